@@ -1,0 +1,24 @@
+//! Errors of the localizer.
+
+use crate::map::{DescriptorError, MapError};
+
+/// What can go wrong when creating a localizer or processing a frame. On error the localizer's
+/// state is exactly what it was before the call.
+#[derive(Debug, thiserror::Error)]
+pub enum LocalizeError {
+    /// The query descriptor has the wrong length, NaN/Inf, or is all zeros.
+    #[error("bad query descriptor: {0}")]
+    Descriptor(#[from] DescriptorError),
+    /// The map does not fit the localizer (descriptor mismatch, ...).
+    #[error(transparent)]
+    Map(#[from] MapError),
+    /// An option is out of range; the message names it.
+    #[error("invalid localizer option: {0}")]
+    InvalidOption(String),
+    /// Frame timestamp is NaN/Inf or earlier than the previous frame's.
+    #[error("bad timestamp: {0}")]
+    Timestamp(String),
+    /// Odometry is not finite.
+    #[error("bad odometry: {0}")]
+    Odometry(String),
+}

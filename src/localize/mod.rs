@@ -1,0 +1,294 @@
+//! Per-frame localization against a map: similarity of the query descriptor to every view,
+//! place scores, and a forward filter over the graph (see [`filter`](self) docs in
+//! `filter.rs`), giving the most probable place, a confidence, top-k candidates and an
+//! off-map flag.
+
+mod error;
+mod filter;
+mod similarity;
+
+pub use error::LocalizeError;
+
+use crate::map::{normalize_descriptor_into, ExpectedDescriptor, Map, PlaceId, ViewId};
+use filter::{Belief, FilterParams};
+use nalgebra::Isometry3;
+use std::sync::Arc;
+
+/// Whether frames are filtered over time or judged one by one.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum Mode {
+    /// Forward filter over the graph (default).
+    #[default]
+    Filter,
+    /// Every frame on its own, from the same prior; for comparison and for unordered queries.
+    SingleFrame,
+}
+
+/// Localizer parameters. Defaults were chosen on the synthetic demo stream (`topoloc demo`);
+/// descriptors with other similarity spreads may want another `temperature`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LocalizerOptions {
+    /// Filter or single-frame.
+    pub mode: Mode,
+    /// Softmax temperature turning similarities into likelihoods; smaller trusts the
+    /// appearance more. Default 0.02.
+    pub temperature: f32,
+    /// Probability of staying at a place between two frames when no odometry is given.
+    /// Default 0.7.
+    pub stay_probability: f32,
+    /// Probability of a jump to any place (kidnapping, relocalization). Default 0.01.
+    pub jump_probability: f32,
+    /// Probability of entering the off-map state per frame. Default 0.01; 0 disables off-map.
+    pub off_map_probability: f32,
+    /// Similarity the off-map hypothesis scores: frames whose best place scores below it (for
+    /// long enough) are reported off-map. Default 0.2.
+    pub off_map_similarity: f32,
+    /// Candidates reported per frame. Default 5.
+    pub top_k: usize,
+    /// Refuse maps built with another descriptor than this one.
+    pub expected: ExpectedDescriptor,
+}
+
+impl Default for LocalizerOptions {
+    fn default() -> Self {
+        Self {
+            mode: Mode::Filter,
+            temperature: 0.02,
+            stay_probability: 0.7,
+            jump_probability: 0.01,
+            off_map_probability: 0.01,
+            off_map_similarity: 0.2,
+            top_k: 5,
+            expected: ExpectedDescriptor::default(),
+        }
+    }
+}
+
+impl LocalizerOptions {
+    fn filter_params(&self) -> Result<FilterParams, LocalizeError> {
+        let bad = |msg: &str| Err(LocalizeError::InvalidOption(msg.to_string()));
+        let prob = |x: f32| x.is_finite() && (0.0..=1.0).contains(&x);
+        if !(self.temperature.is_finite() && self.temperature > 0.0) {
+            return bad("temperature must be finite and > 0");
+        }
+        if !prob(self.stay_probability) {
+            return bad("stay_probability must lie in [0, 1]");
+        }
+        if !prob(self.jump_probability) || !prob(self.off_map_probability) {
+            return bad("jump_probability and off_map_probability must lie in [0, 1]");
+        }
+        if self.jump_probability + self.off_map_probability >= 1.0 {
+            return bad("jump_probability + off_map_probability must be below 1");
+        }
+        if !(self.off_map_similarity.is_finite() && (-1.0..=1.0).contains(&self.off_map_similarity)) {
+            return bad("off_map_similarity must lie in [-1, 1]");
+        }
+        if self.top_k == 0 {
+            return bad("top_k must be at least 1");
+        }
+        Ok(FilterParams {
+            temperature: f64::from(self.temperature),
+            stay_probability: f64::from(self.stay_probability),
+            jump_probability: f64::from(self.jump_probability),
+            off_map_probability: f64::from(self.off_map_probability),
+            off_map_similarity: f64::from(self.off_map_similarity),
+        })
+    }
+}
+
+/// One camera frame, described by the host.
+#[derive(Clone, Debug)]
+pub struct Frame<'a> {
+    /// Time in seconds; must not decrease in filter mode.
+    pub timestamp: f64,
+    /// Global descriptor of the frame (D values; normalised internally).
+    pub descriptor: &'a [f32],
+    /// Motion since the previous frame, `previous_T_current`, from the host's odometry.
+    pub odometry: Option<Isometry3<f64>>,
+}
+
+/// One ranked hypothesis.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Candidate {
+    /// Place.
+    pub place: PlaceId,
+    /// Best-matching view of the place.
+    pub view: ViewId,
+    /// Posterior probability of the place.
+    pub probability: f32,
+    /// Cosine similarity of the query to `view`.
+    pub similarity: f32,
+}
+
+/// The answer for one frame.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Localization {
+    /// 0-based count of frames processed since creation or reset.
+    pub frame_index: u64,
+    /// Most probable place.
+    pub place: PlaceId,
+    /// Best-matching view of that place.
+    pub view: ViewId,
+    /// Posterior probability of `place` (0..1).
+    pub confidence: f32,
+    /// Cosine similarity of the query to `view`.
+    pub similarity: f32,
+    /// True when the off-map state is more probable than any place.
+    pub off_map: bool,
+    /// Posterior probability of the off-map state.
+    pub off_map_probability: f32,
+    /// Top-k places by posterior, best first; `candidates[0]` is `place`.
+    pub candidates: Vec<Candidate>,
+}
+
+/// Localizes a stream of frames against one map.
+///
+/// Holds the filter state, so one localizer follows one camera; it is `Send` but not meant to
+/// be shared between threads without a lock. Many localizers may share one `Arc<Map>`.
+/// After construction, `process` allocates nothing.
+pub struct Localizer {
+    map: Arc<Map>,
+    options: LocalizerOptions,
+    params: FilterParams,
+    belief: Belief,
+    initialized: bool,
+    frames: u64,
+    last_timestamp: Option<f64>,
+    query: Vec<f32>,
+    view_scores: Vec<f32>,
+    place_scores: Vec<f32>,
+    best_views: Vec<u32>,
+    order: Vec<u32>,
+}
+
+impl Localizer {
+    /// Creates a localizer; fails on invalid options or when the map was built with another
+    /// descriptor than `options.expected`.
+    pub fn new(map: Arc<Map>, options: LocalizerOptions) -> Result<Self, LocalizeError> {
+        let params = options.filter_params()?;
+        map.descriptor().check_compatible(&options.expected)?;
+        let (n, m) = (map.view_count(), map.place_count());
+        let mut belief = Belief::new(&map);
+        belief.set_initial(&params);
+        Ok(Self {
+            belief,
+            params,
+            initialized: false,
+            frames: 0,
+            last_timestamp: None,
+            query: Vec::with_capacity(map.dim()),
+            view_scores: vec![0.0; n],
+            place_scores: vec![0.0; m],
+            best_views: vec![0; m],
+            order: (0..m as u32).collect(),
+            options,
+            map,
+        })
+    }
+
+    /// The map this localizer reads.
+    pub fn map(&self) -> &Arc<Map> {
+        &self.map
+    }
+
+    /// The options it was created with.
+    pub fn options(&self) -> &LocalizerOptions {
+        &self.options
+    }
+
+    /// Similarity of the last processed frame to every view (empty before the first frame).
+    pub fn last_view_similarities(&self) -> &[f32] {
+        if self.frames == 0 {
+            &[]
+        } else {
+            &self.view_scores
+        }
+    }
+
+    /// Forgets all history: the next frame is treated as the first.
+    pub fn reset(&mut self) {
+        self.belief.set_initial(&self.params);
+        self.initialized = false;
+        self.frames = 0;
+        self.last_timestamp = None;
+    }
+
+    /// Processes one frame and returns the result.
+    pub fn localize(&mut self, frame: &Frame<'_>) -> Result<Localization, LocalizeError> {
+        let mut out = Localization::default();
+        self.process(frame, &mut out)?;
+        Ok(out)
+    }
+
+    /// Processes one frame, writing into `out` (reusing its candidate buffer). Validates the
+    /// whole frame before touching any state, so an error leaves the localizer unchanged.
+    /// Cost: one pass over the descriptor matrix plus O(places + edges).
+    pub fn process(&mut self, frame: &Frame<'_>, out: &mut Localization) -> Result<(), LocalizeError> {
+        let filtering = self.options.mode == Mode::Filter;
+        if !frame.timestamp.is_finite() {
+            return Err(LocalizeError::Timestamp(format!("{} is not finite", frame.timestamp)));
+        }
+        if let (true, Some(last)) = (filtering, self.last_timestamp) {
+            if frame.timestamp < last {
+                return Err(LocalizeError::Timestamp(format!(
+                    "{} is earlier than the previous frame's {last}; reset the localizer to start a new sequence",
+                    frame.timestamp
+                )));
+            }
+        }
+        let travelled = match &frame.odometry {
+            Some(pose) => {
+                let t = pose.translation.vector;
+                if !(t.iter().chain(pose.rotation.coords.iter()).all(|x| x.is_finite())) {
+                    return Err(LocalizeError::Odometry("odometry has a non-finite value".into()));
+                }
+                Some(t.norm())
+            }
+            None => None,
+        };
+        normalize_descriptor_into(frame.descriptor, self.map.dim(), &mut self.query)?;
+
+        similarity::view_similarities(&self.map, &self.query, &mut self.view_scores);
+        similarity::pool_places(&self.map, &self.view_scores, &mut self.place_scores, &mut self.best_views);
+        if filtering && self.initialized {
+            self.belief.predict(&self.map, &self.params, travelled);
+        } else {
+            self.belief.set_initial(&self.params);
+        }
+        self.belief.update(&self.params, &self.place_scores);
+        self.initialized = true;
+        self.last_timestamp = Some(frame.timestamp);
+        out.frame_index = self.frames;
+        self.frames += 1;
+        self.write_result(out);
+        Ok(())
+    }
+
+    fn write_result(&mut self, out: &mut Localization) {
+        let m = self.map.place_count();
+        let p = &self.belief.probabilities;
+        let k = self.options.top_k.min(m);
+        let by_probability = |a: &u32, b: &u32| p[*b as usize].total_cmp(&p[*a as usize]).then(a.cmp(b));
+        if k < m {
+            self.order.select_nth_unstable_by(k - 1, by_probability);
+        }
+        self.order[..k].sort_unstable_by(by_probability);
+        out.candidates.clear();
+        out.candidates.extend(self.order[..k].iter().map(|&place| {
+            let view = self.best_views[place as usize];
+            Candidate {
+                place,
+                view,
+                probability: p[place as usize] as f32,
+                similarity: self.view_scores[view as usize],
+            }
+        }));
+        let best = out.candidates[0];
+        out.place = best.place;
+        out.view = best.view;
+        out.confidence = best.probability;
+        out.similarity = best.similarity;
+        out.off_map_probability = p[m] as f32;
+        out.off_map = p[m] > p[best.place as usize];
+    }
+}

@@ -1,0 +1,468 @@
+//! The graph map: places (the seed's macro nodes), their views (micro nodes) and the edges
+//! between places.
+//!
+//! A [`Map`] is immutable once built. Build one with [`MapBuilder`], from a keyframe sequence
+//! with [`from_keyframes`], or load one from a file with [`Map::load`]. Maps are `Send + Sync`
+//! and are shared between localizers through `Arc<Map>`.
+//!
+//! Conventions: positions and translations are in metres; a view pose is `world_T_camera`
+//! (the camera frame expressed in the world frame); descriptors are `f32`, L2-normalised,
+//! stored row-major, one row per view.
+
+mod builder;
+mod error;
+mod file;
+mod keyframes;
+
+pub use builder::{MapBuilder, ViewAttributes};
+pub use error::MapError;
+pub use file::{LoadOptions, FORMAT_NAME, FORMAT_VERSION_MAJOR, FORMAT_VERSION_MINOR};
+pub use keyframes::{from_keyframes, Keyframe, KeyframeOptions};
+
+use nalgebra::{Isometry3, Point3};
+use serde::{Deserialize, Serialize};
+
+/// Index of a place in a map, `0..map.place_count()`.
+pub type PlaceId = u32;
+/// Index of a view in a map, `0..map.view_count()`.
+pub type ViewId = u32;
+
+/// Tolerance on `| ||x|| - 1 |` for a stored descriptor to count as L2-normalised.
+pub const NORM_TOLERANCE: f32 = 1e-3;
+
+/// Which descriptor produced a map's vectors. A query described by anything else is refused,
+/// because similarities between different descriptor spaces mean nothing.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct DescriptorIdentity {
+    /// Backend family, e.g. `"onnx-mlf"`, `"vlad-orb"`, or a host-chosen name for external vectors.
+    pub kind: String,
+    /// Model identity within the family: file hash, taps, preprocessing; free text.
+    pub model: String,
+    /// Descriptor dimension D.
+    pub dim: u32,
+}
+
+impl DescriptorIdentity {
+    /// Creates an identity; `kind` must be non-empty and `dim` positive.
+    pub fn new(kind: impl Into<String>, model: impl Into<String>, dim: u32) -> Result<Self, MapError> {
+        let identity = Self { kind: kind.into(), model: model.into(), dim };
+        identity.validate()?;
+        Ok(identity)
+    }
+
+    fn validate(&self) -> Result<(), MapError> {
+        if self.kind.is_empty() {
+            return Err(MapError::InvalidArgument("descriptor kind must not be empty".into()));
+        }
+        if self.dim == 0 {
+            return Err(MapError::InvalidArgument("descriptor dimension must be positive".into()));
+        }
+        Ok(())
+    }
+
+    /// Checks that a query described by `expected` may be compared with this map's vectors.
+    /// Empty `kind`/`model` and zero `dim` in `expected` mean "any".
+    pub fn check_compatible(&self, expected: &ExpectedDescriptor) -> Result<(), MapError> {
+        let kind_ok = expected.kind.as_deref().is_none_or(|k| k == self.kind);
+        let model_ok = expected.model.as_deref().is_none_or(|m| m == self.model);
+        let dim_ok = expected.dim.is_none_or(|d| d == self.dim);
+        if kind_ok && model_ok && dim_ok {
+            Ok(())
+        } else {
+            Err(MapError::DescriptorMismatch { map: self.clone(), expected: expected.clone() })
+        }
+    }
+}
+
+impl std::fmt::Display for DescriptorIdentity {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{} (model '{}', D={})", self.kind, self.model, self.dim)
+    }
+}
+
+/// What a caller's descriptor is; each `None` field matches anything.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct ExpectedDescriptor {
+    /// Required backend family.
+    pub kind: Option<String>,
+    /// Required model identity.
+    pub model: Option<String>,
+    /// Required dimension.
+    pub dim: Option<u32>,
+}
+
+impl std::fmt::Display for ExpectedDescriptor {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let any = |s: &Option<String>| s.clone().unwrap_or_else(|| "*".into());
+        let dim = self.dim.map_or_else(|| "*".into(), |d| d.to_string());
+        write!(f, "{} (model '{}', D={})", any(&self.kind), any(&self.model), dim)
+    }
+}
+
+/// An undirected edge between two places; `a < b`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Edge {
+    /// Lower place index.
+    pub a: PlaceId,
+    /// Higher place index.
+    pub b: PlaceId,
+    /// Positive weight; higher means a stronger link (the localizer moves belief along edges in
+    /// proportion to their weight).
+    pub weight: f32,
+}
+
+/// Per-view attributes besides the descriptor.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ViewRecord {
+    /// Place this view belongs to.
+    pub place: PlaceId,
+    /// Keyframe id in the host SLAM system, if the view came from one.
+    pub keyframe_id: Option<u64>,
+    /// Camera pose `world_T_camera`, if known.
+    pub world_t_camera: Option<Isometry3<f64>>,
+    /// Reference to the source image (path or URI), if any.
+    pub image: Option<String>,
+}
+
+/// Row-major descriptor matrix, either owned or borrowed zero-copy from a memory-mapped file.
+pub(crate) enum DescriptorStore {
+    Owned(Vec<f32>),
+    Mapped { mmap: memmap2::Mmap, byte_offset: usize, len: usize },
+}
+
+impl DescriptorStore {
+    pub(crate) fn as_slice(&self) -> &[f32] {
+        match self {
+            DescriptorStore::Owned(v) => v,
+            DescriptorStore::Mapped { mmap, byte_offset, len } => {
+                let bytes = &mmap[*byte_offset..*byte_offset + *len * 4];
+                // Alignment and length were checked when the store was made (file.rs).
+                let (prefix, floats, suffix) = unsafe { bytes.align_to::<f32>() };
+                debug_assert!(prefix.is_empty() && suffix.is_empty());
+                floats
+            }
+        }
+    }
+}
+
+/// An immutable topological map. See the module documentation.
+pub struct Map {
+    identity: DescriptorIdentity,
+    creator: String,
+    descriptors: DescriptorStore,
+    views: Vec<ViewRecord>,
+    place_positions: Vec<Option<Point3<f64>>>,
+    /// CSR: views of place p are `place_view_ids[place_view_offsets[p]..place_view_offsets[p+1]]`.
+    place_view_offsets: Vec<u32>,
+    place_view_ids: Vec<ViewId>,
+    edges: Vec<Edge>,
+    /// CSR adjacency: neighbours of p are `neighbour_ids[neighbour_offsets[p]..neighbour_offsets[p+1]]`,
+    /// with the matching weights in `neighbour_weights`.
+    neighbour_offsets: Vec<u32>,
+    neighbour_ids: Vec<PlaceId>,
+    neighbour_weights: Vec<f32>,
+}
+
+impl std::fmt::Debug for Map {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Map")
+            .field("identity", &self.identity)
+            .field("places", &self.place_count())
+            .field("views", &self.view_count())
+            .field("edges", &self.edges.len())
+            .finish()
+    }
+}
+
+impl Map {
+    /// Assembles and validates a map from its parts. Used by the builder and the file loader so
+    /// that every map, however made, passes the same checks.
+    pub(crate) fn from_parts(
+        identity: DescriptorIdentity,
+        creator: String,
+        descriptors: DescriptorStore,
+        views: Vec<ViewRecord>,
+        place_positions: Vec<Option<Point3<f64>>>,
+        mut edges: Vec<Edge>,
+    ) -> Result<Self, MapError> {
+        identity.validate()?;
+        let dim = identity.dim as usize;
+        let places = place_positions.len();
+        if places == 0 {
+            return Err(MapError::EmptyMap);
+        }
+        if places > u32::MAX as usize || views.len() > u32::MAX as usize {
+            return Err(MapError::InvalidArgument("more than 2^32-1 places or views".into()));
+        }
+        let data = descriptors.as_slice();
+        if data.len() != views.len() * dim {
+            return Err(MapError::Invalid(format!(
+                "descriptor matrix holds {} values, expected {} views x D={}",
+                data.len(),
+                views.len(),
+                dim
+            )));
+        }
+        for (v, row) in data.chunks_exact(dim).enumerate() {
+            check_unit_descriptor(row).map_err(|e| MapError::Invalid(format!("view {v}: {e}")))?;
+        }
+        let mut views_per_place = vec![0u32; places];
+        for (v, view) in views.iter().enumerate() {
+            let p = view.place as usize;
+            if p >= places {
+                return Err(MapError::Invalid(format!("view {v} belongs to place {p}, but the map has {places} places")));
+            }
+            views_per_place[p] += 1;
+            if let Some(pose) = &view.world_t_camera {
+                check_pose(pose).map_err(|e| MapError::Invalid(format!("view {v}: {e}")))?;
+            }
+        }
+        if let Some(p) = views_per_place.iter().position(|&n| n == 0) {
+            return Err(MapError::Invalid(format!("place {p} has no view")));
+        }
+        for (p, pos) in place_positions.iter().enumerate() {
+            if let Some(pos) = pos {
+                if !pos.iter().all(|x| x.is_finite()) {
+                    return Err(MapError::Invalid(format!("place {p} has a non-finite position")));
+                }
+            }
+        }
+        edges.sort_by_key(|e| (e.a, e.b));
+        for (i, e) in edges.iter().enumerate() {
+            if e.a >= e.b || e.b as usize >= places {
+                return Err(MapError::Invalid(format!(
+                    "edge ({}, {}) must join two different existing places (a < b < {places})",
+                    e.a, e.b
+                )));
+            }
+            if !(e.weight.is_finite() && e.weight > 0.0) {
+                return Err(MapError::Invalid(format!("edge ({}, {}) has weight {}, must be finite and > 0", e.a, e.b, e.weight)));
+            }
+            if i > 0 && (edges[i - 1].a, edges[i - 1].b) == (e.a, e.b) {
+                return Err(MapError::Invalid(format!("edge ({}, {}) appears twice", e.a, e.b)));
+            }
+        }
+
+        let place_view_offsets = prefix_offsets(&views_per_place);
+        let mut fill = place_view_offsets.clone();
+        let mut place_view_ids = vec![0; views.len()];
+        for (v, view) in views.iter().enumerate() {
+            let slot = &mut fill[view.place as usize];
+            place_view_ids[*slot as usize] = v as ViewId;
+            *slot += 1;
+        }
+
+        let mut degree = vec![0u32; places];
+        for e in &edges {
+            degree[e.a as usize] += 1;
+            degree[e.b as usize] += 1;
+        }
+        let neighbour_offsets = prefix_offsets(&degree);
+        let mut fill = neighbour_offsets.clone();
+        let mut neighbour_ids = vec![0; edges.len() * 2];
+        let mut neighbour_weights = vec![0.0; edges.len() * 2];
+        for e in &edges {
+            for (from, to) in [(e.a, e.b), (e.b, e.a)] {
+                let slot = &mut fill[from as usize];
+                neighbour_ids[*slot as usize] = to;
+                neighbour_weights[*slot as usize] = e.weight;
+                *slot += 1;
+            }
+        }
+
+        Ok(Self {
+            identity,
+            creator,
+            descriptors,
+            views,
+            place_positions,
+            place_view_offsets,
+            place_view_ids,
+            edges,
+            neighbour_offsets,
+            neighbour_ids,
+            neighbour_weights,
+        })
+    }
+
+    /// The descriptor that produced this map's vectors.
+    pub fn descriptor(&self) -> &DescriptorIdentity {
+        &self.identity
+    }
+
+    /// Free text naming the program that created the map.
+    pub fn creator(&self) -> &str {
+        &self.creator
+    }
+
+    /// Number of places (macro nodes).
+    pub fn place_count(&self) -> usize {
+        self.place_positions.len()
+    }
+
+    /// Number of views (micro nodes).
+    pub fn view_count(&self) -> usize {
+        self.views.len()
+    }
+
+    /// Number of undirected edges.
+    pub fn edge_count(&self) -> usize {
+        self.edges.len()
+    }
+
+    /// Descriptor dimension D.
+    pub fn dim(&self) -> usize {
+        self.identity.dim as usize
+    }
+
+    /// All descriptors, row-major `view_count() x dim()`.
+    pub fn descriptors(&self) -> &[f32] {
+        self.descriptors.as_slice()
+    }
+
+    /// Descriptor of one view (D values, unit norm).
+    pub fn view_descriptor(&self, view: ViewId) -> Result<&[f32], MapError> {
+        self.check_view(view)?;
+        let d = self.dim();
+        Ok(&self.descriptors()[view as usize * d..(view as usize + 1) * d])
+    }
+
+    /// Attributes of one view.
+    pub fn view(&self, view: ViewId) -> Result<&ViewRecord, MapError> {
+        self.check_view(view)?;
+        Ok(&self.views[view as usize])
+    }
+
+    /// All view records, indexed by view id.
+    pub fn views(&self) -> &[ViewRecord] {
+        &self.views
+    }
+
+    /// Place of each view, without bounds checks (for per-frame loops).
+    pub(crate) fn view_place_unchecked(&self, view: usize) -> usize {
+        self.views[view].place as usize
+    }
+
+    /// Views of a place, in increasing id order.
+    pub fn place_views(&self, place: PlaceId) -> Result<&[ViewId], MapError> {
+        self.check_place(place)?;
+        let p = place as usize;
+        Ok(&self.place_view_ids[self.place_view_offsets[p] as usize..self.place_view_offsets[p + 1] as usize])
+    }
+
+    /// Position of a place in metres, if the map has one.
+    pub fn place_position(&self, place: PlaceId) -> Result<Option<Point3<f64>>, MapError> {
+        self.check_place(place)?;
+        Ok(self.place_positions[place as usize])
+    }
+
+    /// Neighbouring places and the weights of the edges to them.
+    pub fn neighbours(&self, place: PlaceId) -> Result<(&[PlaceId], &[f32]), MapError> {
+        self.check_place(place)?;
+        let p = place as usize;
+        let range = self.neighbour_offsets[p] as usize..self.neighbour_offsets[p + 1] as usize;
+        Ok((&self.neighbour_ids[range.clone()], &self.neighbour_weights[range]))
+    }
+
+    /// All edges, sorted by `(a, b)`.
+    pub fn edges(&self) -> &[Edge] {
+        &self.edges
+    }
+
+    pub(crate) fn place_positions(&self) -> &[Option<Point3<f64>>] {
+        &self.place_positions
+    }
+
+    fn check_place(&self, place: PlaceId) -> Result<(), MapError> {
+        if (place as usize) < self.place_count() {
+            Ok(())
+        } else {
+            Err(MapError::UnknownPlace { place, places: self.place_count() })
+        }
+    }
+
+    fn check_view(&self, view: ViewId) -> Result<(), MapError> {
+        if (view as usize) < self.view_count() {
+            Ok(())
+        } else {
+            Err(MapError::UnknownView { view, views: self.view_count() })
+        }
+    }
+}
+
+fn prefix_offsets(counts: &[u32]) -> Vec<u32> {
+    let mut offsets = Vec::with_capacity(counts.len() + 1);
+    let mut total = 0u32;
+    offsets.push(0);
+    for &c in counts {
+        total += c;
+        offsets.push(total);
+    }
+    offsets
+}
+
+/// Checks that a stored descriptor is finite and has unit L2 norm.
+fn check_unit_descriptor(row: &[f32]) -> Result<(), String> {
+    let mut sum = 0.0f32;
+    for &x in row {
+        if !x.is_finite() {
+            return Err("descriptor has a NaN or infinite value".into());
+        }
+        sum += x * x;
+    }
+    let norm = sum.sqrt();
+    if (norm - 1.0).abs() > NORM_TOLERANCE {
+        return Err(format!("descriptor norm is {norm}, expected 1 (L2-normalised)"));
+    }
+    Ok(())
+}
+
+fn check_pose(pose: &Isometry3<f64>) -> Result<(), String> {
+    let finite = pose.translation.vector.iter().all(|x| x.is_finite())
+        && pose.rotation.coords.iter().all(|x| x.is_finite());
+    if !finite {
+        return Err("pose has a non-finite value".into());
+    }
+    Ok(())
+}
+
+/// Returns a unit-norm copy of `descriptor`, or an error naming what is wrong with it
+/// (wrong length, NaN/Inf, all zeros). Writes into `out` so that per-frame callers reuse a buffer.
+pub fn normalize_descriptor_into(descriptor: &[f32], dim: usize, out: &mut Vec<f32>) -> Result<(), DescriptorError> {
+    if descriptor.len() != dim {
+        return Err(DescriptorError::Dimension { got: descriptor.len(), expected: dim });
+    }
+    let mut sum = 0.0f64;
+    for &x in descriptor {
+        if !x.is_finite() {
+            return Err(DescriptorError::NonFinite);
+        }
+        sum += f64::from(x) * f64::from(x);
+    }
+    if sum <= f64::from(f32::MIN_POSITIVE) {
+        return Err(DescriptorError::Zero);
+    }
+    let inv = (1.0 / sum.sqrt()) as f32;
+    out.clear();
+    out.extend(descriptor.iter().map(|&x| x * inv));
+    Ok(())
+}
+
+/// What is wrong with a descriptor given by a caller.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum DescriptorError {
+    /// Length differs from the map's D.
+    #[error("descriptor has {got} values, the map's descriptor has D={expected}")]
+    Dimension {
+        /// Values given.
+        got: usize,
+        /// The map's D.
+        expected: usize,
+    },
+    /// Contains NaN or infinity.
+    #[error("descriptor contains NaN or infinite values")]
+    NonFinite,
+    /// All values are (close to) zero, so it has no direction.
+    #[error("descriptor is all zeros")]
+    Zero,
+}
