@@ -1,1 +1,31 @@
-//! C ABI.
+//! The C ABI: a thin layer over the Rust API and the only place with `extern "C"` items and
+//! raw-pointer handling.
+//!
+//! House rules (see ARCHITECTURE.md): every function is prefixed `topoloc_`; handles are opaque
+//! and come in `_new`/`_load` + `_free` pairs, `_free(NULL)` being a no-op; every fallible
+//! function returns a [`topoloc_status`] and leaves the details in a thread-local message
+//! (`topoloc_last_error_message`); out-parameters are written only on success (except the
+//! documented `needed`/`count` sizes); options structs start with `struct_size` and are filled by
+//! `*_default()`; no panic crosses the boundary (`TOPOLOC_ERR_PANIC`).
+//!
+//! Thread safety: `const topoloc_map*` may be used from many threads at once; builders and
+//! localizers are single-threaded state (one thread at a time; they may move between threads).
+
+#![deny(missing_docs)]
+#![allow(non_camel_case_types)]
+
+mod boundary;
+mod builder;
+mod convert;
+mod localizer;
+mod map;
+mod version;
+
+pub use boundary::topoloc_status;
+pub use builder::*;
+pub use localizer::*;
+pub use map::*;
+pub use version::*;
+
+#[cfg(test)]
+mod tests;

@@ -17,10 +17,10 @@
 //! | `edges` | U32 | E x 2 | undirected edges, a < b, sorted |
 //! | `edge_weight` | F32 | E | edge weights |
 //!
-//! Metadata key `topoloc` holds a JSON object with `format` (`"topoloc-map"`), `version`
-//! (`"MAJOR.MINOR"`), `descriptor` (`kind`, `model`, `dim`), `creator` and the counts. Key
-//! `topoloc_crc32` holds the CRC-32 (hex) of the `topoloc` JSON followed by every tensor's bytes
-//! in tensor-name order, so that any flipped byte is detected. Readers accept any file of the
+//! The only metadata key, `topoloc`, holds a JSON object with `format` (`"topoloc-map"`),
+//! `version` (`"MAJOR.MINOR"`), `descriptor` (`kind`, `model`, `dim`), `creator`, the counts, and
+//! `crc32`: the CRC-32 (hex) of that JSON serialised without `crc32`, followed by every tensor's
+//! bytes in tensor-name order, so that any flipped byte is detected. Readers accept any file of the
 //! same major version; a newer minor version may add tensors, which older readers ignore.
 
 use super::{DescriptorIdentity, DescriptorStore, Edge, ExpectedDescriptor, Map, MapError, ViewRecord};
@@ -40,7 +40,6 @@ pub const FORMAT_VERSION_MAJOR: u32 = 1;
 pub const FORMAT_VERSION_MINOR: u32 = 0;
 
 const META_KEY: &str = "topoloc";
-const CRC_KEY: &str = "topoloc_crc32";
 /// Longest JSON header accepted; far above any real map's header (a few hundred bytes).
 const MAX_HEADER_BYTES: u64 = 1 << 20;
 /// What a topoloc map file's JSON header starts with (safetensors writes `__metadata__` first).
@@ -67,6 +66,9 @@ struct FileMeta {
     places: u64,
     views: u64,
     edges: u64,
+    /// Absent while the checksum itself is computed.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    crc32: Option<String>,
 }
 
 /// A tensor to write: dtype, shape and its little-endian bytes.
@@ -170,10 +172,13 @@ impl Map {
             places: m as u64,
             views: n as u64,
             edges: e as u64,
+            crc32: None,
         };
-        let meta_json = serde_json::to_string(&meta).expect("map metadata serialises");
-        let crc = checksum(&meta_json, tensors.iter().map(|(_, t)| &*t.bytes));
-        let metadata = HashMap::from([(META_KEY.to_string(), meta_json), (CRC_KEY.to_string(), crc)]);
+        let unsigned_json = serde_json::to_string(&meta).expect("map metadata serialises");
+        let crc = checksum(&unsigned_json, tensors.iter().map(|(_, t)| &*t.bytes));
+        let meta = FileMeta { crc32: Some(crc), ..meta };
+        // One key only: safetensors writes metadata from a HashMap, whose order is random.
+        let metadata = HashMap::from([(META_KEY.to_string(), serde_json::to_string(&meta).expect("serialises"))]);
         safetensors::serialize(tensors.iter().map(|(name, t)| (*name, t)), Some(metadata))
             .map_err(|e| MapError::Invalid(format!("serialising the map failed: {e}")))
     }
@@ -329,7 +334,7 @@ fn parse(bytes: &[u8], options: &LoadOptions) -> Result<ParsedMap, MapError> {
         return Err(MapError::Corrupt(format!("{} unexpected bytes after the data", len as u64 - expected_len)));
     }
 
-    let meta: FileMeta =
+    let mut meta: FileMeta =
         serde_json::from_str(meta_json).map_err(|e| MapError::Corrupt(format!("topoloc metadata: {e}")))?;
     if meta.format != FORMAT_NAME {
         return Err(MapError::NotAMap(format!("format is '{}', not '{FORMAT_NAME}'", meta.format)));
@@ -345,11 +350,12 @@ fn parse(bytes: &[u8], options: &LoadOptions) -> Result<ParsedMap, MapError> {
     }
 
     let st = SafeTensors::deserialize(bytes).map_err(|e| MapError::Corrupt(format!("safetensors: {e}")))?;
-    let stored_crc = header["__metadata__"].get(CRC_KEY).and_then(|v| v.as_str()).unwrap_or("");
+    let stored_crc = meta.crc32.take().unwrap_or_default();
+    let unsigned_json = serde_json::to_string(&meta).expect("map metadata serialises");
     let mut names: Vec<&str> = st.names();
     names.sort_unstable();
     let tensors: Vec<_> = names.iter().map(|n| st.tensor(n)).collect::<Result<_, _>>().map_err(|e| MapError::Corrupt(e.to_string()))?;
-    let crc = checksum(meta_json, tensors.iter().map(|t| t.data()));
+    let crc = checksum(&unsigned_json, tensors.iter().map(|t| t.data()));
     if crc != stored_crc {
         return Err(MapError::Corrupt(format!("checksum mismatch (stored '{stored_crc}', computed '{crc}')")));
     }

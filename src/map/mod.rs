@@ -315,6 +315,11 @@ impl Map {
         self.identity.dim as usize
     }
 
+    /// True when the descriptors are read in place from a memory-mapped file (zero-copy load).
+    pub fn is_memory_mapped(&self) -> bool {
+        matches!(self.descriptors, DescriptorStore::Mapped { .. })
+    }
+
     /// All descriptors, row-major `view_count() x dim()`.
     pub fn descriptors(&self) -> &[f32] {
         self.descriptors.as_slice()

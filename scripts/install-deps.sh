@@ -1,0 +1,28 @@
+#!/usr/bin/env bash
+# Installs what topoloc's builds and tests need on a Debian machine (bookworm), idempotently:
+# Debian packages only when missing (apt-get update only then), Python packages only when their
+# import fails. The Rust toolchain is expected (rustup); this script does not install it.
+set -euo pipefail
+
+packages=(build-essential cmake pkg-config valgrind)
+missing=()
+for p in "${packages[@]}"; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+done
+if ((${#missing[@]})); then
+  echo "install-deps: apt-get install ${missing[*]}"
+  SUDO=""; [ "$(id -u)" -eq 0 ] || SUDO="sudo"
+  $SUDO apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
+fi
+
+if ! command -v cargo >/dev/null 2>&1; then
+  echo "install-deps: cargo not found; install Rust with rustup (https://rustup.rs) first" >&2
+  exit 1
+fi
+
+root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+if ! python3 -c "import numpy, pytest" >/dev/null 2>&1; then
+  echo "install-deps: pip install -r python/requirements-dev.txt"
+  python3 -m pip install -q -r "$root/python/requirements-dev.txt"
+fi

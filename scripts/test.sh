@@ -1,0 +1,33 @@
+#!/usr/bin/env bash
+# Runs every test layer: Rust (unit, integration, FFI), the header check, C (plain, ASan+UBSan,
+# valgrind, static), C++ RAII, the CMake consumer against the installed package, and Python.
+set -euo pipefail
+root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+cd "$root"
+bash scripts/install-deps.sh
+
+section() { printf '\n=== %s ===\n' "$1"; }
+
+section "Rust tests"
+cargo test --workspace --quiet
+
+section "C header is current"
+cargo run --quiet -p topoloc-gen-header -- --check
+
+section "Release library"
+cargo build --release --lib --quiet
+export TOPOLOC_TARGET_DIR="$root/target/release"
+
+section "C ABI tests"
+TOPOLOC_CHECK_STATIC_LIBS=1 bash tests/c/run.sh
+
+section "C++ RAII tests"
+bash tests/cpp/run.sh
+
+section "CMake consumer (find_package against the installed prefix)"
+bash tests/consumer/run.sh
+
+section "Python shim"
+TOPOLOC_LIBRARY="$root/target/release/libtopoloc.so" python3 -m pytest -q python/tests
+
+section "All test layers passed"

@@ -1,0 +1,257 @@
+//! C functions that build maps: the incremental builder and the keyframe path.
+
+use super::boundary::{fill_default, borrow, borrow_mut, check_out, optional_string, read_versioned, run, run_void, slice, string, write_out, FfiError, Versioned};
+use super::convert::optional_pose;
+use super::map::topoloc_map;
+use super::topoloc_status;
+use crate::map::{from_keyframes, DescriptorIdentity, Keyframe, KeyframeOptions, MapBuilder, ViewAttributes};
+use nalgebra::Point3;
+use std::ffi::c_char;
+
+/// Collects places, views and edges for a new map. Created by `topoloc_map_builder_new`,
+/// released by `topoloc_map_builder_free`. Not thread-safe: use from one thread at a time.
+pub struct topoloc_map_builder {
+    builder: MapBuilder,
+}
+
+/// Starts a map whose vectors come from descriptor `kind` / `model` with dimension `dim`
+/// (`model` may be NULL). On success `*out` owns a new builder.
+/// Errors: `_NULL_ARGUMENT`, `_INVALID_ARGUMENT` (empty kind, dim 0), `_INVALID_UTF8`.
+#[no_mangle]
+pub extern "C" fn topoloc_map_builder_new(
+    kind: *const c_char,
+    model: *const c_char,
+    dim: u32,
+    out: *mut *mut topoloc_map_builder,
+) -> topoloc_status {
+    run(|| {
+        let identity = identity(kind, model, dim)?;
+        check_out(out, "out")?;
+        write_out(out, Box::into_raw(Box::new(topoloc_map_builder { builder: MapBuilder::new(identity) })));
+        Ok(())
+    })
+}
+
+fn identity(kind: *const c_char, model: *const c_char, dim: u32) -> Result<DescriptorIdentity, FfiError> {
+    let kind = string(kind, "kind")?;
+    let model = optional_string(model, "model")?.unwrap_or_default();
+    Ok(DescriptorIdentity::new(kind, model, dim)?)
+}
+
+/// Releases a builder. `NULL` is a no-op.
+#[no_mangle]
+pub extern "C" fn topoloc_map_builder_free(builder: *mut topoloc_map_builder) {
+    run_void(|| {
+        if !builder.is_null() {
+            // SAFETY: came from `topoloc_map_builder_new` and is freed once, per the contract.
+            drop(unsafe { Box::from_raw(builder) });
+        }
+    })
+}
+
+/// Adds a place; `position` (3 doubles, metres) may be NULL. `*place_out` receives its id.
+#[no_mangle]
+pub extern "C" fn topoloc_map_builder_add_place(builder: *mut topoloc_map_builder, position: *const f64, place_out: *mut u32) -> topoloc_status {
+    run(|| {
+        let builder = &mut borrow_mut(builder, "builder")?.builder;
+        check_out(place_out, "place_out")?;
+        let position = match position.is_null() {
+            true => None,
+            false => {
+                let p = slice(position, 3, "position")?;
+                Some(Point3::new(p[0], p[1], p[2]))
+            }
+        };
+        write_out(place_out, builder.add_place(position)?);
+        Ok(())
+    })
+}
+
+/// Optional attributes of a view. Initialise with `topoloc_view_attributes_default`.
+#[repr(C)]
+#[derive(Clone, Copy)]
+#[allow(non_snake_case)]
+pub struct topoloc_view_attributes {
+    /// `sizeof(topoloc_view_attributes)`, set by the `_default` function.
+    pub struct_size: usize,
+    /// Whether `keyframe_id` is set.
+    pub has_keyframe_id: bool,
+    /// Host keyframe id.
+    pub keyframe_id: u64,
+    /// Camera pose, 16 doubles row-major 4x4; NULL = none.
+    pub world_T_camera: *const f64,
+    /// Image reference (path or URI), NUL-terminated UTF-8; NULL = none.
+    pub image: *const c_char,
+}
+
+impl Versioned for topoloc_view_attributes {
+    const MIN_SIZE: usize = std::mem::size_of::<Self>();
+}
+
+impl Default for topoloc_view_attributes {
+    fn default() -> Self {
+        Self {
+            struct_size: std::mem::size_of::<Self>(),
+            has_keyframe_id: false,
+            keyframe_id: 0,
+            world_T_camera: std::ptr::null(),
+            image: std::ptr::null(),
+        }
+    }
+}
+
+/// Fills `*attributes` with "nothing set". Does nothing if `attributes` is NULL.
+#[no_mangle]
+pub extern "C" fn topoloc_view_attributes_default(attributes: *mut topoloc_view_attributes) {
+    fill_default(attributes)
+}
+
+/// Adds a view with `descriptor` (`len` floats, normalised here) to `place`; `attributes` may be
+/// NULL. `*view_out` receives its id. On error the builder is unchanged.
+/// Errors: `_UNKNOWN_PLACE`, `_DIMENSION_MISMATCH`, `_NON_FINITE`, `_ZERO_DESCRIPTOR`, `_INVALID_ARGUMENT`.
+#[no_mangle]
+pub extern "C" fn topoloc_map_builder_add_view(
+    builder: *mut topoloc_map_builder,
+    place: u32,
+    descriptor: *const f32,
+    len: usize,
+    attributes: *const topoloc_view_attributes,
+    view_out: *mut u32,
+) -> topoloc_status {
+    run(|| {
+        let builder = &mut borrow_mut(builder, "builder")?.builder;
+        let descriptor = slice(descriptor, len, "descriptor")?;
+        check_out(view_out, "view_out")?;
+        let attributes = if attributes.is_null() {
+            ViewAttributes::default()
+        } else {
+            let a = read_versioned(attributes, topoloc_view_attributes::default(), "attributes")?;
+            ViewAttributes {
+                keyframe_id: a.has_keyframe_id.then_some(a.keyframe_id),
+                world_t_camera: optional_pose(a.world_T_camera, "attributes.world_T_camera")?,
+                image: optional_string(a.image, "attributes.image")?,
+            }
+        };
+        write_out(view_out, builder.add_view(place, descriptor, attributes)?);
+        Ok(())
+    })
+}
+
+/// Joins places `a` and `b` (different, existing, not yet joined) with weight > 0.
+#[no_mangle]
+pub extern "C" fn topoloc_map_builder_add_edge(builder: *mut topoloc_map_builder, a: u32, b: u32, weight: f32) -> topoloc_status {
+    run(|| {
+        borrow_mut(builder, "builder")?.builder.add_edge(a, b, weight)?;
+        Ok(())
+    })
+}
+
+/// Validates and produces a map from what was added; the builder stays usable. On success
+/// `*out` owns a new map. Errors: `_EMPTY_MAP`, `_INVALID_MAP` (e.g. a place without views).
+#[no_mangle]
+pub extern "C" fn topoloc_map_builder_build(builder: *const topoloc_map_builder, out: *mut *mut topoloc_map) -> topoloc_status {
+    run(|| {
+        let builder = &borrow(builder, "builder")?.builder;
+        check_out(out, "out")?;
+        write_out(out, topoloc_map::into_raw(builder.build()?));
+        Ok(())
+    })
+}
+
+/// One keyframe for `topoloc_map_from_keyframes`. Array element: its layout never changes.
+#[repr(C)]
+#[derive(Clone, Copy)]
+#[allow(non_snake_case)]
+pub struct topoloc_keyframe {
+    /// Host keyframe id, stored with the view it becomes.
+    pub id: u64,
+    /// Global descriptor.
+    pub descriptor: *const f32,
+    /// Number of floats at `descriptor` (must equal the map's D).
+    pub descriptor_len: usize,
+    /// Camera pose, 16 doubles row-major 4x4; NULL = none (then NULL for every keyframe).
+    pub world_T_camera: *const f64,
+}
+
+/// Parameters of `topoloc_map_from_keyframes`. Initialise with `topoloc_keyframe_options_default`.
+#[repr(C)]
+#[derive(Clone, Copy)]
+pub struct topoloc_keyframe_options {
+    /// `sizeof(topoloc_keyframe_options)`, set by the `_default` function.
+    pub struct_size: usize,
+    /// Distance (m) within which a keyframe joins an existing place. Default 2.0.
+    pub place_spacing_m: f64,
+    /// Cosine similarity below which a keyframe's appearance is novel. Default 0.9.
+    pub novelty_similarity: f32,
+    /// Places closer than this (m) are joined by an edge. Default 3.0.
+    pub neighbour_radius_m: f64,
+    /// Most views per place. Default 4.
+    pub max_views_per_place: u32,
+}
+
+impl Versioned for topoloc_keyframe_options {
+    const MIN_SIZE: usize = std::mem::size_of::<Self>();
+}
+
+impl Default for topoloc_keyframe_options {
+    fn default() -> Self {
+        let d = KeyframeOptions::default();
+        Self {
+            struct_size: std::mem::size_of::<Self>(),
+            place_spacing_m: d.place_spacing_m,
+            novelty_similarity: d.novelty_similarity,
+            neighbour_radius_m: d.neighbour_radius_m,
+            max_views_per_place: d.max_views_per_place,
+        }
+    }
+}
+
+/// Fills `*options` with defaults. Does nothing if `options` is NULL.
+#[no_mangle]
+pub extern "C" fn topoloc_keyframe_options_default(options: *mut topoloc_keyframe_options) {
+    fill_default(options)
+}
+
+/// Builds a map from `count` keyframes in order (places by spacing and appearance novelty, edges
+/// between consecutive and nearby places). `options` may be NULL. On success `*out` owns a new map.
+/// Errors: `_EMPTY_MAP`, `_INVALID_ARGUMENT` (bad keyframe or option; the message names it).
+#[no_mangle]
+pub extern "C" fn topoloc_map_from_keyframes(
+    kind: *const c_char,
+    model: *const c_char,
+    dim: u32,
+    keyframes: *const topoloc_keyframe,
+    count: usize,
+    options: *const topoloc_keyframe_options,
+    out: *mut *mut topoloc_map,
+) -> topoloc_status {
+    run(|| {
+        let identity = identity(kind, model, dim)?;
+        let raw = slice(keyframes, count, "keyframes")?;
+        check_out(out, "out")?;
+        let o = if options.is_null() {
+            topoloc_keyframe_options::default()
+        } else {
+            read_versioned(options, topoloc_keyframe_options::default(), "options")?
+        };
+        let options = KeyframeOptions {
+            place_spacing_m: o.place_spacing_m,
+            novelty_similarity: o.novelty_similarity,
+            neighbour_radius_m: o.neighbour_radius_m,
+            max_views_per_place: o.max_views_per_place,
+        };
+        let keyframes = raw
+            .iter()
+            .enumerate()
+            .map(|(i, k)| {
+                Ok(Keyframe {
+                    id: k.id,
+                    descriptor: slice(k.descriptor, k.descriptor_len, &format!("keyframes[{i}].descriptor"))?,
+                    world_t_camera: optional_pose(k.world_T_camera, &format!("keyframes[{i}].world_T_camera"))?,
+                })
+            })
+            .collect::<Result<Vec<_>, FfiError>>()?;
+        write_out(out, topoloc_map::into_raw(from_keyframes(identity, &keyframes, &options)?));
+        Ok(())
+    })
+}

@@ -1,0 +1,299 @@
+//! C functions of the localizer: create, process a frame, reset, free.
+
+use super::boundary::{
+    borrow, borrow_mut, check_out, fill_default, read_versioned, run, run_void, slice, struct_size_of, write_out, FfiError, Versioned,
+};
+use super::convert::{expected_descriptor, optional_pose};
+use super::map::topoloc_map;
+use super::topoloc_status;
+use crate::localize::{Frame, Localization, Localizer, LocalizerOptions, Mode};
+use std::ffi::c_char;
+
+/// Filter mode: forward filter over the graph (default).
+pub const TOPOLOC_MODE_FILTER: u32 = 0;
+/// Single-frame mode: every frame judged on its own.
+pub const TOPOLOC_MODE_SINGLE_FRAME: u32 = 1;
+
+/// Follows one camera through a map. Created by `topoloc_localizer_new`, released by
+/// `topoloc_localizer_free`. Holds per-camera state: use it from one thread at a time (it may
+/// move between threads). It keeps its own reference to the map.
+pub struct topoloc_localizer {
+    localizer: Localizer,
+    scratch: Localization,
+}
+
+/// Localizer parameters. Initialise with `topoloc_localizer_options_default`; the defaults and
+/// meaning of each field are those of the Rust `LocalizerOptions`.
+#[repr(C)]
+#[derive(Clone, Copy)]
+pub struct topoloc_localizer_options {
+    /// `sizeof(topoloc_localizer_options)`, set by the `_default` function.
+    pub struct_size: usize,
+    /// `TOPOLOC_MODE_FILTER` or `TOPOLOC_MODE_SINGLE_FRAME`.
+    pub mode: u32,
+    /// Softmax temperature of the observation likelihood (> 0). Default 0.02.
+    pub temperature: f32,
+    /// Probability of staying at a place between frames without odometry. Default 0.7.
+    pub stay_probability: f32,
+    /// Probability of a jump anywhere per frame (kidnap recovery). Default 0.01.
+    pub jump_probability: f32,
+    /// Probability of entering the off-map state per frame; 0 disables off-map. Default 0.01.
+    pub off_map_probability: f32,
+    /// Similarity scored by the off-map hypothesis. Default 0.2.
+    pub off_map_similarity: f32,
+    /// Candidates reported per frame (>= 1). Default 5.
+    pub top_k: u32,
+    /// Refuse maps built with another descriptor kind; NULL or "" = any.
+    pub expected_descriptor_kind: *const c_char,
+    /// Refuse maps built with another descriptor model; NULL or "" = any.
+    pub expected_descriptor_model: *const c_char,
+}
+
+impl Versioned for topoloc_localizer_options {
+    const MIN_SIZE: usize = std::mem::size_of::<Self>();
+}
+
+impl Default for topoloc_localizer_options {
+    fn default() -> Self {
+        let d = LocalizerOptions::default();
+        Self {
+            struct_size: std::mem::size_of::<Self>(),
+            mode: TOPOLOC_MODE_FILTER,
+            temperature: d.temperature,
+            stay_probability: d.stay_probability,
+            jump_probability: d.jump_probability,
+            off_map_probability: d.off_map_probability,
+            off_map_similarity: d.off_map_similarity,
+            top_k: d.top_k as u32,
+            expected_descriptor_kind: std::ptr::null(),
+            expected_descriptor_model: std::ptr::null(),
+        }
+    }
+}
+
+/// Fills `*options` with defaults. Does nothing if `options` is NULL.
+#[no_mangle]
+pub extern "C" fn topoloc_localizer_options_default(options: *mut topoloc_localizer_options) {
+    fill_default(options)
+}
+
+/// Creates a localizer on `map` (which it keeps alive; the caller may free its own handle).
+/// `options` may be NULL for defaults. On success `*out` owns a new localizer.
+/// Errors: `_INVALID_OPTION`, `_DESCRIPTOR_MISMATCH`, `_STRUCT_SIZE`, `_NULL_ARGUMENT`.
+#[no_mangle]
+pub extern "C" fn topoloc_localizer_new(
+    map: *const topoloc_map,
+    options: *const topoloc_localizer_options,
+    out: *mut *mut topoloc_localizer,
+) -> topoloc_status {
+    run(|| {
+        let map = borrow(map, "map")?.map.clone();
+        check_out(out, "out")?;
+        let o = if options.is_null() {
+            topoloc_localizer_options::default()
+        } else {
+            read_versioned(options, topoloc_localizer_options::default(), "options")?
+        };
+        let mode = match o.mode {
+            TOPOLOC_MODE_FILTER => Mode::Filter,
+            TOPOLOC_MODE_SINGLE_FRAME => Mode::SingleFrame,
+            other => return Err(FfiError::new(topoloc_status::TOPOLOC_ERR_INVALID_OPTION, format!("unknown mode {other}"))),
+        };
+        let options = LocalizerOptions {
+            mode,
+            temperature: o.temperature,
+            stay_probability: o.stay_probability,
+            jump_probability: o.jump_probability,
+            off_map_probability: o.off_map_probability,
+            off_map_similarity: o.off_map_similarity,
+            top_k: o.top_k as usize,
+            expected: expected_descriptor(o.expected_descriptor_kind, o.expected_descriptor_model, 0)?,
+        };
+        let localizer = Localizer::new(map, options)?;
+        write_out(out, Box::into_raw(Box::new(topoloc_localizer { localizer, scratch: Localization::default() })));
+        Ok(())
+    })
+}
+
+/// Releases a localizer. `NULL` is a no-op.
+#[no_mangle]
+pub extern "C" fn topoloc_localizer_free(localizer: *mut topoloc_localizer) {
+    run_void(|| {
+        if !localizer.is_null() {
+            // SAFETY: came from `topoloc_localizer_new` and is freed once, per the contract.
+            drop(unsafe { Box::from_raw(localizer) });
+        }
+    })
+}
+
+/// Forgets all history; the next frame is treated as the first.
+#[no_mangle]
+pub extern "C" fn topoloc_localizer_reset(localizer: *mut topoloc_localizer) -> topoloc_status {
+    run(|| {
+        borrow_mut(localizer, "localizer")?.localizer.reset();
+        Ok(())
+    })
+}
+
+/// One camera frame. Initialise with `topoloc_frame_default`.
+#[repr(C)]
+#[derive(Clone, Copy)]
+pub struct topoloc_frame {
+    /// `sizeof(topoloc_frame)`, set by the `_default` function.
+    pub struct_size: usize,
+    /// Time in seconds; must not decrease in filter mode (reset to start a new sequence).
+    pub timestamp: f64,
+    /// Global descriptor of the frame (normalised internally).
+    pub descriptor: *const f32,
+    /// Number of floats at `descriptor`; must equal the map's D.
+    pub descriptor_len: usize,
+    /// Motion since the previous frame `previous_T_current`, 16 doubles row-major 4x4; NULL = none.
+    pub odometry: *const f64,
+}
+
+impl Versioned for topoloc_frame {
+    const MIN_SIZE: usize = std::mem::size_of::<Self>();
+}
+
+impl Default for topoloc_frame {
+    fn default() -> Self {
+        Self {
+            struct_size: std::mem::size_of::<Self>(),
+            timestamp: 0.0,
+            descriptor: std::ptr::null(),
+            descriptor_len: 0,
+            odometry: std::ptr::null(),
+        }
+    }
+}
+
+/// Fills `*frame` with an empty frame (no descriptor, no odometry). Does nothing if NULL.
+#[no_mangle]
+pub extern "C" fn topoloc_frame_default(frame: *mut topoloc_frame) {
+    fill_default(frame)
+}
+
+/// One ranked hypothesis. Array element: its layout never changes.
+#[repr(C)]
+#[derive(Clone, Copy, Default)]
+pub struct topoloc_candidate {
+    /// Place id.
+    pub place: u32,
+    /// Best-matching view of the place.
+    pub view: u32,
+    /// Posterior probability of the place.
+    pub probability: f32,
+    /// Cosine similarity of the frame to `view`.
+    pub similarity: f32,
+}
+
+/// The answer for one frame, written by `topoloc_localizer_process`. The caller sets
+/// `struct_size` (with `topoloc_result_default`) and, to receive candidates, `candidates` and
+/// `candidates_capacity`; topoloc writes the other fields.
+#[repr(C)]
+#[derive(Clone, Copy)]
+pub struct topoloc_result {
+    /// `sizeof(topoloc_result)`, set by the `_default` function.
+    pub struct_size: usize,
+    /// 0-based frame count since creation or reset.
+    pub frame_index: u64,
+    /// Most probable place.
+    pub place: u32,
+    /// Best-matching view of that place.
+    pub view: u32,
+    /// Posterior probability of `place`.
+    pub confidence: f32,
+    /// Cosine similarity of the frame to `view`.
+    pub similarity: f32,
+    /// Posterior probability of the off-map state.
+    pub off_map_probability: f32,
+    /// True when the off-map state is more probable than any place.
+    pub off_map: bool,
+    /// Caller-owned array receiving the top candidates, best first; may be NULL if capacity is 0.
+    pub candidates: *mut topoloc_candidate,
+    /// Capacity of `candidates` in elements.
+    pub candidates_capacity: usize,
+    /// Number of candidates written: min(top_k, places, capacity).
+    pub candidates_len: usize,
+}
+
+impl Versioned for topoloc_result {
+    const MIN_SIZE: usize = std::mem::size_of::<Self>();
+}
+
+impl Default for topoloc_result {
+    fn default() -> Self {
+        Self {
+            struct_size: std::mem::size_of::<Self>(),
+            frame_index: 0,
+            place: 0,
+            view: 0,
+            confidence: 0.0,
+            similarity: 0.0,
+            off_map_probability: 0.0,
+            off_map: false,
+            candidates: std::ptr::null_mut(),
+            candidates_capacity: 0,
+            candidates_len: 0,
+        }
+    }
+}
+
+/// Fills `*result` with an empty result without a candidate buffer. Does nothing if NULL.
+#[no_mangle]
+pub extern "C" fn topoloc_result_default(result: *mut topoloc_result) {
+    fill_default(result)
+}
+
+/// Localizes one frame and writes the answer into `*result`. The whole frame is validated
+/// first: on any error the localizer state and `*result` are unchanged.
+/// Errors: `_DIMENSION_MISMATCH`, `_NON_FINITE`, `_ZERO_DESCRIPTOR`, `_TIMESTAMP`,
+/// `_INVALID_ARGUMENT` (odometry not a rigid transform), `_STRUCT_SIZE`, `_NULL_ARGUMENT`.
+/// Cost: one pass over the map's descriptors plus O(places + edges); no allocation.
+#[no_mangle]
+pub extern "C" fn topoloc_localizer_process(
+    localizer: *mut topoloc_localizer,
+    frame: *const topoloc_frame,
+    result: *mut topoloc_result,
+) -> topoloc_status {
+    run(|| {
+        let state = borrow_mut(localizer, "localizer")?;
+        let f = read_versioned(frame, topoloc_frame::default(), "frame")?;
+        struct_size_of(result as *const topoloc_result, "result")?;
+        let caller = borrow(result as *const topoloc_result, "result")?;
+        let (buffer, capacity) = (caller.candidates, caller.candidates_capacity);
+        if buffer.is_null() && capacity > 0 {
+            return Err(FfiError::null("result.candidates"));
+        }
+        let frame = Frame {
+            timestamp: f.timestamp,
+            descriptor: slice(f.descriptor, f.descriptor_len, "frame.descriptor")?,
+            odometry: optional_pose(f.odometry, "frame.odometry")?,
+        };
+        state.localizer.process(&frame, &mut state.scratch)?;
+        let out = &state.scratch;
+        let written = out.candidates.len().min(capacity);
+        for (i, c) in out.candidates[..written].iter().enumerate() {
+            let candidate = topoloc_candidate { place: c.place, view: c.view, probability: c.probability, similarity: c.similarity };
+            // SAFETY: the caller provides `capacity` writable elements at `buffer`; i < capacity.
+            unsafe { buffer.add(i).write(candidate) };
+        }
+        write_out(
+            result,
+            topoloc_result {
+                struct_size: std::mem::size_of::<topoloc_result>(),
+                frame_index: out.frame_index,
+                place: out.place,
+                view: out.view,
+                confidence: out.confidence,
+                similarity: out.similarity,
+                off_map_probability: out.off_map_probability,
+                off_map: out.off_map,
+                candidates: buffer,
+                candidates_capacity: capacity,
+                candidates_len: written,
+            },
+        );
+        Ok(())
+    })
+}
