@@ -271,9 +271,14 @@ typedef struct topoloc_localizer_options {
    */
   float off_map_probability;
   /**
-   * Similarity scored by the off-map hypothesis. Default 0.2.
+   * Absolute floor of the off-map hypothesis' score (cosine similarity). Default 0.2.
    */
   float off_map_similarity;
+  /**
+   * Standard deviations above the expected best background score a place must reach to
+   * beat the off-map hypothesis (>= 0). Default 1.0.
+   */
+  float off_map_margin;
   /**
    * Candidates reported per frame (>= 1). Default 5.
    */
@@ -359,7 +364,7 @@ typedef struct topoloc_result {
    */
   uint32_t view;
   /**
-   * Posterior probability of `place`.
+   * Posterior probability that the robot is at `place` (place belief x on-map probability).
    */
   float confidence;
   /**
@@ -371,7 +376,7 @@ typedef struct topoloc_result {
    */
   float off_map_probability;
   /**
-   * True when the off-map state is more probable than any place.
+   * True when the robot is more likely off the map than on it.
    */
   bool off_map;
   /**

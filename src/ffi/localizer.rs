@@ -39,8 +39,11 @@ pub struct topoloc_localizer_options {
     pub jump_probability: f32,
     /// Probability of entering the off-map state per frame; 0 disables off-map. Default 0.01.
     pub off_map_probability: f32,
-    /// Similarity scored by the off-map hypothesis. Default 0.2.
+    /// Absolute floor of the off-map hypothesis' score (cosine similarity). Default 0.2.
     pub off_map_similarity: f32,
+    /// Standard deviations above the expected best background score a place must reach to
+    /// beat the off-map hypothesis (>= 0). Default 1.0.
+    pub off_map_margin: f32,
     /// Candidates reported per frame (>= 1). Default 5.
     pub top_k: u32,
     /// Refuse maps built with another descriptor kind; NULL or "" = any.
@@ -64,6 +67,7 @@ impl Default for topoloc_localizer_options {
             jump_probability: d.jump_probability,
             off_map_probability: d.off_map_probability,
             off_map_similarity: d.off_map_similarity,
+            off_map_margin: d.off_map_margin,
             top_k: d.top_k as u32,
             expected_descriptor_kind: std::ptr::null(),
             expected_descriptor_model: std::ptr::null(),
@@ -106,6 +110,7 @@ pub extern "C" fn topoloc_localizer_new(
             jump_probability: o.jump_probability,
             off_map_probability: o.off_map_probability,
             off_map_similarity: o.off_map_similarity,
+            off_map_margin: o.off_map_margin,
             top_k: o.top_k as usize,
             expected: expected_descriptor(o.expected_descriptor_kind, o.expected_descriptor_model, 0)?,
         };
@@ -201,13 +206,13 @@ pub struct topoloc_result {
     pub place: u32,
     /// Best-matching view of that place.
     pub view: u32,
-    /// Posterior probability of `place`.
+    /// Posterior probability that the robot is at `place` (place belief x on-map probability).
     pub confidence: f32,
     /// Cosine similarity of the frame to `view`.
     pub similarity: f32,
     /// Posterior probability of the off-map state.
     pub off_map_probability: f32,
-    /// True when the off-map state is more probable than any place.
+    /// True when the robot is more likely off the map than on it.
     pub off_map: bool,
     /// Caller-owned array receiving the top candidates, best first; may be NULL if capacity is 0.
     pub candidates: *mut topoloc_candidate,

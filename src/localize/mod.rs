@@ -40,9 +40,12 @@ pub struct LocalizerOptions {
     pub jump_probability: f32,
     /// Probability of entering the off-map state per frame. Default 0.01; 0 disables off-map.
     pub off_map_probability: f32,
-    /// Similarity the off-map hypothesis scores: frames whose best place scores below it (for
-    /// long enough) are reported off-map. Default 0.2.
+    /// Absolute floor of the off-map hypothesis' score: frames whose best place scores below it
+    /// (for long enough) are reported off-map. Default 0.2.
     pub off_map_similarity: f32,
+    /// How many standard deviations above the expected best background score a place must
+    /// score to beat the off-map hypothesis (see `filter.rs`). Default 1.0.
+    pub off_map_margin: f32,
     /// Candidates reported per frame. Default 5.
     pub top_k: usize,
     /// Refuse maps built with another descriptor than this one.
@@ -58,6 +61,7 @@ impl Default for LocalizerOptions {
             jump_probability: 0.01,
             off_map_probability: 0.01,
             off_map_similarity: 0.2,
+            off_map_margin: 1.0,
             top_k: 5,
             expected: ExpectedDescriptor::default(),
         }
@@ -83,6 +87,9 @@ impl LocalizerOptions {
         if !(self.off_map_similarity.is_finite() && (-1.0..=1.0).contains(&self.off_map_similarity)) {
             return bad("off_map_similarity must lie in [-1, 1]");
         }
+        if !(self.off_map_margin.is_finite() && self.off_map_margin >= 0.0) {
+            return bad("off_map_margin must be finite and >= 0");
+        }
         if self.top_k == 0 {
             return bad("top_k must be at least 1");
         }
@@ -92,6 +99,7 @@ impl LocalizerOptions {
             jump_probability: f64::from(self.jump_probability),
             off_map_probability: f64::from(self.off_map_probability),
             off_map_similarity: f64::from(self.off_map_similarity),
+            off_map_margin: f64::from(self.off_map_margin),
         })
     }
 }
@@ -129,13 +137,14 @@ pub struct Localization {
     pub place: PlaceId,
     /// Best-matching view of that place.
     pub view: ViewId,
-    /// Posterior probability of `place` (0..1).
+    /// Posterior probability that the robot is at `place` (0..1): the place belief times the
+    /// probability of being on the map.
     pub confidence: f32,
     /// Cosine similarity of the query to `view`.
     pub similarity: f32,
-    /// True when the off-map state is more probable than any place.
+    /// True when the robot is more likely off the map than on it.
     pub off_map: bool,
-    /// Posterior probability of the off-map state.
+    /// Posterior probability that the robot is off the map.
     pub off_map_probability: f32,
     /// Top-k places by posterior, best first; `candidates[0]` is `place`.
     pub candidates: Vec<Candidate>,
@@ -266,7 +275,8 @@ impl Localizer {
 
     fn write_result(&mut self, out: &mut Localization) {
         let m = self.map.place_count();
-        let p = &self.belief.probabilities;
+        let p = &self.belief.places;
+        let on_map = 1.0 - self.belief.off_map;
         let k = self.options.top_k.min(m);
         let by_probability = |a: &u32, b: &u32| p[*b as usize].total_cmp(&p[*a as usize]).then(a.cmp(b));
         if k < m {
@@ -279,7 +289,7 @@ impl Localizer {
             Candidate {
                 place,
                 view,
-                probability: p[place as usize] as f32,
+                probability: (p[place as usize] * on_map) as f32,
                 similarity: self.view_scores[view as usize],
             }
         }));
@@ -288,7 +298,7 @@ impl Localizer {
         out.view = best.view;
         out.confidence = best.probability;
         out.similarity = best.similarity;
-        out.off_map_probability = p[m] as f32;
-        out.off_map = p[m] > p[best.place as usize];
+        out.off_map_probability = self.belief.off_map as f32;
+        out.off_map = self.belief.off_map > 0.5;
     }
 }
