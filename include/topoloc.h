@@ -255,7 +255,7 @@ typedef struct topoloc_localizer_options {
    */
   uint32_t mode;
   /**
-   * Softmax temperature of the observation likelihood (> 0). Default 0.02.
+   * Softmax temperature of the observation likelihood (> 0). Default 0.03.
    */
   float temperature;
   /**
@@ -276,7 +276,7 @@ typedef struct topoloc_localizer_options {
   float off_map_similarity;
   /**
    * Standard deviations above the expected best background score a place must reach to
-   * beat the off-map hypothesis (>= 0). Default 1.0.
+   * beat the off-map hypothesis (finite; may be negative). Default -1.0.
    */
   float off_map_margin;
   /**

@@ -19,7 +19,9 @@ pub mod localize;
 pub mod map;
 pub mod synthetic;
 
-pub use localize::{Candidate, Frame, Localization, LocalizeError, Localizer, LocalizerOptions, Mode};
+pub use localize::{
+    Candidate, Frame, Localization, LocalizeError, Localizer, LocalizerOptions, Mode,
+};
 pub use map::{DescriptorIdentity, ExpectedDescriptor, LoadOptions, Map, MapBuilder, MapError};
 
 /// Crate version, `MAJOR.MINOR.PATCH`.

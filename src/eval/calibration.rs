@@ -53,15 +53,28 @@ pub fn calibration(outcomes: &[ScoredOutcome], bin_count: usize) -> Result<Calib
     let bins: Vec<CalibrationBin> = (0..bin_count)
         .map(|b| CalibrationBin {
             lower: b as f64 * width,
-            upper: if b + 1 == bin_count { 1.0 } else { (b + 1) as f64 * width },
+            upper: if b + 1 == bin_count {
+                1.0
+            } else {
+                (b + 1) as f64 * width
+            },
             count: counts[b],
-            mean_confidence: if counts[b] == 0 { 0.0 } else { confidence_sums[b] / counts[b] as f64 },
+            mean_confidence: if counts[b] == 0 {
+                0.0
+            } else {
+                confidence_sums[b] / counts[b] as f64
+            },
             accuracy: fraction(correct[b], counts[b]),
         })
         .collect();
-    let expected_calibration_error =
-        bins.iter().map(|b| fraction(b.count, outcomes.len()) * (b.accuracy - b.mean_confidence).abs()).sum();
-    Ok(Calibration { bins, expected_calibration_error })
+    let expected_calibration_error = bins
+        .iter()
+        .map(|b| fraction(b.count, outcomes.len()) * (b.accuracy - b.mean_confidence).abs())
+        .sum();
+    Ok(Calibration {
+        bins,
+        expected_calibration_error,
+    })
 }
 
 #[cfg(test)]
@@ -69,7 +82,12 @@ mod tests {
     use super::*;
 
     fn outcomes(list: &[(f32, bool)]) -> Vec<ScoredOutcome> {
-        list.iter().map(|&(confidence, correct)| ScoredOutcome { confidence, correct }).collect()
+        list.iter()
+            .map(|&(confidence, correct)| ScoredOutcome {
+                confidence,
+                correct,
+            })
+            .collect()
     }
 
     #[test]
@@ -77,16 +95,34 @@ mod tests {
         // Bin [0.25, 0.5): confidences 0.3, 0.4, one right -> mean 0.35, accuracy 0.5.
         // Bin [0.75, 1]: confidences 0.9, 0.8, 1.0, two right -> mean 0.9, accuracy 2/3.
         // ECE = 2/5 * 0.15 + 3/5 * (0.9 - 2/3) = 0.06 + 0.14 = 0.2.
-        let table =
-            calibration(&outcomes(&[(0.3, true), (0.9, true), (0.4, false), (1.0, false), (0.8, true)]), 4).unwrap();
-        assert!((table.expected_calibration_error - 0.2).abs() < 1e-6, "{}", table.expected_calibration_error);
+        let table = calibration(
+            &outcomes(&[
+                (0.3, true),
+                (0.9, true),
+                (0.4, false),
+                (1.0, false),
+                (0.8, true),
+            ]),
+            4,
+        )
+        .unwrap();
+        assert!(
+            (table.expected_calibration_error - 0.2).abs() < 1e-6,
+            "{}",
+            table.expected_calibration_error
+        );
         let counts: Vec<usize> = table.bins.iter().map(|b| b.count).collect();
         assert_eq!(counts, [0, 2, 0, 3]);
         let (low, high) = (table.bins[1], table.bins[3]);
         assert!((low.mean_confidence - 0.35).abs() < 1e-6 && (low.accuracy - 0.5).abs() < 1e-12);
-        assert!((high.mean_confidence - 0.9).abs() < 1e-6 && (high.accuracy - 2.0 / 3.0).abs() < 1e-12);
+        assert!(
+            (high.mean_confidence - 0.9).abs() < 1e-6 && (high.accuracy - 2.0 / 3.0).abs() < 1e-12
+        );
         assert_eq!((low.lower, low.upper, high.upper), (0.25, 0.5, 1.0));
-        assert_eq!((table.bins[0].mean_confidence, table.bins[0].accuracy), (0.0, 0.0));
+        assert_eq!(
+            (table.bins[0].mean_confidence, table.bins[0].accuracy),
+            (0.0, 0.0)
+        );
     }
 
     #[test]
@@ -99,10 +135,16 @@ mod tests {
     fn bad_inputs() {
         assert_eq!(calibration(&[], 0).unwrap_err(), EvalError::NoBins);
         let empty = calibration(&[], 3).unwrap();
-        assert_eq!((empty.bins.len(), empty.expected_calibration_error), (3, 0.0));
+        assert_eq!(
+            (empty.bins.len(), empty.expected_calibration_error),
+            (3, 0.0)
+        );
         assert_eq!(
             calibration(&outcomes(&[(0.5, true), (1.5, true)]), 2).unwrap_err(),
-            EvalError::ConfidenceOutOfRange { query: 1, value: 1.5 }
+            EvalError::ConfidenceOutOfRange {
+                query: 1,
+                value: 1.5
+            }
         );
         assert!(matches!(
             calibration(&outcomes(&[(f32::NAN, true)]), 2),

@@ -18,11 +18,20 @@ pub struct FrameRanking {
 ///
 /// Accepts any iterator of rankings, e.g. `&rankings` or
 /// `predictions.iter().filter_map(|p| p.frames.as_ref())`.
-pub fn recall_at_n_frames<'a>(queries: impl IntoIterator<Item = &'a FrameRanking>, tolerance: usize, n: usize) -> f64 {
+pub fn recall_at_n_frames<'a>(
+    queries: impl IntoIterator<Item = &'a FrameRanking>,
+    tolerance: usize,
+    n: usize,
+) -> f64 {
     let (mut hits, mut total) = (0, 0);
     for query in queries {
         total += 1;
-        if query.ranked.iter().take(n).any(|&frame| frame.abs_diff(query.truth) <= tolerance) {
+        if query
+            .ranked
+            .iter()
+            .take(n)
+            .any(|&frame| frame.abs_diff(query.truth) <= tolerance)
+        {
             hits += 1;
         }
     }
@@ -35,9 +44,18 @@ mod tests {
 
     fn rankings() -> Vec<FrameRanking> {
         vec![
-            FrameRanking { truth: 10, ranked: vec![3, 12, 40] },
-            FrameRanking { truth: 0, ranked: vec![1] },
-            FrameRanking { truth: 50, ranked: vec![] },
+            FrameRanking {
+                truth: 10,
+                ranked: vec![3, 12, 40],
+            },
+            FrameRanking {
+                truth: 0,
+                ranked: vec![1],
+            },
+            FrameRanking {
+                truth: 50,
+                ranked: vec![],
+            },
         ]
     }
 

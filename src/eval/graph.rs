@@ -70,7 +70,11 @@ impl<'a> GraphEvaluator<'a> {
         for (query, prediction) in predictions.iter().enumerate() {
             let mut ids = std::iter::once(&prediction.truth).chain(&prediction.ranked);
             if let Some(&place) = ids.find(|&&p| p as usize >= places) {
-                return Err(EvalError::UnknownPlace { query, place, places });
+                return Err(EvalError::UnknownPlace {
+                    query,
+                    place,
+                    places,
+                });
             }
         }
         Ok(Self { hops, predictions })
@@ -79,7 +83,11 @@ impl<'a> GraphEvaluator<'a> {
     /// Fraction of queries with any of the top `n` places at most `max_hops` hops from the
     /// truth. The metrics below are special cases of it.
     pub fn hit_rate(&self, n: usize, max_hops: u32) -> f64 {
-        let hits = self.predictions.iter().filter(|p| self.any_within(p.top_n(n), p.truth, max_hops)).count();
+        let hits = self
+            .predictions
+            .iter()
+            .filter(|p| self.any_within(p.top_n(n), p.truth, max_hops))
+            .count();
         fraction(hits, self.predictions.len())
     }
 
@@ -110,7 +118,13 @@ impl<'a> GraphEvaluator<'a> {
             queries: self.predictions.len(),
             mna: self.mna(),
             oha: self.oha(),
-            recall_at_n: ns.iter().map(|&n| RecallAtN { n, recall: self.recall_at_n(n) }).collect(),
+            recall_at_n: ns
+                .iter()
+                .map(|&n| RecallAtN {
+                    n,
+                    recall: self.recall_at_n(n),
+                })
+                .collect(),
         }
     }
 
@@ -128,7 +142,9 @@ impl<'a> GraphEvaluator<'a> {
     }
 
     fn any_within(&self, candidates: &[PlaceId], truth: PlaceId, max_hops: u32) -> bool {
-        candidates.iter().any(|&c| c == truth || self.hops.hops(truth, c).is_some_and(|h| h <= max_hops))
+        candidates
+            .iter()
+            .any(|&c| c == truth || self.hops.hops(truth, c).is_some_and(|h| h <= max_hops))
     }
 }
 
@@ -141,7 +157,12 @@ mod tests {
     }
 
     fn prediction(truth: PlaceId, ranked: &[PlaceId], confidence: f32) -> Prediction {
-        Prediction { truth, ranked: ranked.to_vec(), confidence, frames: None }
+        Prediction {
+            truth,
+            ranked: ranked.to_vec(),
+            confidence,
+            frames: None,
+        }
     }
 
     /// On the chain 0-1-2-3-4. Hops of the ranked places from the truth, per query:
@@ -187,7 +208,10 @@ mod tests {
         let exact: Vec<bool> = eval.scored_outcomes(0).iter().map(|o| o.correct).collect();
         assert_eq!(exact, [true, false, false, false, false]);
         let one_hop = eval.scored_outcomes(1);
-        assert_eq!(one_hop.iter().map(|o| o.correct).collect::<Vec<_>>(), [true, true, false, false, false]);
+        assert_eq!(
+            one_hop.iter().map(|o| o.correct).collect::<Vec<_>>(),
+            [true, true, false, false, false]
+        );
         assert_eq!(one_hop[2].confidence, 0.4);
     }
 
@@ -196,11 +220,26 @@ mod tests {
         let hops = chain();
         let bad = [prediction(1, &[1], 0.5), prediction(1, &[2, 7], 0.5)];
         let err = GraphEvaluator::new(&hops, &bad).unwrap_err();
-        assert_eq!(err, EvalError::UnknownPlace { query: 1, place: 7, places: 5 });
+        assert_eq!(
+            err,
+            EvalError::UnknownPlace {
+                query: 1,
+                place: 7,
+                places: 5
+            }
+        );
         let bad_truth = [prediction(5, &[1], 0.5)];
         assert!(GraphEvaluator::new(&hops, &bad_truth).is_err());
 
         let empty = GraphEvaluator::new(&hops, &[]).unwrap().metrics(&[1]);
-        assert_eq!((empty.queries, empty.mna, empty.oha, empty.recall_at_n[0].recall), (0, 0.0, 0.0, 0.0));
+        assert_eq!(
+            (
+                empty.queries,
+                empty.mna,
+                empty.oha,
+                empty.recall_at_n[0].recall
+            ),
+            (0, 0.0, 0.0, 0.0)
+        );
     }
 }

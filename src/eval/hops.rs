@@ -37,7 +37,11 @@ impl HopDistances {
         for (place, list) in (0..).zip(adjacency) {
             for &neighbour in list {
                 if neighbour as usize >= places {
-                    return Err(EvalError::UnknownNeighbour { place, neighbour, places });
+                    return Err(EvalError::UnknownNeighbour {
+                        place,
+                        neighbour,
+                        places,
+                    });
                 }
                 edges.push((place, neighbour));
             }
@@ -47,8 +51,11 @@ impl HopDistances {
 
     /// Builds the symmetric CSR adjacency. Edge endpoints must be `< places`.
     fn from_edges(places: usize, edges: impl IntoIterator<Item = (PlaceId, PlaceId)>) -> Self {
-        let mut pairs: Vec<(PlaceId, PlaceId)> =
-            edges.into_iter().filter(|(a, b)| a != b).map(|(a, b)| (a.min(b), a.max(b))).collect();
+        let mut pairs: Vec<(PlaceId, PlaceId)> = edges
+            .into_iter()
+            .filter(|(a, b)| a != b)
+            .map(|(a, b)| (a.min(b), a.max(b)))
+            .collect();
         pairs.sort_unstable();
         pairs.dedup();
 
@@ -69,7 +76,11 @@ impl HopDistances {
                 *slot += 1;
             }
         }
-        Self { offsets, neighbours, from_source: (0..places).map(|_| OnceLock::new()).collect() }
+        Self {
+            offsets,
+            neighbours,
+            from_source: (0..places).map(|_| OnceLock::new()).collect(),
+        }
     }
 
     /// Number of places in the graph.
@@ -86,7 +97,11 @@ impl HopDistances {
         }
         // The graph is undirected: reuse a BFS from `b` if only that one is cached.
         let (source, target) =
-            if self.from_source[a].get().is_none() && self.from_source[b].get().is_some() { (b, a) } else { (a, b) };
+            if self.from_source[a].get().is_none() && self.from_source[b].get().is_some() {
+                (b, a)
+            } else {
+                (a, b)
+            };
         let hops = self.from_source[source].get_or_init(|| self.bfs(source))[target];
         (hops != UNREACHABLE).then_some(hops)
     }
@@ -111,7 +126,10 @@ impl HopDistances {
     /// Number of source places whose BFS is cached.
     #[cfg(test)]
     fn cached_sources(&self) -> usize {
-        self.from_source.iter().filter(|cell| cell.get().is_some()).count()
+        self.from_source
+            .iter()
+            .filter(|cell| cell.get().is_some())
+            .count()
     }
 }
 
@@ -165,7 +183,14 @@ mod tests {
     #[test]
     fn bad_neighbour_is_rejected() {
         let err = HopDistances::from_adjacency(&[vec![1], vec![5]]).unwrap_err();
-        assert_eq!(err, EvalError::UnknownNeighbour { place: 1, neighbour: 5, places: 2 });
+        assert_eq!(
+            err,
+            EvalError::UnknownNeighbour {
+                place: 1,
+                neighbour: 5,
+                places: 2
+            }
+        );
     }
 
     #[test]
@@ -183,7 +208,9 @@ mod tests {
         let mut builder = MapBuilder::new(DescriptorIdentity::new("test", "", 4).unwrap());
         for _ in 0..6 {
             let place = builder.add_place(None).unwrap();
-            builder.add_view(place, &[1.0, 0.0, 0.0, 0.0], Default::default()).unwrap();
+            builder
+                .add_view(place, &[1.0, 0.0, 0.0, 0.0], Default::default())
+                .unwrap();
         }
         // Ring 0-1-2-3-4-0; place 5 has no edge.
         for (a, b) in [(0, 1), (1, 2), (2, 3), (3, 4), (4, 0)] {

@@ -68,7 +68,12 @@ mod tests {
     use super::*;
 
     fn outcomes(list: &[(f32, bool)]) -> Vec<ScoredOutcome> {
-        list.iter().map(|&(confidence, correct)| ScoredOutcome { confidence, correct }).collect()
+        list.iter()
+            .map(|&(confidence, correct)| ScoredOutcome {
+                confidence,
+                correct,
+            })
+            .collect()
     }
 
     fn close(a: f64, b: f64) -> bool {
@@ -78,27 +83,57 @@ mod tests {
     #[test]
     fn ties_form_one_step_whatever_their_order() {
         // Steps: 0.9 -> 1/1 of 5; 0.8 -> 2/3 of 5; 0.5 -> 3/4 of 5; 0.3 -> 3/5 of 5.
-        let want_points = [(0.9, 1.0, 0.2), (0.8, 2.0 / 3.0, 0.4), (0.5, 0.75, 0.6), (0.3, 0.6, 0.6)];
+        let want_points = [
+            (0.9, 1.0, 0.2),
+            (0.8, 2.0 / 3.0, 0.4),
+            (0.5, 0.75, 0.6),
+            (0.3, 0.6, 0.6),
+        ];
         let want_ap = 0.2 * 1.0 + 0.2 * (2.0 / 3.0) + 0.2 * 0.75;
         for order in [
-            [(0.8, true), (0.3, false), (0.9, true), (0.8, false), (0.5, true)],
-            [(0.8, false), (0.5, true), (0.9, true), (0.3, false), (0.8, true)],
+            [
+                (0.8, true),
+                (0.3, false),
+                (0.9, true),
+                (0.8, false),
+                (0.5, true),
+            ],
+            [
+                (0.8, false),
+                (0.5, true),
+                (0.9, true),
+                (0.3, false),
+                (0.8, true),
+            ],
         ] {
             let curve = precision_recall(&outcomes(&order)).unwrap();
             assert_eq!(curve.points.len(), want_points.len());
             for (got, &(threshold, precision, recall)) in curve.points.iter().zip(&want_points) {
                 assert_eq!(got.threshold, threshold);
-                assert!(close(got.precision, precision) && close(got.recall, recall), "{got:?}");
+                assert!(
+                    close(got.precision, precision) && close(got.recall, recall),
+                    "{got:?}"
+                );
             }
-            assert!(close(curve.average_precision, want_ap), "{}", curve.average_precision);
+            assert!(
+                close(curve.average_precision, want_ap),
+                "{}",
+                curve.average_precision
+            );
             assert!(close(curve.recall_at_full_precision, 0.2));
         }
     }
 
     #[test]
     fn full_precision_recall_stops_at_the_first_wrong_answer() {
-        let curve =
-            precision_recall(&outcomes(&[(0.9, true), (0.8, true), (0.7, false), (0.6, true), (0.5, true)])).unwrap();
+        let curve = precision_recall(&outcomes(&[
+            (0.9, true),
+            (0.8, true),
+            (0.7, false),
+            (0.6, true),
+            (0.5, true),
+        ]))
+        .unwrap();
         assert!(close(curve.recall_at_full_precision, 0.4));
         // 0.2*1 + 0.2*1 + 0*(2/3) + 0.2*(3/4) + 0.2*(4/5)
         assert!(close(curve.average_precision, 0.71));
@@ -116,7 +151,10 @@ mod tests {
         let curve = precision_recall(&outcomes(&[(0.2, true), (0.9, true), (0.6, true)])).unwrap();
         assert!(close(curve.average_precision, 1.0));
         assert!(close(curve.recall_at_full_precision, 1.0));
-        assert_eq!(curve.points.iter().map(|p| p.threshold).collect::<Vec<_>>(), [0.9, 0.6, 0.2]);
+        assert_eq!(
+            curve.points.iter().map(|p| p.threshold).collect::<Vec<_>>(),
+            [0.9, 0.6, 0.2]
+        );
     }
 
     #[test]

@@ -107,11 +107,17 @@ pub(crate) struct FfiError {
 
 impl FfiError {
     pub fn new(status: topoloc_status, message: impl Into<String>) -> Self {
-        Self { status, message: message.into() }
+        Self {
+            status,
+            message: message.into(),
+        }
     }
 
     pub fn null(name: &str) -> Self {
-        Self::new(TOPOLOC_ERR_NULL_ARGUMENT, format!("argument '{name}' is NULL"))
+        Self::new(
+            TOPOLOC_ERR_NULL_ARGUMENT,
+            format!("argument '{name}' is NULL"),
+        )
     }
 
     pub fn invalid(message: impl Into<String>) -> Self {
@@ -156,7 +162,9 @@ impl From<LocalizeError> for FfiError {
             LocalizeError::Descriptor(d) => d.into(),
             LocalizeError::Map(m) => m.into(),
             LocalizeError::InvalidOption(_) => Self::new(TOPOLOC_ERR_INVALID_OPTION, e.to_string()),
-            LocalizeError::Timestamp(ref msg) if msg.contains("not finite") => Self::new(TOPOLOC_ERR_NON_FINITE, e.to_string()),
+            LocalizeError::Timestamp(ref msg) if msg.contains("not finite") => {
+                Self::new(TOPOLOC_ERR_NON_FINITE, e.to_string())
+            }
             LocalizeError::Timestamp(_) => Self::new(TOPOLOC_ERR_TIMESTAMP, e.to_string()),
             LocalizeError::Odometry(_) => Self::new(TOPOLOC_ERR_NON_FINITE, e.to_string()),
         }
@@ -175,10 +183,12 @@ fn set_last_error(message: &str) {
 /// Copies the calling thread's last error message into `buf` (see `topoloc_last_error_message`).
 /// Does not itself change the last error.
 pub(crate) fn copy_last_error(buf: *mut c_char, len: usize, needed: *mut usize) -> topoloc_status {
-    LAST_ERROR.with(|e| match copy_c_string(e.borrow().to_bytes(), buf, len, needed) {
-        Ok(()) => TOPOLOC_OK,
-        Err(err) => err.status,
-    })
+    LAST_ERROR.with(
+        |e| match copy_c_string(e.borrow().to_bytes(), buf, len, needed) {
+            Ok(()) => TOPOLOC_OK,
+            Err(err) => err.status,
+        },
+    )
 }
 
 /// Runs an entry point's body: converts its error into a status and the thread's last error
@@ -246,8 +256,13 @@ pub(crate) fn slice<'a, T>(ptr: *const T, len: usize, name: &str) -> Result<&'a 
     if ptr.is_null() {
         return Err(FfiError::null(name));
     }
-    if len.checked_mul(std::mem::size_of::<T>()).is_none_or(|bytes| bytes > isize::MAX as usize) {
-        return Err(FfiError::invalid(format!("length of '{name}' is too large")));
+    if len
+        .checked_mul(std::mem::size_of::<T>())
+        .is_none_or(|bytes| bytes > isize::MAX as usize)
+    {
+        return Err(FfiError::invalid(format!(
+            "length of '{name}' is too large"
+        )));
     }
     // SAFETY: the caller guarantees `len` readable, initialised Ts at `ptr`.
     Ok(unsafe { std::slice::from_raw_parts(ptr, len) })
@@ -259,9 +274,12 @@ pub(crate) fn string<'a>(ptr: *const c_char, name: &str) -> Result<&'a str, FfiE
         return Err(FfiError::null(name));
     }
     // SAFETY: the caller guarantees a NUL-terminated string.
-    unsafe { CStr::from_ptr(ptr) }
-        .to_str()
-        .map_err(|_| FfiError::new(topoloc_status::TOPOLOC_ERR_INVALID_UTF8, format!("'{name}' is not valid UTF-8")))
+    unsafe { CStr::from_ptr(ptr) }.to_str().map_err(|_| {
+        FfiError::new(
+            topoloc_status::TOPOLOC_ERR_INVALID_UTF8,
+            format!("'{name}' is not valid UTF-8"),
+        )
+    })
 }
 
 /// Reads an optional string: NULL and "" both mean "not given".
@@ -275,13 +293,21 @@ pub(crate) fn optional_string(ptr: *const c_char, name: &str) -> Result<Option<S
 
 /// Copies `text` plus a NUL into `buf` of `len` bytes. `needed` (if non-NULL) always receives
 /// the size required including the NUL; a too-small buffer gives `TOPOLOC_ERR_BUFFER_TOO_SMALL`.
-pub(crate) fn copy_c_string(text: &[u8], buf: *mut c_char, len: usize, needed: *mut usize) -> Result<(), FfiError> {
+pub(crate) fn copy_c_string(
+    text: &[u8],
+    buf: *mut c_char,
+    len: usize,
+    needed: *mut usize,
+) -> Result<(), FfiError> {
     let required = text.len() + 1;
     if !needed.is_null() {
         write_out(needed, required);
     }
     if len < required {
-        return Err(FfiError::new(TOPOLOC_ERR_BUFFER_TOO_SMALL, format!("buffer of {len} bytes, {required} needed")));
+        return Err(FfiError::new(
+            TOPOLOC_ERR_BUFFER_TOO_SMALL,
+            format!("buffer of {len} bytes, {required} needed"),
+        ));
     }
     check_out(buf, "buf")?;
     // SAFETY: `buf` has room for `len >= required` bytes per the caller's contract.
@@ -294,7 +320,12 @@ pub(crate) fn copy_c_string(text: &[u8], buf: *mut c_char, len: usize, needed: *
 
 /// Copies `values` into the caller's `(buf, len)`. `count` (if non-NULL) always receives
 /// `values.len()`; a too-small buffer fails with `TOPOLOC_ERR_BUFFER_TOO_SMALL`.
-pub(crate) fn write_array<T: Copy>(values: &[T], buf: *mut T, len: usize, count: *mut usize) -> Result<(), FfiError> {
+pub(crate) fn write_array<T: Copy>(
+    values: &[T],
+    buf: *mut T,
+    len: usize,
+    count: *mut usize,
+) -> Result<(), FfiError> {
     if !count.is_null() {
         write_out(count, values.len());
     }
@@ -322,13 +353,19 @@ pub(crate) trait Versioned: Copy {
 
 /// Reads a versioned struct written by the caller: `struct_size` must be at least the first
 /// published size; fields beyond the caller's `struct_size` keep their values from `defaults`.
-pub(crate) fn read_versioned<T: Versioned>(ptr: *const T, defaults: T, name: &str) -> Result<T, FfiError> {
+pub(crate) fn read_versioned<T: Versioned>(
+    ptr: *const T,
+    defaults: T,
+    name: &str,
+) -> Result<T, FfiError> {
     let size = struct_size_of(ptr, name)?;
     let mut value = defaults;
     let copy = size.min(std::mem::size_of::<T>());
     // SAFETY: the caller's struct is at least `copy` bytes long (it says so in struct_size),
     // and `value` is a T, so the first `copy` bytes of both are valid to copy.
-    unsafe { std::ptr::copy_nonoverlapping(ptr.cast::<u8>(), (&mut value as *mut T).cast::<u8>(), copy) };
+    unsafe {
+        std::ptr::copy_nonoverlapping(ptr.cast::<u8>(), (&mut value as *mut T).cast::<u8>(), copy)
+    };
     Ok(value)
 }
 

@@ -1,10 +1,15 @@
 //! C functions that build maps: the incremental builder and the keyframe path.
 
-use super::boundary::{fill_default, borrow, borrow_mut, check_out, optional_string, read_versioned, run, run_void, slice, string, write_out, FfiError, Versioned};
+use super::boundary::{
+    borrow, borrow_mut, check_out, fill_default, optional_string, read_versioned, run, run_void,
+    slice, string, write_out, FfiError, Versioned,
+};
 use super::convert::optional_pose;
 use super::map::topoloc_map;
 use super::topoloc_status;
-use crate::map::{from_keyframes, DescriptorIdentity, Keyframe, KeyframeOptions, MapBuilder, ViewAttributes};
+use crate::map::{
+    from_keyframes, DescriptorIdentity, Keyframe, KeyframeOptions, MapBuilder, ViewAttributes,
+};
 use nalgebra::Point3;
 use std::ffi::c_char;
 
@@ -27,12 +32,21 @@ pub extern "C" fn topoloc_map_builder_new(
     run(|| {
         let identity = identity(kind, model, dim)?;
         check_out(out, "out")?;
-        write_out(out, Box::into_raw(Box::new(topoloc_map_builder { builder: MapBuilder::new(identity) })));
+        write_out(
+            out,
+            Box::into_raw(Box::new(topoloc_map_builder {
+                builder: MapBuilder::new(identity),
+            })),
+        );
         Ok(())
     })
 }
 
-fn identity(kind: *const c_char, model: *const c_char, dim: u32) -> Result<DescriptorIdentity, FfiError> {
+fn identity(
+    kind: *const c_char,
+    model: *const c_char,
+    dim: u32,
+) -> Result<DescriptorIdentity, FfiError> {
     let kind = string(kind, "kind")?;
     let model = optional_string(model, "model")?.unwrap_or_default();
     Ok(DescriptorIdentity::new(kind, model, dim)?)
@@ -51,7 +65,11 @@ pub extern "C" fn topoloc_map_builder_free(builder: *mut topoloc_map_builder) {
 
 /// Adds a place; `position` (3 doubles, metres) may be NULL. `*place_out` receives its id.
 #[no_mangle]
-pub extern "C" fn topoloc_map_builder_add_place(builder: *mut topoloc_map_builder, position: *const f64, place_out: *mut u32) -> topoloc_status {
+pub extern "C" fn topoloc_map_builder_add_place(
+    builder: *mut topoloc_map_builder,
+    position: *const f64,
+    place_out: *mut u32,
+) -> topoloc_status {
     run(|| {
         let builder = &mut borrow_mut(builder, "builder")?.builder;
         check_out(place_out, "place_out")?;
@@ -139,9 +157,16 @@ pub extern "C" fn topoloc_map_builder_add_view(
 
 /// Joins places `a` and `b` (different, existing, not yet joined) with weight > 0.
 #[no_mangle]
-pub extern "C" fn topoloc_map_builder_add_edge(builder: *mut topoloc_map_builder, a: u32, b: u32, weight: f32) -> topoloc_status {
+pub extern "C" fn topoloc_map_builder_add_edge(
+    builder: *mut topoloc_map_builder,
+    a: u32,
+    b: u32,
+    weight: f32,
+) -> topoloc_status {
     run(|| {
-        borrow_mut(builder, "builder")?.builder.add_edge(a, b, weight)?;
+        borrow_mut(builder, "builder")?
+            .builder
+            .add_edge(a, b, weight)?;
         Ok(())
     })
 }
@@ -149,7 +174,10 @@ pub extern "C" fn topoloc_map_builder_add_edge(builder: *mut topoloc_map_builder
 /// Validates and produces a map from what was added; the builder stays usable. On success
 /// `*out` owns a new map. Errors: `_EMPTY_MAP`, `_INVALID_MAP` (e.g. a place without views).
 #[no_mangle]
-pub extern "C" fn topoloc_map_builder_build(builder: *const topoloc_map_builder, out: *mut *mut topoloc_map) -> topoloc_status {
+pub extern "C" fn topoloc_map_builder_build(
+    builder: *const topoloc_map_builder,
+    out: *mut *mut topoloc_map,
+) -> topoloc_status {
     run(|| {
         let builder = &borrow(builder, "builder")?.builder;
         check_out(out, "out")?;
@@ -246,12 +274,22 @@ pub extern "C" fn topoloc_map_from_keyframes(
             .map(|(i, k)| {
                 Ok(Keyframe {
                     id: k.id,
-                    descriptor: slice(k.descriptor, k.descriptor_len, &format!("keyframes[{i}].descriptor"))?,
-                    world_t_camera: optional_pose(k.world_T_camera, &format!("keyframes[{i}].world_T_camera"))?,
+                    descriptor: slice(
+                        k.descriptor,
+                        k.descriptor_len,
+                        &format!("keyframes[{i}].descriptor"),
+                    )?,
+                    world_t_camera: optional_pose(
+                        k.world_T_camera,
+                        &format!("keyframes[{i}].world_T_camera"),
+                    )?,
                 })
             })
             .collect::<Result<Vec<_>, FfiError>>()?;
-        write_out(out, topoloc_map::into_raw(from_keyframes(identity, &keyframes, &options)?));
+        write_out(
+            out,
+            topoloc_map::into_raw(from_keyframes(identity, &keyframes, &options)?),
+        );
         Ok(())
     })
 }

@@ -1,7 +1,8 @@
 //! C functions of the localizer: create, process a frame, reset, free.
 
 use super::boundary::{
-    borrow, borrow_mut, check_out, fill_default, read_versioned, run, run_void, slice, struct_size_of, write_out, FfiError, Versioned,
+    borrow, borrow_mut, check_out, fill_default, read_versioned, run, run_void, slice,
+    struct_size_of, write_out, FfiError, Versioned,
 };
 use super::convert::{expected_descriptor, optional_pose};
 use super::map::topoloc_map;
@@ -31,7 +32,7 @@ pub struct topoloc_localizer_options {
     pub struct_size: usize,
     /// `TOPOLOC_MODE_FILTER` or `TOPOLOC_MODE_SINGLE_FRAME`.
     pub mode: u32,
-    /// Softmax temperature of the observation likelihood (> 0). Default 0.02.
+    /// Softmax temperature of the observation likelihood (> 0). Default 0.03.
     pub temperature: f32,
     /// Probability of staying at a place between frames without odometry. Default 0.7.
     pub stay_probability: f32,
@@ -42,7 +43,7 @@ pub struct topoloc_localizer_options {
     /// Absolute floor of the off-map hypothesis' score (cosine similarity). Default 0.2.
     pub off_map_similarity: f32,
     /// Standard deviations above the expected best background score a place must reach to
-    /// beat the off-map hypothesis (>= 0). Default 1.0.
+    /// beat the off-map hypothesis (finite; may be negative). Default -1.0.
     pub off_map_margin: f32,
     /// Candidates reported per frame (>= 1). Default 5.
     pub top_k: u32,
@@ -101,7 +102,12 @@ pub extern "C" fn topoloc_localizer_new(
         let mode = match o.mode {
             TOPOLOC_MODE_FILTER => Mode::Filter,
             TOPOLOC_MODE_SINGLE_FRAME => Mode::SingleFrame,
-            other => return Err(FfiError::new(topoloc_status::TOPOLOC_ERR_INVALID_OPTION, format!("unknown mode {other}"))),
+            other => {
+                return Err(FfiError::new(
+                    topoloc_status::TOPOLOC_ERR_INVALID_OPTION,
+                    format!("unknown mode {other}"),
+                ))
+            }
         };
         let options = LocalizerOptions {
             mode,
@@ -112,10 +118,20 @@ pub extern "C" fn topoloc_localizer_new(
             off_map_similarity: o.off_map_similarity,
             off_map_margin: o.off_map_margin,
             top_k: o.top_k as usize,
-            expected: expected_descriptor(o.expected_descriptor_kind, o.expected_descriptor_model, 0)?,
+            expected: expected_descriptor(
+                o.expected_descriptor_kind,
+                o.expected_descriptor_model,
+                0,
+            )?,
         };
         let localizer = Localizer::new(map, options)?;
-        write_out(out, Box::into_raw(Box::new(topoloc_localizer { localizer, scratch: Localization::default() })));
+        write_out(
+            out,
+            Box::into_raw(Box::new(topoloc_localizer {
+                localizer,
+                scratch: Localization::default(),
+            })),
+        );
         Ok(())
     })
 }
@@ -279,7 +295,12 @@ pub extern "C" fn topoloc_localizer_process(
         let out = &state.scratch;
         let written = out.candidates.len().min(capacity);
         for (i, c) in out.candidates[..written].iter().enumerate() {
-            let candidate = topoloc_candidate { place: c.place, view: c.view, probability: c.probability, similarity: c.similarity };
+            let candidate = topoloc_candidate {
+                place: c.place,
+                view: c.view,
+                probability: c.probability,
+                similarity: c.similarity,
+            };
             // SAFETY: the caller provides `capacity` writable elements at `buffer`; i < capacity.
             unsafe { buffer.add(i).write(candidate) };
         }

@@ -1,8 +1,8 @@
 //! C functions on maps: load, save, free and read-only accessors.
 
-use super::boundary::{fill_default, 
-    borrow, check_out, copy_c_string, read_versioned, run, run_void, slice, string, write_array, write_out, FfiError,
-    Versioned,
+use super::boundary::{
+    borrow, check_out, copy_c_string, fill_default, read_versioned, run, run_void, slice, string,
+    write_array, write_out, FfiError, Versioned,
 };
 use super::convert::{expected_descriptor, pose_to_row_major};
 use super::topoloc_status;
@@ -66,7 +66,11 @@ fn load_options(options: *const topoloc_map_load_options) -> Result<LoadOptions,
     }
     let o = read_versioned(options, topoloc_map_load_options::default(), "options")?;
     Ok(LoadOptions {
-        expected: expected_descriptor(o.expected_descriptor_kind, o.expected_descriptor_model, o.expected_descriptor_dim)?,
+        expected: expected_descriptor(
+            o.expected_descriptor_kind,
+            o.expected_descriptor_model,
+            o.expected_descriptor_dim,
+        )?,
     })
 }
 
@@ -131,29 +135,45 @@ pub extern "C" fn topoloc_map_free(map: *mut topoloc_map) {
 
 /// Number of places (`*out`).
 #[no_mangle]
-pub extern "C" fn topoloc_map_place_count(map: *const topoloc_map, out: *mut usize) -> topoloc_status {
+pub extern "C" fn topoloc_map_place_count(
+    map: *const topoloc_map,
+    out: *mut usize,
+) -> topoloc_status {
     map_value(map, out, |m| m.place_count())
 }
 
 /// Number of views (`*out`).
 #[no_mangle]
-pub extern "C" fn topoloc_map_view_count(map: *const topoloc_map, out: *mut usize) -> topoloc_status {
+pub extern "C" fn topoloc_map_view_count(
+    map: *const topoloc_map,
+    out: *mut usize,
+) -> topoloc_status {
     map_value(map, out, |m| m.view_count())
 }
 
 /// Number of undirected edges (`*out`).
 #[no_mangle]
-pub extern "C" fn topoloc_map_edge_count(map: *const topoloc_map, out: *mut usize) -> topoloc_status {
+pub extern "C" fn topoloc_map_edge_count(
+    map: *const topoloc_map,
+    out: *mut usize,
+) -> topoloc_status {
     map_value(map, out, |m| m.edge_count())
 }
 
 /// Descriptor dimension D (`*out`).
 #[no_mangle]
-pub extern "C" fn topoloc_map_descriptor_dim(map: *const topoloc_map, out: *mut u32) -> topoloc_status {
+pub extern "C" fn topoloc_map_descriptor_dim(
+    map: *const topoloc_map,
+    out: *mut u32,
+) -> topoloc_status {
     map_value(map, out, |m| m.descriptor().dim)
 }
 
-fn map_value<T>(map: *const topoloc_map, out: *mut T, read: impl FnOnce(&Map) -> T) -> topoloc_status {
+fn map_value<T>(
+    map: *const topoloc_map,
+    out: *mut T,
+    read: impl FnOnce(&Map) -> T,
+) -> topoloc_status {
     run(|| {
         let map = &borrow(map, "map")?.map;
         check_out(out, "out")?;
@@ -165,17 +185,33 @@ fn map_value<T>(map: *const topoloc_map, out: *mut T, read: impl FnOnce(&Map) ->
 /// Copies the descriptor kind (NUL-terminated) into `buf` of `len` bytes. `*needed` (if not
 /// NULL) receives the size required including the NUL, also on `TOPOLOC_ERR_BUFFER_TOO_SMALL`.
 #[no_mangle]
-pub extern "C" fn topoloc_map_descriptor_kind(map: *const topoloc_map, buf: *mut c_char, len: usize, needed: *mut usize) -> topoloc_status {
+pub extern "C" fn topoloc_map_descriptor_kind(
+    map: *const topoloc_map,
+    buf: *mut c_char,
+    len: usize,
+    needed: *mut usize,
+) -> topoloc_status {
     map_string(map, buf, len, needed, |m| m.descriptor().kind.clone())
 }
 
 /// Copies the descriptor model identity; same contract as `topoloc_map_descriptor_kind`.
 #[no_mangle]
-pub extern "C" fn topoloc_map_descriptor_model(map: *const topoloc_map, buf: *mut c_char, len: usize, needed: *mut usize) -> topoloc_status {
+pub extern "C" fn topoloc_map_descriptor_model(
+    map: *const topoloc_map,
+    buf: *mut c_char,
+    len: usize,
+    needed: *mut usize,
+) -> topoloc_status {
     map_string(map, buf, len, needed, |m| m.descriptor().model.clone())
 }
 
-fn map_string(map: *const topoloc_map, buf: *mut c_char, len: usize, needed: *mut usize, read: impl FnOnce(&Map) -> String) -> topoloc_status {
+fn map_string(
+    map: *const topoloc_map,
+    buf: *mut c_char,
+    len: usize,
+    needed: *mut usize,
+    read: impl FnOnce(&Map) -> String,
+) -> topoloc_status {
     run(|| {
         let text = read(&borrow(map, "map")?.map);
         copy_c_string(text.as_bytes(), buf, len, needed)
@@ -185,7 +221,13 @@ fn map_string(map: *const topoloc_map, buf: *mut c_char, len: usize, needed: *mu
 /// Copies the neighbours of `place` into `buf` (capacity `len`). `*count` (if not NULL) receives
 /// the number of neighbours, also on `TOPOLOC_ERR_BUFFER_TOO_SMALL`. Errors: `_UNKNOWN_PLACE`.
 #[no_mangle]
-pub extern "C" fn topoloc_map_neighbours(map: *const topoloc_map, place: u32, buf: *mut u32, len: usize, count: *mut usize) -> topoloc_status {
+pub extern "C" fn topoloc_map_neighbours(
+    map: *const topoloc_map,
+    place: u32,
+    buf: *mut u32,
+    len: usize,
+    count: *mut usize,
+) -> topoloc_status {
     run(|| {
         let (ids, _) = borrow(map, "map")?.map.neighbours(place)?;
         write_array(ids, buf, len, count)
@@ -194,7 +236,13 @@ pub extern "C" fn topoloc_map_neighbours(map: *const topoloc_map, place: u32, bu
 
 /// Copies the view ids of `place`; same contract as `topoloc_map_neighbours`.
 #[no_mangle]
-pub extern "C" fn topoloc_map_place_views(map: *const topoloc_map, place: u32, buf: *mut u32, len: usize, count: *mut usize) -> topoloc_status {
+pub extern "C" fn topoloc_map_place_views(
+    map: *const topoloc_map,
+    place: u32,
+    buf: *mut u32,
+    len: usize,
+    count: *mut usize,
+) -> topoloc_status {
     run(|| {
         let views = borrow(map, "map")?.map.place_views(place)?;
         write_array(views, buf, len, count)
@@ -204,7 +252,12 @@ pub extern "C" fn topoloc_map_place_views(map: *const topoloc_map, place: u32, b
 /// Position of `place` in metres: `*has_position` says whether the map has one; `xyz` (3
 /// doubles) receives it, or zeros. Errors: `_UNKNOWN_PLACE`.
 #[no_mangle]
-pub extern "C" fn topoloc_map_place_position(map: *const topoloc_map, place: u32, xyz: *mut f64, has_position: *mut bool) -> topoloc_status {
+pub extern "C" fn topoloc_map_place_position(
+    map: *const topoloc_map,
+    place: u32,
+    xyz: *mut f64,
+    has_position: *mut bool,
+) -> topoloc_status {
     run(|| {
         let position = borrow(map, "map")?.map.place_position(place)?;
         check_out(xyz, "xyz")?;
@@ -218,13 +271,21 @@ pub extern "C" fn topoloc_map_place_position(map: *const topoloc_map, place: u32
 
 /// Edge number `index` (0..edge_count, sorted by (a, b)): places `*a < *b` and `*weight`.
 #[no_mangle]
-pub extern "C" fn topoloc_map_edge(map: *const topoloc_map, index: usize, a: *mut u32, b: *mut u32, weight: *mut f32) -> topoloc_status {
+pub extern "C" fn topoloc_map_edge(
+    map: *const topoloc_map,
+    index: usize,
+    a: *mut u32,
+    b: *mut u32,
+    weight: *mut f32,
+) -> topoloc_status {
     run(|| {
         let map = &borrow(map, "map")?.map;
-        let edge = *map
-            .edges()
-            .get(index)
-            .ok_or_else(|| FfiError::invalid(format!("edge index {index} out of range (the map has {} edges)", map.edge_count())))?;
+        let edge = *map.edges().get(index).ok_or_else(|| {
+            FfiError::invalid(format!(
+                "edge index {index} out of range (the map has {} edges)",
+                map.edge_count()
+            ))
+        })?;
         check_out(a, "a")?;
         check_out(b, "b")?;
         check_out(weight, "weight")?;
@@ -261,11 +322,17 @@ impl Versioned for topoloc_view_info {
 
 /// Fills `*out` with the attributes of `view`. Errors: `_UNKNOWN_VIEW`, `_STRUCT_SIZE`.
 #[no_mangle]
-pub extern "C" fn topoloc_map_view_info(map: *const topoloc_map, view: u32, out: *mut topoloc_view_info) -> topoloc_status {
+pub extern "C" fn topoloc_map_view_info(
+    map: *const topoloc_map,
+    view: u32,
+    out: *mut topoloc_view_info,
+) -> topoloc_status {
     run(|| {
         let record = borrow(map, "map")?.map.view(view)?;
         super::boundary::struct_size_of(out as *const topoloc_view_info, "out")?;
-        let pose = record.world_t_camera.unwrap_or_else(nalgebra::Isometry3::identity);
+        let pose = record
+            .world_t_camera
+            .unwrap_or_else(nalgebra::Isometry3::identity);
         write_out(
             out,
             topoloc_view_info {
@@ -284,17 +351,33 @@ pub extern "C" fn topoloc_map_view_info(map: *const topoloc_map, view: u32, out:
 /// Copies the image reference of `view` (NUL-terminated, "" when none); same buffer contract as
 /// `topoloc_map_descriptor_kind`.
 #[no_mangle]
-pub extern "C" fn topoloc_map_view_image(map: *const topoloc_map, view: u32, buf: *mut c_char, len: usize, needed: *mut usize) -> topoloc_status {
+pub extern "C" fn topoloc_map_view_image(
+    map: *const topoloc_map,
+    view: u32,
+    buf: *mut c_char,
+    len: usize,
+    needed: *mut usize,
+) -> topoloc_status {
     run(|| {
         let record = borrow(map, "map")?.map.view(view)?;
-        copy_c_string(record.image.as_deref().unwrap_or("").as_bytes(), buf, len, needed)
+        copy_c_string(
+            record.image.as_deref().unwrap_or("").as_bytes(),
+            buf,
+            len,
+            needed,
+        )
     })
 }
 
 /// Copies the unit-norm descriptor of `view` (D floats) into `buf` of capacity `len`.
 /// Errors: `_UNKNOWN_VIEW`, `_BUFFER_TOO_SMALL` when `len < D`.
 #[no_mangle]
-pub extern "C" fn topoloc_map_view_descriptor(map: *const topoloc_map, view: u32, buf: *mut f32, len: usize) -> topoloc_status {
+pub extern "C" fn topoloc_map_view_descriptor(
+    map: *const topoloc_map,
+    view: u32,
+    buf: *mut f32,
+    len: usize,
+) -> topoloc_status {
     run(|| {
         let descriptor = borrow(map, "map")?.map.view_descriptor(view)?;
         write_array(descriptor, buf, len, std::ptr::null_mut())

@@ -9,25 +9,43 @@ use topoloc_status::*;
 
 fn last_error() -> String {
     let mut needed = 0usize;
-    assert_eq!(topoloc_last_error_message(null_mut(), 0, &mut needed), TOPOLOC_ERR_BUFFER_TOO_SMALL);
+    assert_eq!(
+        topoloc_last_error_message(null_mut(), 0, &mut needed),
+        TOPOLOC_ERR_BUFFER_TOO_SMALL
+    );
     let mut buf = vec![0 as c_char; needed];
-    assert_eq!(topoloc_last_error_message(buf.as_mut_ptr(), buf.len(), null_mut()), TOPOLOC_OK);
-    unsafe { CStr::from_ptr(buf.as_ptr()) }.to_str().unwrap().to_string()
+    assert_eq!(
+        topoloc_last_error_message(buf.as_mut_ptr(), buf.len(), null_mut()),
+        TOPOLOC_OK
+    );
+    unsafe { CStr::from_ptr(buf.as_ptr()) }
+        .to_str()
+        .unwrap()
+        .to_string()
 }
 
 /// A 2-place map with 2 views each (D = 4) built through the C builder.
 fn small_map() -> *mut topoloc_map {
     let mut builder = null_mut();
-    assert_eq!(topoloc_map_builder_new(c"test".as_ptr(), null(), 4, &mut builder), TOPOLOC_OK);
+    assert_eq!(
+        topoloc_map_builder_new(c"test".as_ptr(), null(), 4, &mut builder),
+        TOPOLOC_OK
+    );
     let mut place = 0;
     let mut view = 0;
     for p in 0..2u32 {
-        assert_eq!(topoloc_map_builder_add_place(builder, null(), &mut place), TOPOLOC_OK);
+        assert_eq!(
+            topoloc_map_builder_add_place(builder, null(), &mut place),
+            TOPOLOC_OK
+        );
         assert_eq!(place, p);
         for v in 0..2usize {
             let mut d = [0.0f32; 4];
             d[p as usize * 2 + v] = 1.0;
-            assert_eq!(topoloc_map_builder_add_view(builder, p, d.as_ptr(), 4, null(), &mut view), TOPOLOC_OK);
+            assert_eq!(
+                topoloc_map_builder_add_view(builder, p, d.as_ptr(), 4, null(), &mut view),
+                TOPOLOC_OK
+            );
         }
     }
     assert_eq!(topoloc_map_builder_add_edge(builder, 0, 1, 1.0), TOPOLOC_OK);
@@ -47,22 +65,49 @@ fn panics_become_status_codes_with_a_message() {
 fn null_arguments_are_refused_and_named() {
     let map = small_map();
     let mut count = 0usize;
-    assert_eq!(topoloc_map_place_count(null(), &mut count), TOPOLOC_ERR_NULL_ARGUMENT);
+    assert_eq!(
+        topoloc_map_place_count(null(), &mut count),
+        TOPOLOC_ERR_NULL_ARGUMENT
+    );
     assert!(last_error().contains("'map'"));
-    assert_eq!(topoloc_map_place_count(map, null_mut()), TOPOLOC_ERR_NULL_ARGUMENT);
-    assert_eq!(topoloc_map_load(null(), null(), null_mut()), TOPOLOC_ERR_NULL_ARGUMENT);
+    assert_eq!(
+        topoloc_map_place_count(map, null_mut()),
+        TOPOLOC_ERR_NULL_ARGUMENT
+    );
+    assert_eq!(
+        topoloc_map_load(null(), null(), null_mut()),
+        TOPOLOC_ERR_NULL_ARGUMENT
+    );
     assert_eq!(topoloc_map_save(map, null()), TOPOLOC_ERR_NULL_ARGUMENT);
-    assert_eq!(topoloc_localizer_new(null(), null(), null_mut()), TOPOLOC_ERR_NULL_ARGUMENT);
+    assert_eq!(
+        topoloc_localizer_new(null(), null(), null_mut()),
+        TOPOLOC_ERR_NULL_ARGUMENT
+    );
     let mut localizer = null_mut();
-    assert_eq!(topoloc_localizer_new(map, null(), &mut localizer), TOPOLOC_OK);
+    assert_eq!(
+        topoloc_localizer_new(map, null(), &mut localizer),
+        TOPOLOC_OK
+    );
     let mut result = topoloc_result::default();
-    assert_eq!(topoloc_localizer_process(localizer, null(), &mut result), TOPOLOC_ERR_NULL_ARGUMENT);
+    assert_eq!(
+        topoloc_localizer_process(localizer, null(), &mut result),
+        TOPOLOC_ERR_NULL_ARGUMENT
+    );
     let mut frame = topoloc_frame::default();
-    assert_eq!(topoloc_localizer_process(localizer, &frame, &mut result), TOPOLOC_ERR_DIMENSION_MISMATCH);
+    assert_eq!(
+        topoloc_localizer_process(localizer, &frame, &mut result),
+        TOPOLOC_ERR_DIMENSION_MISMATCH
+    );
     frame.descriptor_len = 4;
-    assert_eq!(topoloc_localizer_process(localizer, &frame, &mut result), TOPOLOC_ERR_NULL_ARGUMENT);
+    assert_eq!(
+        topoloc_localizer_process(localizer, &frame, &mut result),
+        TOPOLOC_ERR_NULL_ARGUMENT
+    );
     assert!(last_error().contains("frame.descriptor"));
-    assert_eq!(topoloc_localizer_reset(null_mut()), TOPOLOC_ERR_NULL_ARGUMENT);
+    assert_eq!(
+        topoloc_localizer_reset(null_mut()),
+        TOPOLOC_ERR_NULL_ARGUMENT
+    );
     topoloc_localizer_free(localizer);
     topoloc_localizer_free(null_mut());
     topoloc_map_free(map);
@@ -75,10 +120,16 @@ fn struct_size_is_checked_and_defaults_fill_it() {
     let map = small_map();
     let mut options = topoloc_localizer_options::default();
     topoloc_localizer_options_default(&mut options);
-    assert_eq!(options.struct_size, std::mem::size_of::<topoloc_localizer_options>());
+    assert_eq!(
+        options.struct_size,
+        std::mem::size_of::<topoloc_localizer_options>()
+    );
     options.struct_size = 8;
     let mut localizer = null_mut();
-    assert_eq!(topoloc_localizer_new(map, &options, &mut localizer), TOPOLOC_ERR_STRUCT_SIZE);
+    assert_eq!(
+        topoloc_localizer_new(map, &options, &mut localizer),
+        TOPOLOC_ERR_STRUCT_SIZE
+    );
     assert!(localizer.is_null(), "out-parameter written on error");
     assert!(last_error().contains("struct_size"));
     topoloc_map_free(map);
@@ -88,22 +139,58 @@ fn struct_size_is_checked_and_defaults_fill_it() {
 fn process_leaves_result_untouched_on_error_and_fills_candidates() {
     let map = small_map();
     let mut localizer = null_mut();
-    assert_eq!(topoloc_localizer_new(map, null(), &mut localizer), TOPOLOC_OK);
+    assert_eq!(
+        topoloc_localizer_new(map, null(), &mut localizer),
+        TOPOLOC_OK
+    );
     let mut candidates = [topoloc_candidate::default(); 1];
-    let mut result = topoloc_result { candidates: candidates.as_mut_ptr(), candidates_capacity: 1, ..Default::default() };
+    let mut result = topoloc_result {
+        candidates: candidates.as_mut_ptr(),
+        candidates_capacity: 1,
+        ..Default::default()
+    };
     result.place = 77;
     let nan = [f32::NAN, 0.0, 0.0, 0.0];
-    let frame = topoloc_frame { descriptor: nan.as_ptr(), descriptor_len: 4, ..Default::default() };
-    assert_eq!(topoloc_localizer_process(localizer, &frame, &mut result), TOPOLOC_ERR_NON_FINITE);
+    let frame = topoloc_frame {
+        descriptor: nan.as_ptr(),
+        descriptor_len: 4,
+        ..Default::default()
+    };
+    assert_eq!(
+        topoloc_localizer_process(localizer, &frame, &mut result),
+        TOPOLOC_ERR_NON_FINITE
+    );
     assert_eq!(result.place, 77);
     let query = [0.0f32, 0.0, 0.9, 0.1];
-    let frame = topoloc_frame { descriptor: query.as_ptr(), descriptor_len: 4, ..Default::default() };
-    assert_eq!(topoloc_localizer_process(localizer, &frame, &mut result), TOPOLOC_OK);
-    assert_eq!((result.place, result.view, result.frame_index, result.candidates_len), (1, 2, 0, 1));
+    let frame = topoloc_frame {
+        descriptor: query.as_ptr(),
+        descriptor_len: 4,
+        ..Default::default()
+    };
+    assert_eq!(
+        topoloc_localizer_process(localizer, &frame, &mut result),
+        TOPOLOC_OK
+    );
+    assert_eq!(
+        (
+            result.place,
+            result.view,
+            result.frame_index,
+            result.candidates_len
+        ),
+        (1, 2, 0, 1)
+    );
     assert_eq!(candidates[0].place, 1);
     let bad_pose = [2.0f64; 16];
-    let frame = topoloc_frame { odometry: bad_pose.as_ptr(), timestamp: 1.0, ..frame };
-    assert_eq!(topoloc_localizer_process(localizer, &frame, &mut result), TOPOLOC_ERR_INVALID_ARGUMENT);
+    let frame = topoloc_frame {
+        odometry: bad_pose.as_ptr(),
+        timestamp: 1.0,
+        ..frame
+    };
+    assert_eq!(
+        topoloc_localizer_process(localizer, &frame, &mut result),
+        TOPOLOC_ERR_INVALID_ARGUMENT
+    );
     topoloc_localizer_free(localizer);
     topoloc_map_free(map);
 }
@@ -113,48 +200,97 @@ fn buffers_report_the_size_needed() {
     let map = small_map();
     let mut needed = 0usize;
     let mut small = [0 as c_char; 2];
-    assert_eq!(topoloc_map_descriptor_kind(map, small.as_mut_ptr(), 2, &mut needed), TOPOLOC_ERR_BUFFER_TOO_SMALL);
+    assert_eq!(
+        topoloc_map_descriptor_kind(map, small.as_mut_ptr(), 2, &mut needed),
+        TOPOLOC_ERR_BUFFER_TOO_SMALL
+    );
     assert_eq!(needed, 5);
     let mut neighbours = [0u32; 0];
     let mut count = 0usize;
-    assert_eq!(topoloc_map_neighbours(map, 0, neighbours.as_mut_ptr(), 0, &mut count), TOPOLOC_ERR_BUFFER_TOO_SMALL);
+    assert_eq!(
+        topoloc_map_neighbours(map, 0, neighbours.as_mut_ptr(), 0, &mut count),
+        TOPOLOC_ERR_BUFFER_TOO_SMALL
+    );
     assert_eq!(count, 1);
-    assert_eq!(topoloc_map_neighbours(map, 9, neighbours.as_mut_ptr(), 0, &mut count), TOPOLOC_ERR_UNKNOWN_PLACE);
+    assert_eq!(
+        topoloc_map_neighbours(map, 9, neighbours.as_mut_ptr(), 0, &mut count),
+        TOPOLOC_ERR_UNKNOWN_PLACE
+    );
     topoloc_map_free(map);
 }
 
 #[test]
 fn poses_cross_the_abi_row_major() {
     let mut builder = null_mut();
-    assert_eq!(topoloc_map_builder_new(c"test".as_ptr(), c"m".as_ptr(), 2, &mut builder), TOPOLOC_OK);
+    assert_eq!(
+        topoloc_map_builder_new(c"test".as_ptr(), c"m".as_ptr(), 2, &mut builder),
+        TOPOLOC_OK
+    );
     let mut place = 0;
     let mut view = 0;
-    assert_eq!(topoloc_map_builder_add_place(builder, [1.0, 2.0, 3.0].as_ptr(), &mut place), TOPOLOC_OK);
+    assert_eq!(
+        topoloc_map_builder_add_place(builder, [1.0, 2.0, 3.0].as_ptr(), &mut place),
+        TOPOLOC_OK
+    );
     // 90 degrees about z, translation (1, 2, 3).
-    let pose = [0.0, -1.0, 0.0, 1.0, 1.0, 0.0, 0.0, 2.0, 0.0, 0.0, 1.0, 3.0, 0.0, 0.0, 0.0, 1.0];
-    let attributes = topoloc_view_attributes { world_T_camera: pose.as_ptr(), has_keyframe_id: true, keyframe_id: 7, ..Default::default() };
-    assert_eq!(topoloc_map_builder_add_view(builder, 0, [1.0, 0.0].as_ptr(), 2, &attributes, &mut view), TOPOLOC_OK);
+    let pose = [
+        0.0, -1.0, 0.0, 1.0, 1.0, 0.0, 0.0, 2.0, 0.0, 0.0, 1.0, 3.0, 0.0, 0.0, 0.0, 1.0,
+    ];
+    let attributes = topoloc_view_attributes {
+        world_T_camera: pose.as_ptr(),
+        has_keyframe_id: true,
+        keyframe_id: 7,
+        ..Default::default()
+    };
+    assert_eq!(
+        topoloc_map_builder_add_view(builder, 0, [1.0, 0.0].as_ptr(), 2, &attributes, &mut view),
+        TOPOLOC_OK
+    );
     let mut map = null_mut();
     assert_eq!(topoloc_map_builder_build(builder, &mut map), TOPOLOC_OK);
-    let mut info = topoloc_view_info { struct_size: std::mem::size_of::<topoloc_view_info>(), place: 0, has_keyframe_id: false, keyframe_id: 0, has_pose: false, world_T_camera: [0.0; 16] };
+    let mut info = topoloc_view_info {
+        struct_size: std::mem::size_of::<topoloc_view_info>(),
+        place: 0,
+        has_keyframe_id: false,
+        keyframe_id: 0,
+        has_pose: false,
+        world_T_camera: [0.0; 16],
+    };
     assert_eq!(topoloc_map_view_info(map, 0, &mut info), TOPOLOC_OK);
     assert!(info.has_pose && info.has_keyframe_id && info.keyframe_id == 7);
     for (got, want) in info.world_T_camera.iter().zip(pose) {
         assert!((got - want).abs() < 1e-12, "{:?}", info.world_T_camera);
     }
-    let skewed = [1.0, 0.5, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0];
-    let attributes = topoloc_view_attributes { world_T_camera: skewed.as_ptr(), ..Default::default() };
-    assert_eq!(topoloc_map_builder_add_view(builder, 0, [0.0, 1.0].as_ptr(), 2, &attributes, &mut view), TOPOLOC_ERR_INVALID_ARGUMENT);
+    let skewed = [
+        1.0, 0.5, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0,
+    ];
+    let attributes = topoloc_view_attributes {
+        world_T_camera: skewed.as_ptr(),
+        ..Default::default()
+    };
+    assert_eq!(
+        topoloc_map_builder_add_view(builder, 0, [0.0, 1.0].as_ptr(), 2, &attributes, &mut view),
+        TOPOLOC_ERR_INVALID_ARGUMENT
+    );
     topoloc_map_builder_free(builder);
     topoloc_map_free(map);
 }
 
 #[test]
 fn status_strings_and_versions() {
-    let text = |code| unsafe { CStr::from_ptr(topoloc_status_str(code)) }.to_str().unwrap();
+    let text = |code| {
+        unsafe { CStr::from_ptr(topoloc_status_str(code)) }
+            .to_str()
+            .unwrap()
+    };
     assert_eq!(text(0), "ok");
     assert_eq!(text(TOPOLOC_ERR_CORRUPT as u32), "corrupt map file");
     assert_eq!(text(12345), "unknown status code");
-    assert_eq!(unsafe { CStr::from_ptr(topoloc_version()) }.to_str().unwrap(), env!("CARGO_PKG_VERSION"));
+    assert_eq!(
+        unsafe { CStr::from_ptr(topoloc_version()) }
+            .to_str()
+            .unwrap(),
+        env!("CARGO_PKG_VERSION")
+    );
     assert_eq!(topoloc_abi_version(), TOPOLOC_ABI_VERSION);
 }

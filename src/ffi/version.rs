@@ -7,10 +7,11 @@ use std::ffi::{c_char, CStr};
 /// incompatibly (which the project avoids: it adds functions and appends struct fields).
 pub const TOPOLOC_ABI_VERSION: u32 = 1;
 
-static VERSION: &CStr = match CStr::from_bytes_with_nul(concat!(env!("CARGO_PKG_VERSION"), "\0").as_bytes()) {
-    Ok(v) => v,
-    Err(_) => panic!("version string has no interior NUL"),
-};
+static VERSION: &CStr =
+    match CStr::from_bytes_with_nul(concat!(env!("CARGO_PKG_VERSION"), "\0").as_bytes()) {
+        Ok(v) => v,
+        Err(_) => panic!("version string has no interior NUL"),
+    };
 
 /// Library version "MAJOR.MINOR.PATCH" as a static NUL-terminated string (never free it).
 /// Compare with the `TOPOLOC_VERSION_*` macros of the header the program was built against.
@@ -38,6 +39,10 @@ pub extern "C" fn topoloc_status_str(status: u32) -> *const c_char {
 /// `TOPOLOC_ERR_BUFFER_TOO_SMALL`; never changes the stored message. Thread-safe: each thread
 /// has its own last error.
 #[no_mangle]
-pub extern "C" fn topoloc_last_error_message(buf: *mut c_char, len: usize, needed: *mut usize) -> topoloc_status {
+pub extern "C" fn topoloc_last_error_message(
+    buf: *mut c_char,
+    len: usize,
+    needed: *mut usize,
+) -> topoloc_status {
     copy_last_error(buf, len, needed)
 }

@@ -46,12 +46,15 @@ fn off_map_score(params: &FilterParams, place_scores: &[f32], max_score: f64) ->
     if m < MIN_PLACES_FOR_BACKGROUND {
         return params.off_map_similarity;
     }
-    let (sum, sum_sq) = place_scores.iter().fold((0.0, 0.0), |(a, b), &s| (a + f64::from(s), b + f64::from(s).powi(2)));
+    let (sum, sum_sq) = place_scores.iter().fold((0.0, 0.0), |(a, b), &s| {
+        (a + f64::from(s), b + f64::from(s).powi(2))
+    });
     let n = (m - 1) as f64;
     let mean = (sum - max_score) / n;
     let variance = ((sum_sq - max_score * max_score) / n - mean * mean).max(0.0);
     let expected_max_z = (2.0 * n.ln()).sqrt();
-    (mean + (expected_max_z + params.off_map_margin) * variance.sqrt()).max(params.off_map_similarity)
+    (mean + (expected_max_z + params.off_map_margin) * variance.sqrt())
+        .max(params.off_map_similarity)
 }
 
 /// Place belief, off-map probability, and scratch buffers.
@@ -73,13 +76,20 @@ impl Belief {
             .map(|p| {
                 let here = positions[p]?;
                 let (ids, _) = map.neighbours(p as u32).expect("place in range");
-                let lengths: Vec<f64> =
-                    ids.iter().map(|&j| positions[j as usize].map(|q| (q - here).norm())).collect::<Option<_>>()?;
+                let lengths: Vec<f64> = ids
+                    .iter()
+                    .map(|&j| positions[j as usize].map(|q| (q - here).norm()))
+                    .collect::<Option<_>>()?;
                 let mean = lengths.iter().sum::<f64>() / lengths.len().max(1) as f64;
                 (!lengths.is_empty() && mean > 0.0).then_some(mean)
             })
             .collect();
-        Self { places: vec![0.0; m], off_map: 0.0, scratch: vec![0.0; m], mean_edge_length }
+        Self {
+            places: vec![0.0; m],
+            off_map: 0.0,
+            scratch: vec![0.0; m],
+            mean_edge_length,
+        }
     }
 
     /// Sets the belief to the prior used before any frame: uniform over places, off-map with
@@ -122,14 +132,17 @@ impl Belief {
         for (b, &p) in self.places.iter_mut().zip(moved.iter()) {
             *b = keep * p + uniform;
         }
-        self.off_map = self.off_map * params.stay_probability + (1.0 - self.off_map) * params.off_map_probability;
+        self.off_map = self.off_map * params.stay_probability
+            + (1.0 - self.off_map) * params.off_map_probability;
     }
 
     /// Multiplies by the observation likelihoods and normalises both filters. If every place
     /// underflows to zero (possible only with zero jump probability), the place belief restarts
     /// from the likelihood alone.
     pub fn update(&mut self, params: &FilterParams, place_scores: &[f32]) {
-        let max_score = place_scores.iter().fold(f32::NEG_INFINITY, |a, &b| a.max(b)) as f64;
+        let max_score = place_scores
+            .iter()
+            .fold(f32::NEG_INFINITY, |a, &b| a.max(b)) as f64;
         let off_score = off_map_score(params, place_scores, max_score);
         let shift = max_score.max(off_score);
         let inv_t = 1.0 / params.temperature;
@@ -149,6 +162,10 @@ impl Belief {
 
         let off = self.off_map * ((off_score - shift) * inv_t).exp();
         let on = (1.0 - self.off_map) * on_map_likelihood;
-        self.off_map = if off + on > 0.0 { off / (off + on) } else { 0.0 };
+        self.off_map = if off + on > 0.0 {
+            off / (off + on)
+        } else {
+            0.0
+        };
     }
 }

@@ -24,14 +24,15 @@ pub enum Mode {
     SingleFrame,
 }
 
-/// Localizer parameters. Defaults were chosen on the synthetic demo stream (`topoloc demo`);
-/// descriptors with other similarity spreads may want another `temperature`.
+/// Localizer parameters. `temperature` and `off_map_margin` were chosen with `topoloc sweep`
+/// on generated worlds held out from the demo (table in BENCHMARKS.md); descriptors with other
+/// similarity spreads may want another `temperature`.
 #[derive(Clone, Debug, PartialEq)]
 pub struct LocalizerOptions {
     /// Filter or single-frame.
     pub mode: Mode,
     /// Softmax temperature turning similarities into likelihoods; smaller trusts the
-    /// appearance more. Default 0.02.
+    /// appearance more. Default 0.03.
     pub temperature: f32,
     /// Probability of staying at a place between two frames when no odometry is given.
     /// Default 0.7.
@@ -44,7 +45,8 @@ pub struct LocalizerOptions {
     /// (for long enough) are reported off-map. Default 0.2.
     pub off_map_similarity: f32,
     /// How many standard deviations above the expected best background score a place must
-    /// score to beat the off-map hypothesis (see `filter.rs`). Default 1.0.
+    /// score to beat the off-map hypothesis (see `filter.rs`; negative values lower the bar,
+    /// since neighbouring places make the background scores correlated). Default -1.0.
     pub off_map_margin: f32,
     /// Candidates reported per frame. Default 5.
     pub top_k: usize,
@@ -56,12 +58,12 @@ impl Default for LocalizerOptions {
     fn default() -> Self {
         Self {
             mode: Mode::Filter,
-            temperature: 0.02,
+            temperature: 0.03,
             stay_probability: 0.7,
             jump_probability: 0.01,
             off_map_probability: 0.01,
             off_map_similarity: 0.2,
-            off_map_margin: 1.0,
+            off_map_margin: -1.0,
             top_k: 5,
             expected: ExpectedDescriptor::default(),
         }
@@ -84,11 +86,12 @@ impl LocalizerOptions {
         if self.jump_probability + self.off_map_probability >= 1.0 {
             return bad("jump_probability + off_map_probability must be below 1");
         }
-        if !(self.off_map_similarity.is_finite() && (-1.0..=1.0).contains(&self.off_map_similarity)) {
+        if !(self.off_map_similarity.is_finite() && (-1.0..=1.0).contains(&self.off_map_similarity))
+        {
             return bad("off_map_similarity must lie in [-1, 1]");
         }
-        if !(self.off_map_margin.is_finite() && self.off_map_margin >= 0.0) {
-            return bad("off_map_margin must be finite and >= 0");
+        if !self.off_map_margin.is_finite() {
+            return bad("off_map_margin must be finite");
         }
         if self.top_k == 0 {
             return bad("top_k must be at least 1");
@@ -232,10 +235,17 @@ impl Localizer {
     /// Processes one frame, writing into `out` (reusing its candidate buffer). Validates the
     /// whole frame before touching any state, so an error leaves the localizer unchanged.
     /// Cost: one pass over the descriptor matrix plus O(places + edges).
-    pub fn process(&mut self, frame: &Frame<'_>, out: &mut Localization) -> Result<(), LocalizeError> {
+    pub fn process(
+        &mut self,
+        frame: &Frame<'_>,
+        out: &mut Localization,
+    ) -> Result<(), LocalizeError> {
         let filtering = self.options.mode == Mode::Filter;
         if !frame.timestamp.is_finite() {
-            return Err(LocalizeError::Timestamp(format!("{} is not finite", frame.timestamp)));
+            return Err(LocalizeError::Timestamp(format!(
+                "{} is not finite",
+                frame.timestamp
+            )));
         }
         if let (true, Some(last)) = (filtering, self.last_timestamp) {
             if frame.timestamp < last {
@@ -248,8 +258,14 @@ impl Localizer {
         let travelled = match &frame.odometry {
             Some(pose) => {
                 let t = pose.translation.vector;
-                if !(t.iter().chain(pose.rotation.coords.iter()).all(|x| x.is_finite())) {
-                    return Err(LocalizeError::Odometry("odometry has a non-finite value".into()));
+                if !(t
+                    .iter()
+                    .chain(pose.rotation.coords.iter())
+                    .all(|x| x.is_finite()))
+                {
+                    return Err(LocalizeError::Odometry(
+                        "odometry has a non-finite value".into(),
+                    ));
                 }
                 Some(t.norm())
             }
@@ -258,7 +274,12 @@ impl Localizer {
         normalize_descriptor_into(frame.descriptor, self.map.dim(), &mut self.query)?;
 
         similarity::view_similarities(&self.map, &self.query, &mut self.view_scores);
-        similarity::pool_places(&self.map, &self.view_scores, &mut self.place_scores, &mut self.best_views);
+        similarity::pool_places(
+            &self.map,
+            &self.view_scores,
+            &mut self.place_scores,
+            &mut self.best_views,
+        );
         if filtering && self.initialized {
             self.belief.predict(&self.map, &self.params, travelled);
         } else {
@@ -278,7 +299,8 @@ impl Localizer {
         let p = &self.belief.places;
         let on_map = 1.0 - self.belief.off_map;
         let k = self.options.top_k.min(m);
-        let by_probability = |a: &u32, b: &u32| p[*b as usize].total_cmp(&p[*a as usize]).then(a.cmp(b));
+        let by_probability =
+            |a: &u32, b: &u32| p[*b as usize].total_cmp(&p[*a as usize]).then(a.cmp(b));
         if k < m {
             self.order.select_nth_unstable_by(k - 1, by_probability);
         }

@@ -19,7 +19,12 @@ pub(crate) fn view_similarities(map: &Map, query: &[f32], out: &mut [f32]) {
 
 /// Place score = best similarity over the place's views (the query looks one way; the view
 /// facing that way is the one that should match). Also records which view won.
-pub(crate) fn pool_places(map: &Map, view_scores: &[f32], place_scores: &mut [f32], best_views: &mut [u32]) {
+pub(crate) fn pool_places(
+    map: &Map,
+    view_scores: &[f32],
+    place_scores: &mut [f32],
+    best_views: &mut [u32],
+) {
     place_scores.fill(f32::NEG_INFINITY);
     for (v, &s) in view_scores.iter().enumerate() {
         let p = map.view_place_unchecked(v);

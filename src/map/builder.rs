@@ -1,8 +1,8 @@
 //! Incremental construction of a [`Map`] from places, views and edges.
 
 use super::{
-    normalize_descriptor_into, DescriptorIdentity, DescriptorStore, Edge, Map, MapError, PlaceId, ViewId,
-    ViewRecord,
+    normalize_descriptor_into, DescriptorIdentity, DescriptorStore, Edge, Map, MapError, PlaceId,
+    ViewId, ViewRecord,
 };
 use nalgebra::{Isometry3, Point3};
 use std::collections::HashSet;
@@ -74,7 +74,9 @@ impl MapBuilder {
     pub fn add_place(&mut self, position: Option<Point3<f64>>) -> Result<PlaceId, MapError> {
         if let Some(p) = position {
             if !p.iter().all(|x| x.is_finite()) {
-                return Err(MapError::InvalidArgument("place position must be finite".into()));
+                return Err(MapError::InvalidArgument(
+                    "place position must be finite".into(),
+                ));
             }
         }
         let id = PlaceId::try_from(self.place_positions.len())
@@ -84,18 +86,32 @@ impl MapBuilder {
     }
 
     /// Adds a view with its descriptor (D values, normalised here) to an existing place.
-    pub fn add_view(&mut self, place: PlaceId, descriptor: &[f32], attributes: ViewAttributes) -> Result<ViewId, MapError> {
+    pub fn add_view(
+        &mut self,
+        place: PlaceId,
+        descriptor: &[f32],
+        attributes: ViewAttributes,
+    ) -> Result<ViewId, MapError> {
         if place as usize >= self.place_positions.len() {
-            return Err(MapError::UnknownPlace { place, places: self.place_positions.len() });
+            return Err(MapError::UnknownPlace {
+                place,
+                places: self.place_positions.len(),
+            });
         }
         if let Some(pose) = &attributes.world_t_camera {
-            let finite = pose.translation.vector.iter().chain(pose.rotation.coords.iter()).all(|x| x.is_finite());
+            let finite = pose
+                .translation
+                .vector
+                .iter()
+                .chain(pose.rotation.coords.iter())
+                .all(|x| x.is_finite());
             if !finite {
                 return Err(MapError::InvalidArgument("view pose must be finite".into()));
             }
         }
         normalize_descriptor_into(descriptor, self.identity.dim as usize, &mut self.scratch)?;
-        let id = ViewId::try_from(self.views.len()).map_err(|_| MapError::InvalidArgument("too many views".into()))?;
+        let id = ViewId::try_from(self.views.len())
+            .map_err(|_| MapError::InvalidArgument("too many views".into()))?;
         self.descriptors.extend_from_slice(&self.scratch);
         self.views.push(ViewRecord {
             place,
@@ -116,14 +132,20 @@ impl MapBuilder {
             }
         }
         if a == b {
-            return Err(MapError::InvalidArgument(format!("edge from place {a} to itself")));
+            return Err(MapError::InvalidArgument(format!(
+                "edge from place {a} to itself"
+            )));
         }
         if !(weight.is_finite() && weight > 0.0) {
-            return Err(MapError::InvalidArgument(format!("edge weight {weight} must be finite and > 0")));
+            return Err(MapError::InvalidArgument(format!(
+                "edge weight {weight} must be finite and > 0"
+            )));
         }
         let (a, b) = (a.min(b), a.max(b));
         if self.has_edge(a, b) {
-            return Err(MapError::InvalidArgument(format!("edge ({a}, {b}) exists already")));
+            return Err(MapError::InvalidArgument(format!(
+                "edge ({a}, {b}) exists already"
+            )));
         }
         self.edges.push(Edge { a, b, weight });
         self.edge_set.insert((a, b));

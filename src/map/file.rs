@@ -23,7 +23,9 @@
 //! bytes in tensor-name order, so that any flipped byte is detected. Readers accept any file of the
 //! same major version; a newer minor version may add tensors, which older readers ignore.
 
-use super::{DescriptorIdentity, DescriptorStore, Edge, ExpectedDescriptor, Map, MapError, ViewRecord};
+use super::{
+    DescriptorIdentity, DescriptorStore, Edge, ExpectedDescriptor, Map, MapError, ViewRecord,
+};
 use nalgebra::{Isometry3, Point3, Quaternion, Translation3, UnitQuaternion};
 use safetensors::{Dtype, SafeTensors, View};
 use serde::{Deserialize, Serialize};
@@ -93,7 +95,10 @@ impl View for &OutTensor<'_> {
     }
 }
 
-fn le_bytes<T: Copy, const W: usize>(values: &[T], to_le: impl Fn(T) -> [u8; W]) -> Cow<'static, [u8]> {
+fn le_bytes<T: Copy, const W: usize>(
+    values: &[T],
+    to_le: impl Fn(T) -> [u8; W],
+) -> Cow<'static, [u8]> {
     Cow::Owned(values.iter().flat_map(|&v| to_le(v)).collect())
 }
 
@@ -118,7 +123,9 @@ impl Map {
             let floats = self.descriptors();
             // SAFETY: f32 has no padding or invalid bit patterns; on little-endian targets its
             // in-memory bytes are its little-endian encoding.
-            Cow::Borrowed(unsafe { std::slice::from_raw_parts(floats.as_ptr().cast::<u8>(), floats.len() * 4) })
+            Cow::Borrowed(unsafe {
+                std::slice::from_raw_parts(floats.as_ptr().cast::<u8>(), floats.len() * 4)
+            })
         } else {
             le_bytes(self.descriptors(), f32::to_le_bytes)
         };
@@ -134,7 +141,10 @@ impl Map {
             })
             .collect();
         let view_keyframe: Vec<u64> = views.iter().map(|v| v.keyframe_id.unwrap_or(0)).collect();
-        let view_pose: Vec<f64> = views.iter().flat_map(|v| pose_to_array(&v.world_t_camera.unwrap_or_else(Isometry3::identity))).collect();
+        let view_pose: Vec<f64> = views
+            .iter()
+            .flat_map(|v| pose_to_array(&v.world_t_camera.unwrap_or_else(Isometry3::identity)))
+            .collect();
         let mut image_offsets = Vec::with_capacity(n + 1);
         let mut image_bytes = Vec::new();
         image_offsets.push(0u64);
@@ -143,26 +153,111 @@ impl Map {
             image_offsets.push(image_bytes.len() as u64);
         }
         let positions = self.place_positions();
-        let place_flags: Vec<u8> = positions.iter().map(|p| (p.is_some() as u8) * PLACE_HAS_POSITION).collect();
-        let place_position: Vec<f64> =
-            positions.iter().flat_map(|p| p.map_or([0.0; 3], |p| [p.x, p.y, p.z])).collect();
+        let place_flags: Vec<u8> = positions
+            .iter()
+            .map(|p| (p.is_some() as u8) * PLACE_HAS_POSITION)
+            .collect();
+        let place_position: Vec<f64> = positions
+            .iter()
+            .flat_map(|p| p.map_or([0.0; 3], |p| [p.x, p.y, p.z]))
+            .collect();
         let edges: Vec<u32> = self.edges().iter().flat_map(|e| [e.a, e.b]).collect();
         let edge_weight: Vec<f32> = self.edges().iter().map(|e| e.weight).collect();
 
         let tensors: Vec<(&str, OutTensor)> = vec![
-            ("descriptors", OutTensor { dtype: Dtype::F32, shape: vec![n, d], bytes: descriptor_bytes }),
-            ("edge_weight", OutTensor { dtype: Dtype::F32, shape: vec![e], bytes: le_bytes(&edge_weight, f32::to_le_bytes) }),
-            ("edges", OutTensor { dtype: Dtype::U32, shape: vec![e, 2], bytes: le_bytes(&edges, u32::to_le_bytes) }),
-            ("place_flags", OutTensor { dtype: Dtype::U8, shape: vec![m], bytes: Cow::Owned(place_flags) }),
-            ("place_position", OutTensor { dtype: Dtype::F64, shape: vec![m, 3], bytes: le_bytes(&place_position, f64::to_le_bytes) }),
-            ("view_flags", OutTensor { dtype: Dtype::U8, shape: vec![n], bytes: Cow::Owned(view_flags) }),
-            ("view_image_bytes", OutTensor { dtype: Dtype::U8, shape: vec![image_bytes.len()], bytes: Cow::Owned(image_bytes) }),
-            ("view_image_offsets", OutTensor { dtype: Dtype::U64, shape: vec![n + 1], bytes: le_bytes(&image_offsets, u64::to_le_bytes) }),
-            ("view_keyframe", OutTensor { dtype: Dtype::U64, shape: vec![n], bytes: le_bytes(&view_keyframe, u64::to_le_bytes) }),
-            ("view_place", OutTensor { dtype: Dtype::U32, shape: vec![n], bytes: le_bytes(&view_place, u32::to_le_bytes) }),
-            ("view_pose", OutTensor { dtype: Dtype::F64, shape: vec![n, 7], bytes: le_bytes(&view_pose, f64::to_le_bytes) }),
+            (
+                "descriptors",
+                OutTensor {
+                    dtype: Dtype::F32,
+                    shape: vec![n, d],
+                    bytes: descriptor_bytes,
+                },
+            ),
+            (
+                "edge_weight",
+                OutTensor {
+                    dtype: Dtype::F32,
+                    shape: vec![e],
+                    bytes: le_bytes(&edge_weight, f32::to_le_bytes),
+                },
+            ),
+            (
+                "edges",
+                OutTensor {
+                    dtype: Dtype::U32,
+                    shape: vec![e, 2],
+                    bytes: le_bytes(&edges, u32::to_le_bytes),
+                },
+            ),
+            (
+                "place_flags",
+                OutTensor {
+                    dtype: Dtype::U8,
+                    shape: vec![m],
+                    bytes: Cow::Owned(place_flags),
+                },
+            ),
+            (
+                "place_position",
+                OutTensor {
+                    dtype: Dtype::F64,
+                    shape: vec![m, 3],
+                    bytes: le_bytes(&place_position, f64::to_le_bytes),
+                },
+            ),
+            (
+                "view_flags",
+                OutTensor {
+                    dtype: Dtype::U8,
+                    shape: vec![n],
+                    bytes: Cow::Owned(view_flags),
+                },
+            ),
+            (
+                "view_image_bytes",
+                OutTensor {
+                    dtype: Dtype::U8,
+                    shape: vec![image_bytes.len()],
+                    bytes: Cow::Owned(image_bytes),
+                },
+            ),
+            (
+                "view_image_offsets",
+                OutTensor {
+                    dtype: Dtype::U64,
+                    shape: vec![n + 1],
+                    bytes: le_bytes(&image_offsets, u64::to_le_bytes),
+                },
+            ),
+            (
+                "view_keyframe",
+                OutTensor {
+                    dtype: Dtype::U64,
+                    shape: vec![n],
+                    bytes: le_bytes(&view_keyframe, u64::to_le_bytes),
+                },
+            ),
+            (
+                "view_place",
+                OutTensor {
+                    dtype: Dtype::U32,
+                    shape: vec![n],
+                    bytes: le_bytes(&view_place, u32::to_le_bytes),
+                },
+            ),
+            (
+                "view_pose",
+                OutTensor {
+                    dtype: Dtype::F64,
+                    shape: vec![n, 7],
+                    bytes: le_bytes(&view_pose, f64::to_le_bytes),
+                },
+            ),
         ];
-        debug_assert!(tensors.windows(2).all(|w| w[0].0 < w[1].0), "tensors listed in name order");
+        debug_assert!(
+            tensors.windows(2).all(|w| w[0].0 < w[1].0),
+            "tensors listed in name order"
+        );
 
         let meta = FileMeta {
             format: FORMAT_NAME.into(),
@@ -176,9 +271,15 @@ impl Map {
         };
         let unsigned_json = serde_json::to_string(&meta).expect("map metadata serialises");
         let crc = checksum(&unsigned_json, tensors.iter().map(|(_, t)| &*t.bytes));
-        let meta = FileMeta { crc32: Some(crc), ..meta };
+        let meta = FileMeta {
+            crc32: Some(crc),
+            ..meta
+        };
         // One key only: safetensors writes metadata from a HashMap, whose order is random.
-        let metadata = HashMap::from([(META_KEY.to_string(), serde_json::to_string(&meta).expect("serialises"))]);
+        let metadata = HashMap::from([(
+            META_KEY.to_string(),
+            serde_json::to_string(&meta).expect("serialises"),
+        )]);
         safetensors::serialize(tensors.iter().map(|(name, t)| (*name, t)), Some(metadata))
             .map_err(|e| MapError::Invalid(format!("serialising the map failed: {e}")))
     }
@@ -187,13 +288,20 @@ impl Map {
     /// flushed to disk and renamed over `path`, so a crash never leaves a partial map behind.
     pub fn save(&self, path: impl AsRef<Path>) -> Result<(), MapError> {
         let path = path.as_ref();
-        let io = |source| MapError::Io { path: path.to_path_buf(), source };
+        let io = |source| MapError::Io {
+            path: path.to_path_buf(),
+            source,
+        };
         let bytes = self.to_bytes()?;
         let dir = match path.parent() {
             Some(p) if !p.as_os_str().is_empty() => p,
             _ => Path::new("."),
         };
-        let mut tmp = tempfile::Builder::new().prefix(".topoloc-map-").suffix(".tmp").tempfile_in(dir).map_err(io)?;
+        let mut tmp = tempfile::Builder::new()
+            .prefix(".topoloc-map-")
+            .suffix(".tmp")
+            .tempfile_in(dir)
+            .map_err(io)?;
         tmp.write_all(&bytes).map_err(io)?;
         tmp.as_file().sync_all().map_err(io)?;
         tmp.persist(path).map_err(|e| io(e.error))?;
@@ -209,7 +317,10 @@ impl Map {
     /// replaces files by rename, which is safe).
     pub fn load(path: impl AsRef<Path>, options: &LoadOptions) -> Result<Map, MapError> {
         let path = path.as_ref();
-        let io = |source| MapError::Io { path: path.to_path_buf(), source };
+        let io = |source| MapError::Io {
+            path: path.to_path_buf(),
+            source,
+        };
         let file = std::fs::File::open(path).map_err(io)?;
         let len = file.metadata().map_err(io)?.len();
         if len == 0 {
@@ -221,7 +332,11 @@ impl Map {
         let range = parsed.descriptor_bytes.clone();
         let aligned = (mmap.as_ptr() as usize + range.start) % std::mem::align_of::<f32>() == 0;
         let store = if aligned && cfg!(target_endian = "little") {
-            DescriptorStore::Mapped { mmap, byte_offset: range.start, len: range.len() / 4 }
+            DescriptorStore::Mapped {
+                mmap,
+                byte_offset: range.start,
+                len: range.len() / 4,
+            }
         } else {
             DescriptorStore::Owned(decode_f32(&mmap[range]))
         };
@@ -240,7 +355,10 @@ impl Map {
 }
 
 fn decode_f32(bytes: &[u8]) -> Vec<f32> {
-    bytes.chunks_exact(4).map(|c| f32::from_le_bytes(c.try_into().expect("4 bytes"))).collect()
+    bytes
+        .chunks_exact(4)
+        .map(|c| f32::from_le_bytes(c.try_into().expect("4 bytes")))
+        .collect()
 }
 
 fn pose_to_array(pose: &Isometry3<f64>) -> [f64; 7] {
@@ -257,7 +375,10 @@ fn pose_from_array(a: &[f64]) -> Result<Isometry3<f64>, String> {
     if (q.norm() - 1.0).abs() > 1e-6 {
         return Err(format!("pose quaternion has norm {}, expected 1", q.norm()));
     }
-    Ok(Isometry3::from_parts(Translation3::new(a[0], a[1], a[2]), UnitQuaternion::new_unchecked(q)))
+    Ok(Isometry3::from_parts(
+        Translation3::new(a[0], a[1], a[2]),
+        UnitQuaternion::new_unchecked(q),
+    ))
 }
 
 /// Everything read from a file except the descriptor store.
@@ -272,7 +393,15 @@ struct ParsedMap {
 
 impl ParsedMap {
     fn into_map(self, store: DescriptorStore) -> Result<Map, MapError> {
-        Map::from_parts(self.identity, self.creator, store, self.views, self.place_positions, self.edges).map_err(|e| match e {
+        Map::from_parts(
+            self.identity,
+            self.creator,
+            store,
+            self.views,
+            self.place_positions,
+            self.edges,
+        )
+        .map_err(|e| match e {
             MapError::Invalid(msg) => MapError::Corrupt(msg),
             MapError::EmptyMap => MapError::Corrupt("the map has no places".into()),
             other => other,
@@ -283,7 +412,9 @@ impl ParsedMap {
 /// Decides whether a damaged header still looks like the start of a topoloc map, which tells a
 /// truncated or corrupt map apart from some other file.
 fn starts_like_map(bytes: &[u8]) -> bool {
-    let Some(header) = bytes.get(8..) else { return true };
+    let Some(header) = bytes.get(8..) else {
+        return true;
+    };
     let n = header.len().min(HEADER_START.len());
     header[..n] == HEADER_START[..n]
 }
@@ -291,32 +422,45 @@ fn starts_like_map(bytes: &[u8]) -> bool {
 fn parse(bytes: &[u8], options: &LoadOptions) -> Result<ParsedMap, MapError> {
     let len = bytes.len();
     if len < 8 {
-        return Err(MapError::Truncated(format!("{len} bytes, shorter than the 8-byte header length")));
+        return Err(MapError::Truncated(format!(
+            "{len} bytes, shorter than the 8-byte header length"
+        )));
     }
     let header_len = u64::from_le_bytes(bytes[..8].try_into().expect("8 bytes"));
     if header_len > MAX_HEADER_BYTES || header_len < 2 {
         return Err(if starts_like_map(bytes) && header_len > MAX_HEADER_BYTES {
             MapError::Corrupt(format!("implausible header length {header_len}"))
         } else {
-            MapError::NotAMap(format!("implausible safetensors header length {header_len}"))
+            MapError::NotAMap(format!(
+                "implausible safetensors header length {header_len}"
+            ))
         });
     }
     let header_end = 8 + header_len as usize;
     if len < header_end {
         return Err(if starts_like_map(bytes) {
-            MapError::Truncated(format!("{len} bytes, but the header alone needs {header_end}"))
+            MapError::Truncated(format!(
+                "{len} bytes, but the header alone needs {header_end}"
+            ))
         } else {
             MapError::NotAMap("not a safetensors file".into())
         });
     }
     let header: serde_json::Value = match serde_json::from_slice(&bytes[8..header_end]) {
         Ok(v) => v,
-        Err(e) if starts_like_map(bytes) => return Err(MapError::Corrupt(format!("header is not valid JSON: {e}"))),
+        Err(e) if starts_like_map(bytes) => {
+            return Err(MapError::Corrupt(format!("header is not valid JSON: {e}")))
+        }
         Err(_) => return Err(MapError::NotAMap("not a safetensors file".into())),
     };
-    let meta_value = header.get("__metadata__").and_then(|m| m.get(META_KEY)).and_then(|v| v.as_str());
+    let meta_value = header
+        .get("__metadata__")
+        .and_then(|m| m.get(META_KEY))
+        .and_then(|v| v.as_str());
     let Some(meta_json) = meta_value else {
-        return Err(MapError::NotAMap("safetensors file without topoloc metadata".into()));
+        return Err(MapError::NotAMap(
+            "safetensors file without topoloc metadata".into(),
+        ));
     };
     let data_end = header
         .as_object()
@@ -328,45 +472,70 @@ fn parse(bytes: &[u8], options: &LoadOptions) -> Result<ParsedMap, MapError> {
         .unwrap_or(0);
     let expected_len = header_end as u64 + data_end;
     if (len as u64) < expected_len {
-        return Err(MapError::Truncated(format!("{len} bytes, the header promises {expected_len}")));
+        return Err(MapError::Truncated(format!(
+            "{len} bytes, the header promises {expected_len}"
+        )));
     }
     if (len as u64) > expected_len {
-        return Err(MapError::Corrupt(format!("{} unexpected bytes after the data", len as u64 - expected_len)));
+        return Err(MapError::Corrupt(format!(
+            "{} unexpected bytes after the data",
+            len as u64 - expected_len
+        )));
     }
 
-    let mut meta: FileMeta =
-        serde_json::from_str(meta_json).map_err(|e| MapError::Corrupt(format!("topoloc metadata: {e}")))?;
+    let mut meta: FileMeta = serde_json::from_str(meta_json)
+        .map_err(|e| MapError::Corrupt(format!("topoloc metadata: {e}")))?;
     if meta.format != FORMAT_NAME {
-        return Err(MapError::NotAMap(format!("format is '{}', not '{FORMAT_NAME}'", meta.format)));
+        return Err(MapError::NotAMap(format!(
+            "format is '{}', not '{FORMAT_NAME}'",
+            meta.format
+        )));
     }
     let major: u32 = meta
         .version
         .split('.')
         .next()
         .and_then(|m| m.parse().ok())
-        .ok_or_else(|| MapError::Corrupt(format!("unreadable format version '{}'", meta.version)))?;
+        .ok_or_else(|| {
+            MapError::Corrupt(format!("unreadable format version '{}'", meta.version))
+        })?;
     if major > FORMAT_VERSION_MAJOR {
-        return Err(MapError::UnsupportedVersion { found: meta.version, supported: FORMAT_VERSION_MAJOR });
+        return Err(MapError::UnsupportedVersion {
+            found: meta.version,
+            supported: FORMAT_VERSION_MAJOR,
+        });
     }
 
-    let st = SafeTensors::deserialize(bytes).map_err(|e| MapError::Corrupt(format!("safetensors: {e}")))?;
+    let st = SafeTensors::deserialize(bytes)
+        .map_err(|e| MapError::Corrupt(format!("safetensors: {e}")))?;
     let stored_crc = meta.crc32.take().unwrap_or_default();
     let unsigned_json = serde_json::to_string(&meta).expect("map metadata serialises");
     let mut names: Vec<&str> = st.names();
     names.sort_unstable();
-    let tensors: Vec<_> = names.iter().map(|n| st.tensor(n)).collect::<Result<_, _>>().map_err(|e| MapError::Corrupt(e.to_string()))?;
+    let tensors: Vec<_> = names
+        .iter()
+        .map(|n| st.tensor(n))
+        .collect::<Result<_, _>>()
+        .map_err(|e| MapError::Corrupt(e.to_string()))?;
     let crc = checksum(&unsigned_json, tensors.iter().map(|t| t.data()));
     if crc != stored_crc {
-        return Err(MapError::Corrupt(format!("checksum mismatch (stored '{stored_crc}', computed '{crc}')")));
+        return Err(MapError::Corrupt(format!(
+            "checksum mismatch (stored '{stored_crc}', computed '{crc}')"
+        )));
     }
     meta.descriptor.check_compatible(&options.expected)?;
 
     let reader = TensorReader { st: &st };
-    let (n, m, e) = (meta.views as usize, meta.places as usize, meta.edges as usize);
+    let (n, m, e) = (
+        meta.views as usize,
+        meta.places as usize,
+        meta.edges as usize,
+    );
     let d = meta.descriptor.dim as usize;
     let descriptors = reader.get("descriptors", Dtype::F32, &[n, d])?;
     let base = bytes.as_ptr() as usize;
-    let descriptor_bytes = descriptors.as_ptr() as usize - base..descriptors.as_ptr() as usize - base + descriptors.len();
+    let descriptor_bytes = descriptors.as_ptr() as usize - base
+        ..descriptors.as_ptr() as usize - base + descriptors.len();
 
     let view_place = reader.u32s("view_place", &[n])?;
     let view_flags = reader.get("view_flags", Dtype::U8, &[n])?;
@@ -378,14 +547,21 @@ fn parse(bytes: &[u8], options: &LoadOptions) -> Result<ParsedMap, MapError> {
     for v in 0..n {
         let flags = view_flags[v];
         let world_t_camera = if flags & VIEW_HAS_POSE != 0 {
-            Some(pose_from_array(&view_pose[v * 7..v * 7 + 7]).map_err(|e| MapError::Corrupt(format!("view {v}: {e}")))?)
+            Some(
+                pose_from_array(&view_pose[v * 7..v * 7 + 7])
+                    .map_err(|e| MapError::Corrupt(format!("view {v}: {e}")))?,
+            )
         } else {
             None
         };
         let image = if flags & VIEW_HAS_IMAGE != 0 {
             let (a, b) = (image_offsets[v] as usize, image_offsets[v + 1] as usize);
-            let slice = image_bytes.get(a..b).filter(|_| a <= b).ok_or_else(|| MapError::Corrupt(format!("view {v}: image reference out of range")))?;
-            Some(String::from_utf8(slice.to_vec()).map_err(|_| MapError::Corrupt(format!("view {v}: image reference is not UTF-8")))?)
+            let slice = image_bytes.get(a..b).filter(|_| a <= b).ok_or_else(|| {
+                MapError::Corrupt(format!("view {v}: image reference out of range"))
+            })?;
+            Some(String::from_utf8(slice.to_vec()).map_err(|_| {
+                MapError::Corrupt(format!("view {v}: image reference is not UTF-8"))
+            })?)
         } else {
             None
         };
@@ -400,14 +576,35 @@ fn parse(bytes: &[u8], options: &LoadOptions) -> Result<ParsedMap, MapError> {
     let place_flags = reader.get("place_flags", Dtype::U8, &[m])?;
     let place_position = reader.f64s("place_position", &[m, 3])?;
     let place_positions = (0..m)
-        .map(|p| (place_flags[p] & PLACE_HAS_POSITION != 0).then(|| Point3::new(place_position[3 * p], place_position[3 * p + 1], place_position[3 * p + 2])))
+        .map(|p| {
+            (place_flags[p] & PLACE_HAS_POSITION != 0).then(|| {
+                Point3::new(
+                    place_position[3 * p],
+                    place_position[3 * p + 1],
+                    place_position[3 * p + 2],
+                )
+            })
+        })
         .collect();
 
     let edge_ids = reader.u32s("edges", &[e, 2])?;
     let edge_weight = reader.f32s("edge_weight", &[e])?;
-    let edges = (0..e).map(|i| Edge { a: edge_ids[2 * i], b: edge_ids[2 * i + 1], weight: edge_weight[i] }).collect();
+    let edges = (0..e)
+        .map(|i| Edge {
+            a: edge_ids[2 * i],
+            b: edge_ids[2 * i + 1],
+            weight: edge_weight[i],
+        })
+        .collect();
 
-    Ok(ParsedMap { identity: meta.descriptor, creator: meta.creator, descriptor_bytes, views, place_positions, edges })
+    Ok(ParsedMap {
+        identity: meta.descriptor,
+        creator: meta.creator,
+        descriptor_bytes,
+        views,
+        place_positions,
+        edges,
+    })
 }
 
 /// Typed access to the tensors of a parsed file, with shape checks that name the tensor.
@@ -417,28 +614,49 @@ struct TensorReader<'a, 'data> {
 
 impl<'data> TensorReader<'_, 'data> {
     fn get_any_len(&self, name: &str, dtype: Dtype) -> Result<&'data [u8], MapError> {
-        let t = self.st.tensor(name).map_err(|_| MapError::Corrupt(format!("tensor '{name}' is missing")))?;
+        let t = self
+            .st
+            .tensor(name)
+            .map_err(|_| MapError::Corrupt(format!("tensor '{name}' is missing")))?;
         if t.dtype() != dtype {
-            return Err(MapError::Corrupt(format!("tensor '{name}' has dtype {:?}, expected {dtype:?}", t.dtype())));
+            return Err(MapError::Corrupt(format!(
+                "tensor '{name}' has dtype {:?}, expected {dtype:?}",
+                t.dtype()
+            )));
         }
         Ok(t.data())
     }
 
     fn get(&self, name: &str, dtype: Dtype, shape: &[usize]) -> Result<&'data [u8], MapError> {
         let data = self.get_any_len(name, dtype)?;
-        let found = self.st.tensor(name).expect("checked above").shape().to_vec();
+        let found = self
+            .st
+            .tensor(name)
+            .expect("checked above")
+            .shape()
+            .to_vec();
         if found != shape {
-            return Err(MapError::Corrupt(format!("tensor '{name}' has shape {found:?}, expected {shape:?}")));
+            return Err(MapError::Corrupt(format!(
+                "tensor '{name}' has shape {found:?}, expected {shape:?}"
+            )));
         }
         Ok(data)
     }
 
     fn u32s(&self, name: &str, shape: &[usize]) -> Result<Vec<u32>, MapError> {
-        Ok(self.get(name, Dtype::U32, shape)?.chunks_exact(4).map(|c| u32::from_le_bytes(c.try_into().expect("4"))).collect())
+        Ok(self
+            .get(name, Dtype::U32, shape)?
+            .chunks_exact(4)
+            .map(|c| u32::from_le_bytes(c.try_into().expect("4")))
+            .collect())
     }
 
     fn u64s(&self, name: &str, shape: &[usize]) -> Result<Vec<u64>, MapError> {
-        Ok(self.get(name, Dtype::U64, shape)?.chunks_exact(8).map(|c| u64::from_le_bytes(c.try_into().expect("8"))).collect())
+        Ok(self
+            .get(name, Dtype::U64, shape)?
+            .chunks_exact(8)
+            .map(|c| u64::from_le_bytes(c.try_into().expect("8")))
+            .collect())
     }
 
     fn f32s(&self, name: &str, shape: &[usize]) -> Result<Vec<f32>, MapError> {
@@ -446,6 +664,10 @@ impl<'data> TensorReader<'_, 'data> {
     }
 
     fn f64s(&self, name: &str, shape: &[usize]) -> Result<Vec<f64>, MapError> {
-        Ok(self.get(name, Dtype::F64, shape)?.chunks_exact(8).map(|c| f64::from_le_bytes(c.try_into().expect("8"))).collect())
+        Ok(self
+            .get(name, Dtype::F64, shape)?
+            .chunks_exact(8)
+            .map(|c| f64::from_le_bytes(c.try_into().expect("8")))
+            .collect())
     }
 }

@@ -8,7 +8,10 @@
 //! place, and is dropped as redundant otherwise. Edges join the places of consecutive keyframes
 //! and, with positions, all places closer than `neighbour_radius_m`.
 
-use super::{normalize_descriptor_into, DescriptorIdentity, Map, MapBuilder, MapError, PlaceId, ViewAttributes};
+use super::{
+    normalize_descriptor_into, DescriptorIdentity, Map, MapBuilder, MapError, PlaceId,
+    ViewAttributes,
+};
 use nalgebra::{Isometry3, Point3};
 
 /// One keyframe of the input sequence.
@@ -37,7 +40,12 @@ pub struct KeyframeOptions {
 
 impl Default for KeyframeOptions {
     fn default() -> Self {
-        Self { place_spacing_m: 2.0, novelty_similarity: 0.9, neighbour_radius_m: 3.0, max_views_per_place: 4 }
+        Self {
+            place_spacing_m: 2.0,
+            novelty_similarity: 0.9,
+            neighbour_radius_m: 3.0,
+            max_views_per_place: 4,
+        }
     }
 }
 
@@ -72,8 +80,13 @@ pub fn from_keyframes(
         return Err(MapError::EmptyMap);
     }
     let with_poses = keyframes[0].world_t_camera.is_some();
-    if keyframes.iter().any(|k| k.world_t_camera.is_some() != with_poses) {
-        return Err(MapError::InvalidArgument("either every keyframe has a pose or none has".into()));
+    if keyframes
+        .iter()
+        .any(|k| k.world_t_camera.is_some() != with_poses)
+    {
+        return Err(MapError::InvalidArgument(
+            "either every keyframe has a pose or none has".into(),
+        ));
     }
     let dim = identity.dim as usize;
     let mut builder = MapBuilder::new(identity);
@@ -82,9 +95,12 @@ pub fn from_keyframes(
     let mut previous_place: Option<PlaceId> = None;
 
     for (index, keyframe) in keyframes.iter().enumerate() {
-        normalize_descriptor_into(keyframe.descriptor, dim, &mut unit)
-            .map_err(|e| MapError::InvalidArgument(format!("keyframe {index} (id {}): {e}", keyframe.id)))?;
-        let position = keyframe.world_t_camera.map(|pose| Point3::from(pose.translation.vector));
+        normalize_descriptor_into(keyframe.descriptor, dim, &mut unit).map_err(|e| {
+            MapError::InvalidArgument(format!("keyframe {index} (id {}): {e}", keyframe.id))
+        })?;
+        let position = keyframe
+            .world_t_camera
+            .map(|pose| Point3::from(pose.translation.vector));
         let candidate = match position {
             Some(p) => nearest_place_within(&builder, p, options.place_spacing_m),
             None => previous_place,
@@ -95,7 +111,9 @@ pub fn from_keyframes(
                 let novel = best_similarity(&builder, views, &unit) < options.novelty_similarity;
                 match (novel, position.is_some()) {
                     // Same spot, new appearance: another view of the place, if it has room.
-                    (true, true) if views.len() < options.max_views_per_place as usize => Some(place),
+                    (true, true) if views.len() < options.max_views_per_place as usize => {
+                        Some(place)
+                    }
                     // No poses: novelty alone decides that the robot reached a new place.
                     (true, false) => None,
                     // Redundant keyframe, or a full place: nothing to add.
@@ -115,7 +133,11 @@ pub fn from_keyframes(
                 builder.add_place(position)?
             }
         };
-        let attributes = ViewAttributes { keyframe_id: Some(keyframe.id), world_t_camera: keyframe.world_t_camera, image: None };
+        let attributes = ViewAttributes {
+            keyframe_id: Some(keyframe.id),
+            world_t_camera: keyframe.world_t_camera,
+            image: None,
+        };
         let view = builder.add_view(place, &unit, attributes)?;
         views_of_place[place as usize].push(view);
         link(&mut builder, previous_place, place)?;
@@ -131,7 +153,10 @@ pub fn from_keyframes(
 /// Highest cosine similarity of a unit descriptor to the given views.
 fn best_similarity(builder: &MapBuilder, views: &[u32], unit: &[f32]) -> f32 {
     let dot = |a: &[f32]| -> f32 { a.iter().zip(unit).map(|(x, y)| x * y).sum() };
-    views.iter().map(|&v| dot(builder.view_descriptor(v))).fold(f32::NEG_INFINITY, f32::max)
+    views
+        .iter()
+        .map(|&v| dot(builder.view_descriptor(v)))
+        .fold(f32::NEG_INFINITY, f32::max)
 }
 
 fn link(builder: &mut MapBuilder, from: Option<PlaceId>, to: PlaceId) -> Result<(), MapError> {
@@ -143,7 +168,11 @@ fn link(builder: &mut MapBuilder, from: Option<PlaceId>, to: PlaceId) -> Result<
 
 fn nearest_place_within(builder: &MapBuilder, p: Point3<f64>, radius: f64) -> Option<PlaceId> {
     (0..builder.place_count() as PlaceId)
-        .filter_map(|place| builder.place_position(place).map(|q| (place, (q - p).norm())))
+        .filter_map(|place| {
+            builder
+                .place_position(place)
+                .map(|q| (place, (q - p).norm()))
+        })
         .filter(|&(_, d)| d <= radius)
         .min_by(|a, b| a.1.total_cmp(&b.1))
         .map(|(place, _)| place)
@@ -152,9 +181,13 @@ fn nearest_place_within(builder: &MapBuilder, p: Point3<f64>, radius: f64) -> Op
 fn join_close_places(builder: &mut MapBuilder, radius: f64) -> Result<(), MapError> {
     let places = builder.place_count() as PlaceId;
     for a in 0..places {
-        let Some(pa) = builder.place_position(a) else { continue };
+        let Some(pa) = builder.place_position(a) else {
+            continue;
+        };
         for b in a + 1..places {
-            let Some(pb) = builder.place_position(b) else { continue };
+            let Some(pb) = builder.place_position(b) else {
+                continue;
+            };
             if (pa - pb).norm() <= radius && !builder.has_edge(a, b) {
                 builder.add_edge(a, b, 1.0)?;
             }

@@ -44,18 +44,30 @@ pub struct DescriptorIdentity {
 
 impl DescriptorIdentity {
     /// Creates an identity; `kind` must be non-empty and `dim` positive.
-    pub fn new(kind: impl Into<String>, model: impl Into<String>, dim: u32) -> Result<Self, MapError> {
-        let identity = Self { kind: kind.into(), model: model.into(), dim };
+    pub fn new(
+        kind: impl Into<String>,
+        model: impl Into<String>,
+        dim: u32,
+    ) -> Result<Self, MapError> {
+        let identity = Self {
+            kind: kind.into(),
+            model: model.into(),
+            dim,
+        };
         identity.validate()?;
         Ok(identity)
     }
 
     fn validate(&self) -> Result<(), MapError> {
         if self.kind.is_empty() {
-            return Err(MapError::InvalidArgument("descriptor kind must not be empty".into()));
+            return Err(MapError::InvalidArgument(
+                "descriptor kind must not be empty".into(),
+            ));
         }
         if self.dim == 0 {
-            return Err(MapError::InvalidArgument("descriptor dimension must be positive".into()));
+            return Err(MapError::InvalidArgument(
+                "descriptor dimension must be positive".into(),
+            ));
         }
         Ok(())
     }
@@ -69,7 +81,10 @@ impl DescriptorIdentity {
         if kind_ok && model_ok && dim_ok {
             Ok(())
         } else {
-            Err(MapError::DescriptorMismatch { map: self.clone(), expected: expected.clone() })
+            Err(MapError::DescriptorMismatch {
+                map: self.clone(),
+                expected: expected.clone(),
+            })
         }
     }
 }
@@ -95,7 +110,13 @@ impl std::fmt::Display for ExpectedDescriptor {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         let any = |s: &Option<String>| s.clone().unwrap_or_else(|| "*".into());
         let dim = self.dim.map_or_else(|| "*".into(), |d| d.to_string());
-        write!(f, "{} (model '{}', D={})", any(&self.kind), any(&self.model), dim)
+        write!(
+            f,
+            "{} (model '{}', D={})",
+            any(&self.kind),
+            any(&self.model),
+            dim
+        )
     }
 }
 
@@ -127,14 +148,22 @@ pub struct ViewRecord {
 /// Row-major descriptor matrix, either owned or borrowed zero-copy from a memory-mapped file.
 pub(crate) enum DescriptorStore {
     Owned(Vec<f32>),
-    Mapped { mmap: memmap2::Mmap, byte_offset: usize, len: usize },
+    Mapped {
+        mmap: memmap2::Mmap,
+        byte_offset: usize,
+        len: usize,
+    },
 }
 
 impl DescriptorStore {
     pub(crate) fn as_slice(&self) -> &[f32] {
         match self {
             DescriptorStore::Owned(v) => v,
-            DescriptorStore::Mapped { mmap, byte_offset, len } => {
+            DescriptorStore::Mapped {
+                mmap,
+                byte_offset,
+                len,
+            } => {
                 let bytes = &mmap[*byte_offset..*byte_offset + *len * 4];
                 // Alignment and length were checked when the store was made (file.rs).
                 let (prefix, floats, suffix) = unsafe { bytes.align_to::<f32>() };
@@ -192,7 +221,9 @@ impl Map {
             return Err(MapError::EmptyMap);
         }
         if places > u32::MAX as usize || views.len() > u32::MAX as usize {
-            return Err(MapError::InvalidArgument("more than 2^32-1 places or views".into()));
+            return Err(MapError::InvalidArgument(
+                "more than 2^32-1 places or views".into(),
+            ));
         }
         let data = descriptors.as_slice();
         if data.len() != views.len() * dim {
@@ -210,7 +241,9 @@ impl Map {
         for (v, view) in views.iter().enumerate() {
             let p = view.place as usize;
             if p >= places {
-                return Err(MapError::Invalid(format!("view {v} belongs to place {p}, but the map has {places} places")));
+                return Err(MapError::Invalid(format!(
+                    "view {v} belongs to place {p}, but the map has {places} places"
+                )));
             }
             views_per_place[p] += 1;
             if let Some(pose) = &view.world_t_camera {
@@ -223,7 +256,9 @@ impl Map {
         for (p, pos) in place_positions.iter().enumerate() {
             if let Some(pos) = pos {
                 if !pos.iter().all(|x| x.is_finite()) {
-                    return Err(MapError::Invalid(format!("place {p} has a non-finite position")));
+                    return Err(MapError::Invalid(format!(
+                        "place {p} has a non-finite position"
+                    )));
                 }
             }
         }
@@ -236,10 +271,16 @@ impl Map {
                 )));
             }
             if !(e.weight.is_finite() && e.weight > 0.0) {
-                return Err(MapError::Invalid(format!("edge ({}, {}) has weight {}, must be finite and > 0", e.a, e.b, e.weight)));
+                return Err(MapError::Invalid(format!(
+                    "edge ({}, {}) has weight {}, must be finite and > 0",
+                    e.a, e.b, e.weight
+                )));
             }
             if i > 0 && (edges[i - 1].a, edges[i - 1].b) == (e.a, e.b) {
-                return Err(MapError::Invalid(format!("edge ({}, {}) appears twice", e.a, e.b)));
+                return Err(MapError::Invalid(format!(
+                    "edge ({}, {}) appears twice",
+                    e.a, e.b
+                )));
             }
         }
 
@@ -352,7 +393,8 @@ impl Map {
     pub fn place_views(&self, place: PlaceId) -> Result<&[ViewId], MapError> {
         self.check_place(place)?;
         let p = place as usize;
-        Ok(&self.place_view_ids[self.place_view_offsets[p] as usize..self.place_view_offsets[p + 1] as usize])
+        Ok(&self.place_view_ids
+            [self.place_view_offsets[p] as usize..self.place_view_offsets[p + 1] as usize])
     }
 
     /// Position of a place in metres, if the map has one.
@@ -366,7 +408,10 @@ impl Map {
         self.check_place(place)?;
         let p = place as usize;
         let range = self.neighbour_offsets[p] as usize..self.neighbour_offsets[p + 1] as usize;
-        Ok((&self.neighbour_ids[range.clone()], &self.neighbour_weights[range]))
+        Ok((
+            &self.neighbour_ids[range.clone()],
+            &self.neighbour_weights[range],
+        ))
     }
 
     /// All edges, sorted by `(a, b)`.
@@ -382,7 +427,10 @@ impl Map {
         if (place as usize) < self.place_count() {
             Ok(())
         } else {
-            Err(MapError::UnknownPlace { place, places: self.place_count() })
+            Err(MapError::UnknownPlace {
+                place,
+                places: self.place_count(),
+            })
         }
     }
 
@@ -390,7 +438,10 @@ impl Map {
         if (view as usize) < self.view_count() {
             Ok(())
         } else {
-            Err(MapError::UnknownView { view, views: self.view_count() })
+            Err(MapError::UnknownView {
+                view,
+                views: self.view_count(),
+            })
         }
     }
 }
@@ -417,7 +468,9 @@ fn check_unit_descriptor(row: &[f32]) -> Result<(), String> {
     }
     let norm = sum.sqrt();
     if (norm - 1.0).abs() > NORM_TOLERANCE {
-        return Err(format!("descriptor norm is {norm}, expected 1 (L2-normalised)"));
+        return Err(format!(
+            "descriptor norm is {norm}, expected 1 (L2-normalised)"
+        ));
     }
     Ok(())
 }
@@ -433,9 +486,16 @@ fn check_pose(pose: &Isometry3<f64>) -> Result<(), String> {
 
 /// Returns a unit-norm copy of `descriptor`, or an error naming what is wrong with it
 /// (wrong length, NaN/Inf, all zeros). Writes into `out` so that per-frame callers reuse a buffer.
-pub fn normalize_descriptor_into(descriptor: &[f32], dim: usize, out: &mut Vec<f32>) -> Result<(), DescriptorError> {
+pub fn normalize_descriptor_into(
+    descriptor: &[f32],
+    dim: usize,
+    out: &mut Vec<f32>,
+) -> Result<(), DescriptorError> {
     if descriptor.len() != dim {
-        return Err(DescriptorError::Dimension { got: descriptor.len(), expected: dim });
+        return Err(DescriptorError::Dimension {
+            got: descriptor.len(),
+            expected: dim,
+        });
     }
     let mut sum = 0.0f64;
     for &x in descriptor {
