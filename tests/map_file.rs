@@ -18,7 +18,10 @@ fn round_trip_is_bit_exact_and_keeps_everything() {
     let path = dir.path().join("chain.topoloc");
     map.save(&path).unwrap();
     let loaded = Map::load(&path, &LoadOptions::default()).unwrap();
-    assert!(loaded.is_memory_mapped(), "descriptors should be read in place");
+    assert!(
+        loaded.is_memory_mapped(),
+        "descriptors should be read in place"
+    );
     assert_eq!(std::fs::read(&path).unwrap(), loaded.to_bytes().unwrap());
     assert_eq!(loaded.descriptors(), map.descriptors());
     assert_eq!(loaded.views(), map.views());
@@ -26,19 +29,28 @@ fn round_trip_is_bit_exact_and_keeps_everything() {
     assert_eq!(loaded.descriptor(), map.descriptor());
     assert_eq!(loaded.creator(), map.creator());
     for p in 0..5 {
-        assert_eq!(loaded.place_position(p).unwrap(), map.place_position(p).unwrap());
+        assert_eq!(
+            loaded.place_position(p).unwrap(),
+            map.place_position(p).unwrap()
+        );
         assert_eq!(loaded.neighbours(p).unwrap(), map.neighbours(p).unwrap());
         assert_eq!(loaded.place_views(p).unwrap(), map.place_views(p).unwrap());
     }
-    assert_eq!(loaded.view(2).unwrap().image.as_deref(), Some("images/place000_view2.png"));
+    assert_eq!(
+        loaded.view(2).unwrap().image.as_deref(),
+        Some("images/place000_view2.png")
+    );
     assert_eq!(loaded.view(3).unwrap().image, None);
 }
 
 #[test]
 fn map_without_edges_or_attributes_round_trips() {
-    let mut builder = topoloc::MapBuilder::new(topoloc::DescriptorIdentity::new("bare", "", 3).unwrap());
+    let mut builder =
+        topoloc::MapBuilder::new(topoloc::DescriptorIdentity::new("bare", "", 3).unwrap());
     let p = builder.add_place(None).unwrap();
-    builder.add_view(p, &[0.0, 3.0, 4.0], Default::default()).unwrap();
+    builder
+        .add_view(p, &[0.0, 3.0, 4.0], Default::default())
+        .unwrap();
     let map = builder.build().unwrap();
     let bytes = map.to_bytes().unwrap();
     let loaded = load_bytes(&bytes).unwrap();
@@ -55,7 +67,10 @@ fn every_truncation_is_a_typed_error() {
         match load_bytes(&bytes[..len]) {
             Err(MapError::Truncated(_)) => {}
             Err(MapError::NotAMap(_)) if len == 0 => {}
-            other => panic!("truncated at {len} of {}: expected Truncated, got {other:?}", bytes.len()),
+            other => panic!(
+                "truncated at {len} of {}: expected Truncated, got {other:?}",
+                bytes.len()
+            ),
         }
     }
 }
@@ -67,7 +82,10 @@ fn every_flipped_byte_is_detected() {
         for mask in [0x01u8, 0x80] {
             let mut damaged = bytes.clone();
             damaged[i] ^= mask;
-            assert!(load_bytes(&damaged).is_err(), "flipping byte {i} with {mask:#04x} went unnoticed");
+            assert!(
+                load_bytes(&damaged).is_err(),
+                "flipping byte {i} with {mask:#04x} went unnoticed"
+            );
         }
     }
 }
@@ -81,9 +99,20 @@ fn trailing_garbage_is_corrupt() {
 
 #[test]
 fn foreign_files_are_not_maps() {
-    assert!(matches!(load_bytes(b"hello, this is a text file and not a map at all"), Err(MapError::NotAMap(_))));
+    assert!(matches!(
+        load_bytes(b"hello, this is a text file and not a map at all"),
+        Err(MapError::NotAMap(_))
+    ));
     let foreign = safetensors::serialize(
-        [("weights", safetensors::tensor::TensorView::new(safetensors::Dtype::F32, vec![1], &[0, 0, 128, 63]).unwrap())],
+        [(
+            "weights",
+            safetensors::tensor::TensorView::new(
+                safetensors::Dtype::F32,
+                vec![1],
+                &[0, 0, 128, 63],
+            )
+            .unwrap(),
+        )],
         None,
     )
     .unwrap();
@@ -91,19 +120,31 @@ fn foreign_files_are_not_maps() {
     let dir = tempfile::tempdir().unwrap();
     let empty = dir.path().join("empty");
     std::fs::write(&empty, b"").unwrap();
-    assert!(matches!(Map::load(&empty, &LoadOptions::default()), Err(MapError::NotAMap(_))));
-    assert!(matches!(Map::load(dir.path().join("missing"), &LoadOptions::default()), Err(MapError::Io { .. })));
+    assert!(matches!(
+        Map::load(&empty, &LoadOptions::default()),
+        Err(MapError::NotAMap(_))
+    ));
+    assert!(matches!(
+        Map::load(dir.path().join("missing"), &LoadOptions::default()),
+        Err(MapError::Io { .. })
+    ));
 }
 
 #[test]
 fn newer_major_version_is_refused() {
     let bytes = chain_map(2, 1, 4).to_bytes().unwrap();
     let pattern = br#"\"version\":\"1.0\""#;
-    let at = bytes.windows(pattern.len()).position(|w| w == pattern).expect("version in header");
+    let at = bytes
+        .windows(pattern.len())
+        .position(|w| w == pattern)
+        .expect("version in header");
     let mut newer = bytes.clone();
     newer[at + r#"\"version\":\""#.len()] = b'2';
     match load_bytes(&newer) {
-        Err(MapError::UnsupportedVersion { found, supported: 1 }) => assert_eq!(found, "2.0"),
+        Err(MapError::UnsupportedVersion {
+            found,
+            supported: 1,
+        }) => assert_eq!(found, "2.0"),
         other => panic!("expected UnsupportedVersion, got {other:?}"),
     }
 }
@@ -112,11 +153,21 @@ fn newer_major_version_is_refused() {
 fn descriptor_mismatch_is_refused_on_load() {
     let bytes = chain_map(2, 1, 4).to_bytes().unwrap();
     let expect = |kind: Option<&str>, dim: Option<u32>| LoadOptions {
-        expected: ExpectedDescriptor { kind: kind.map(String::from), model: None, dim },
+        expected: ExpectedDescriptor {
+            kind: kind.map(String::from),
+            model: None,
+            dim,
+        },
     };
     assert!(Map::from_bytes(&bytes, &expect(Some("test"), Some(4))).is_ok());
-    assert!(matches!(Map::from_bytes(&bytes, &expect(Some("vlad-orb"), None)), Err(MapError::DescriptorMismatch { .. })));
-    assert!(matches!(Map::from_bytes(&bytes, &expect(None, Some(512))), Err(MapError::DescriptorMismatch { .. })));
+    assert!(matches!(
+        Map::from_bytes(&bytes, &expect(Some("vlad-orb"), None)),
+        Err(MapError::DescriptorMismatch { .. })
+    ));
+    assert!(matches!(
+        Map::from_bytes(&bytes, &expect(None, Some(512))),
+        Err(MapError::DescriptorMismatch { .. })
+    ));
 }
 
 #[test]
@@ -125,9 +176,19 @@ fn save_is_atomic_and_leaves_no_temporary_files() {
     let path = dir.path().join("map.topoloc");
     chain_map(2, 1, 4).save(&path).unwrap();
     chain_map(3, 1, 4).save(&path).unwrap();
-    assert_eq!(Map::load(&path, &LoadOptions::default()).unwrap().place_count(), 3);
-    let names: Vec<_> = std::fs::read_dir(dir.path()).unwrap().map(|e| e.unwrap().file_name()).collect();
+    assert_eq!(
+        Map::load(&path, &LoadOptions::default())
+            .unwrap()
+            .place_count(),
+        3
+    );
+    let names: Vec<_> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .map(|e| e.unwrap().file_name())
+        .collect();
     assert_eq!(names, vec![std::ffi::OsString::from("map.topoloc")]);
-    let err = chain_map(2, 1, 4).save(dir.path().join("no/such/dir/map.topoloc")).unwrap_err();
+    let err = chain_map(2, 1, 4)
+        .save(dir.path().join("no/such/dir/map.topoloc"))
+        .unwrap_err();
     assert!(matches!(err, MapError::Io { .. }), "{err:?}");
 }

@@ -35,15 +35,26 @@ pub fn mix(a: &[f32], b: &[f32], scale: f32) -> Vec<f32> {
 pub fn chain_map(places: u32, views: u32, dim: u32) -> Map {
     let mut builder = MapBuilder::new(DescriptorIdentity::new("test", "chain-v1", dim).unwrap());
     for p in 0..places {
-        let place = builder.add_place(Some(Point3::new(2.0 * p as f64, 0.0, 0.0))).unwrap();
+        let place = builder
+            .add_place(Some(Point3::new(2.0 * p as f64, 0.0, 0.0)))
+            .unwrap();
         for v in 0..views {
             let yaw = std::f64::consts::FRAC_PI_2 * v as f64;
             let attributes = ViewAttributes {
                 keyframe_id: Some(u64::from(p * 100 + v)),
-                world_t_camera: Some(Isometry3::new(Vector3::new(2.0 * p as f64, 0.0, 1.5), Vector3::z() * yaw)),
+                world_t_camera: Some(Isometry3::new(
+                    Vector3::new(2.0 * p as f64, 0.0, 1.5),
+                    Vector3::z() * yaw,
+                )),
                 image: (v % 2 == 0).then(|| format!("images/place{p:03}_view{v}.png")),
             };
-            builder.add_view(place, &unit_vector(u64::from(p * 16 + v), dim as usize), attributes).unwrap();
+            builder
+                .add_view(
+                    place,
+                    &unit_vector(u64::from(p * 16 + v), dim as usize),
+                    attributes,
+                )
+                .unwrap();
         }
         if p > 0 {
             builder.add_edge(p - 1, p, 1.0).unwrap();

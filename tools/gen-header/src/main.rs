@@ -8,13 +8,20 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 fn repo_root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..").canonicalize().expect("repository root exists")
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../..")
+        .canonicalize()
+        .expect("repository root exists")
 }
 
 /// Reads `version = "X.Y.Z"` from the `[package]` table of the root Cargo.toml.
 fn package_version(root: &Path) -> Result<(String, String, String), String> {
-    let text = std::fs::read_to_string(root.join("Cargo.toml")).map_err(|e| format!("reading Cargo.toml: {e}"))?;
-    let package = text.split("[package]").nth(1).ok_or("no [package] table in Cargo.toml")?;
+    let text = std::fs::read_to_string(root.join("Cargo.toml"))
+        .map_err(|e| format!("reading Cargo.toml: {e}"))?;
+    let package = text
+        .split("[package]")
+        .nth(1)
+        .ok_or("no [package] table in Cargo.toml")?;
     let line = package
         .lines()
         .take_while(|l| !l.trim_start().starts_with('['))
@@ -30,7 +37,8 @@ fn package_version(root: &Path) -> Result<(String, String, String), String> {
 
 fn generate(root: &Path) -> Result<Vec<u8>, String> {
     let (major, minor, patch) = package_version(root)?;
-    let mut config = cbindgen::Config::from_file(root.join("cbindgen.toml")).map_err(|e| e.to_string())?;
+    let mut config =
+        cbindgen::Config::from_file(root.join("cbindgen.toml")).map_err(|e| e.to_string())?;
     config.after_includes = Some(format!(
         "\n#define TOPOLOC_VERSION_MAJOR {major}\n#define TOPOLOC_VERSION_MINOR {minor}\n#define TOPOLOC_VERSION_PATCH {patch}\n#define TOPOLOC_VERSION_STRING \"{major}.{minor}.{patch}\"\n"
     ));
