@@ -135,9 +135,10 @@ impl Map {
         let view_flags: Vec<u8> = views
             .iter()
             .map(|v| {
-                (v.keyframe_id.is_some() as u8) * VIEW_HAS_KEYFRAME
-                    | (v.world_t_camera.is_some() as u8) * VIEW_HAS_POSE
-                    | (v.image.is_some() as u8) * VIEW_HAS_IMAGE
+                let flag = |present: bool, bit: u8| if present { bit } else { 0 };
+                flag(v.keyframe_id.is_some(), VIEW_HAS_KEYFRAME)
+                    | flag(v.world_t_camera.is_some(), VIEW_HAS_POSE)
+                    | flag(v.image.is_some(), VIEW_HAS_IMAGE)
             })
             .collect();
         let view_keyframe: Vec<u64> = views.iter().map(|v| v.keyframe_id.unwrap_or(0)).collect();
@@ -427,7 +428,7 @@ fn parse(bytes: &[u8], options: &LoadOptions) -> Result<ParsedMap, MapError> {
         )));
     }
     let header_len = u64::from_le_bytes(bytes[..8].try_into().expect("8 bytes"));
-    if header_len > MAX_HEADER_BYTES || header_len < 2 {
+    if !(2..=MAX_HEADER_BYTES).contains(&header_len) {
         return Err(if starts_like_map(bytes) && header_len > MAX_HEADER_BYTES {
             MapError::Corrupt(format!("implausible header length {header_len}"))
         } else {
