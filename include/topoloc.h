@@ -26,6 +26,15 @@
 #define TOPOLOC_VERSION_PATCH 0
 #define TOPOLOC_VERSION_STRING "0.1.0"
 
+/* Fill a versioned struct with defaults (and its struct_size) before use. */
+#define topoloc_map_load_options_default(p) topoloc_map_load_options_init((p), sizeof *(p))
+#define topoloc_view_attributes_default(p) topoloc_view_attributes_init((p), sizeof *(p))
+#define topoloc_keyframe_options_default(p) topoloc_keyframe_options_init((p), sizeof *(p))
+#define topoloc_localizer_options_default(p) topoloc_localizer_options_init((p), sizeof *(p))
+#define topoloc_frame_default(p) topoloc_frame_init((p), sizeof *(p))
+#define topoloc_result_default(p) topoloc_result_init((p), sizeof *(p))
+#define topoloc_view_info_default(p) topoloc_view_info_init((p), sizeof *(p))
+
 
 /**
  * Filter mode: forward filter over the graph (default).
@@ -416,8 +425,8 @@ typedef struct topoloc_map_load_options {
 } topoloc_map_load_options;
 
 /**
- * Attributes of one view, filled by `topoloc_map_view_info`. Set `struct_size` to
- * `sizeof(topoloc_view_info)` before the call.
+ * Attributes of one view, filled by `topoloc_map_view_info`. Initialise with
+ * `topoloc_view_info_default` (which sets `struct_size`) before the call.
  */
 typedef struct topoloc_view_info {
   /**
@@ -468,9 +477,11 @@ void topoloc_map_builder_free(struct topoloc_map_builder *builder);
 topoloc_status topoloc_map_builder_add_place(struct topoloc_map_builder *builder, const double *position, uint32_t *place_out);
 
 /**
- * Fills `*attributes` with "nothing set". Does nothing if `attributes` is NULL.
+ * Fills the first `size` bytes of `*attributes` with defaults and sets `struct_size`; call it
+ * through the header macro `topoloc_view_attributes_default(attributes)`, which passes `sizeof *(attributes)`.
+ * Errors: `_NULL_ARGUMENT`, `_STRUCT_SIZE` (size below the first published layout).
  */
-void topoloc_view_attributes_default(struct topoloc_view_attributes *attributes);
+topoloc_status topoloc_view_attributes_init(struct topoloc_view_attributes *attributes, size_t size);
 
 /**
  * Adds a view with `descriptor` (`len` floats, normalised here) to `place`; `attributes` may be
@@ -491,9 +502,11 @@ topoloc_status topoloc_map_builder_add_edge(struct topoloc_map_builder *builder,
 topoloc_status topoloc_map_builder_build(const struct topoloc_map_builder *builder, struct topoloc_map **out);
 
 /**
- * Fills `*options` with defaults. Does nothing if `options` is NULL.
+ * Fills the first `size` bytes of `*options` with defaults and sets `struct_size`; call it
+ * through the header macro `topoloc_keyframe_options_default(options)`, which passes `sizeof *(options)`.
+ * Errors: `_NULL_ARGUMENT`, `_STRUCT_SIZE` (size below the first published layout).
  */
-void topoloc_keyframe_options_default(struct topoloc_keyframe_options *options);
+topoloc_status topoloc_keyframe_options_init(struct topoloc_keyframe_options *options, size_t size);
 
 /**
  * Builds a map from `count` keyframes in order (places by spacing and appearance novelty, edges
@@ -503,9 +516,11 @@ void topoloc_keyframe_options_default(struct topoloc_keyframe_options *options);
 topoloc_status topoloc_map_from_keyframes(const char *kind, const char *model, uint32_t dim, const struct topoloc_keyframe *keyframes, size_t count, const struct topoloc_keyframe_options *options, struct topoloc_map **out);
 
 /**
- * Fills `*options` with defaults. Does nothing if `options` is NULL.
+ * Fills the first `size` bytes of `*options` with defaults and sets `struct_size`; call it
+ * through the header macro `topoloc_localizer_options_default(options)`, which passes `sizeof *(options)`.
+ * Errors: `_NULL_ARGUMENT`, `_STRUCT_SIZE` (size below the first published layout).
  */
-void topoloc_localizer_options_default(struct topoloc_localizer_options *options);
+topoloc_status topoloc_localizer_options_init(struct topoloc_localizer_options *options, size_t size);
 
 /**
  * Creates a localizer on `map` (which it keeps alive; the caller may free its own handle).
@@ -525,14 +540,18 @@ void topoloc_localizer_free(struct topoloc_localizer *localizer);
 topoloc_status topoloc_localizer_reset(struct topoloc_localizer *localizer);
 
 /**
- * Fills `*frame` with an empty frame (no descriptor, no odometry). Does nothing if NULL.
+ * Fills the first `size` bytes of `*frame` with defaults and sets `struct_size`; call it
+ * through the header macro `topoloc_frame_default(frame)`, which passes `sizeof *(frame)`.
+ * Errors: `_NULL_ARGUMENT`, `_STRUCT_SIZE` (size below the first published layout).
  */
-void topoloc_frame_default(struct topoloc_frame *frame);
+topoloc_status topoloc_frame_init(struct topoloc_frame *frame, size_t size);
 
 /**
- * Fills `*result` with an empty result without a candidate buffer. Does nothing if NULL.
+ * Fills the first `size` bytes of `*result` with defaults and sets `struct_size`; call it
+ * through the header macro `topoloc_result_default(result)`, which passes `sizeof *(result)`.
+ * Errors: `_NULL_ARGUMENT`, `_STRUCT_SIZE` (size below the first published layout).
  */
-void topoloc_result_default(struct topoloc_result *result);
+topoloc_status topoloc_result_init(struct topoloc_result *result, size_t size);
 
 /**
  * Localizes one frame and writes the answer into `*result`. The whole frame is validated
@@ -544,9 +563,11 @@ void topoloc_result_default(struct topoloc_result *result);
 topoloc_status topoloc_localizer_process(struct topoloc_localizer *localizer, const struct topoloc_frame *frame, struct topoloc_result *result);
 
 /**
- * Fills `*options` with defaults (accept any descriptor). Does nothing if `options` is NULL.
+ * Fills the first `size` bytes of `*options` with defaults and sets `struct_size`; call it
+ * through the header macro `topoloc_map_load_options_default(options)`, which passes `sizeof *(options)`.
+ * Errors: `_NULL_ARGUMENT`, `_STRUCT_SIZE` (size below the first published layout).
  */
-void topoloc_map_load_options_default(struct topoloc_map_load_options *options);
+topoloc_status topoloc_map_load_options_init(struct topoloc_map_load_options *options, size_t size);
 
 /**
  * Loads and validates a map file (memory-mapped; the file must not be modified while the map
@@ -625,6 +646,13 @@ topoloc_status topoloc_map_place_position(const struct topoloc_map *map, uint32_
  * Edge number `index` (0..edge_count, sorted by (a, b)): places `*a < *b` and `*weight`.
  */
 topoloc_status topoloc_map_edge(const struct topoloc_map *map, size_t index, uint32_t *a, uint32_t *b, float *weight);
+
+/**
+ * Fills the first `size` bytes of `*info` with an empty view info and sets `struct_size`; call
+ * it through the header macro `topoloc_view_info_default(info)`, which passes `sizeof *(info)`.
+ * Errors: `_NULL_ARGUMENT`, `_STRUCT_SIZE`.
+ */
+topoloc_status topoloc_view_info_init(struct topoloc_view_info *info, size_t size);
 
 /**
  * Fills `*out` with the attributes of `view`. Errors: `_UNKNOWN_VIEW`, `_STRUCT_SIZE`.

@@ -385,11 +385,50 @@ pub(crate) fn struct_size_of<T: Versioned>(ptr: *const T, name: &str) -> Result<
     Ok(size)
 }
 
-/// Body of the `*_default()` functions: writes `T::default()` into `*ptr` unless it is NULL.
-pub(crate) fn fill_default<T: Default>(ptr: *mut T) {
-    run_void(|| {
-        if !ptr.is_null() {
-            write_out(ptr, T::default());
+/// Body of the `*_init(ptr, size)` functions behind the header's `*_default(ptr)` macros:
+/// writes the first `min(size, sizeof(T))` bytes of `T::default()` and sets `struct_size` to that
+/// count, so that a library newer than the caller's header never writes past the caller's struct.
+pub(crate) fn init_versioned<T: Versioned + Default>(ptr: *mut T, size: usize) -> topoloc_status {
+    run(|| {
+        check_out(ptr, "ptr")?;
+        if size < T::MIN_SIZE {
+            return Err(FfiError::new(
+                TOPOLOC_ERR_STRUCT_SIZE,
+                format!(
+                    "size {size} is below the smallest published layout ({} bytes)",
+                    T::MIN_SIZE
+                ),
+            ));
         }
+        let written = size.min(std::mem::size_of::<T>());
+        let value = T::default();
+        // SAFETY: the caller provides `size >= written` writable bytes at `ptr`; `value` is a T of
+        // at least `written` bytes; every versioned struct starts with a `size_t struct_size`.
+        unsafe {
+            std::ptr::copy_nonoverlapping(
+                (&value as *const T).cast::<u8>(),
+                ptr.cast::<u8>(),
+                written,
+            );
+            ptr.cast::<usize>().write_unaligned(written);
+        }
+        Ok(())
     })
+}
+
+/// Writes an output struct into the caller's storage, at most the caller's `struct_size` bytes
+/// (checked to be at least the first published size) and keeping that `struct_size`.
+pub(crate) fn write_versioned<T: Versioned>(
+    ptr: *mut T,
+    value: T,
+    name: &str,
+) -> Result<(), FfiError> {
+    let size = struct_size_of(ptr as *const T, name)?;
+    let written = size.min(std::mem::size_of::<T>());
+    // SAFETY: the caller's struct is `size >= written` bytes long (its struct_size says so).
+    unsafe {
+        std::ptr::copy_nonoverlapping((&value as *const T).cast::<u8>(), ptr.cast::<u8>(), written);
+        ptr.cast::<usize>().write_unaligned(size);
+    }
+    Ok(())
 }

@@ -1,7 +1,7 @@
 //! C functions that build maps: the incremental builder and the keyframe path.
 
 use super::boundary::{
-    borrow, borrow_mut, check_out, fill_default, optional_string, read_versioned, run, run_void,
+    borrow, borrow_mut, check_out, init_versioned, optional_string, read_versioned, run, run_void,
     slice, string, write_out, FfiError, Versioned,
 };
 use super::convert::optional_pose;
@@ -118,10 +118,15 @@ impl Default for topoloc_view_attributes {
     }
 }
 
-/// Fills `*attributes` with "nothing set". Does nothing if `attributes` is NULL.
+/// Fills the first `size` bytes of `*attributes` with defaults and sets `struct_size`; call it
+/// through the header macro `topoloc_view_attributes_default(attributes)`, which passes `sizeof *(attributes)`.
+/// Errors: `_NULL_ARGUMENT`, `_STRUCT_SIZE` (size below the first published layout).
 #[no_mangle]
-pub extern "C" fn topoloc_view_attributes_default(attributes: *mut topoloc_view_attributes) {
-    fill_default(attributes)
+pub extern "C" fn topoloc_view_attributes_init(
+    attributes: *mut topoloc_view_attributes,
+    size: usize,
+) -> topoloc_status {
+    init_versioned(attributes, size)
 }
 
 /// Adds a view with `descriptor` (`len` floats, normalised here) to `place`; `attributes` may be
@@ -234,10 +239,15 @@ impl Default for topoloc_keyframe_options {
     }
 }
 
-/// Fills `*options` with defaults. Does nothing if `options` is NULL.
+/// Fills the first `size` bytes of `*options` with defaults and sets `struct_size`; call it
+/// through the header macro `topoloc_keyframe_options_default(options)`, which passes `sizeof *(options)`.
+/// Errors: `_NULL_ARGUMENT`, `_STRUCT_SIZE` (size below the first published layout).
 #[no_mangle]
-pub extern "C" fn topoloc_keyframe_options_default(options: *mut topoloc_keyframe_options) {
-    fill_default(options)
+pub extern "C" fn topoloc_keyframe_options_init(
+    options: *mut topoloc_keyframe_options,
+    size: usize,
+) -> topoloc_status {
+    init_versioned(options, size)
 }
 
 /// Builds a map from `count` keyframes in order (places by spacing and appearance novelty, edges

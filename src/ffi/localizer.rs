@@ -1,8 +1,8 @@
 //! C functions of the localizer: create, process a frame, reset, free.
 
 use super::boundary::{
-    borrow, borrow_mut, check_out, fill_default, read_versioned, run, run_void, slice,
-    struct_size_of, write_out, FfiError, Versioned,
+    borrow, borrow_mut, check_out, init_versioned, read_versioned, run, run_void, slice,
+    struct_size_of, write_out, write_versioned, FfiError, Versioned,
 };
 use super::convert::{expected_descriptor, optional_pose};
 use super::map::topoloc_map;
@@ -76,10 +76,15 @@ impl Default for topoloc_localizer_options {
     }
 }
 
-/// Fills `*options` with defaults. Does nothing if `options` is NULL.
+/// Fills the first `size` bytes of `*options` with defaults and sets `struct_size`; call it
+/// through the header macro `topoloc_localizer_options_default(options)`, which passes `sizeof *(options)`.
+/// Errors: `_NULL_ARGUMENT`, `_STRUCT_SIZE` (size below the first published layout).
 #[no_mangle]
-pub extern "C" fn topoloc_localizer_options_default(options: *mut topoloc_localizer_options) {
-    fill_default(options)
+pub extern "C" fn topoloc_localizer_options_init(
+    options: *mut topoloc_localizer_options,
+    size: usize,
+) -> topoloc_status {
+    init_versioned(options, size)
 }
 
 /// Creates a localizer on `map` (which it keeps alive; the caller may free its own handle).
@@ -188,10 +193,12 @@ impl Default for topoloc_frame {
     }
 }
 
-/// Fills `*frame` with an empty frame (no descriptor, no odometry). Does nothing if NULL.
+/// Fills the first `size` bytes of `*frame` with defaults and sets `struct_size`; call it
+/// through the header macro `topoloc_frame_default(frame)`, which passes `sizeof *(frame)`.
+/// Errors: `_NULL_ARGUMENT`, `_STRUCT_SIZE` (size below the first published layout).
 #[no_mangle]
-pub extern "C" fn topoloc_frame_default(frame: *mut topoloc_frame) {
-    fill_default(frame)
+pub extern "C" fn topoloc_frame_init(frame: *mut topoloc_frame, size: usize) -> topoloc_status {
+    init_versioned(frame, size)
 }
 
 /// One ranked hypothesis. Array element: its layout never changes.
@@ -260,10 +267,12 @@ impl Default for topoloc_result {
     }
 }
 
-/// Fills `*result` with an empty result without a candidate buffer. Does nothing if NULL.
+/// Fills the first `size` bytes of `*result` with defaults and sets `struct_size`; call it
+/// through the header macro `topoloc_result_default(result)`, which passes `sizeof *(result)`.
+/// Errors: `_NULL_ARGUMENT`, `_STRUCT_SIZE` (size below the first published layout).
 #[no_mangle]
-pub extern "C" fn topoloc_result_default(result: *mut topoloc_result) {
-    fill_default(result)
+pub extern "C" fn topoloc_result_init(result: *mut topoloc_result, size: usize) -> topoloc_status {
+    init_versioned(result, size)
 }
 
 /// Localizes one frame and writes the answer into `*result`. The whole frame is validated
@@ -304,7 +313,7 @@ pub extern "C" fn topoloc_localizer_process(
             // SAFETY: the caller provides `capacity` writable elements at `buffer`; i < capacity.
             unsafe { buffer.add(i).write(candidate) };
         }
-        write_out(
+        write_versioned(
             result,
             topoloc_result {
                 struct_size: std::mem::size_of::<topoloc_result>(),
@@ -319,7 +328,7 @@ pub extern "C" fn topoloc_localizer_process(
                 candidates_capacity: capacity,
                 candidates_len: written,
             },
-        );
-        Ok(())
+            "result",
+        )
     })
 }

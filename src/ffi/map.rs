@@ -1,8 +1,8 @@
 //! C functions on maps: load, save, free and read-only accessors.
 
 use super::boundary::{
-    borrow, check_out, copy_c_string, fill_default, read_versioned, run, run_void, slice, string,
-    write_array, write_out, FfiError, Versioned,
+    borrow, check_out, copy_c_string, init_versioned, read_versioned, run, run_void, slice, string,
+    write_array, write_out, write_versioned, FfiError, Versioned,
 };
 use super::convert::{expected_descriptor, pose_to_row_major};
 use super::topoloc_status;
@@ -54,10 +54,15 @@ impl Default for topoloc_map_load_options {
     }
 }
 
-/// Fills `*options` with defaults (accept any descriptor). Does nothing if `options` is NULL.
+/// Fills the first `size` bytes of `*options` with defaults and sets `struct_size`; call it
+/// through the header macro `topoloc_map_load_options_default(options)`, which passes `sizeof *(options)`.
+/// Errors: `_NULL_ARGUMENT`, `_STRUCT_SIZE` (size below the first published layout).
 #[no_mangle]
-pub extern "C" fn topoloc_map_load_options_default(options: *mut topoloc_map_load_options) {
-    fill_default(options)
+pub extern "C" fn topoloc_map_load_options_init(
+    options: *mut topoloc_map_load_options,
+    size: usize,
+) -> topoloc_status {
+    init_versioned(options, size)
 }
 
 fn load_options(options: *const topoloc_map_load_options) -> Result<LoadOptions, FfiError> {
@@ -296,8 +301,8 @@ pub extern "C" fn topoloc_map_edge(
     })
 }
 
-/// Attributes of one view, filled by `topoloc_map_view_info`. Set `struct_size` to
-/// `sizeof(topoloc_view_info)` before the call.
+/// Attributes of one view, filled by `topoloc_map_view_info`. Initialise with
+/// `topoloc_view_info_default` (which sets `struct_size`) before the call.
 #[repr(C)]
 #[derive(Clone, Copy)]
 #[allow(non_snake_case)]
@@ -320,6 +325,30 @@ impl Versioned for topoloc_view_info {
     const MIN_SIZE: usize = std::mem::size_of::<Self>();
 }
 
+impl Default for topoloc_view_info {
+    fn default() -> Self {
+        Self {
+            struct_size: std::mem::size_of::<Self>(),
+            place: 0,
+            has_keyframe_id: false,
+            keyframe_id: 0,
+            has_pose: false,
+            world_T_camera: [0.0; 16],
+        }
+    }
+}
+
+/// Fills the first `size` bytes of `*info` with an empty view info and sets `struct_size`; call
+/// it through the header macro `topoloc_view_info_default(info)`, which passes `sizeof *(info)`.
+/// Errors: `_NULL_ARGUMENT`, `_STRUCT_SIZE`.
+#[no_mangle]
+pub extern "C" fn topoloc_view_info_init(
+    info: *mut topoloc_view_info,
+    size: usize,
+) -> topoloc_status {
+    init_versioned(info, size)
+}
+
 /// Fills `*out` with the attributes of `view`. Errors: `_UNKNOWN_VIEW`, `_STRUCT_SIZE`.
 #[no_mangle]
 pub extern "C" fn topoloc_map_view_info(
@@ -329,11 +358,10 @@ pub extern "C" fn topoloc_map_view_info(
 ) -> topoloc_status {
     run(|| {
         let record = borrow(map, "map")?.map.view(view)?;
-        super::boundary::struct_size_of(out as *const topoloc_view_info, "out")?;
         let pose = record
             .world_t_camera
             .unwrap_or_else(nalgebra::Isometry3::identity);
-        write_out(
+        write_versioned(
             out,
             topoloc_view_info {
                 struct_size: std::mem::size_of::<topoloc_view_info>(),
@@ -343,8 +371,8 @@ pub extern "C" fn topoloc_map_view_info(
                 has_pose: record.world_t_camera.is_some(),
                 world_T_camera: pose_to_row_major(&pose),
             },
-        );
-        Ok(())
+            "out",
+        )
     })
 }
 

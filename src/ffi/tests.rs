@@ -118,11 +118,24 @@ fn null_arguments_are_refused_and_named() {
 #[test]
 fn struct_size_is_checked_and_defaults_fill_it() {
     let map = small_map();
-    let mut options = topoloc_localizer_options::default();
-    topoloc_localizer_options_default(&mut options);
+    let mut options = topoloc_localizer_options {
+        struct_size: 0,
+        temperature: -1.0,
+        ..Default::default()
+    };
+    let size = std::mem::size_of::<topoloc_localizer_options>();
     assert_eq!(
-        options.struct_size,
-        std::mem::size_of::<topoloc_localizer_options>()
+        topoloc_localizer_options_init(&mut options, size),
+        TOPOLOC_OK
+    );
+    assert_eq!((options.struct_size, options.temperature), (size, 0.03));
+    assert_eq!(
+        topoloc_localizer_options_init(&mut options, 4),
+        TOPOLOC_ERR_STRUCT_SIZE
+    );
+    assert_eq!(
+        topoloc_localizer_options_init(null_mut(), size),
+        TOPOLOC_ERR_NULL_ARGUMENT
     );
     options.struct_size = 8;
     let mut localizer = null_mut();
@@ -191,6 +204,39 @@ fn process_leaves_result_untouched_on_error_and_fills_candidates() {
         topoloc_localizer_process(localizer, &frame, &mut result),
         TOPOLOC_ERR_INVALID_ARGUMENT
     );
+    topoloc_localizer_free(localizer);
+    topoloc_map_free(map);
+}
+
+#[test]
+fn a_newer_library_never_writes_past_an_older_callers_struct() {
+    // Simulate a caller whose header knew a 1-field-shorter result: the library must write at
+    // most `struct_size` bytes and keep the caller's struct_size.
+    let map = small_map();
+    let mut localizer = null_mut();
+    assert_eq!(
+        topoloc_localizer_new(map, null(), &mut localizer),
+        TOPOLOC_OK
+    );
+    let full = std::mem::size_of::<topoloc_result>();
+    let mut storage = vec![0xABu8; full + 16];
+    let result = storage.as_mut_ptr().cast::<topoloc_result>();
+    assert_eq!(topoloc_result_init(result, full), TOPOLOC_OK);
+    let query = [1.0f32, 0.0, 0.0, 0.0];
+    let frame = topoloc_frame {
+        descriptor: query.as_ptr(),
+        descriptor_len: 4,
+        ..Default::default()
+    };
+    assert_eq!(
+        topoloc_localizer_process(localizer, &frame, result),
+        TOPOLOC_OK
+    );
+    assert!(
+        storage[full..].iter().all(|&b| b == 0xAB),
+        "wrote past struct_size"
+    );
+    assert_eq!(unsafe { (*result).place }, 0);
     topoloc_localizer_free(localizer);
     topoloc_map_free(map);
 }

@@ -504,12 +504,13 @@ pub fn normalize_descriptor_into(
         }
         sum += f64::from(x) * f64::from(x);
     }
-    if sum <= f64::from(f32::MIN_POSITIVE) {
+    // In f64 even the smallest subnormal f32 squares to a positive number: only zeros give 0.
+    if sum == 0.0 {
         return Err(DescriptorError::Zero);
     }
-    let inv = (1.0 / sum.sqrt()) as f32;
+    let inv = 1.0 / sum.sqrt();
     out.clear();
-    out.extend(descriptor.iter().map(|&x| x * inv));
+    out.extend(descriptor.iter().map(|&x| (f64::from(x) * inv) as f32));
     Ok(())
 }
 

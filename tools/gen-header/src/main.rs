@@ -35,12 +35,25 @@ fn package_version(root: &Path) -> Result<(String, String, String), String> {
     }
 }
 
+/// `T_default(p)` macros over the exported `T_init(p, size)` functions: they pass the size of
+/// the caller's struct, so that a newer library never writes past an older caller's struct.
+const DEFAULT_MACROS: &str = "
+/* Fill a versioned struct with defaults (and its struct_size) before use. */
+#define topoloc_map_load_options_default(p) topoloc_map_load_options_init((p), sizeof *(p))
+#define topoloc_view_attributes_default(p) topoloc_view_attributes_init((p), sizeof *(p))
+#define topoloc_keyframe_options_default(p) topoloc_keyframe_options_init((p), sizeof *(p))
+#define topoloc_localizer_options_default(p) topoloc_localizer_options_init((p), sizeof *(p))
+#define topoloc_frame_default(p) topoloc_frame_init((p), sizeof *(p))
+#define topoloc_result_default(p) topoloc_result_init((p), sizeof *(p))
+#define topoloc_view_info_default(p) topoloc_view_info_init((p), sizeof *(p))
+";
+
 fn generate(root: &Path) -> Result<Vec<u8>, String> {
     let (major, minor, patch) = package_version(root)?;
     let mut config =
         cbindgen::Config::from_file(root.join("cbindgen.toml")).map_err(|e| e.to_string())?;
     config.after_includes = Some(format!(
-        "\n#define TOPOLOC_VERSION_MAJOR {major}\n#define TOPOLOC_VERSION_MINOR {minor}\n#define TOPOLOC_VERSION_PATCH {patch}\n#define TOPOLOC_VERSION_STRING \"{major}.{minor}.{patch}\"\n"
+        "\n#define TOPOLOC_VERSION_MAJOR {major}\n#define TOPOLOC_VERSION_MINOR {minor}\n#define TOPOLOC_VERSION_PATCH {patch}\n#define TOPOLOC_VERSION_STRING \"{major}.{minor}.{patch}\"\n{DEFAULT_MACROS}"
     ));
     let bindings = cbindgen::Builder::new()
         .with_config(config)

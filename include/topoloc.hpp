@@ -1,0 +1,799 @@
+/*
+ * topoloc.hpp: header-only C++17 RAII layer over the C ABI in topoloc.h.
+ *
+ * Every type here is a thin, move-only owner of one C handle: its destructor calls the matching
+ * C `_free` function, `capi()` returns the raw handle for code that talks to the C API directly,
+ * and every failing C call is turned into a `topoloc::Error` exception carrying the C status and
+ * the thread-local message of `topoloc_last_error_message`. Nothing here adds behaviour the C
+ * API does not have; the C header documents the semantics of each call.
+ *
+ * Thread safety (the C rules, restated):
+ *  - `Map`: immutable. Its const methods may be called from many threads at once.
+ *  - `MapBuilder`, `Localizer`: single-threaded state. Use each from one thread at a time (they
+ *    may move between threads).
+ *  - Error messages are per thread, so an `Error` always describes the failure of the call that
+ *    threw it on that thread.
+ *
+ * Moved-from and default-constructed owners are empty (`!owner`, `capi() == nullptr`); calling a
+ * method on an empty owner throws `Error` with `TOPOLOC_ERR_NULL_ARGUMENT`.
+ *
+ * OpenCV: when OpenCV's core header is included *before* this one (so that `CV_VERSION` is
+ * defined), `Localizer::process` and `MapBuilder::add_view` gain `cv::Mat` overloads.
+ */
+
+#ifndef TOPOLOC_HPP
+#define TOPOLOC_HPP
+
+#include "topoloc.h"
+
+#include <array>
+#include <cstddef>
+#include <cstdint>
+#include <cstring>
+#include <memory>
+#include <optional>
+#include <stdexcept>
+#include <string>
+#include <utility>
+#include <vector>
+
+namespace topoloc {
+
+// ---------------------------------------------------------------------------------------------
+// Errors
+// ---------------------------------------------------------------------------------------------
+
+/// Static English description of a status code (`topoloc_status_str`); never null, never freed.
+inline const char *status_string(topoloc_status status) noexcept {
+  return topoloc_status_str(static_cast<uint32_t>(status));
+}
+
+/// The message of the most recent failed C call on the calling thread ("" if none).
+/// Reads the size first and then the text, so messages of any length are returned whole.
+/// Does not change the stored message. Never throws except `std::bad_alloc`.
+inline std::string last_error_message() {
+  std::size_t needed = 0;
+  // First ask for the size: with an empty buffer the call reports BUFFER_TOO_SMALL and `needed`.
+  topoloc_last_error_message(nullptr, 0, &needed);
+  // The stored message cannot change between these calls (it is per thread and only failing
+  // C calls on this thread replace it), but loop anyway rather than trust that.
+  for (int attempt = 0; attempt < 4 && needed > 0; ++attempt) {
+    std::string text(needed, '\0');
+    std::size_t again = 0;
+    const topoloc_status status = topoloc_last_error_message(&text[0], text.size(), &again);
+    if (status == TOPOLOC_OK) {
+      text.resize(std::strlen(text.c_str()));
+      return text;
+    }
+    if (status != TOPOLOC_ERR_BUFFER_TOO_SMALL) {
+      break;
+    }
+    needed = again;
+  }
+  return std::string();
+}
+
+/// Exception thrown by every wrapper call whose C call fails. `status()` is the C status code;
+/// `message()` the library's message for it (from `topoloc_last_error_message`, or written by
+/// this layer for errors it detects itself); `what()` is "<status description>: <message>".
+class Error : public std::runtime_error {
+public:
+  /// An error with an explicit status and message (used for errors this layer detects).
+  Error(topoloc_status status, std::string message)
+      : std::runtime_error(compose(status, message)), status_(status),
+        message_(std::move(message)) {}
+
+  /// The error of the C call that just failed on this thread with `status`: reads the
+  /// thread-local message. Call it before any other topoloc call on this thread.
+  static Error from_last(topoloc_status status) { return Error(status, last_error_message()); }
+
+  /// The C status code (never `TOPOLOC_OK`).
+  topoloc_status status() const noexcept { return status_; }
+
+  /// The message alone, without the status description ("" if the library gave none).
+  const std::string &message() const noexcept { return message_; }
+
+private:
+  static std::string compose(topoloc_status status, const std::string &message) {
+    std::string text = status_string(status);
+    if (!message.empty()) {
+      text += ": ";
+      text += message;
+    }
+    return text;
+  }
+
+  topoloc_status status_;
+  std::string message_;
+};
+
+/// Throws `Error::from_last(status)` unless `status` is `TOPOLOC_OK`. Use it right after a C
+/// call, before any other topoloc call on this thread.
+inline void check(topoloc_status status) {
+  if (status != TOPOLOC_OK) {
+    throw Error::from_last(status);
+  }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Versions
+// ---------------------------------------------------------------------------------------------
+
+/// Version of the loaded library, "MAJOR.MINOR.PATCH" (static; never free it). The header's
+/// version is `TOPOLOC_VERSION_STRING`.
+inline const char *version() noexcept { return topoloc_version(); }
+
+/// ABI version of the loaded library.
+inline uint32_t abi_version() noexcept { return topoloc_abi_version(); }
+
+/// ABI version of the header this program was compiled against.
+constexpr uint32_t header_abi_version = TOPOLOC_ABI_VERSION;
+
+/// True when the loaded library has the ABI of the header this program was compiled against.
+/// Check it once at start-up; on false, do not use the library.
+inline bool abi_matches() noexcept { return topoloc_abi_version() == TOPOLOC_ABI_VERSION; }
+
+// ---------------------------------------------------------------------------------------------
+// Options: the C structs themselves, filled by their _default() functions
+// ---------------------------------------------------------------------------------------------
+//
+// The `topoloc_*_default(p)` macros of topoloc.h pass `sizeof *p`, so the library fills exactly
+// the layout this program was compiled with. They fail only when the library refuses that size
+// (a header older than the library's first published layout), which `check` turns into `Error`.
+
+/// Options of `Map::load` / `Map::from_memory` (the C struct). Start from
+/// `default_load_options()`; a value-initialised struct has `struct_size == 0` and is refused
+/// with `TOPOLOC_ERR_STRUCT_SIZE`. The string fields are borrowed for the duration of the call.
+using LoadOptions = topoloc_map_load_options;
+
+/// Localizer parameters (the C struct). Start from `default_localizer_options()`; see topoloc.h
+/// for each field's meaning and default. The string fields are borrowed only during the
+/// `Localizer` constructor.
+using LocalizerOptions = topoloc_localizer_options;
+
+/// Parameters of `map_from_keyframes` (the C struct). Start from `default_keyframe_options()`.
+using KeyframeOptions = topoloc_keyframe_options;
+
+/// Load options that accept any map (`topoloc_map_load_options_default`). Throws `Error`
+/// (`TOPOLOC_ERR_STRUCT_SIZE`) only on a header/library layout mismatch.
+inline LoadOptions default_load_options() {
+  LoadOptions options;
+  check(topoloc_map_load_options_default(&options));
+  return options;
+}
+
+/// Default localizer options (`topoloc_localizer_options_default`). Throws `Error`
+/// (`TOPOLOC_ERR_STRUCT_SIZE`) only on a header/library layout mismatch.
+inline LocalizerOptions default_localizer_options() {
+  LocalizerOptions options;
+  check(topoloc_localizer_options_default(&options));
+  return options;
+}
+
+/// Default keyframe options (`topoloc_keyframe_options_default`). Throws `Error`
+/// (`TOPOLOC_ERR_STRUCT_SIZE`) only on a header/library layout mismatch.
+inline KeyframeOptions default_keyframe_options() {
+  KeyframeOptions options;
+  check(topoloc_keyframe_options_default(&options));
+  return options;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Plain values
+// ---------------------------------------------------------------------------------------------
+
+/// A position in metres (x, y, z).
+using Position = std::array<double, 3>;
+
+/// A rigid transform: 16 doubles, row-major 4x4 `[R t; 0 0 0 1]`, metres.
+using Pose = std::array<double, 16>;
+
+/// One ranked hypothesis of a frame (the C struct: place, view, probability, similarity).
+using Candidate = topoloc_candidate;
+
+/// One undirected edge of a map: places `a < b` and a positive weight.
+struct Edge {
+  uint32_t a = 0;      ///< Smaller place id.
+  uint32_t b = 0;      ///< Larger place id.
+  float weight = 0.f;  ///< Edge weight (> 0).
+};
+
+/// Attributes of one map view, as returned by `Map::view_info`.
+struct ViewInfo {
+  uint32_t place = 0;                   ///< Place the view belongs to.
+  std::optional<uint64_t> keyframe_id;  ///< Host keyframe id, if the map stores one.
+  std::optional<Pose> world_T_camera;   ///< Camera pose `world_T_camera`, if the map stores one.
+};
+
+/// Optional attributes of a view given to `MapBuilder::add_view`. Owns its data.
+struct ViewAttributes {
+  std::optional<uint64_t> keyframe_id;  ///< Host keyframe id.
+  std::optional<Pose> world_T_camera;   ///< Camera pose `world_T_camera` (must be rigid).
+  std::string image;                    ///< Image reference (path or URI), UTF-8; "" = none.
+};
+
+/// One keyframe for `map_from_keyframes`. Owns its data.
+struct Keyframe {
+  uint64_t id = 0;                     ///< Host keyframe id, stored with the view it becomes.
+  std::vector<float> descriptor;       ///< Global descriptor (D floats).
+  std::optional<Pose> world_T_camera;  ///< Camera pose; all keyframes have one or none has.
+};
+
+/// The answer for one frame (the fields of `topoloc_result`), with its candidates.
+struct Result {
+  uint64_t frame_index = 0;         ///< 0-based frame count since creation or reset.
+  uint32_t place = 0;               ///< Most probable place.
+  uint32_t view = 0;                ///< Best-matching view of that place.
+  float confidence = 0.f;           ///< P(at `place`) = place belief x on-map probability.
+  float similarity = 0.f;           ///< Cosine similarity of the frame to `view`.
+  float off_map_probability = 0.f;  ///< Posterior probability of the off-map state.
+  bool off_map = false;             ///< True when more likely off the map than on it.
+  std::vector<Candidate> candidates;  ///< Top candidates, best first; `candidates[0].place == place`.
+};
+
+namespace detail {
+
+struct MapFree {
+  void operator()(topoloc_map *map) const noexcept { topoloc_map_free(map); }
+};
+struct MapBuilderFree {
+  void operator()(topoloc_map_builder *builder) const noexcept {
+    topoloc_map_builder_free(builder);
+  }
+};
+struct LocalizerFree {
+  void operator()(topoloc_localizer *localizer) const noexcept {
+    topoloc_localizer_free(localizer);
+  }
+};
+
+/// Optional string argument: "" becomes NULL (the C API treats both as "not given").
+inline const char *optional_c_str(const std::string &s) noexcept {
+  return s.empty() ? nullptr : s.c_str();
+}
+
+/// Reads a string through a C function of the (buf, len, &needed) contract.
+template <typename Call> std::string read_string(Call call) {
+  std::string text(64, '\0');
+  for (int attempt = 0; attempt < 4; ++attempt) {
+    std::size_t needed = 0;
+    const topoloc_status status = call(&text[0], text.size(), &needed);
+    if (status == TOPOLOC_OK) {
+      text.resize(std::strlen(text.c_str()));  // C strings hold no interior NUL
+      return text;
+    }
+    if (status != TOPOLOC_ERR_BUFFER_TOO_SMALL) {
+      throw Error::from_last(status);
+    }
+    text.assign(needed, '\0');
+  }
+  throw Error(TOPOLOC_ERR_BUFFER_TOO_SMALL, "string kept growing while being read");
+}
+
+/// Reads an id array through a C function of the (buf, len, &count) contract.
+template <typename Call> std::vector<uint32_t> read_ids(Call call) {
+  std::vector<uint32_t> ids;
+  std::size_t count = 0;
+  topoloc_status status = call(nullptr, 0, &count);
+  if (status == TOPOLOC_OK) {
+    return ids;  // empty
+  }
+  if (status != TOPOLOC_ERR_BUFFER_TOO_SMALL) {
+    throw Error::from_last(status);
+  }
+  ids.resize(count);
+  check(call(ids.data(), ids.size(), &count));
+  ids.resize(count);
+  return ids;
+}
+
+#ifdef CV_VERSION
+/// A descriptor held in a cv::Mat: one row or one column of CV_32F, continuous, non-empty.
+inline std::pair<const float *, std::size_t> mat_descriptor(const cv::Mat &mat) {
+  if (mat.empty() || mat.dims != 2 || mat.type() != CV_32FC1 || !mat.isContinuous() ||
+      (mat.rows != 1 && mat.cols != 1)) {
+    throw Error(TOPOLOC_ERR_INVALID_ARGUMENT,
+                "descriptor cv::Mat must be a non-empty, continuous 1xD or Dx1 CV_32F matrix");
+  }
+  return {mat.ptr<float>(), mat.total()};
+}
+#endif
+
+}  // namespace detail
+
+// ---------------------------------------------------------------------------------------------
+// Map
+// ---------------------------------------------------------------------------------------------
+
+/// Owner of an immutable map (`topoloc_map*`). Move-only; the destructor calls
+/// `topoloc_map_free`. Localizers keep their own reference to the map, so a `Map` may be
+/// destroyed while localizers made from it are still in use.
+///
+/// Thread safety: all const methods may be called concurrently from many threads.
+/// Errors: every method that calls the library throws `Error` on failure.
+class Map {
+public:
+  /// An empty owner (`!map`).
+  Map() noexcept = default;
+
+  /// Takes ownership of `raw` (from a C call such as `topoloc_map_load`); null gives an empty
+  /// owner.
+  explicit Map(topoloc_map *raw) noexcept : ptr_(raw) {}
+
+  Map(const Map &) = delete;
+  Map &operator=(const Map &) = delete;
+  /// Moves ownership; `other` is left empty.
+  Map(Map &&other) noexcept = default;
+  /// Frees the current map (if any) and takes `other`'s; `other` is left empty.
+  Map &operator=(Map &&other) noexcept = default;
+  /// Frees the map (`topoloc_map_free`).
+  ~Map() = default;
+
+  /// Loads and validates a map file (memory-mapped: do not modify the file while the map
+  /// lives). Throws `Error` (`TOPOLOC_ERR_IO`, `_NOT_A_MAP`, `_TRUNCATED`, `_CORRUPT`,
+  /// `_UNSUPPORTED_VERSION`, `_DESCRIPTOR_MISMATCH`, ...).
+  static Map load(const std::string &path, const LoadOptions &options = default_load_options()) {
+    topoloc_map *raw = nullptr;
+    check(topoloc_map_load(path.c_str(), &options, &raw));
+    return Map(raw);
+  }
+
+  /// Loads and validates a map from `len` bytes in the map file format (copied: the buffer may
+  /// be released afterwards). Same errors as `load`.
+  static Map from_memory(const void *data, std::size_t len,
+                         const LoadOptions &options = default_load_options()) {
+    topoloc_map *raw = nullptr;
+    check(topoloc_map_load_from_memory(static_cast<const uint8_t *>(data), len, &options, &raw));
+    return Map(raw);
+  }
+
+  /// `from_memory` over a byte vector.
+  static Map from_memory(const std::vector<uint8_t> &bytes,
+                         const LoadOptions &options = default_load_options()) {
+    return from_memory(bytes.data(), bytes.size(), options);
+  }
+
+  /// Saves the map to `path` atomically (temporary file, fsync, rename). Throws `Error`
+  /// (`TOPOLOC_ERR_IO`, ...).
+  void save(const std::string &path) const { check(topoloc_map_save(ptr_.get(), path.c_str())); }
+
+  /// Number of places.
+  std::size_t place_count() const {
+    std::size_t n = 0;
+    check(topoloc_map_place_count(ptr_.get(), &n));
+    return n;
+  }
+
+  /// Number of views.
+  std::size_t view_count() const {
+    std::size_t n = 0;
+    check(topoloc_map_view_count(ptr_.get(), &n));
+    return n;
+  }
+
+  /// Number of undirected edges.
+  std::size_t edge_count() const {
+    std::size_t n = 0;
+    check(topoloc_map_edge_count(ptr_.get(), &n));
+    return n;
+  }
+
+  /// Descriptor dimension D: every descriptor given to a localizer of this map has D floats.
+  uint32_t dim() const {
+    uint32_t d = 0;
+    check(topoloc_map_descriptor_dim(ptr_.get(), &d));
+    return d;
+  }
+
+  /// Descriptor kind the map was built with (e.g. the backend family).
+  std::string descriptor_kind() const {
+    return detail::read_string([this](char *buf, std::size_t len, std::size_t *needed) {
+      return topoloc_map_descriptor_kind(ptr_.get(), buf, len, needed);
+    });
+  }
+
+  /// Descriptor model identity the map was built with ("" when none).
+  std::string descriptor_model() const {
+    return detail::read_string([this](char *buf, std::size_t len, std::size_t *needed) {
+      return topoloc_map_descriptor_model(ptr_.get(), buf, len, needed);
+    });
+  }
+
+  /// Places joined to `place` by an edge. Throws `Error` (`TOPOLOC_ERR_UNKNOWN_PLACE`).
+  std::vector<uint32_t> neighbours(uint32_t place) const {
+    return detail::read_ids([this, place](uint32_t *buf, std::size_t len, std::size_t *count) {
+      return topoloc_map_neighbours(ptr_.get(), place, buf, len, count);
+    });
+  }
+
+  /// View ids of `place`. Throws `Error` (`TOPOLOC_ERR_UNKNOWN_PLACE`).
+  std::vector<uint32_t> place_views(uint32_t place) const {
+    return detail::read_ids([this, place](uint32_t *buf, std::size_t len, std::size_t *count) {
+      return topoloc_map_place_views(ptr_.get(), place, buf, len, count);
+    });
+  }
+
+  /// Position of `place` in metres, or nullopt when the map has none. Throws `Error`
+  /// (`TOPOLOC_ERR_UNKNOWN_PLACE`).
+  std::optional<Position> place_position(uint32_t place) const {
+    Position xyz{};
+    bool has = false;
+    check(topoloc_map_place_position(ptr_.get(), place, xyz.data(), &has));
+    if (!has) {
+      return std::nullopt;
+    }
+    return xyz;
+  }
+
+  /// Edge number `index` (0..edge_count(), sorted by (a, b)). Throws `Error`
+  /// (`TOPOLOC_ERR_INVALID_ARGUMENT` when out of range).
+  Edge edge(std::size_t index) const {
+    Edge e;
+    check(topoloc_map_edge(ptr_.get(), index, &e.a, &e.b, &e.weight));
+    return e;
+  }
+
+  /// All edges, sorted by (a, b).
+  std::vector<Edge> edges() const {
+    std::vector<Edge> all(edge_count());
+    for (std::size_t i = 0; i < all.size(); ++i) {
+      all[i] = edge(i);
+    }
+    return all;
+  }
+
+  /// Attributes of `view`. Throws `Error` (`TOPOLOC_ERR_UNKNOWN_VIEW`).
+  ViewInfo view_info(uint32_t view) const {
+    topoloc_view_info raw;
+    check(topoloc_view_info_default(&raw));
+    check(topoloc_map_view_info(ptr_.get(), view, &raw));
+    ViewInfo info;
+    info.place = raw.place;
+    if (raw.has_keyframe_id) {
+      info.keyframe_id = raw.keyframe_id;
+    }
+    if (raw.has_pose) {
+      Pose pose;
+      std::memcpy(pose.data(), raw.world_T_camera, sizeof raw.world_T_camera);
+      info.world_T_camera = pose;
+    }
+    return info;
+  }
+
+  /// The unit-norm descriptor of `view` (D floats). Throws `Error` (`TOPOLOC_ERR_UNKNOWN_VIEW`).
+  std::vector<float> view_descriptor(uint32_t view) const {
+    std::vector<float> descriptor(dim());
+    check(topoloc_map_view_descriptor(ptr_.get(), view, descriptor.data(), descriptor.size()));
+    return descriptor;
+  }
+
+  /// Image reference of `view` ("" when none). Throws `Error` (`TOPOLOC_ERR_UNKNOWN_VIEW`).
+  std::string view_image(uint32_t view) const {
+    return detail::read_string([this, view](char *buf, std::size_t len, std::size_t *needed) {
+      return topoloc_map_view_image(ptr_.get(), view, buf, len, needed);
+    });
+  }
+
+  /// The raw handle, still owned by this object (null when empty).
+  const topoloc_map *capi() const noexcept { return ptr_.get(); }
+  /// The raw handle, still owned by this object (null when empty).
+  topoloc_map *capi() noexcept { return ptr_.get(); }
+
+  /// Gives up ownership: returns the handle (free it with `topoloc_map_free`) and leaves this
+  /// object empty.
+  topoloc_map *release() noexcept { return ptr_.release(); }
+
+  /// True when this object owns a map.
+  explicit operator bool() const noexcept { return static_cast<bool>(ptr_); }
+
+private:
+  std::unique_ptr<topoloc_map, detail::MapFree> ptr_;
+};
+
+// ---------------------------------------------------------------------------------------------
+// MapBuilder
+// ---------------------------------------------------------------------------------------------
+
+/// Owner of a map builder (`topoloc_map_builder*`): collects places, views and edges, then
+/// `build()`s a `Map`. Move-only; the destructor calls `topoloc_map_builder_free`.
+///
+/// Thread safety: not thread-safe; use from one thread at a time.
+/// Errors: every method that calls the library throws `Error` on failure; a failed call leaves
+/// the builder unchanged.
+class MapBuilder {
+public:
+  /// An empty owner (`!builder`).
+  MapBuilder() noexcept = default;
+
+  /// Starts a map of descriptors of `kind` / `model` ("" = none) with dimension `dim`.
+  /// Throws `Error` (`TOPOLOC_ERR_INVALID_ARGUMENT` for an empty kind or dim 0, ...).
+  MapBuilder(const std::string &kind, const std::string &model, uint32_t dim) {
+    topoloc_map_builder *raw = nullptr;
+    check(topoloc_map_builder_new(kind.c_str(), detail::optional_c_str(model), dim, &raw));
+    ptr_.reset(raw);
+  }
+
+  /// Takes ownership of `raw`; null gives an empty owner.
+  explicit MapBuilder(topoloc_map_builder *raw) noexcept : ptr_(raw) {}
+
+  MapBuilder(const MapBuilder &) = delete;
+  MapBuilder &operator=(const MapBuilder &) = delete;
+  /// Moves ownership; `other` is left empty.
+  MapBuilder(MapBuilder &&other) noexcept = default;
+  /// Frees the current builder (if any) and takes `other`'s; `other` is left empty.
+  MapBuilder &operator=(MapBuilder &&other) noexcept = default;
+  /// Frees the builder (`topoloc_map_builder_free`).
+  ~MapBuilder() = default;
+
+  /// Adds a place, optionally at `position` (metres); returns its id.
+  uint32_t add_place(const std::optional<Position> &position = std::nullopt) {
+    uint32_t id = 0;
+    check(topoloc_map_builder_add_place(ptr_.get(), position ? position->data() : nullptr, &id));
+    return id;
+  }
+
+  /// Adds a view with `descriptor` (`len` floats; normalised by the library) to `place`;
+  /// returns its id. Throws `Error` (`TOPOLOC_ERR_UNKNOWN_PLACE`, `_DIMENSION_MISMATCH`,
+  /// `_NON_FINITE`, `_ZERO_DESCRIPTOR`, `_INVALID_ARGUMENT` for a non-rigid pose).
+  uint32_t add_view(uint32_t place, const float *descriptor, std::size_t len,
+                    const ViewAttributes &attributes = ViewAttributes()) {
+    topoloc_view_attributes raw;
+    check(topoloc_view_attributes_default(&raw));
+    raw.has_keyframe_id = attributes.keyframe_id.has_value();
+    raw.keyframe_id = attributes.keyframe_id.value_or(0);
+    raw.world_T_camera = attributes.world_T_camera ? attributes.world_T_camera->data() : nullptr;
+    raw.image = detail::optional_c_str(attributes.image);
+    uint32_t id = 0;
+    check(topoloc_map_builder_add_view(ptr_.get(), place, descriptor, len, &raw, &id));
+    return id;
+  }
+
+  /// `add_view` with a vector descriptor.
+  uint32_t add_view(uint32_t place, const std::vector<float> &descriptor,
+                    const ViewAttributes &attributes = ViewAttributes()) {
+    return add_view(place, descriptor.data(), descriptor.size(), attributes);
+  }
+
+#ifdef CV_VERSION
+  /// `add_view` with a 1xD or Dx1 continuous CV_32F matrix (else throws `Error` with
+  /// `TOPOLOC_ERR_INVALID_ARGUMENT`).
+  uint32_t add_view(uint32_t place, const cv::Mat &descriptor,
+                    const ViewAttributes &attributes = ViewAttributes()) {
+    const auto d = detail::mat_descriptor(descriptor);
+    return add_view(place, d.first, d.second, attributes);
+  }
+#endif
+
+  /// Joins places `a` and `b` (different, existing, not yet joined) with `weight` > 0.
+  void add_edge(uint32_t a, uint32_t b, float weight = 1.0f) {
+    check(topoloc_map_builder_add_edge(ptr_.get(), a, b, weight));
+  }
+
+  /// Validates and returns a map of what was added; the builder stays usable. Throws `Error`
+  /// (`TOPOLOC_ERR_EMPTY_MAP`, `_INVALID_MAP` e.g. for a place without views).
+  Map build() const {
+    topoloc_map *raw = nullptr;
+    check(topoloc_map_builder_build(ptr_.get(), &raw));
+    return Map(raw);
+  }
+
+  /// The raw handle, still owned by this object (null when empty).
+  const topoloc_map_builder *capi() const noexcept { return ptr_.get(); }
+  /// The raw handle, still owned by this object (null when empty).
+  topoloc_map_builder *capi() noexcept { return ptr_.get(); }
+
+  /// Gives up ownership: returns the handle (free it with `topoloc_map_builder_free`) and
+  /// leaves this object empty.
+  topoloc_map_builder *release() noexcept { return ptr_.release(); }
+
+  /// True when this object owns a builder.
+  explicit operator bool() const noexcept { return static_cast<bool>(ptr_); }
+
+private:
+  std::unique_ptr<topoloc_map_builder, detail::MapBuilderFree> ptr_;
+};
+
+/// Builds a map from keyframes in order (`topoloc_map_from_keyframes`): places by spacing and
+/// appearance novelty, edges between consecutive and nearby places. Either every keyframe has
+/// a pose or none has. Throws `Error` (`TOPOLOC_ERR_EMPTY_MAP`, `_INVALID_ARGUMENT` naming the
+/// bad keyframe or option).
+inline Map map_from_keyframes(const std::string &kind, const std::string &model, uint32_t dim,
+                              const std::vector<Keyframe> &keyframes,
+                              const KeyframeOptions &options = default_keyframe_options()) {
+  std::vector<topoloc_keyframe> raw(keyframes.size());
+  for (std::size_t i = 0; i < keyframes.size(); ++i) {
+    raw[i].id = keyframes[i].id;
+    raw[i].descriptor = keyframes[i].descriptor.data();
+    raw[i].descriptor_len = keyframes[i].descriptor.size();
+    raw[i].world_T_camera =
+        keyframes[i].world_T_camera ? keyframes[i].world_T_camera->data() : nullptr;
+  }
+  topoloc_map *out = nullptr;
+  check(topoloc_map_from_keyframes(kind.c_str(), detail::optional_c_str(model), dim, raw.data(),
+                                   raw.size(), &options, &out));
+  return Map(out);
+}
+
+/// `map_from_keyframes` over C keyframe records (borrowed for the duration of the call).
+inline Map map_from_keyframes(const std::string &kind, const std::string &model, uint32_t dim,
+                              const topoloc_keyframe *keyframes, std::size_t count,
+                              const KeyframeOptions &options = default_keyframe_options()) {
+  topoloc_map *out = nullptr;
+  check(topoloc_map_from_keyframes(kind.c_str(), detail::optional_c_str(model), dim, keyframes,
+                                   count, &options, &out));
+  return Map(out);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Localizer
+// ---------------------------------------------------------------------------------------------
+
+/// Owner of a localizer (`topoloc_localizer*`) that follows one camera through a map, plus the
+/// buffers it reuses for results: after construction, `process` allocates nothing. Move-only;
+/// the destructor calls `topoloc_localizer_free`. It keeps its own reference to the map, so the
+/// `Map` it was made from may be destroyed first.
+///
+/// Thread safety: single-threaded state; use from one thread at a time (it may move between
+/// threads). Many localizers may share one map on many threads.
+/// Errors: every method that calls the library throws `Error` on failure; a failed `process`
+/// leaves the localizer and its last result unchanged.
+class Localizer {
+public:
+  /// An empty owner (`!localizer`).
+  Localizer() noexcept = default;
+
+  /// Creates a localizer on `map`. The candidate buffer holds min(options.top_k, places)
+  /// entries. Throws `Error` (`TOPOLOC_ERR_INVALID_OPTION`, `_DESCRIPTOR_MISMATCH`,
+  /// `_STRUCT_SIZE`, `_NULL_ARGUMENT` for an empty map).
+  explicit Localizer(const Map &map,
+                     const LocalizerOptions &options = default_localizer_options()) {
+    topoloc_localizer *raw = nullptr;
+    check(topoloc_localizer_new(map.capi(), &options, &raw));
+    ptr_.reset(raw);
+    check(topoloc_frame_default(&frame_template_));
+    check(topoloc_result_default(&result_template_));
+    const std::size_t places = map.place_count();
+    const std::size_t capacity =
+        static_cast<std::size_t>(options.top_k) < places ? options.top_k : places;
+    buffer_.resize(capacity);
+    last_.candidates.reserve(capacity);
+  }
+
+  Localizer(const Localizer &) = delete;
+  Localizer &operator=(const Localizer &) = delete;
+
+  /// Moves ownership and buffers; `other` is left empty.
+  Localizer(Localizer &&other) noexcept
+      : ptr_(std::move(other.ptr_)), frame_template_(other.frame_template_),
+        result_template_(other.result_template_), buffer_(std::move(other.buffer_)),
+        last_(std::move(other.last_)) {
+    other.clear_buffers();
+  }
+
+  /// Frees the current localizer (if any) and takes `other`'s; `other` is left empty.
+  Localizer &operator=(Localizer &&other) noexcept {
+    if (this != &other) {
+      ptr_ = std::move(other.ptr_);
+      frame_template_ = other.frame_template_;
+      result_template_ = other.result_template_;
+      buffer_ = std::move(other.buffer_);
+      last_ = std::move(other.last_);
+      other.clear_buffers();
+    }
+    return *this;
+  }
+
+  /// Frees the localizer (`topoloc_localizer_free`).
+  ~Localizer() = default;
+
+  /// Localizes one frame: `descriptor` holds `len` floats (the map's D; normalised by the
+  /// library), `timestamp` is in seconds and must not decrease in filter mode, `odometry` is
+  /// the motion since the previous frame `previous_T_current` (16 doubles, row-major 4x4) or
+  /// null. Returns the result, which stays valid (and is overwritten) until the next
+  /// `process`/`reset` or the destruction of this localizer: copy it to keep it.
+  /// Throws `Error` (`TOPOLOC_ERR_DIMENSION_MISMATCH`, `_NON_FINITE`, `_ZERO_DESCRIPTOR`,
+  /// `_TIMESTAMP`, `_INVALID_ARGUMENT` for non-rigid odometry, `_NULL_ARGUMENT` when empty).
+  /// Cost: one pass over the map's descriptors plus O(places + edges); no allocation.
+  const Result &process(const float *descriptor, std::size_t len, double timestamp,
+                        const double *odometry = nullptr) {
+    topoloc_frame frame = frame_template_;
+    frame.timestamp = timestamp;
+    frame.descriptor = descriptor;
+    frame.descriptor_len = len;
+    frame.odometry = odometry;
+    topoloc_result raw = result_template_;
+    raw.candidates = buffer_.empty() ? nullptr : buffer_.data();
+    raw.candidates_capacity = buffer_.size();
+    check(topoloc_localizer_process(ptr_.get(), &frame, &raw));
+    last_.frame_index = raw.frame_index;
+    last_.place = raw.place;
+    last_.view = raw.view;
+    last_.confidence = raw.confidence;
+    last_.similarity = raw.similarity;
+    last_.off_map_probability = raw.off_map_probability;
+    last_.off_map = raw.off_map;
+    // Within the reserved capacity: no allocation.
+    last_.candidates.assign(buffer_.begin(), buffer_.begin() + static_cast<std::ptrdiff_t>(
+                                                                   raw.candidates_len));
+    return last_;
+  }
+
+  /// `process` with a vector descriptor.
+  const Result &process(const std::vector<float> &descriptor, double timestamp,
+                        const double *odometry = nullptr) {
+    return process(descriptor.data(), descriptor.size(), timestamp, odometry);
+  }
+
+  /// `process` with odometry as a `Pose` (`previous_T_current`).
+  const Result &process(const std::vector<float> &descriptor, double timestamp,
+                        const Pose &odometry) {
+    return process(descriptor.data(), descriptor.size(), timestamp, odometry.data());
+  }
+
+#ifdef CV_VERSION
+  /// `process` with a 1xD or Dx1 continuous CV_32F matrix (else throws `Error` with
+  /// `TOPOLOC_ERR_INVALID_ARGUMENT`).
+  const Result &process(const cv::Mat &descriptor, double timestamp,
+                        const double *odometry = nullptr) {
+    const auto d = detail::mat_descriptor(descriptor);
+    return process(d.first, d.second, timestamp, odometry);
+  }
+#endif
+
+  /// Forgets all history: the next frame is treated as the first (any timestamp accepted).
+  void reset() {
+    check(topoloc_localizer_reset(ptr_.get()));
+    clear_result();
+  }
+
+  /// The result of the last successful `process` since creation or `reset` (all zero and
+  /// without candidates before the first).
+  const Result &last_result() const noexcept { return last_; }
+
+  /// Most candidates a result can hold: min(options.top_k, places).
+  std::size_t candidate_capacity() const noexcept { return buffer_.size(); }
+
+  /// The raw handle, still owned by this object (null when empty).
+  const topoloc_localizer *capi() const noexcept { return ptr_.get(); }
+  /// The raw handle, still owned by this object (null when empty).
+  topoloc_localizer *capi() noexcept { return ptr_.get(); }
+
+  /// Gives up ownership: returns the handle (free it with `topoloc_localizer_free`) and leaves
+  /// this object empty.
+  topoloc_localizer *release() noexcept {
+    clear_buffers();
+    return ptr_.release();
+  }
+
+  /// True when this object owns a localizer.
+  explicit operator bool() const noexcept { return static_cast<bool>(ptr_); }
+
+private:
+  // Keeps the reserved capacity of the candidates: reset() must not cost an allocation later.
+  void clear_result() noexcept {
+    last_.frame_index = 0;
+    last_.place = 0;
+    last_.view = 0;
+    last_.confidence = 0.f;
+    last_.similarity = 0.f;
+    last_.off_map_probability = 0.f;
+    last_.off_map = false;
+    last_.candidates.clear();
+  }
+
+  // Leaves the buffers of a moved-from or released localizer empty (no memory held).
+  void clear_buffers() noexcept {
+    std::vector<Candidate>().swap(buffer_);
+    last_ = Result();
+  }
+
+  std::unique_ptr<topoloc_localizer, detail::LocalizerFree> ptr_;
+  topoloc_frame frame_template_{};    // filled once by topoloc_frame_default
+  topoloc_result result_template_{};  // filled once by topoloc_result_default
+  std::vector<Candidate> buffer_;  // handed to the C call as the candidate array
+  Result last_;                    // returned by reference from process()
+};
+
+}  // namespace topoloc
+
+#endif  // TOPOLOC_HPP

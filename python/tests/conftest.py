@@ -1,0 +1,126 @@
+"""Shared fixtures: the package is imported from the source tree, and small synthetic maps are
+built with known descriptors so that tests can compute the expected answers with numpy."""
+
+from __future__ import annotations
+
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+from typing import List, Optional
+
+import numpy as np
+import pytest
+
+PYTHON_DIR = Path(__file__).resolve().parents[1]
+if str(PYTHON_DIR) not in sys.path:
+    sys.path.insert(0, str(PYTHON_DIR))
+
+import topoloc  # noqa: E402
+
+
+def find_repo_root() -> Optional[Path]:
+    for d in [PYTHON_DIR, *PYTHON_DIR.parents]:
+        if (d / "Cargo.toml").is_file():
+            return d
+    return None
+
+
+REPO_ROOT = find_repo_root()
+HEADER = REPO_ROOT / "include" / "topoloc.h" if REPO_ROOT else None
+
+KIND = "netvlad"
+MODEL = "pitts30k-v1"
+
+
+def unit(v: np.ndarray) -> np.ndarray:
+    return v / np.linalg.norm(v, axis=-1, keepdims=True)
+
+
+def rot_z(angle: float, t=(0.0, 0.0, 0.0)) -> np.ndarray:
+    c, s = np.cos(angle), np.sin(angle)
+    m = np.eye(4)
+    m[:2, :2] = [[c, -s], [s, c]]
+    m[:3, 3] = t
+    return m
+
+
+@dataclass
+class Corridor:
+    """A chain of places along the x axis, ``views_per_place`` views each."""
+
+    map: topoloc.Map
+    dim: int
+    places: int
+    views_per_place: int
+    base: np.ndarray  # (P, D) unit place descriptors
+    views: np.ndarray  # (V, D) unit view descriptors, view v of place v // views_per_place
+    poses: List[np.ndarray]
+    rng: np.random.Generator
+
+    def query(self, place: int, noise: float = 0.03, view: int = 0) -> np.ndarray:
+        """A noisy (unnormalised) copy of a view of ``place``."""
+        v = self.views[place * self.views_per_place + view]
+        return (v + noise * self.rng.standard_normal(self.dim)).astype(np.float32) * 3.0
+
+    def expected_single_frame(self, q: np.ndarray):
+        """(place, view, similarity) that a single-frame localizer must report: best view
+        similarity pooled per place."""
+        sims = unit(self.views.astype(np.float64)) @ unit(q.astype(np.float64))
+        view = int(np.argmax(sims))
+        return view // self.views_per_place, view, float(sims[view])
+
+
+def build_corridor(places: int = 12, views_per_place: int = 2, dim: int = 64, seed: int = 7) -> Corridor:
+    rng = np.random.default_rng(seed)
+    base = unit(rng.standard_normal((places, dim)))
+    views = []
+    poses = []
+    with topoloc.MapBuilder(KIND, MODEL, dim) as b:
+        for p in range(places):
+            pid = b.add_place(position=[2.0 * p, 0.5, 0.0])
+            assert pid == p
+            for k in range(views_per_place):
+                d = unit(base[p] + 0.3 * rng.standard_normal(dim) / np.sqrt(dim))
+                pose = rot_z(k * np.pi / 2, (2.0 * p, 0.5, 1.2))
+                vid = b.add_view(
+                    pid,
+                    d * (1.0 + p),  # not unit: the library normalises
+                    keyframe_id=1000 + len(views),
+                    world_T_camera=pose,
+                    image=f"images/place{p:03d}_view{k}.png",
+                )
+                assert vid == len(views)
+                views.append(d)
+                poses.append(pose)
+        for p in range(places - 1):
+            b.add_edge(p, p + 1, 1.0 + 0.5 * p)
+        m = b.build()
+    return Corridor(m, dim, places, views_per_place, base, np.array(views), poses, rng)
+
+
+@pytest.fixture
+def corridor():
+    c = build_corridor()
+    yield c
+    c.map.close()
+
+
+@pytest.fixture
+def small_map():
+    """Three places, one view each, dimension 4, no attributes."""
+    with topoloc.MapBuilder("toy", None, 4) as b:
+        for i in range(3):
+            b.add_place()
+            b.add_view(i, np.eye(4)[i] + 0.1)
+        b.add_edge(0, 1)
+        b.add_edge(1, 2)
+        m = b.build()
+    yield m
+    m.close()
+
+
+@pytest.fixture
+def map_file(tmp_path, corridor) -> Path:
+    path = tmp_path / "corridor.topomap"
+    corridor.map.save(path)
+    return path

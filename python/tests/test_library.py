@@ -1,0 +1,458 @@
+"""The binding layer itself: versions, finding the library, struct layouts and function
+signatures against the C header, status codes and error messages."""
+
+from __future__ import annotations
+
+import ctypes
+import os
+import pickle
+import re
+import shutil
+import subprocess
+import sys
+from ctypes import POINTER, c_bool, c_char, c_char_p, c_double, c_float, c_size_t, c_uint8, c_uint32, c_uint64
+from pathlib import Path
+
+import pytest
+
+import topoloc
+from topoloc import _errors, _lib
+
+from conftest import HEADER, PYTHON_DIR, REPO_ROOT
+
+needs_header = pytest.mark.skipif(HEADER is None or not HEADER.is_file(), reason="not a source checkout")
+
+
+# ---------------------------------------------------------------------------------------------
+# Versions
+# ---------------------------------------------------------------------------------------------
+
+
+def test_version_matches_cargo_and_header():
+    v = topoloc.version()
+    assert re.fullmatch(r"\d+\.\d+\.\d+", v), v
+    assert topoloc.__version__ == v
+    if REPO_ROOT is not None:
+        cargo = (REPO_ROOT / "Cargo.toml").read_text()
+        m = re.search(r'^\[package\][^\[]*?^version\s*=\s*"([^"]+)"', cargo, re.M | re.S)
+        assert m and m.group(1) == v
+    if HEADER is not None and HEADER.is_file():
+        text = HEADER.read_text()
+        assert f'#define TOPOLOC_VERSION_STRING "{v}"' in text
+
+
+def test_abi_version():
+    assert topoloc.abi_version() == 1
+    assert topoloc.ABI_VERSION == 1
+    assert isinstance(topoloc.abi_version(), int)
+
+
+@needs_header
+def test_abi_and_mode_constants_match_header():
+    text = HEADER.read_text()
+    defines = dict(re.findall(r"#define (TOPOLOC_\w+) (\d+)\b", text))
+    assert int(defines["TOPOLOC_ABI_VERSION"]) == _lib.ABI_VERSION
+    assert int(defines["TOPOLOC_MODE_FILTER"]) == topoloc.MODE_FILTER == 0
+    assert int(defines["TOPOLOC_MODE_SINGLE_FRAME"]) == topoloc.MODE_SINGLE_FRAME == 1
+
+
+def test_library_path_is_the_loaded_file():
+    assert Path(topoloc.library_path).is_file()
+    if "TOPOLOC_LIBRARY" not in os.environ and REPO_ROOT is not None:
+        # In a source checkout without an override, the freshly built library is used.
+        assert Path(topoloc.library_path).name.startswith("libtopoloc")
+
+
+# ---------------------------------------------------------------------------------------------
+# Struct layouts against the library and the header
+# ---------------------------------------------------------------------------------------------
+
+DEFAULT_FUNCTIONS = {
+    "topoloc_view_info": "topoloc_view_info_init",
+    "topoloc_view_attributes": "topoloc_view_attributes_init",
+    "topoloc_keyframe_options": "topoloc_keyframe_options_init",
+    "topoloc_localizer_options": "topoloc_localizer_options_init",
+    "topoloc_frame": "topoloc_frame_init",
+    "topoloc_result": "topoloc_result_init",
+    "topoloc_map_load_options": "topoloc_map_load_options_init",
+}
+
+
+@pytest.mark.parametrize("struct_name", sorted(DEFAULT_FUNCTIONS))
+def test_struct_size_matches_library_default(struct_name):
+    cls = _lib.STRUCTS[struct_name]
+    fill = getattr(_lib.lib, DEFAULT_FUNCTIONS[struct_name])
+    assert _lib.library_struct_size(cls, fill) == ctypes.sizeof(cls)
+
+
+def test_struct_size_written_by_view_info_and_process(corridor):
+    # topoloc_view_info has no _default(): the library writes its sizeof when it fills one.
+    info, keep = _lib.scratch_struct(_lib.topoloc_view_info)
+    info.struct_size = ctypes.sizeof(_lib.topoloc_view_info)
+    assert _lib.lib.topoloc_map_view_info(corridor.map._h, 0, ctypes.byref(info)) == 0
+    assert ctypes.cast(keep, POINTER(c_size_t))[0] == ctypes.sizeof(_lib.topoloc_view_info)
+    # topoloc_result: process writes struct_size = the library's sizeof.
+    loc = topoloc.Localizer(corridor.map)
+    loc.process(corridor.query(0), 0.0)
+    assert loc._result.struct_size == ctypes.sizeof(_lib.topoloc_result)
+
+
+def test_struct_size_below_minimum_is_refused(corridor):
+    info = _lib.topoloc_view_info()
+    info.struct_size = 8
+    status = _lib.lib.topoloc_map_view_info(corridor.map._h, 0, ctypes.byref(info))
+    assert status == topoloc.StructSizeError.STATUS
+    with pytest.raises(topoloc.StructSizeError, match="struct_size"):
+        _lib.check(status)
+
+
+def test_defaults_are_the_library_defaults():
+    raw = _lib.defaults(_lib.topoloc_localizer_options, _lib.lib.topoloc_localizer_options_init)
+    d = topoloc.localizer_options_default()
+    assert d["mode"] == "filter"
+    for name in ("temperature", "stay_probability", "jump_probability", "off_map_probability",
+                 "off_map_similarity", "off_map_margin"):
+        assert d[name] == pytest.approx(getattr(raw, name), abs=0, rel=0)
+    assert d["top_k"] == raw.top_k >= 1
+    assert 0 < d["temperature"] < 1
+    kf = topoloc.keyframe_options_default()
+    raw_kf = _lib.defaults(_lib.topoloc_keyframe_options, _lib.lib.topoloc_keyframe_options_init)
+    assert kf["place_spacing_m"] == raw_kf.place_spacing_m > 0
+    assert kf["max_views_per_place"] == raw_kf.max_views_per_place >= 1
+
+
+def _strip_comments(text: str) -> str:
+    text = re.sub(r"/\*.*?\*/", "", text, flags=re.S)
+    return re.sub(r"//[^\n]*", "", text)
+
+
+def _ctype_for(c_type: str):
+    """ctypes type the shim must use for a C type written in the header."""
+    t = c_type.strip()
+    const = t.startswith("const ")
+    t = t.replace("const ", "").replace("struct ", "").strip()
+    stars = t.count("*")
+    base = t.replace("*", "").strip()
+    if base == "char" and stars == 1:
+        return c_char_p if const else POINTER(c_char)
+    table = {
+        "size_t": c_size_t,
+        "bool": c_bool,
+        "uint64_t": c_uint64,
+        "uint32_t": c_uint32,
+        "uint8_t": c_uint8,
+        "float": c_float,
+        "double": c_double,
+        "topoloc_status": c_uint32,
+        "void": None,
+    }
+    table.update(_lib.STRUCTS)
+    table.update(_lib.HANDLES)
+    ty = table[base]
+    for _ in range(stars):
+        ty = POINTER(ty)
+    return ty
+
+
+def _split_decl(decl: str):
+    """'const double *world_T_camera' -> ('const double *', 'world_T_camera', None);
+    'double world_T_camera[16]' -> ('double', 'world_T_camera', 16)."""
+    m = re.fullmatch(r"\s*(.*?[\s*])(\w+)\s*(?:\[(\d+)\])?\s*", decl, re.S)
+    assert m, decl
+    return m.group(1).strip(), m.group(2), int(m.group(3)) if m.group(3) else None
+
+
+def _header_structs():
+    text = _strip_comments(HEADER.read_text())
+    out = {}
+    for name, body in re.findall(r"typedef struct (\w+) \{(.*?)\} \1;", text, re.S):
+        fields = []
+        for decl in body.split(";"):
+            if decl.strip():
+                c_type, field, array = _split_decl(decl)
+                ty = _ctype_for(c_type)
+                fields.append((field, ty * array if array else ty))
+        out[name] = fields
+    return out
+
+
+def _header_functions():
+    text = _strip_comments(HEADER.read_text())
+    out = {}
+    for ret, name, params in re.findall(r"^([\w \*]+?)\s*\b(topoloc_\w+)\(([^)]*)\);", text, re.M):
+        args = []
+        if params.strip() not in ("", "void"):
+            for p in params.split(","):
+                c_type, _, _ = _split_decl(p)
+                args.append(_ctype_for(c_type))
+        out[name] = (_ctype_for(ret), args)
+    return out
+
+
+@needs_header
+def test_every_header_struct_is_mirrored_exactly():
+    structs = _header_structs()
+    assert set(structs) == set(_lib.STRUCTS), "structs added to or removed from the header"
+    for name, fields in structs.items():
+        shim = _lib.STRUCTS[name]._fields_
+        assert [f for f, _ in shim] == [f for f, _ in fields], f"{name}: field names/order differ"
+        for (field, ty), (_, shim_ty) in zip(fields, shim):
+            if isinstance(ty, type) and issubclass(ty, ctypes.Array):
+                assert issubclass(shim_ty, ctypes.Array)
+                assert shim_ty._type_ is ty._type_ and shim_ty._length_ == ty._length_, f"{name}.{field}"
+            else:
+                assert shim_ty is ty, f"{name}.{field}: header {ty}, shim {shim_ty}"
+
+
+@needs_header
+def test_every_header_function_is_declared():
+    functions = _header_functions()
+    assert len(functions) >= 38
+    assert set(functions) == set(_lib.SIGNATURES), "functions added to or removed from the header"
+    for name, (restype, argtypes) in functions.items():
+        fn = getattr(_lib.lib, name)
+        assert fn.restype is restype, f"{name}: restype {fn.restype}, header {restype}"
+        assert list(fn.argtypes) == argtypes, f"{name}: argtypes differ from the header"
+
+
+def test_every_signature_is_applied_to_the_library():
+    for name, (restype, argtypes) in _lib.SIGNATURES.items():
+        fn = getattr(_lib.lib, name)
+        assert fn.restype is restype
+        assert list(fn.argtypes) == list(argtypes)
+
+
+@needs_header
+def test_struct_offsets_match_a_c_compiler(tmp_path):
+    cc = shutil.which("cc") or shutil.which("gcc") or shutil.which("clang")
+    if cc is None:
+        pytest.skip("no C compiler")
+    lines = []
+    for name, cls in _lib.STRUCTS.items():
+        lines.append(f'printf("{name} size %zu\\n", sizeof({name}));')
+        for field, _ in cls._fields_:
+            lines.append(f'printf("{name}.{field} %zu\\n", offsetof({name}, {field}));')
+    src = tmp_path / "layout.c"
+    src.write_text(
+        "#include <stdio.h>\n#include <stddef.h>\n#include \"topoloc.h\"\nint main(void) {\n"
+        + "\n".join(lines)
+        + "\nreturn 0;\n}\n"
+    )
+    exe = tmp_path / "layout"
+    subprocess.run([cc, "-std=c11", "-I", str(HEADER.parent), str(src), "-o", str(exe)], check=True)
+    out = subprocess.run([str(exe)], check=True, capture_output=True, text=True).stdout
+    measured = dict(line.rsplit(" ", 1) for line in out.splitlines())
+    for name, cls in _lib.STRUCTS.items():
+        assert int(measured[f"{name} size"]) == ctypes.sizeof(cls), name
+        for field, _ in cls._fields_:
+            assert int(measured[f"{name}.{field}"]) == getattr(cls, field).offset, f"{name}.{field}"
+
+
+# ---------------------------------------------------------------------------------------------
+# Status codes and error messages
+# ---------------------------------------------------------------------------------------------
+
+
+@needs_header
+def test_status_codes_match_header():
+    text = _strip_comments(HEADER.read_text())
+    enum = re.search(r"enum topoloc_status[^{]*\{(.*?)\};", text, re.S).group(1)
+    header_codes = {int(v): n for n, v in re.findall(r"(TOPOLOC_\w+) = (\d+)", enum)}
+    assert header_codes == _errors.STATUS_NAMES
+
+
+EXPECTED_CLASSES = {
+    1: "NullArgumentError",
+    2: "InvalidArgumentError",
+    3: "BufferTooSmallError",
+    4: "StructSizeError",
+    5: "InvalidUTF8Error",
+    100: "MapIOError",
+    101: "NotAMapError",
+    102: "TruncatedMapError",
+    103: "CorruptMapError",
+    104: "UnsupportedVersionError",
+    105: "DescriptorMismatchError",
+    106: "EmptyMapError",
+    107: "InvalidMapError",
+    108: "UnknownPlaceError",
+    109: "UnknownViewError",
+    200: "DimensionMismatchError",
+    201: "NonFiniteError",
+    202: "ZeroDescriptorError",
+    203: "TimestampError",
+    204: "InvalidOptionError",
+    900: "PanicError",
+}
+
+
+@pytest.mark.parametrize("status", sorted(EXPECTED_CLASSES))
+def test_each_status_maps_to_its_class(status):
+    cls = _errors.error_class_for_status(status)
+    assert cls.__name__ == EXPECTED_CLASSES[status]
+    assert cls is getattr(topoloc, EXPECTED_CLASSES[status])
+    assert issubclass(cls, topoloc.TopolocError) and cls is not topoloc.TopolocError
+    e = _errors.error_from_status(status, "details here")
+    assert type(e) is cls and e.status == status and e.message == "details here"
+    assert "details here" in str(e) and _errors.STATUS_NAMES[status] in str(e)
+    copy = pickle.loads(pickle.dumps(e))
+    assert type(copy) is cls and copy.status == status and copy.message == "details here"
+    assert topoloc.status_str(status) not in ("", "unknown status code")
+
+
+def test_unknown_status_gives_base_class():
+    e = _errors.error_from_status(777, "future error")
+    assert type(e) is topoloc.TopolocError
+    assert e.status == 777
+    assert topoloc.status_str(777) == "unknown status code"
+    assert topoloc.status_str(0) == "ok"
+
+
+def test_python_exception_hierarchy():
+    assert issubclass(topoloc.DimensionMismatchError, ValueError)
+    assert issubclass(topoloc.InvalidOptionError, ValueError)
+    assert issubclass(topoloc.UnknownPlaceError, IndexError)
+    assert issubclass(topoloc.UnknownViewError, IndexError)
+    assert not issubclass(topoloc.MapIOError, OSError)
+
+
+def test_error_message_is_read_from_the_library(tmp_path):
+    # A long path gives a message longer than any fixed first-guess buffer.
+    long_dir = tmp_path / ("d" * 200) / ("e" * 200)
+    missing = long_dir / "missing.topomap"
+    with pytest.raises(topoloc.MapIOError) as info:
+        topoloc.Map.load(missing)
+    assert info.value.status == 100
+    assert str(missing) in info.value.message
+    # The message stays readable (thread-local, not cleared by reading it).
+    assert _lib.last_error_message() == info.value.message
+    assert _lib.last_error_message() == info.value.message
+
+
+def test_last_error_is_per_thread():
+    import threading
+
+    with pytest.raises(topoloc.MapIOError) as info:
+        topoloc.Map.load("/nonexistent/in/main/thread")
+    seen = []
+    t = threading.Thread(target=lambda: seen.append(_lib.last_error_message()))
+    t.start()
+    t.join()
+    assert seen == [""]
+    assert _lib.last_error_message() == info.value.message
+
+
+# ---------------------------------------------------------------------------------------------
+# Finding the library
+# ---------------------------------------------------------------------------------------------
+
+
+def test_env_variable_wins_and_is_not_silently_ignored(tmp_path):
+    missing = tmp_path / "nope" / "libtopoloc.so"
+    assert _lib.candidate_locations({"TOPOLOC_LIBRARY": str(missing)}) == [("env", str(missing))]
+    with pytest.raises(topoloc.LibraryNotFoundError) as info:
+        _lib.load_library({"TOPOLOC_LIBRARY": str(missing)})
+    msg = str(info.value)
+    assert isinstance(info.value, ImportError)
+    assert str(missing) in msg
+    assert "cargo build --release" in msg and "TOPOLOC_LIBRARY" in msg
+    assert info.value.tried == [(str(missing), "not found")]
+
+
+def test_env_variable_pointing_at_a_non_library(tmp_path):
+    bogus = tmp_path / "libtopoloc.so"
+    bogus.write_text("not an ELF file")
+    with pytest.raises(topoloc.LibraryNotFoundError) as info:
+        _lib.load_library({"TOPOLOC_LIBRARY": str(bogus)})
+    assert "failed to load" in str(info.value)
+
+
+def test_relative_env_path_is_relative_to_the_working_directory(tmp_path, monkeypatch):
+    os.symlink(topoloc.library_path, tmp_path / "libtopoloc.so")
+    monkeypatch.chdir(tmp_path)
+    assert _lib.candidate_locations({"TOPOLOC_LIBRARY": "libtopoloc.so"}) == [("env", str(tmp_path / "libtopoloc.so"))]
+    lib, where = _lib.load_library({"TOPOLOC_LIBRARY": "libtopoloc.so"})
+    assert where == str(tmp_path / "libtopoloc.so") and lib.topoloc_abi_version() == 1
+
+
+def test_env_variable_loads_the_given_library():
+    lib, where = _lib.load_library({"TOPOLOC_LIBRARY": topoloc.library_path})
+    assert where == topoloc.library_path
+    assert lib.topoloc_abi_version() == 1
+    assert lib.topoloc_version().decode() == topoloc.version()
+
+
+def test_nothing_found_lists_every_location(tmp_path):
+    pkg = tmp_path / "site-packages" / "topoloc"
+    pkg.mkdir(parents=True)
+    with pytest.raises(topoloc.LibraryNotFoundError) as info:
+        _lib.load_library({}, package_dir=pkg, use_system=False)
+    msg = str(info.value)
+    assert str(pkg / "libtopoloc.so*") in msg
+    assert "not a source checkout" in msg
+    assert "cargo build --release --lib" in msg and "TOPOLOC_LIBRARY=" in msg
+    assert len(info.value.tried) == 2
+
+
+def test_library_next_to_the_package_is_found(tmp_path):
+    pkg = tmp_path / "topoloc"
+    pkg.mkdir()
+    copy = pkg / "libtopoloc.so"
+    os.symlink(topoloc.library_path, copy)
+    lib, where = _lib.load_library({}, package_dir=pkg, use_system=False)
+    assert where == str(copy)
+    assert lib.topoloc_abi_version() == 1
+
+
+def test_library_in_a_checkout_is_found(tmp_path):
+    repo = tmp_path / "repo"
+    pkg = repo / "python" / "topoloc"
+    pkg.mkdir(parents=True)
+    (repo / "Cargo.toml").write_text("[package]\nname = 'topoloc'\n")
+    built = repo / "target" / "release" / "libtopoloc.so"
+    built.parent.mkdir(parents=True)
+    os.symlink(topoloc.library_path, built)
+    kinds = [k for k, _ in _lib.candidate_locations({}, package_dir=pkg, use_system=False)]
+    assert kinds == ["package", "checkout"]
+    lib, where = _lib.load_library({}, package_dir=pkg, use_system=False)
+    assert where == str(built)
+    # CARGO_TARGET_DIR is searched before <repo>/target.
+    locations = _lib.candidate_locations({"CARGO_TARGET_DIR": "/elsewhere"}, package_dir=pkg, use_system=False)
+    assert locations[1] == ("checkout", "/elsewhere/release/libtopoloc.so")
+    assert locations[2] == ("checkout", str(built))
+
+
+def test_abi_mismatch_is_refused():
+    class FakeFunction:
+        restype = argtypes = None
+
+        def __call__(self):
+            return 2
+
+    class FakeLib:
+        topoloc_abi_version = FakeFunction()
+
+    with pytest.raises(topoloc.AbiVersionError) as info:
+        _lib._check_abi(FakeLib(), "/fake/libtopoloc.so")
+    assert isinstance(info.value, ImportError)
+    assert info.value.found == 2 and info.value.expected == 1
+    assert "ABI version 2" in str(info.value) and "ABI version 1" in str(info.value)
+    _lib._check_abi(_lib.lib, topoloc.library_path)  # the real one passes
+
+
+def test_import_fails_cleanly_without_the_library(tmp_path):
+    env = dict(os.environ, TOPOLOC_LIBRARY=str(tmp_path / "missing.so"), PYTHONPATH=str(PYTHON_DIR))
+    proc = subprocess.run(
+        [sys.executable, "-c", "import topoloc"], env=env, capture_output=True, text=True, cwd=tmp_path
+    )
+    assert proc.returncode != 0
+    assert "LibraryNotFoundError" in proc.stderr
+    assert str(tmp_path / "missing.so") in proc.stderr
+
+
+def test_import_with_env_override_in_a_fresh_interpreter(tmp_path):
+    env = dict(os.environ, TOPOLOC_LIBRARY=topoloc.library_path, PYTHONPATH=str(PYTHON_DIR))
+    code = "import topoloc; print(topoloc.library_path); print(topoloc.abi_version())"
+    proc = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.split() == [topoloc.library_path, "1"]

@@ -1,0 +1,127 @@
+"""topoloc: visual topological localization and loop-closure hints for SLAM.
+
+Pure-Python ctypes bindings over the stable C ABI of ``libtopoloc`` (see ``include/topoloc.h``),
+with numpy arrays in and out.
+
+Quick start::
+
+    import numpy as np
+    import topoloc
+
+    with topoloc.MapBuilder("netvlad", "pitts30k", dim=4) as b:
+        p0 = b.add_place(position=[0, 0, 0])
+        b.add_view(p0, [1, 0, 0, 0], keyframe_id=7)
+        p1 = b.add_place(position=[2, 0, 0])
+        b.add_view(p1, [0, 1, 0, 0])
+        b.add_edge(p0, p1)
+        m = b.build()
+
+    with m, topoloc.Localizer(m, mode="filter") as loc:
+        r = loc.process(np.array([0.1, 0.9, 0, 0]), timestamp=0.0)
+        print(r.place, r.confidence, r.candidates)
+
+Objects and threads: a :class:`Map` is immutable and may be shared by many threads; a
+:class:`Localizer` (one camera) and a :class:`MapBuilder` are single-threaded state. Every
+object owning a C handle is a context manager, has ``close()``, and is released when garbage
+collected. Failures raise subclasses of :class:`TopolocError` (see :mod:`topoloc._errors`).
+
+The shared library is found through ``TOPOLOC_LIBRARY``, next to this package, in the
+``target/release`` directory of a source checkout, or on the system (see :mod:`topoloc._lib`).
+"""
+
+from ._errors import (
+    BufferTooSmallError,
+    CorruptMapError,
+    DescriptorMismatchError,
+    DimensionMismatchError,
+    EmptyMapError,
+    InvalidArgumentError,
+    InvalidMapError,
+    InvalidOptionError,
+    InvalidUTF8Error,
+    MapIOError,
+    NonFiniteError,
+    NotAMapError,
+    NullArgumentError,
+    PanicError,
+    StructSizeError,
+    TimestampError,
+    TopolocError,
+    TruncatedMapError,
+    UnknownPlaceError,
+    UnknownViewError,
+    UnsupportedVersionError,
+    ZeroDescriptorError,
+)
+from ._lib import (
+    ABI_VERSION,
+    MODE_FILTER,
+    MODE_SINGLE_FRAME,
+    AbiVersionError,
+    LibraryNotFoundError,
+    library_path,
+)
+from ._core import (
+    Candidate,
+    Localizer,
+    Map,
+    MapBuilder,
+    Result,
+    ViewInfo,
+    abi_version,
+    keyframe_options_default,
+    localizer_options_default,
+    map_from_keyframes,
+    status_str,
+    version,
+)
+
+#: Version of the loaded shared library.
+__version__ = version()
+
+__all__ = [
+    # maps
+    "Map",
+    "MapBuilder",
+    "map_from_keyframes",
+    "keyframe_options_default",
+    "ViewInfo",
+    # localization
+    "Localizer",
+    "localizer_options_default",
+    "Result",
+    "Candidate",
+    "MODE_FILTER",
+    "MODE_SINGLE_FRAME",
+    # versions and library
+    "version",
+    "abi_version",
+    "status_str",
+    "ABI_VERSION",
+    "library_path",
+    "LibraryNotFoundError",
+    "AbiVersionError",
+    # errors
+    "TopolocError",
+    "NullArgumentError",
+    "InvalidArgumentError",
+    "BufferTooSmallError",
+    "StructSizeError",
+    "InvalidUTF8Error",
+    "MapIOError",
+    "NotAMapError",
+    "TruncatedMapError",
+    "CorruptMapError",
+    "UnsupportedVersionError",
+    "DescriptorMismatchError",
+    "EmptyMapError",
+    "InvalidMapError",
+    "UnknownPlaceError",
+    "UnknownViewError",
+    "DimensionMismatchError",
+    "NonFiniteError",
+    "ZeroDescriptorError",
+    "TimestampError",
+    "InvalidOptionError",
+    "PanicError",
+]

@@ -1,0 +1,908 @@
+"""The Pythonic API over the C ABI: :class:`Map`, :class:`MapBuilder`, :func:`map_from_keyframes`,
+:class:`Localizer` and their result types. Import these from :mod:`topoloc`.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import operator
+import os
+import threading
+from ctypes import POINTER, byref, c_bool, c_char_p, c_double, c_float, c_size_t, c_uint8, c_uint32
+from dataclasses import dataclass, field
+from typing import Any, Dict, List, Optional, Tuple, Type, Union
+
+import numpy as np
+
+from . import _lib
+from ._errors import (
+    DimensionMismatchError,
+    InvalidArgumentError,
+    InvalidOptionError,
+    InvalidUTF8Error,
+    TopolocError,
+    UnknownPlaceError,
+    UnknownViewError,
+)
+from ._lib import check, lib
+
+__all__ = [
+    "Map",
+    "MapBuilder",
+    "map_from_keyframes",
+    "Localizer",
+    "Result",
+    "Candidate",
+    "ViewInfo",
+    "version",
+    "abi_version",
+    "status_str",
+]
+
+PathLike = Union[str, bytes, "os.PathLike[str]", "os.PathLike[bytes]"]
+
+_U32_MAX = 0xFFFFFFFF
+_U64_MAX = 0xFFFFFFFFFFFFFFFF
+
+
+# --------------------------------------------------------------------------------------------
+# Argument conversion
+# --------------------------------------------------------------------------------------------
+
+
+def _int_in_range(value: Any, name: str, high: int, error: Type[TopolocError]) -> int:
+    try:
+        v = operator.index(value)
+    except TypeError:
+        raise TypeError(f"{name} must be an integer, got {type(value).__name__}") from None
+    if not 0 <= v <= high:
+        raise error(f"{name} {v} is out of range: expected an integer in [0, {high}]")
+    return v
+
+
+def _u32(value: Any, name: str, error: Type[TopolocError] = InvalidArgumentError) -> int:
+    return _int_in_range(value, name, _U32_MAX, error)
+
+
+def _descriptor(values: Any, name: str = "descriptor") -> np.ndarray:
+    """A C-contiguous float32 1-D copy (or view) of ``values``."""
+    arr = np.asarray(values, dtype=np.float32)
+    if arr.ndim != 1:
+        raise DimensionMismatchError(f"{name} must be a 1-D array of floats, got shape {arr.shape}")
+    return np.ascontiguousarray(arr, dtype=np.float32)
+
+
+def _pose(values: Any, name: str) -> np.ndarray:
+    """A C-contiguous (row-major) float64 4x4 array."""
+    arr = np.asarray(values, dtype=np.float64)
+    if arr.shape != (4, 4):
+        raise InvalidArgumentError(f"{name} must be a 4x4 matrix, got shape {arr.shape}")
+    return np.ascontiguousarray(arr, dtype=np.float64)
+
+
+def _text(value: Optional[Union[str, bytes]], name: str) -> Optional[bytes]:
+    """UTF-8 bytes for a C string argument (None stays None -> NULL)."""
+    if value is None:
+        return None
+    if isinstance(value, str):
+        try:
+            data = value.encode("utf-8")
+        except UnicodeEncodeError as e:
+            raise InvalidUTF8Error(f"{name} cannot be encoded as UTF-8: {e}") from None
+    elif isinstance(value, (bytes, bytearray)):
+        data = bytes(value)
+    else:
+        raise TypeError(f"{name} must be str or bytes, got {type(value).__name__}")
+    if b"\0" in data:
+        raise InvalidArgumentError(f"{name} contains a NUL character")
+    return data
+
+
+def _path(value: PathLike, name: str = "path") -> bytes:
+    data = os.fsencode(value)  # str paths: UTF-8 (surrogateescape), bytes paths: unchanged
+    if b"\0" in data:
+        raise InvalidArgumentError(f"{name} contains a NUL character")
+    return data
+
+
+def _f32_ptr(arr: np.ndarray):
+    return arr.ctypes.data_as(POINTER(c_float))
+
+
+def _f64_ptr(arr: np.ndarray):
+    return arr.ctypes.data_as(POINTER(c_double))
+
+
+def _read_string(fn, *args) -> str:
+    """Calls a ``(..., char *buf, size_t len, size_t *needed)`` function, growing the buffer."""
+    needed = c_size_t(0)
+    size = 64
+    for _ in range(2):
+        buf = ctypes.create_string_buffer(size)
+        status = fn(*args, buf, size, byref(needed))
+        if status == _lib.TOPOLOC_ERR_BUFFER_TOO_SMALL and needed.value > size:
+            size = int(needed.value)
+            continue
+        check(status)
+        return buf.raw[: max(int(needed.value) - 1, 0)].decode("utf-8")
+    check(status)  # pragma: no cover - the size cannot grow between two calls on an immutable map
+    raise AssertionError("unreachable")
+
+
+def _read_u32s(fn, *args) -> np.ndarray:
+    """Calls a ``(..., uint32_t *buf, size_t len, size_t *count)`` function, growing the buffer."""
+    count = c_size_t(0)
+    capacity = 16
+    for _ in range(2):
+        out = np.empty(capacity, dtype=np.uint32)
+        status = fn(*args, out.ctypes.data_as(POINTER(c_uint32)), capacity, byref(count))
+        if status == _lib.TOPOLOC_ERR_BUFFER_TOO_SMALL and count.value > capacity:
+            capacity = int(count.value)
+            continue
+        check(status)
+        return out[: int(count.value)].copy()
+    check(status)  # pragma: no cover
+    raise AssertionError("unreachable")
+
+
+# --------------------------------------------------------------------------------------------
+# Versions
+# --------------------------------------------------------------------------------------------
+
+
+def version() -> str:
+    """Version of the loaded library, ``"MAJOR.MINOR.PATCH"`` (``topoloc_version``)."""
+    return lib.topoloc_version().decode("ascii")
+
+
+def abi_version() -> int:
+    """C ABI version of the loaded library (``topoloc_abi_version``); equals
+    :data:`topoloc.ABI_VERSION` (checked at import)."""
+    return int(lib.topoloc_abi_version())
+
+
+def status_str(status: int) -> str:
+    """Short English description of a status code (``topoloc_status_str``)."""
+    return _lib.status_str(status)
+
+
+# --------------------------------------------------------------------------------------------
+# Map
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, eq=False)
+class ViewInfo:
+    """Attributes of one view of a :class:`Map` (see :meth:`Map.view_info`).
+
+    Attributes:
+        view: the view id.
+        place: the place the view belongs to.
+        keyframe_id: host keyframe id, or ``None`` when the view has none.
+        world_T_camera: camera pose as a (4, 4) float64 array (row-major ``[R t; 0 0 0 1]``,
+            metres), or ``None`` when the view has none.
+    """
+
+    view: int
+    place: int
+    keyframe_id: Optional[int]
+    world_T_camera: Optional[np.ndarray]
+
+
+def _load_options(expected_kind, expected_model, expected_dim) -> _lib.topoloc_map_load_options:
+    options = _lib.defaults(_lib.topoloc_map_load_options, lib.topoloc_map_load_options_init)
+    # c_char_p fields keep a reference to the bytes object in the struct (ctypes' _objects).
+    options.expected_descriptor_kind = _text(expected_kind, "expected_kind")
+    options.expected_descriptor_model = _text(expected_model, "expected_model")
+    options.expected_descriptor_dim = _u32(expected_dim or 0, "expected_dim")
+    return options
+
+
+class Map:
+    """An immutable topological map: places (graph nodes) holding views (descriptors with
+    optional keyframe id, pose and image reference), joined by weighted undirected edges.
+
+    Create one with :meth:`load`, :meth:`from_bytes`, :meth:`MapBuilder.build` or
+    :func:`map_from_keyframes`; the constructor is not public.
+
+    Ownership: the object owns one C ``topoloc_map`` handle, released by :meth:`close`, by the
+    ``with`` statement, or when the object is garbage collected. :class:`Localizer` objects keep
+    their own reference to the map data, so closing a map never affects them. Methods called
+    after :meth:`close` raise ``ValueError``.
+
+    Thread safety: a map is immutable; its read methods may be called from many threads at once
+    (the C calls release the GIL). Do not call :meth:`close` while another thread still uses it.
+    """
+
+    _ptr: Any = None
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        raise TypeError("use Map.load(), Map.from_bytes(), MapBuilder.build() or map_from_keyframes()")
+
+    @classmethod
+    def _adopt(cls, ptr) -> "Map":
+        self = cls.__new__(cls)
+        self._ptr = ptr
+        self._free = lib.topoloc_map_free  # kept so that __del__ works during interpreter exit
+        return self
+
+    # -- creation ------------------------------------------------------------------------------
+
+    @classmethod
+    def load(
+        cls,
+        path: PathLike,
+        expected_kind: Optional[str] = None,
+        expected_model: Optional[str] = None,
+        expected_dim: int = 0,
+    ) -> "Map":
+        """Loads and validates a map file (memory-mapped: do not modify the file while the map
+        is open; :meth:`save` replaces files atomically, which is safe).
+
+        ``expected_kind`` / ``expected_model`` / ``expected_dim`` (``None``/``""``/``0`` = any)
+        make the load fail with :class:`DescriptorMismatchError` when the map was built with
+        another descriptor.
+
+        Raises :class:`MapIOError`, :class:`NotAMapError`, :class:`TruncatedMapError`,
+        :class:`CorruptMapError`, :class:`UnsupportedVersionError`,
+        :class:`DescriptorMismatchError`, :class:`InvalidUTF8Error`.
+        """
+        options = _load_options(expected_kind, expected_model, expected_dim)
+        out = _lib.MapPtr()
+        check(lib.topoloc_map_load(_path(path), byref(options), byref(out)))
+        return cls._adopt(out)
+
+    @classmethod
+    def from_bytes(
+        cls,
+        data: Union[bytes, bytearray, memoryview],
+        expected_kind: Optional[str] = None,
+        expected_model: Optional[str] = None,
+        expected_dim: int = 0,
+    ) -> "Map":
+        """Loads and validates a map from bytes in the map file format (the library copies them;
+        ``data`` may be released afterwards). Same options and errors as :meth:`load`."""
+        buf = np.frombuffer(data, dtype=np.uint8)
+        options = _load_options(expected_kind, expected_model, expected_dim)
+        out = _lib.MapPtr()
+        check(
+            lib.topoloc_map_load_from_memory(
+                buf.ctypes.data_as(POINTER(c_uint8)), buf.size, byref(options), byref(out)
+            )
+        )
+        return cls._adopt(out)
+
+    # -- lifetime ------------------------------------------------------------------------------
+
+    @property
+    def _h(self):
+        if not self._ptr:
+            raise ValueError("operation on a closed topoloc.Map")
+        return self._ptr
+
+    @property
+    def closed(self) -> bool:
+        """Whether :meth:`close` was called."""
+        return not self._ptr
+
+    def close(self) -> None:
+        """Releases the C handle (idempotent). Localizers created from the map keep working."""
+        ptr, self._ptr = self._ptr, None
+        if ptr:
+            self._free(ptr)
+
+    def __enter__(self) -> "Map":
+        self._h  # refuse a closed map
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()
+
+    def __del__(self) -> None:
+        try:
+            self.close()
+        except Exception:  # pragma: no cover - interpreter shutdown
+            pass
+
+    def __repr__(self) -> str:
+        if self.closed:
+            return "<topoloc.Map (closed)>"
+        return (
+            f"<topoloc.Map kind={self.descriptor_kind!r} model={self.descriptor_model!r} "
+            f"dim={self.dim} places={self.place_count} views={self.view_count} edges={self.edge_count}>"
+        )
+
+    # -- whole-map operations ------------------------------------------------------------------
+
+    def save(self, path: PathLike) -> None:
+        """Writes the map to ``path`` atomically (temporary file, fsync, rename).
+        Raises :class:`MapIOError`."""
+        check(lib.topoloc_map_save(self._h, _path(path)))
+
+    def _size(self, fn) -> int:
+        out = c_size_t(0)
+        check(fn(self._h, byref(out)))
+        return int(out.value)
+
+    @property
+    def place_count(self) -> int:
+        """Number of places."""
+        return self._size(lib.topoloc_map_place_count)
+
+    @property
+    def view_count(self) -> int:
+        """Number of views."""
+        return self._size(lib.topoloc_map_view_count)
+
+    @property
+    def edge_count(self) -> int:
+        """Number of undirected edges."""
+        return self._size(lib.topoloc_map_edge_count)
+
+    @property
+    def dim(self) -> int:
+        """Descriptor dimension D."""
+        out = c_uint32(0)
+        check(lib.topoloc_map_descriptor_dim(self._h, byref(out)))
+        return int(out.value)
+
+    @property
+    def descriptor_kind(self) -> str:
+        """Descriptor kind (backend family) the map was built with."""
+        return _read_string(lib.topoloc_map_descriptor_kind, self._h)
+
+    @property
+    def descriptor_model(self) -> str:
+        """Descriptor model identity the map was built with ("" if none was given)."""
+        return _read_string(lib.topoloc_map_descriptor_model, self._h)
+
+    # -- places --------------------------------------------------------------------------------
+
+    def neighbours(self, place: int) -> np.ndarray:
+        """Places joined to ``place`` by an edge, as a uint32 array.
+        Raises :class:`UnknownPlaceError`."""
+        place = _u32(place, "place", UnknownPlaceError)
+        return _read_u32s(lib.topoloc_map_neighbours, self._h, place)
+
+    def place_views(self, place: int) -> np.ndarray:
+        """View ids of ``place``, as a uint32 array. Raises :class:`UnknownPlaceError`."""
+        place = _u32(place, "place", UnknownPlaceError)
+        return _read_u32s(lib.topoloc_map_place_views, self._h, place)
+
+    def place_position(self, place: int) -> Optional[np.ndarray]:
+        """Position of ``place`` in metres as a float64 array of 3, or ``None`` when the map has
+        none. Raises :class:`UnknownPlaceError`."""
+        place = _u32(place, "place", UnknownPlaceError)
+        xyz = np.zeros(3, dtype=np.float64)
+        has = c_bool(False)
+        check(lib.topoloc_map_place_position(self._h, place, _f64_ptr(xyz), byref(has)))
+        return xyz if has.value else None
+
+    def edges(self) -> Tuple[np.ndarray, np.ndarray]:
+        """All edges, sorted by (a, b) with a < b: ``(pairs, weights)`` where ``pairs`` is an
+        (E, 2) uint32 array and ``weights`` an (E,) float32 array."""
+        h = self._h
+        n = self.edge_count
+        pairs = np.empty((n, 2), dtype=np.uint32)
+        weights = np.empty(n, dtype=np.float32)
+        a, b, w = c_uint32(), c_uint32(), c_float()
+        for i in range(n):
+            check(lib.topoloc_map_edge(h, i, byref(a), byref(b), byref(w)))
+            pairs[i, 0], pairs[i, 1], weights[i] = a.value, b.value, w.value
+        return pairs, weights
+
+    # -- views ---------------------------------------------------------------------------------
+
+    def view_info(self, view: int) -> ViewInfo:
+        """Place, keyframe id and pose of ``view``. Raises :class:`UnknownViewError`."""
+        view = _u32(view, "view", UnknownViewError)
+        info = _lib.defaults(_lib.topoloc_view_info, lib.topoloc_view_info_init)
+        check(lib.topoloc_map_view_info(self._h, view, byref(info)))
+        pose = np.array(info.world_T_camera[:], dtype=np.float64).reshape(4, 4) if info.has_pose else None
+        result = ViewInfo(
+            view=view,
+            place=int(info.place),
+            keyframe_id=int(info.keyframe_id) if info.has_keyframe_id else None,
+            world_T_camera=pose,
+        )
+        return result
+
+    def view_descriptor(self, view: int) -> np.ndarray:
+        """The unit-norm descriptor of ``view`` (a new float32 array of D values).
+        Raises :class:`UnknownViewError`."""
+        view = _u32(view, "view", UnknownViewError)
+        d = self.dim
+        out = np.empty(d, dtype=np.float32)
+        check(lib.topoloc_map_view_descriptor(self._h, view, _f32_ptr(out), d))
+        return out
+
+    def view_descriptors(self) -> np.ndarray:
+        """All view descriptors as a new (V, D) float32 array, row ``v`` being view ``v``."""
+        h = self._h
+        n, d = self.view_count, self.dim
+        out = np.empty((n, d), dtype=np.float32)
+        base = out.ctypes.data
+        row = d * out.itemsize
+        for v in range(n):
+            check(lib.topoloc_map_view_descriptor(h, v, ctypes.cast(base + v * row, POINTER(c_float)), d))
+        return out
+
+    def view_image(self, view: int) -> str:
+        """Image reference (path or URI) of ``view``; "" when it has none.
+        Raises :class:`UnknownViewError`."""
+        view = _u32(view, "view", UnknownViewError)
+        return _read_string(lib.topoloc_map_view_image, self._h, view)
+
+
+# --------------------------------------------------------------------------------------------
+# Building maps
+# --------------------------------------------------------------------------------------------
+
+
+class _SingleThreaded:
+    """Detects concurrent use of a single-threaded C object (which would be undefined
+    behaviour) and raises ``RuntimeError`` instead."""
+
+    _ptr: Any = None
+
+    def _init_guard(self) -> None:
+        self._busy = threading.Lock()
+
+    def _enter(self, what: str):
+        if not self._busy.acquire(blocking=False):
+            raise RuntimeError(f"{type(self).__name__}.{what} called while another thread uses this object")
+        if not self._ptr:
+            self._busy.release()
+            raise ValueError(f"operation on a closed topoloc.{type(self).__name__}")
+        return self._ptr
+
+    def _leave(self) -> None:
+        self._busy.release()
+
+    @property
+    def closed(self) -> bool:
+        """Whether :meth:`close` was called."""
+        return not self._ptr
+
+    def close(self) -> None:
+        """Releases the C handle (idempotent)."""
+        busy = getattr(self, "_busy", None)
+        if busy is None:  # __init__ failed before the handle existed
+            return
+        with busy:
+            ptr, self._ptr = self._ptr, None
+            if ptr:
+                self._free(ptr)
+
+    def __enter__(self):
+        if self.closed:
+            raise ValueError(f"operation on a closed topoloc.{type(self).__name__}")
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()
+
+    def __del__(self) -> None:
+        try:
+            self.close()
+        except Exception:  # pragma: no cover - interpreter shutdown
+            pass
+
+
+class MapBuilder(_SingleThreaded):
+    """Collects places, views and edges, then produces a validated :class:`Map`.
+
+    ``kind`` names the descriptor family (non-empty), ``model`` its model identity (may be
+    ``None``), ``dim`` its dimension D (> 0). Every ``add_*`` method validates its input and
+    leaves the builder unchanged on error; :meth:`build` may be called repeatedly.
+
+    Ownership: owns a C ``topoloc_map_builder`` handle, released by :meth:`close`, the ``with``
+    statement or garbage collection. Thread safety: single-threaded state; use from one thread
+    at a time (concurrent calls raise ``RuntimeError``).
+    """
+
+    def __init__(self, kind: str, model: Optional[str], dim: int) -> None:
+        self._init_guard()
+        self._free = lib.topoloc_map_builder_free
+        out = _lib.BuilderPtr()
+        check(
+            lib.topoloc_map_builder_new(
+                _text(kind, "kind"), _text(model, "model"), _u32(dim, "dim"), byref(out)
+            )
+        )
+        self._ptr = out
+
+    def add_place(self, position: Optional[Any] = None) -> int:
+        """Adds a place, optionally at ``position`` (3 floats, metres); returns its id."""
+        pos = None
+        if position is not None:
+            pos = np.ascontiguousarray(np.asarray(position, dtype=np.float64))
+            if pos.shape != (3,):
+                raise InvalidArgumentError(f"position must have 3 values, got shape {pos.shape}")
+        out = c_uint32(0)
+        h = self._enter("add_place")
+        try:
+            check(lib.topoloc_map_builder_add_place(h, None if pos is None else _f64_ptr(pos), byref(out)))
+        finally:
+            self._leave()
+        return int(out.value)
+
+    def add_view(
+        self,
+        place: int,
+        descriptor: Any,
+        keyframe_id: Optional[int] = None,
+        world_T_camera: Optional[Any] = None,
+        image: Optional[Union[str, "os.PathLike[str]"]] = None,
+    ) -> int:
+        """Adds a view to ``place`` and returns its id.
+
+        ``descriptor``: D floats (any array-like; normalised by the library). ``keyframe_id``:
+        host keyframe id (0..2**64-1). ``world_T_camera``: 4x4 rigid transform (rotation block
+        orthonormal with det +1, last row 0 0 0 1). ``image``: path or URI of the source image.
+
+        Raises :class:`UnknownPlaceError`, :class:`DimensionMismatchError`,
+        :class:`NonFiniteError`, :class:`ZeroDescriptorError`, :class:`InvalidArgumentError`.
+        """
+        place = _u32(place, "place", UnknownPlaceError)
+        q = _descriptor(descriptor)
+        attrs = None
+        pose = None
+        if keyframe_id is not None or world_T_camera is not None or image is not None:
+            attrs = _lib.defaults(_lib.topoloc_view_attributes, lib.topoloc_view_attributes_init)
+            if keyframe_id is not None:
+                attrs.has_keyframe_id = True
+                attrs.keyframe_id = _int_in_range(keyframe_id, "keyframe_id", _U64_MAX, InvalidArgumentError)
+            if world_T_camera is not None:
+                pose = _pose(world_T_camera, "world_T_camera")
+                attrs.world_T_camera = _f64_ptr(pose)
+            if image is not None:
+                attrs.image = _text(os.fspath(image), "image")
+        out = c_uint32(0)
+        h = self._enter("add_view")
+        try:
+            check(
+                lib.topoloc_map_builder_add_view(
+                    h, place, _f32_ptr(q), q.size, None if attrs is None else byref(attrs), byref(out)
+                )
+            )
+        finally:
+            self._leave()
+        del pose  # kept alive until here: attrs.world_T_camera points into it
+        return int(out.value)
+
+    def add_edge(self, a: int, b: int, weight: float = 1.0) -> None:
+        """Joins places ``a`` and ``b`` (different, existing, not yet joined) with a finite
+        ``weight`` > 0. Raises :class:`UnknownPlaceError`, :class:`InvalidArgumentError`."""
+        a = _u32(a, "a", UnknownPlaceError)
+        b = _u32(b, "b", UnknownPlaceError)
+        h = self._enter("add_edge")
+        try:
+            check(lib.topoloc_map_builder_add_edge(h, a, b, float(weight)))
+        finally:
+            self._leave()
+
+    def build(self) -> Map:
+        """Validates what was added and returns a new :class:`Map` (the builder stays usable).
+        Raises :class:`EmptyMapError` (no places), :class:`InvalidMapError` (e.g. a place
+        without views)."""
+        out = _lib.MapPtr()
+        h = self._enter("build")
+        try:
+            check(lib.topoloc_map_builder_build(h, byref(out)))
+        finally:
+            self._leave()
+        return Map._adopt(out)
+
+
+def keyframe_options_default() -> Dict[str, Any]:
+    """The library's defaults for :func:`map_from_keyframes` options, as a dict."""
+    o = _lib.defaults(_lib.topoloc_keyframe_options, lib.topoloc_keyframe_options_init)
+    return {name: getattr(o, name) for name, _ in o._fields_ if name != "struct_size"}
+
+
+def map_from_keyframes(
+    kind: str,
+    model: Optional[str],
+    dim: int,
+    descriptors: Any,
+    ids: Optional[Any] = None,
+    poses: Optional[Any] = None,
+    place_spacing_m: Optional[float] = None,
+    novelty_similarity: Optional[float] = None,
+    neighbour_radius_m: Optional[float] = None,
+    max_views_per_place: Optional[int] = None,
+) -> Map:
+    """Builds a map from an ordered keyframe sequence (a SLAM run or image sequence).
+
+    ``descriptors``: (K, D) array-like of global descriptors. ``ids``: K host keyframe ids
+    (default ``0..K-1``), stored with the views they become. ``poses``: ``None`` or a (K, 4, 4)
+    array of ``world_T_camera`` rigid transforms. With poses, a keyframe joins the nearest
+    place within ``place_spacing_m`` and becomes a new view there only when its appearance is
+    novel (best cosine similarity below ``novelty_similarity``, at most
+    ``max_views_per_place`` views); places closer than ``neighbour_radius_m`` are joined.
+    Without poses, a keyframe starts a new place when novel with respect to the current place
+    and is dropped otherwise. Consecutive keyframes' places are always joined. Options left as
+    ``None`` take the library defaults (:func:`keyframe_options_default`).
+
+    Returns a new :class:`Map`. Raises :class:`EmptyMapError` (K = 0),
+    :class:`InvalidArgumentError` (bad keyframe or option; the message names it),
+    :class:`DimensionMismatchError` (``descriptors`` not 2-D).
+    """
+    desc = np.asarray(descriptors, dtype=np.float32)
+    if desc.ndim != 2:
+        raise DimensionMismatchError(f"descriptors must be a (K, D) array, got shape {desc.shape}")
+    desc = np.ascontiguousarray(desc)
+    k, d = desc.shape
+
+    if ids is None:
+        id_arr = np.arange(k, dtype=np.uint64)
+    else:
+        raw = np.asarray(ids)
+        if raw.shape != (k,):
+            raise InvalidArgumentError(f"ids must have shape ({k},), got {raw.shape}")
+        if k and raw.dtype.kind not in "iu":
+            raise TypeError(f"ids must be integers, got dtype {raw.dtype}")
+        if k and raw.dtype.kind == "i" and (raw < 0).any():
+            raise InvalidArgumentError("ids must be non-negative")
+        id_arr = raw.astype(np.uint64)
+
+    pose_arr = None
+    if poses is not None:
+        pose_arr = np.asarray(poses, dtype=np.float64)
+        if pose_arr.shape != (k, 4, 4):
+            raise InvalidArgumentError(f"poses must have shape ({k}, 4, 4), got {pose_arr.shape}")
+        pose_arr = np.ascontiguousarray(pose_arr)
+
+    options = _lib.defaults(_lib.topoloc_keyframe_options, lib.topoloc_keyframe_options_init)
+    if place_spacing_m is not None:
+        options.place_spacing_m = float(place_spacing_m)
+    if novelty_similarity is not None:
+        options.novelty_similarity = float(novelty_similarity)
+    if neighbour_radius_m is not None:
+        options.neighbour_radius_m = float(neighbour_radius_m)
+    if max_views_per_place is not None:
+        options.max_views_per_place = _u32(max_views_per_place, "max_views_per_place")
+
+    keyframes = (_lib.topoloc_keyframe * k)()
+    desc_base, row = desc.ctypes.data, d * desc.itemsize
+    pose_base = pose_arr.ctypes.data if pose_arr is not None else 0
+    for i in range(k):
+        kf = keyframes[i]
+        kf.id = int(id_arr[i])
+        kf.descriptor = ctypes.cast(desc_base + i * row, POINTER(c_float))
+        kf.descriptor_len = d
+        if pose_arr is not None:
+            kf.world_T_camera = ctypes.cast(pose_base + i * 16 * 8, POINTER(c_double))
+
+    out = _lib.MapPtr()
+    check(
+        lib.topoloc_map_from_keyframes(
+            _text(kind, "kind"),
+            _text(model, "model"),
+            _u32(dim, "dim"),
+            keyframes,
+            k,
+            byref(options),
+            byref(out),
+        )
+    )
+    del desc, pose_arr  # the keyframe array pointed into these until the call returned
+    return Map._adopt(out)
+
+
+# --------------------------------------------------------------------------------------------
+# Localization
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """One ranked hypothesis: ``place``, its best-matching ``view``, the posterior
+    ``probability`` of the place, and the cosine ``similarity`` of the frame to ``view``."""
+
+    place: int
+    view: int
+    probability: float
+    similarity: float
+
+
+@dataclass(frozen=True)
+class Result:
+    """The answer for one frame (see :meth:`Localizer.process`).
+
+    Attributes:
+        frame_index: 0-based frame count since creation or :meth:`Localizer.reset`.
+        place: most probable place.
+        view: best-matching view of that place.
+        confidence: posterior probability of being at ``place`` (place belief x on-map
+            probability).
+        similarity: cosine similarity of the frame to ``view``.
+        off_map: whether the robot is more likely off the map than on it.
+        off_map_probability: posterior probability of the off-map state.
+        candidates: the top-k places, best first (``candidates[0].place == place``).
+    """
+
+    frame_index: int
+    place: int
+    view: int
+    confidence: float
+    similarity: float
+    off_map: bool
+    off_map_probability: float
+    candidates: List[Candidate] = field(default_factory=list)
+
+
+_MODES = {"filter": _lib.MODE_FILTER, "single_frame": _lib.MODE_SINGLE_FRAME}
+_OPTION_FIELDS = (
+    "temperature",
+    "stay_probability",
+    "jump_probability",
+    "off_map_probability",
+    "off_map_similarity",
+    "off_map_margin",
+)
+
+
+def localizer_options_default() -> Dict[str, Any]:
+    """The library's default localizer options (``topoloc_localizer_options_init``) as a dict
+    with keys ``mode`` ("filter"/"single_frame"), the float options and ``top_k``."""
+    o = _lib.defaults(_lib.topoloc_localizer_options, lib.topoloc_localizer_options_init)
+    return _options_dict(o)
+
+
+def _options_dict(o: _lib.topoloc_localizer_options) -> Dict[str, Any]:
+    modes = {v: k for k, v in _MODES.items()}
+    out: Dict[str, Any] = {"mode": modes.get(o.mode, o.mode)}
+    out.update({name: float(getattr(o, name)) for name in _OPTION_FIELDS})
+    out["top_k"] = int(o.top_k)
+    out["expected_kind"] = (o.expected_descriptor_kind or b"").decode("utf-8") or None
+    out["expected_model"] = (o.expected_descriptor_model or b"").decode("utf-8") or None
+    return out
+
+
+class Localizer(_SingleThreaded):
+    """Follows one camera through a :class:`Map`, one frame at a time.
+
+    ``mode``: ``"filter"`` (forward filter over the graph; timestamps must not decrease) or
+    ``"single_frame"`` (every frame judged on its own). Every other option left as ``None``
+    takes the library default (:func:`localizer_options_default`): ``temperature`` (> 0),
+    ``stay_probability``, ``jump_probability``, ``off_map_probability`` (0 disables off-map),
+    ``off_map_similarity``, ``off_map_margin``, ``top_k`` (candidates per frame, >= 1).
+    ``expected_kind`` / ``expected_model`` refuse maps built with another descriptor
+    (:class:`DescriptorMismatchError`). Invalid options raise :class:`InvalidOptionError`.
+
+    Ownership: owns a C ``topoloc_localizer`` handle, released by :meth:`close`, the ``with``
+    statement or garbage collection. The localizer keeps its own reference to the map data, so
+    the :class:`Map` may be closed while the localizer is in use.
+
+    Thread safety: single-threaded state (one camera); use from one thread at a time
+    (concurrent calls raise ``RuntimeError``). Many localizers may share one map, each in its
+    own thread; :meth:`process` releases the GIL while it runs.
+    """
+
+    def __init__(
+        self,
+        map: Map,
+        mode: Union[str, int] = "filter",
+        temperature: Optional[float] = None,
+        stay_probability: Optional[float] = None,
+        jump_probability: Optional[float] = None,
+        off_map_probability: Optional[float] = None,
+        off_map_similarity: Optional[float] = None,
+        off_map_margin: Optional[float] = None,
+        top_k: Optional[int] = None,
+        expected_kind: Optional[str] = None,
+        expected_model: Optional[str] = None,
+    ) -> None:
+        self._init_guard()
+        self._free = lib.topoloc_localizer_free
+        if not isinstance(map, Map):
+            raise TypeError(f"map must be a topoloc.Map, got {type(map).__name__}")
+        options = _lib.defaults(_lib.topoloc_localizer_options, lib.topoloc_localizer_options_init)
+        if isinstance(mode, str):
+            if mode not in _MODES:
+                raise InvalidOptionError(f"mode must be 'filter' or 'single_frame', got {mode!r}")
+            options.mode = _MODES[mode]
+        else:
+            options.mode = _u32(mode, "mode", InvalidOptionError)
+        given = {
+            "temperature": temperature,
+            "stay_probability": stay_probability,
+            "jump_probability": jump_probability,
+            "off_map_probability": off_map_probability,
+            "off_map_similarity": off_map_similarity,
+            "off_map_margin": off_map_margin,
+        }
+        for name, value in given.items():
+            if value is not None:
+                setattr(options, name, float(value))
+        if top_k is not None:
+            options.top_k = _u32(top_k, "top_k", InvalidOptionError)
+        options.expected_descriptor_kind = _text(expected_kind, "expected_kind")
+        options.expected_descriptor_model = _text(expected_model, "expected_model")
+
+        out = _lib.LocalizerPtr()
+        check(lib.topoloc_localizer_new(map._h, byref(options), byref(out)))
+        self._ptr = out
+        self._options = _options_dict(options)
+        self._map = map
+
+        # Reused per frame: the candidate buffer, the frame and the result.
+        capacity = max(1, min(int(options.top_k), map.place_count))
+        self._candidates = (_lib.topoloc_candidate * capacity)()
+        self._result = _lib.defaults(_lib.topoloc_result, lib.topoloc_result_init)
+        self._frame = _lib.defaults(_lib.topoloc_frame, lib.topoloc_frame_init)
+
+    @property
+    def options(self) -> Dict[str, Any]:
+        """The options this localizer was created with (floats as the library stores them, in
+        single precision)."""
+        return dict(self._options)
+
+    @property
+    def map(self) -> Map:
+        """The :class:`Map` given at creation (possibly closed since; the localizer does not
+        need it)."""
+        return self._map
+
+    def process(self, descriptor: Any, timestamp: float, odometry: Optional[Any] = None) -> Result:
+        """Localizes one frame.
+
+        ``descriptor``: the frame's global descriptor, D floats (any 1-D array-like; normalised
+        by the library). ``timestamp``: seconds; must not decrease in filter mode (call
+        :meth:`reset` to start a new sequence). ``odometry``: optional motion since the previous
+        frame, ``previous_T_current``, a 4x4 rigid transform.
+
+        The whole frame is validated first: on any error the localizer state is unchanged (the
+        next successful frame continues the sequence). Raises :class:`DimensionMismatchError`,
+        :class:`NonFiniteError`, :class:`ZeroDescriptorError`, :class:`TimestampError`,
+        :class:`InvalidArgumentError` (odometry not a rigid transform).
+        """
+        q = _descriptor(descriptor)
+        odo = None if odometry is None else _pose(odometry, "odometry")
+        ts = float(timestamp)
+        h = self._enter("process")
+        try:
+            frame, result = self._frame, self._result
+            frame.struct_size = ctypes.sizeof(_lib.topoloc_frame)
+            frame.timestamp = ts
+            frame.descriptor = _f32_ptr(q)
+            frame.descriptor_len = q.size
+            frame.odometry = None if odo is None else _f64_ptr(odo)
+            result.struct_size = ctypes.sizeof(_lib.topoloc_result)
+            result.candidates = self._candidates
+            result.candidates_capacity = len(self._candidates)
+            try:
+                check(lib.topoloc_localizer_process(h, byref(frame), byref(result)))
+            finally:
+                frame.descriptor = None
+                frame.descriptor_len = 0
+                frame.odometry = None
+            n = min(int(result.candidates_len), len(self._candidates))
+            candidates = [
+                Candidate(int(c.place), int(c.view), float(c.probability), float(c.similarity))
+                for c in self._candidates[:n]
+            ]
+            return Result(
+                frame_index=int(result.frame_index),
+                place=int(result.place),
+                view=int(result.view),
+                confidence=float(result.confidence),
+                similarity=float(result.similarity),
+                off_map=bool(result.off_map),
+                off_map_probability=float(result.off_map_probability),
+                candidates=candidates,
+            )
+        finally:
+            self._leave()
+            del q, odo
+
+    def reset(self) -> None:
+        """Forgets all history: the next frame is treated as the first (frame_index 0, any
+        timestamp accepted)."""
+        h = self._enter("reset")
+        try:
+            check(lib.topoloc_localizer_reset(h))
+        finally:
+            self._leave()

@@ -1,0 +1,476 @@
+"""Low-level ctypes layer: finds and loads ``libtopoloc``, mirrors the C structs of
+``include/topoloc.h`` and declares the signature of every C function.
+
+Library search order (the first that exists and loads wins):
+
+1. the ``TOPOLOC_LIBRARY`` environment variable: a path to the shared library (if it is set, it
+   must work: the bindings do not silently fall back to another copy);
+2. next to this package: ``topoloc/libtopoloc.so*`` (``.dylib`` / ``topoloc.dll`` elsewhere);
+3. in a source checkout: ``<repo>/target/release/libtopoloc.so`` (and the same under
+   ``$CARGO_TARGET_DIR``), where ``<repo>`` is the first parent directory holding ``Cargo.toml``;
+4. the system: ``ctypes.util.find_library("topoloc")``.
+
+If nothing loads, :class:`LibraryNotFoundError` (an ``ImportError``) lists every place tried.
+After loading, ``topoloc_abi_version()`` must equal :data:`ABI_VERSION`, the ABI these bindings
+were written for, or :class:`AbiVersionError` (also an ``ImportError``) is raised.
+
+Everything here is private API; use the classes of the :mod:`topoloc` package.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import ctypes.util
+import os
+import sys
+from ctypes import (
+    POINTER,
+    Structure,
+    c_bool,
+    c_char,
+    c_char_p,
+    c_double,
+    c_float,
+    c_size_t,
+    c_uint8,
+    c_uint32,
+    c_uint64,
+)
+from pathlib import Path
+from typing import Callable, List, Mapping, Optional, Sequence, Tuple, Type, TypeVar
+
+from ._errors import error_from_status
+
+#: ABI version these bindings were written for (``TOPOLOC_ABI_VERSION`` of the header).
+ABI_VERSION = 1
+
+#: Environment variable naming the shared library to load.
+ENV_VAR = "TOPOLOC_LIBRARY"
+
+#: ``TOPOLOC_MODE_FILTER`` / ``TOPOLOC_MODE_SINGLE_FRAME``.
+MODE_FILTER = 0
+MODE_SINGLE_FRAME = 1
+
+TOPOLOC_OK = 0
+TOPOLOC_ERR_BUFFER_TOO_SMALL = 3
+
+
+class LibraryNotFoundError(ImportError):
+    """The topoloc shared library could not be found or loaded.
+
+    ``tried`` lists ``(location, reason)`` pairs in search order.
+    """
+
+    def __init__(self, message: str, tried: Sequence[Tuple[str, str]] = ()) -> None:
+        super().__init__(message)
+        self.tried: List[Tuple[str, str]] = list(tried)
+
+
+class AbiVersionError(ImportError):
+    """The loaded library implements another C ABI version than these bindings."""
+
+    def __init__(self, message: str, found: int, expected: int, path: str) -> None:
+        super().__init__(message)
+        self.found = found
+        self.expected = expected
+        self.path = path
+
+
+# --------------------------------------------------------------------------------------------
+# Opaque handles and structs (mirroring include/topoloc.h field by field)
+# --------------------------------------------------------------------------------------------
+
+
+class topoloc_map(Structure):
+    """Opaque ``topoloc_map`` (only used through pointers)."""
+
+
+class topoloc_map_builder(Structure):
+    """Opaque ``topoloc_map_builder``."""
+
+
+class topoloc_localizer(Structure):
+    """Opaque ``topoloc_localizer``."""
+
+
+MapPtr = POINTER(topoloc_map)
+BuilderPtr = POINTER(topoloc_map_builder)
+LocalizerPtr = POINTER(topoloc_localizer)
+
+
+class topoloc_view_attributes(Structure):
+    _fields_ = [
+        ("struct_size", c_size_t),
+        ("has_keyframe_id", c_bool),
+        ("keyframe_id", c_uint64),
+        ("world_T_camera", POINTER(c_double)),
+        ("image", c_char_p),
+    ]
+
+
+class topoloc_keyframe_options(Structure):
+    _fields_ = [
+        ("struct_size", c_size_t),
+        ("place_spacing_m", c_double),
+        ("novelty_similarity", c_float),
+        ("neighbour_radius_m", c_double),
+        ("max_views_per_place", c_uint32),
+    ]
+
+
+class topoloc_keyframe(Structure):
+    _fields_ = [
+        ("id", c_uint64),
+        ("descriptor", POINTER(c_float)),
+        ("descriptor_len", c_size_t),
+        ("world_T_camera", POINTER(c_double)),
+    ]
+
+
+class topoloc_localizer_options(Structure):
+    _fields_ = [
+        ("struct_size", c_size_t),
+        ("mode", c_uint32),
+        ("temperature", c_float),
+        ("stay_probability", c_float),
+        ("jump_probability", c_float),
+        ("off_map_probability", c_float),
+        ("off_map_similarity", c_float),
+        ("off_map_margin", c_float),
+        ("top_k", c_uint32),
+        ("expected_descriptor_kind", c_char_p),
+        ("expected_descriptor_model", c_char_p),
+    ]
+
+
+class topoloc_frame(Structure):
+    _fields_ = [
+        ("struct_size", c_size_t),
+        ("timestamp", c_double),
+        ("descriptor", POINTER(c_float)),
+        ("descriptor_len", c_size_t),
+        ("odometry", POINTER(c_double)),
+    ]
+
+
+class topoloc_candidate(Structure):
+    _fields_ = [
+        ("place", c_uint32),
+        ("view", c_uint32),
+        ("probability", c_float),
+        ("similarity", c_float),
+    ]
+
+
+class topoloc_result(Structure):
+    _fields_ = [
+        ("struct_size", c_size_t),
+        ("frame_index", c_uint64),
+        ("place", c_uint32),
+        ("view", c_uint32),
+        ("confidence", c_float),
+        ("similarity", c_float),
+        ("off_map_probability", c_float),
+        ("off_map", c_bool),
+        ("candidates", POINTER(topoloc_candidate)),
+        ("candidates_capacity", c_size_t),
+        ("candidates_len", c_size_t),
+    ]
+
+
+class topoloc_map_load_options(Structure):
+    _fields_ = [
+        ("struct_size", c_size_t),
+        ("expected_descriptor_kind", c_char_p),
+        ("expected_descriptor_model", c_char_p),
+        ("expected_descriptor_dim", c_uint32),
+    ]
+
+
+class topoloc_view_info(Structure):
+    _fields_ = [
+        ("struct_size", c_size_t),
+        ("place", c_uint32),
+        ("has_keyframe_id", c_bool),
+        ("keyframe_id", c_uint64),
+        ("has_pose", c_bool),
+        ("world_T_camera", c_double * 16),
+    ]
+
+
+#: Every struct of the header, by C name.
+STRUCTS = {
+    cls.__name__: cls
+    for cls in (
+        topoloc_view_attributes,
+        topoloc_keyframe_options,
+        topoloc_keyframe,
+        topoloc_localizer_options,
+        topoloc_frame,
+        topoloc_candidate,
+        topoloc_result,
+        topoloc_map_load_options,
+        topoloc_view_info,
+    )
+}
+
+#: Opaque handle types, by C name.
+HANDLES = {cls.__name__: cls for cls in (topoloc_map, topoloc_map_builder, topoloc_localizer)}
+
+# --------------------------------------------------------------------------------------------
+# Function signatures: name -> (restype, argtypes), in header order
+# --------------------------------------------------------------------------------------------
+
+status_t = c_uint32
+_p = POINTER
+
+SIGNATURES = {
+    "topoloc_map_builder_new": (status_t, [c_char_p, c_char_p, c_uint32, _p(BuilderPtr)]),
+    "topoloc_map_builder_free": (None, [BuilderPtr]),
+    "topoloc_map_builder_add_place": (status_t, [BuilderPtr, _p(c_double), _p(c_uint32)]),
+    "topoloc_view_attributes_init": (status_t, [_p(topoloc_view_attributes), c_size_t]),
+    "topoloc_map_builder_add_view": (
+        status_t,
+        [BuilderPtr, c_uint32, _p(c_float), c_size_t, _p(topoloc_view_attributes), _p(c_uint32)],
+    ),
+    "topoloc_map_builder_add_edge": (status_t, [BuilderPtr, c_uint32, c_uint32, c_float]),
+    "topoloc_map_builder_build": (status_t, [BuilderPtr, _p(MapPtr)]),
+    "topoloc_keyframe_options_init": (status_t, [_p(topoloc_keyframe_options), c_size_t]),
+    "topoloc_map_from_keyframes": (
+        status_t,
+        [c_char_p, c_char_p, c_uint32, _p(topoloc_keyframe), c_size_t, _p(topoloc_keyframe_options), _p(MapPtr)],
+    ),
+    "topoloc_localizer_options_init": (status_t, [_p(topoloc_localizer_options), c_size_t]),
+    "topoloc_localizer_new": (status_t, [MapPtr, _p(topoloc_localizer_options), _p(LocalizerPtr)]),
+    "topoloc_localizer_free": (None, [LocalizerPtr]),
+    "topoloc_localizer_reset": (status_t, [LocalizerPtr]),
+    "topoloc_frame_init": (status_t, [_p(topoloc_frame), c_size_t]),
+    "topoloc_result_init": (status_t, [_p(topoloc_result), c_size_t]),
+    "topoloc_localizer_process": (status_t, [LocalizerPtr, _p(topoloc_frame), _p(topoloc_result)]),
+    "topoloc_map_load_options_init": (status_t, [_p(topoloc_map_load_options), c_size_t]),
+    "topoloc_map_load": (status_t, [c_char_p, _p(topoloc_map_load_options), _p(MapPtr)]),
+    "topoloc_map_load_from_memory": (status_t, [_p(c_uint8), c_size_t, _p(topoloc_map_load_options), _p(MapPtr)]),
+    "topoloc_map_save": (status_t, [MapPtr, c_char_p]),
+    "topoloc_map_free": (None, [MapPtr]),
+    "topoloc_map_place_count": (status_t, [MapPtr, _p(c_size_t)]),
+    "topoloc_map_view_count": (status_t, [MapPtr, _p(c_size_t)]),
+    "topoloc_map_edge_count": (status_t, [MapPtr, _p(c_size_t)]),
+    "topoloc_map_descriptor_dim": (status_t, [MapPtr, _p(c_uint32)]),
+    "topoloc_map_descriptor_kind": (status_t, [MapPtr, _p(c_char), c_size_t, _p(c_size_t)]),
+    "topoloc_map_descriptor_model": (status_t, [MapPtr, _p(c_char), c_size_t, _p(c_size_t)]),
+    "topoloc_map_neighbours": (status_t, [MapPtr, c_uint32, _p(c_uint32), c_size_t, _p(c_size_t)]),
+    "topoloc_map_place_views": (status_t, [MapPtr, c_uint32, _p(c_uint32), c_size_t, _p(c_size_t)]),
+    "topoloc_map_place_position": (status_t, [MapPtr, c_uint32, _p(c_double), _p(c_bool)]),
+    "topoloc_map_edge": (status_t, [MapPtr, c_size_t, _p(c_uint32), _p(c_uint32), _p(c_float)]),
+    "topoloc_view_info_init": (status_t, [_p(topoloc_view_info), c_size_t]),
+    "topoloc_map_view_info": (status_t, [MapPtr, c_uint32, _p(topoloc_view_info)]),
+    "topoloc_map_view_image": (status_t, [MapPtr, c_uint32, _p(c_char), c_size_t, _p(c_size_t)]),
+    "topoloc_map_view_descriptor": (status_t, [MapPtr, c_uint32, _p(c_float), c_size_t]),
+    "topoloc_version": (c_char_p, []),
+    "topoloc_abi_version": (c_uint32, []),
+    "topoloc_status_str": (c_char_p, [c_uint32]),
+    "topoloc_last_error_message": (status_t, [_p(c_char), c_size_t, _p(c_size_t)]),
+}
+
+# --------------------------------------------------------------------------------------------
+# Finding and loading the library
+# --------------------------------------------------------------------------------------------
+
+_PACKAGE_DIR = Path(__file__).resolve().parent
+
+
+def _library_file_names() -> Tuple[str, List[str]]:
+    """(file name built by cargo, glob patterns for copies placed next to the package)."""
+    if sys.platform == "darwin":
+        return "libtopoloc.dylib", ["libtopoloc*.dylib"]
+    if sys.platform == "win32":
+        return "topoloc.dll", ["topoloc*.dll"]
+    return "libtopoloc.so", ["libtopoloc.so*"]
+
+
+def _find_checkout_root(start: Path) -> Optional[Path]:
+    for directory in [start, *start.parents]:
+        if (directory / "Cargo.toml").is_file():
+            return directory
+    return None
+
+
+def candidate_locations(
+    environ: Optional[Mapping[str, str]] = None,
+    package_dir: Optional[Path] = None,
+    use_system: bool = True,
+) -> List[Tuple[str, str]]:
+    """Ordered ``(kind, location)`` pairs to try; ``kind`` is ``"env"``, ``"package"``,
+    ``"checkout"`` or ``"system"``. Locations that do not exist are included (so that an error
+    can list them), except for the system search, which is only listed when it finds something.
+    """
+    environ = os.environ if environ is None else environ
+    package_dir = _PACKAGE_DIR if package_dir is None else Path(package_dir)
+    cargo_name, patterns = _library_file_names()
+    out: List[Tuple[str, str]] = []
+
+    env_path = environ.get(ENV_VAR)
+    if env_path:
+        # Absolute, so that a bare file name means "this file here", not a dlopen search.
+        return [("env", os.path.abspath(os.path.expanduser(env_path)))]
+
+    found_next_to_package = sorted({str(p) for pattern in patterns for p in package_dir.glob(pattern)})
+    if found_next_to_package:
+        # Prefer the unversioned name, then the shortest (libtopoloc.so before libtopoloc.so.0.1.0).
+        found_next_to_package.sort(key=lambda p: (len(p), p))
+        out.extend(("package", p) for p in found_next_to_package)
+    else:
+        out.append(("package", str(package_dir / patterns[0])))
+
+    root = _find_checkout_root(package_dir)
+    target_dirs: List[Path] = []
+    if environ.get("CARGO_TARGET_DIR"):
+        target_dirs.append(Path(environ["CARGO_TARGET_DIR"]))
+    if root is not None:
+        target_dirs.append(root / "target")
+    for target in target_dirs:
+        out.append(("checkout", str(target / "release" / cargo_name)))
+    if root is None and not target_dirs:
+        out.append(("checkout", f"(no Cargo.toml above {package_dir}: not a source checkout)"))
+
+    if use_system:
+        name = ctypes.util.find_library("topoloc")
+        out.append(("system", name if name else "ctypes.util.find_library('topoloc') found nothing"))
+    return out
+
+
+def _check_abi(lib: ctypes.CDLL, path: str, expected: int = ABI_VERSION) -> None:
+    """Raises :class:`AbiVersionError` unless the library's ABI version is ``expected``."""
+    fn = lib.topoloc_abi_version
+    fn.restype = c_uint32
+    fn.argtypes = []
+    found = int(fn())
+    if found != expected:
+        raise AbiVersionError(
+            f"the topoloc library at {path} implements C ABI version {found}, but these Python "
+            f"bindings were written for ABI version {expected}; install bindings matching the "
+            f"library (or point {ENV_VAR} at a matching library)",
+            found=found,
+            expected=expected,
+            path=path,
+        )
+
+
+def _declare(lib: ctypes.CDLL) -> None:
+    for name, (restype, argtypes) in SIGNATURES.items():
+        fn = getattr(lib, name)  # AttributeError: a function of the header is missing
+        fn.restype = restype
+        fn.argtypes = argtypes
+
+
+def load_library(
+    environ: Optional[Mapping[str, str]] = None,
+    package_dir: Optional[Path] = None,
+    use_system: bool = True,
+) -> Tuple[ctypes.CDLL, str]:
+    """Finds, loads and checks the library; returns ``(CDLL, location)``.
+
+    Raises :class:`LibraryNotFoundError` listing every location tried, or
+    :class:`AbiVersionError`.
+    """
+    tried: List[Tuple[str, str]] = []
+    candidates = candidate_locations(environ, package_dir, use_system)
+    for kind, location in candidates:
+        if kind != "system" and not Path(location).is_file():
+            tried.append((location, "not found"))
+            continue
+        if kind == "system" and location.startswith("ctypes.util"):
+            tried.append(("system library search", "nothing found"))
+            continue
+        try:
+            lib = ctypes.CDLL(location)
+        except OSError as e:
+            tried.append((location, f"failed to load: {e}"))
+            continue
+        try:
+            getattr(lib, "topoloc_abi_version")
+        except AttributeError:
+            tried.append((location, "loaded, but it has no topoloc_abi_version: not libtopoloc"))
+            continue
+        _check_abi(lib, location)
+        try:
+            _declare(lib)
+        except AttributeError as e:
+            raise LibraryNotFoundError(
+                f"the topoloc library at {location} lacks a function of the C header ({e}); it is "
+                "older than these bindings: rebuild it with `cargo build --release --lib`",
+                tried + [(location, "missing functions")],
+            ) from None
+        return lib, location
+
+    lines = "\n".join(f"  - {loc}: {why}" for loc, why in tried)
+    env_hint = ""
+    if candidates and candidates[0][0] == "env":
+        env_hint = f"{ENV_VAR} is set, so no other location was searched. "
+    raise LibraryNotFoundError(
+        "could not load the topoloc shared library. Tried, in order:\n"
+        f"{lines}\n"
+        f"{env_hint}Fix: build it with `cargo build --release --lib` in the topoloc repository "
+        f"(giving target/release/{_library_file_names()[0]}), copy it next to the topoloc package, "
+        f"or set {ENV_VAR}=/path/to/{_library_file_names()[0]}.",
+        tried,
+    )
+
+
+lib, library_path = load_library()
+
+# --------------------------------------------------------------------------------------------
+# Calling helpers
+# --------------------------------------------------------------------------------------------
+
+
+def last_error_message() -> str:
+    """The calling thread's last error message ("" if none): reads the size first, then the text."""
+    needed = c_size_t(0)
+    lib.topoloc_last_error_message(None, 0, ctypes.byref(needed))
+    size = max(int(needed.value), 1)
+    buf = ctypes.create_string_buffer(size)
+    status = lib.topoloc_last_error_message(buf, size, ctypes.byref(needed))
+    if status != TOPOLOC_OK:  # the message cannot change between the two calls on one thread
+        return ""
+    return buf.value.decode("utf-8", errors="replace")
+
+
+def check(status: int) -> None:
+    """Raises the exception registered for a non-zero status, with the last error message."""
+    if status != TOPOLOC_OK:
+        raise error_from_status(status, last_error_message())
+
+
+def status_str(status: int) -> str:
+    """Static English description of a status code (``topoloc_status_str``)."""
+    return lib.topoloc_status_str(int(status) & 0xFFFFFFFF).decode("utf-8", errors="replace")
+
+
+S = TypeVar("S", bound=Structure)
+
+# Room the library may fill when asked for its own struct size (see library_struct_size).
+_SCRATCH_BYTES = 4096
+
+
+def scratch_struct(cls: Type[S]) -> Tuple[S, ctypes.Array]:
+    """A zeroed ``cls`` at the start of an oversized buffer; keep the buffer alive with it."""
+    buf = (c_uint64 * (max(_SCRATCH_BYTES, ctypes.sizeof(cls)) // 8))()
+    return cls.from_buffer(buf), buf
+
+
+def defaults(cls: Type[S], init: Callable) -> S:
+    """A ``cls`` filled by the library's ``_init`` function with this struct's own size: the
+    library writes at most that many bytes and sets ``struct_size`` to it (what the C header's
+    ``*_default(p)`` macros do with ``sizeof *(p)``)."""
+    out = cls()
+    check(init(ctypes.byref(out), ctypes.sizeof(cls)))
+    return out
+
+
+def library_struct_size(cls: Type[S], init: Callable) -> int:
+    """The library's own ``sizeof`` of struct ``cls``: its ``_init`` function, offered an
+    oversized buffer, writes ``struct_size = min(offered, sizeof)``."""
+    tmp, buf = scratch_struct(cls)
+    check(init(ctypes.byref(tmp), ctypes.sizeof(buf)))
+    return int(ctypes.cast(buf, POINTER(c_size_t))[0])
