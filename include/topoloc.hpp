@@ -17,6 +17,10 @@
  * Moved-from and default-constructed owners are empty (`!owner`, `capi() == nullptr`); calling a
  * method on an empty owner throws `Error` with `TOPOLOC_ERR_NULL_ARGUMENT`.
  *
+ * Methods returning strings or id lists ask the library for the size first; such a sizing call
+ * may leave a "buffer too small" text as the thread's `topoloc_last_error_message` even though
+ * the method succeeds. Errors thrown by this layer always carry the right message.
+ *
  * OpenCV: when OpenCV's core header is included *before* this one (so that `CV_VERSION` is
  * defined), `Localizer::process` and `MapBuilder::add_view` gain `cv::Mat` overloads.
  */

@@ -1,0 +1,91 @@
+#!/usr/bin/env bash
+# C++ layer tests: builds tests/cpp/test_raii.cpp against include/topoloc.hpp and the release
+# library, runs it normally and under ASan+UBSan (leak checking on), and compiles and runs the
+# C++ examples so that they cannot rot.
+#
+#   TOPOLOC_TARGET_DIR   directory holding libtopoloc.so (default: <repo>/target/release;
+#                        build it with `cargo build --release --lib`)
+#   CXX                  C++ compiler (default: g++)
+#
+# Output goes to <repo>/build/cpp-tests.
+set -euo pipefail
+
+here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
+repo="$(cd "$here/../.." && pwd)"
+target_dir="${TOPOLOC_TARGET_DIR:-$repo/target/release}"
+library="$target_dir/libtopoloc.so"
+out="$repo/build/cpp-tests"
+cxx="${CXX:-g++}"
+
+if [[ ! -f "$library" ]]; then
+    echo "run.sh: $library not found; build it with: cargo build --release --lib" >&2
+    exit 1
+fi
+
+# The library's SONAME is libtopoloc.so.<major>, which cargo does not create next to it: give
+# the loader that name in a private directory, and point the binaries' rpath there.
+libdir="$out/lib"
+mkdir -p "$libdir"
+soname="$(readelf -d "$library" 2>/dev/null | sed -n 's/.*Library soname: \[\(.*\)\].*/\1/p')"
+if [[ -z "$soname" ]]; then
+    major="$(sed -n 's/^#define TOPOLOC_VERSION_MAJOR \([0-9]*\).*/\1/p' "$repo/include/topoloc.h")"
+    soname="libtopoloc.so.$major"
+fi
+ln -sfn "$library" "$libdir/libtopoloc.so"
+ln -sfn "$library" "$libdir/$soname"
+
+cxxflags=(-std=c++17 -Wall -Wextra -Werror -pedantic -g -I"$repo/include")
+ldflags=(-L"$libdir" -ltopoloc -Wl,-rpath,"$libdir")
+sanitize=(-fsanitize=address,undefined -fno-omit-frame-pointer -fno-sanitize-recover=all)
+
+step() { printf '\n== %s\n' "$*"; }
+
+# With OpenCV installed, also build a variant that includes it first and so tests the cv::Mat
+# overloads; without it they are skipped (the header only enables them after OpenCV).
+# OpenCV's own headers are included as system headers, so -Werror judges only our code.
+opencv_cflags=() opencv_libs=()
+if pkg-config --exists opencv4 2>/dev/null; then
+    read -r -a opencv_cflags <<<"$(pkg-config --cflags opencv4 | sed 's/\(^\| \)-I/\1-isystem /g')"
+    read -r -a opencv_libs <<<"$(pkg-config --libs opencv4)"
+fi
+
+step "compile test_raii (plain)"
+"$cxx" "${cxxflags[@]}" -O1 "$here/test_raii.cpp" -o "$out/test_raii" "${ldflags[@]}"
+
+step "compile test_raii (ASan+UBSan)"
+"$cxx" "${cxxflags[@]}" -O1 "${sanitize[@]}" "$here/test_raii.cpp" -o "$out/test_raii_asan" \
+    "${ldflags[@]}"
+
+step "run test_raii (plain)"
+"$out/test_raii"
+
+# No LSan suppression file is needed: with this library LeakSanitizer reports nothing from the
+# Rust runtime (its one-time allocations, e.g. the per-thread error message, are freed at thread
+# exit or still reachable), so any leak it reports is a real one.
+step "run test_raii (ASan+UBSan, leak check)"
+ASAN_OPTIONS="detect_leaks=1:abort_on_error=0:halt_on_error=1${ASAN_OPTIONS:+:$ASAN_OPTIONS}" \
+UBSAN_OPTIONS="print_stacktrace=1:halt_on_error=1${UBSAN_OPTIONS:+:$UBSAN_OPTIONS}" \
+    "$out/test_raii_asan"
+
+if ((${#opencv_cflags[@]})); then
+    step "compile and run test_raii with OpenCV included first (cv::Mat overloads)"
+    "$cxx" "${cxxflags[@]}" -O1 "${opencv_cflags[@]}" -include opencv2/core.hpp \
+        "$here/test_raii.cpp" -o "$out/test_raii_opencv" "${ldflags[@]}" "${opencv_libs[@]}"
+    "$out/test_raii_opencv"
+else
+    step "OpenCV (opencv4) not found: cv::Mat overloads not tested"
+fi
+
+step "compile and run cpp-examples/localize_stream"
+"$cxx" "${cxxflags[@]}" -O2 "$repo/cpp-examples/localize_stream.cpp" \
+    -o "$out/localize_stream" "${ldflags[@]}"
+"$out/localize_stream" >"$out/localize_stream.log"
+tail -n 3 "$out/localize_stream.log"
+# Its error path: a missing map file must end in a clean error, not a crash.
+if "$out/localize_stream" "$out/no-such-map.topoloc" 2>"$out/localize_stream.err"; then
+    echo "localize_stream accepted a missing map file" >&2
+    exit 1
+fi
+grep -q "topoloc error 100" "$out/localize_stream.err"
+
+step "C++ layer: all passed"
