@@ -198,7 +198,44 @@ def _load_options(expected_kind, expected_model, expected_dim) -> _lib.topoloc_m
     return options
 
 
-class Map:
+class _Handle:
+    """Owns one C handle: ``_ptr`` released with ``_free`` by :meth:`close`, the ``with``
+    statement, or garbage collection. Methods called after :meth:`close` raise ``ValueError``."""
+
+    _ptr: Any = None
+
+    @property
+    def _h(self):
+        if not self._ptr:
+            raise ValueError(f"operation on a closed topoloc.{type(self).__name__}")
+        return self._ptr
+
+    @property
+    def closed(self) -> bool:
+        """Whether :meth:`close` was called."""
+        return not self._ptr
+
+    def close(self) -> None:
+        """Releases the C handle (idempotent)."""
+        ptr, self._ptr = self._ptr, None
+        if ptr:
+            self._free(ptr)
+
+    def __enter__(self):
+        self._h  # refuse a closed object
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()
+
+    def __del__(self) -> None:
+        try:
+            self.close()
+        except Exception:  # pragma: no cover - interpreter shutdown
+            pass
+
+
+class Map(_Handle):
     """An immutable topological map: places (graph nodes) holding views (descriptors with
     optional keyframe id, pose and image reference), joined by weighted undirected edges.
 
@@ -213,8 +250,6 @@ class Map:
     Thread safety: a map is immutable; its read methods may be called from many threads at once
     (the C calls release the GIL). Do not call :meth:`close` while another thread still uses it.
     """
-
-    _ptr: Any = None
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         raise TypeError("use Map.load(), Map.from_bytes(), MapBuilder.build() or map_from_keyframes()")
@@ -274,35 +309,9 @@ class Map:
 
     # -- lifetime ------------------------------------------------------------------------------
 
-    @property
-    def _h(self):
-        if not self._ptr:
-            raise ValueError("operation on a closed topoloc.Map")
-        return self._ptr
-
-    @property
-    def closed(self) -> bool:
-        """Whether :meth:`close` was called."""
-        return not self._ptr
-
     def close(self) -> None:
         """Releases the C handle (idempotent). Localizers created from the map keep working."""
-        ptr, self._ptr = self._ptr, None
-        if ptr:
-            self._free(ptr)
-
-    def __enter__(self) -> "Map":
-        self._h  # refuse a closed map
-        return self
-
-    def __exit__(self, *exc: Any) -> None:
-        self.close()
-
-    def __del__(self) -> None:
-        try:
-            self.close()
-        except Exception:  # pragma: no cover - interpreter shutdown
-            pass
+        super().close()
 
     def __repr__(self) -> str:
         if self.closed:
@@ -439,11 +448,9 @@ class Map:
 # --------------------------------------------------------------------------------------------
 
 
-class _SingleThreaded:
+class _SingleThreaded(_Handle):
     """Detects concurrent use of a single-threaded C object (which would be undefined
     behaviour) and raises ``RuntimeError`` instead."""
-
-    _ptr: Any = None
 
     def _init_guard(self) -> None:
         self._busy = threading.Lock()
@@ -459,34 +466,13 @@ class _SingleThreaded:
     def _leave(self) -> None:
         self._busy.release()
 
-    @property
-    def closed(self) -> bool:
-        """Whether :meth:`close` was called."""
-        return not self._ptr
-
     def close(self) -> None:
         """Releases the C handle (idempotent)."""
         busy = getattr(self, "_busy", None)
         if busy is None:  # __init__ failed before the handle existed
             return
         with busy:
-            ptr, self._ptr = self._ptr, None
-            if ptr:
-                self._free(ptr)
-
-    def __enter__(self):
-        if self.closed:
-            raise ValueError(f"operation on a closed topoloc.{type(self).__name__}")
-        return self
-
-    def __exit__(self, *exc: Any) -> None:
-        self.close()
-
-    def __del__(self) -> None:
-        try:
-            self.close()
-        except Exception:  # pragma: no cover - interpreter shutdown
-            pass
+            super().close()
 
 
 class MapBuilder(_SingleThreaded):

@@ -80,15 +80,7 @@ pub fn calibration(outcomes: &[ScoredOutcome], bin_count: usize) -> Result<Calib
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn outcomes(list: &[(f32, bool)]) -> Vec<ScoredOutcome> {
-        list.iter()
-            .map(|&(confidence, correct)| ScoredOutcome {
-                confidence,
-                correct,
-            })
-            .collect()
-    }
+    use crate::eval::outcomes;
 
     #[test]
     fn hand_computed_ece() {

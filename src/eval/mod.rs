@@ -83,3 +83,14 @@ fn fraction(count: usize, total: usize) -> f64 {
         count as f64 / total as f64
     }
 }
+
+/// Test helper: outcomes from `(confidence, correct)` pairs.
+#[cfg(test)]
+pub(crate) fn outcomes(list: &[(f32, bool)]) -> Vec<ScoredOutcome> {
+    list.iter()
+        .map(|&(confidence, correct)| ScoredOutcome {
+            confidence,
+            correct,
+        })
+        .collect()
+}

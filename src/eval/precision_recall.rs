@@ -66,15 +66,7 @@ pub fn precision_recall(outcomes: &[ScoredOutcome]) -> Result<PrCurve, EvalError
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn outcomes(list: &[(f32, bool)]) -> Vec<ScoredOutcome> {
-        list.iter()
-            .map(|&(confidence, correct)| ScoredOutcome {
-                confidence,
-                correct,
-            })
-            .collect()
-    }
+    use crate::eval::outcomes;
 
     fn close(a: f64, b: f64) -> bool {
         (a - b).abs() < 1e-9

@@ -432,3 +432,19 @@ pub(crate) fn write_versioned<T: Versioned>(
     }
     Ok(())
 }
+
+/// Moves a handle's Rust value to the heap and gives C its pointer (freed by [`free_handle`]).
+pub(crate) fn into_handle<T>(value: T) -> *mut T {
+    Box::into_raw(Box::new(value))
+}
+
+/// Body of the `_free` functions: drops a handle made with `Box::into_raw`; NULL is a no-op.
+pub(crate) fn free_handle<T>(ptr: *mut T) {
+    run_void(|| {
+        if !ptr.is_null() {
+            // SAFETY: the C contract: `ptr` came from this library's `_new`/`_load` function for
+            // this handle type and is freed once.
+            drop(unsafe { Box::from_raw(ptr) });
+        }
+    })
+}

@@ -1,8 +1,8 @@
 //! C functions that build maps: the incremental builder and the keyframe path.
 
 use super::boundary::{
-    borrow, borrow_mut, check_out, init_versioned, optional_string, read_versioned, run, run_void,
-    slice, string, write_out, FfiError, Versioned,
+    borrow, borrow_mut, check_out, free_handle, init_versioned, into_handle, optional_string,
+    read_versioned, run, slice, string, write_out, FfiError, Versioned,
 };
 use super::convert::optional_pose;
 use super::map::topoloc_map;
@@ -34,9 +34,9 @@ pub extern "C" fn topoloc_map_builder_new(
         check_out(out, "out")?;
         write_out(
             out,
-            Box::into_raw(Box::new(topoloc_map_builder {
+            into_handle(topoloc_map_builder {
                 builder: MapBuilder::new(identity),
-            })),
+            }),
         );
         Ok(())
     })
@@ -55,12 +55,7 @@ fn identity(
 /// Releases a builder. `NULL` is a no-op.
 #[no_mangle]
 pub extern "C" fn topoloc_map_builder_free(builder: *mut topoloc_map_builder) {
-    run_void(|| {
-        if !builder.is_null() {
-            // SAFETY: came from `topoloc_map_builder_new` and is freed once, per the contract.
-            drop(unsafe { Box::from_raw(builder) });
-        }
-    })
+    free_handle(builder)
 }
 
 /// Adds a place; `position` (3 doubles, metres) may be NULL. `*place_out` receives its id.

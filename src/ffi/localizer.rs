@@ -1,8 +1,8 @@
 //! C functions of the localizer: create, process a frame, reset, free.
 
 use super::boundary::{
-    borrow, borrow_mut, check_out, init_versioned, read_versioned, run, run_void, slice,
-    struct_size_of, write_out, write_versioned, FfiError, Versioned,
+    borrow, borrow_mut, check_out, free_handle, init_versioned, into_handle, read_versioned, run,
+    slice, struct_size_of, write_out, write_versioned, FfiError, Versioned,
 };
 use super::convert::{expected_descriptor, optional_pose};
 use super::map::topoloc_map;
@@ -132,10 +132,10 @@ pub extern "C" fn topoloc_localizer_new(
         let localizer = Localizer::new(map, options)?;
         write_out(
             out,
-            Box::into_raw(Box::new(topoloc_localizer {
+            into_handle(topoloc_localizer {
                 localizer,
                 scratch: Localization::default(),
-            })),
+            }),
         );
         Ok(())
     })
@@ -144,12 +144,7 @@ pub extern "C" fn topoloc_localizer_new(
 /// Releases a localizer. `NULL` is a no-op.
 #[no_mangle]
 pub extern "C" fn topoloc_localizer_free(localizer: *mut topoloc_localizer) {
-    run_void(|| {
-        if !localizer.is_null() {
-            // SAFETY: came from `topoloc_localizer_new` and is freed once, per the contract.
-            drop(unsafe { Box::from_raw(localizer) });
-        }
-    })
+    free_handle(localizer)
 }
 
 /// Forgets all history; the next frame is treated as the first.

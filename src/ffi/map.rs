@@ -1,8 +1,8 @@
 //! C functions on maps: load, save, free and read-only accessors.
 
 use super::boundary::{
-    borrow, check_out, copy_c_string, init_versioned, read_versioned, run, run_void, slice, string,
-    write_array, write_out, write_versioned, FfiError, Versioned,
+    borrow, check_out, copy_c_string, free_handle, init_versioned, into_handle, read_versioned,
+    run, slice, string, write_array, write_out, write_versioned, FfiError, Versioned,
 };
 use super::convert::{expected_descriptor, pose_to_row_major};
 use super::topoloc_status;
@@ -21,7 +21,7 @@ pub struct topoloc_map {
 
 impl topoloc_map {
     pub(crate) fn into_raw(map: Map) -> *mut topoloc_map {
-        Box::into_raw(Box::new(topoloc_map { map: Arc::new(map) }))
+        into_handle(topoloc_map { map: Arc::new(map) })
     }
 }
 
@@ -130,12 +130,7 @@ pub extern "C" fn topoloc_map_save(map: *const topoloc_map, path: *const c_char)
 /// Releases a map handle. Localizers created from it keep working. `NULL` is a no-op.
 #[no_mangle]
 pub extern "C" fn topoloc_map_free(map: *mut topoloc_map) {
-    run_void(|| {
-        if !map.is_null() {
-            // SAFETY: `map` came from `topoloc_map::into_raw` and is freed once, per the contract.
-            drop(unsafe { Box::from_raw(map) });
-        }
-    })
+    free_handle(map)
 }
 
 /// Number of places (`*out`).

@@ -80,6 +80,16 @@ struct OutTensor<'a> {
     bytes: Cow<'a, [u8]>,
 }
 
+impl<'a> OutTensor<'a> {
+    fn new(dtype: Dtype, shape: Vec<usize>, bytes: Cow<'a, [u8]>) -> Self {
+        Self {
+            dtype,
+            shape,
+            bytes,
+        }
+    }
+}
+
 impl View for &OutTensor<'_> {
     fn dtype(&self) -> Dtype {
         self.dtype
@@ -168,91 +178,67 @@ impl Map {
         let tensors: Vec<(&str, OutTensor)> = vec![
             (
                 "descriptors",
-                OutTensor {
-                    dtype: Dtype::F32,
-                    shape: vec![n, d],
-                    bytes: descriptor_bytes,
-                },
+                OutTensor::new(Dtype::F32, vec![n, d], descriptor_bytes),
             ),
             (
                 "edge_weight",
-                OutTensor {
-                    dtype: Dtype::F32,
-                    shape: vec![e],
-                    bytes: le_bytes(&edge_weight, f32::to_le_bytes),
-                },
+                OutTensor::new(
+                    Dtype::F32,
+                    vec![e],
+                    le_bytes(&edge_weight, f32::to_le_bytes),
+                ),
             ),
             (
                 "edges",
-                OutTensor {
-                    dtype: Dtype::U32,
-                    shape: vec![e, 2],
-                    bytes: le_bytes(&edges, u32::to_le_bytes),
-                },
+                OutTensor::new(Dtype::U32, vec![e, 2], le_bytes(&edges, u32::to_le_bytes)),
             ),
             (
                 "place_flags",
-                OutTensor {
-                    dtype: Dtype::U8,
-                    shape: vec![m],
-                    bytes: Cow::Owned(place_flags),
-                },
+                OutTensor::new(Dtype::U8, vec![m], Cow::Owned(place_flags)),
             ),
             (
                 "place_position",
-                OutTensor {
-                    dtype: Dtype::F64,
-                    shape: vec![m, 3],
-                    bytes: le_bytes(&place_position, f64::to_le_bytes),
-                },
+                OutTensor::new(
+                    Dtype::F64,
+                    vec![m, 3],
+                    le_bytes(&place_position, f64::to_le_bytes),
+                ),
             ),
             (
                 "view_flags",
-                OutTensor {
-                    dtype: Dtype::U8,
-                    shape: vec![n],
-                    bytes: Cow::Owned(view_flags),
-                },
+                OutTensor::new(Dtype::U8, vec![n], Cow::Owned(view_flags)),
             ),
             (
                 "view_image_bytes",
-                OutTensor {
-                    dtype: Dtype::U8,
-                    shape: vec![image_bytes.len()],
-                    bytes: Cow::Owned(image_bytes),
-                },
+                OutTensor::new(Dtype::U8, vec![image_bytes.len()], Cow::Owned(image_bytes)),
             ),
             (
                 "view_image_offsets",
-                OutTensor {
-                    dtype: Dtype::U64,
-                    shape: vec![n + 1],
-                    bytes: le_bytes(&image_offsets, u64::to_le_bytes),
-                },
+                OutTensor::new(
+                    Dtype::U64,
+                    vec![n + 1],
+                    le_bytes(&image_offsets, u64::to_le_bytes),
+                ),
             ),
             (
                 "view_keyframe",
-                OutTensor {
-                    dtype: Dtype::U64,
-                    shape: vec![n],
-                    bytes: le_bytes(&view_keyframe, u64::to_le_bytes),
-                },
+                OutTensor::new(
+                    Dtype::U64,
+                    vec![n],
+                    le_bytes(&view_keyframe, u64::to_le_bytes),
+                ),
             ),
             (
                 "view_place",
-                OutTensor {
-                    dtype: Dtype::U32,
-                    shape: vec![n],
-                    bytes: le_bytes(&view_place, u32::to_le_bytes),
-                },
+                OutTensor::new(Dtype::U32, vec![n], le_bytes(&view_place, u32::to_le_bytes)),
             ),
             (
                 "view_pose",
-                OutTensor {
-                    dtype: Dtype::F64,
-                    shape: vec![n, 7],
-                    bytes: le_bytes(&view_pose, f64::to_le_bytes),
-                },
+                OutTensor::new(
+                    Dtype::F64,
+                    vec![n, 7],
+                    le_bytes(&view_pose, f64::to_le_bytes),
+                ),
             ),
         ];
         debug_assert!(
