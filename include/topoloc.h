@@ -691,8 +691,9 @@ const char *topoloc_status_str(uint32_t status);
 /**
  * Copies the message of the most recent failed call on this thread (NUL-terminated; "" if
  * none) into `buf` of `len` bytes. `*needed` (if not NULL) receives the size required
- * including the NUL, also when the buffer is too small. Returns `TOPOLOC_OK` or
- * `TOPOLOC_ERR_BUFFER_TOO_SMALL`; never changes the stored message. Thread-safe: each thread
+ * including the NUL, also when the buffer is too small. Returns `TOPOLOC_OK`,
+ * `TOPOLOC_ERR_BUFFER_TOO_SMALL`, or `TOPOLOC_ERR_NULL_ARGUMENT` (NULL `buf` with `len` large
+ * enough); never changes the stored message. Thread-safe: each thread
  * has its own last error.
  */
 topoloc_status topoloc_last_error_message(char *buf, size_t len, size_t *needed);

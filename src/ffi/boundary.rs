@@ -149,6 +149,7 @@ impl From<MapError> for FfiError {
             MapError::UnknownPlace { .. } => TOPOLOC_ERR_UNKNOWN_PLACE,
             MapError::UnknownView { .. } => TOPOLOC_ERR_UNKNOWN_VIEW,
             MapError::Descriptor(d) => return FfiError::from(d.clone()),
+            MapError::NonFinite(_) => TOPOLOC_ERR_NON_FINITE,
             MapError::InvalidArgument(_) => TOPOLOC_ERR_INVALID_ARGUMENT,
             MapError::Invalid(_) => TOPOLOC_ERR_INVALID_MAP,
         };
@@ -388,9 +389,13 @@ pub(crate) fn struct_size_of<T: Versioned>(ptr: *const T, name: &str) -> Result<
 /// Body of the `*_init(ptr, size)` functions behind the header's `*_default(ptr)` macros:
 /// writes the first `min(size, sizeof(T))` bytes of `T::default()` and sets `struct_size` to that
 /// count, so that a library newer than the caller's header never writes past the caller's struct.
-pub(crate) fn init_versioned<T: Versioned + Default>(ptr: *mut T, size: usize) -> topoloc_status {
+pub(crate) fn init_versioned<T: Versioned + Default>(
+    ptr: *mut T,
+    size: usize,
+    name: &str,
+) -> topoloc_status {
     run(|| {
-        check_out(ptr, "ptr")?;
+        check_out(ptr, name)?;
         if size < T::MIN_SIZE {
             return Err(FfiError::new(
                 TOPOLOC_ERR_STRUCT_SIZE,

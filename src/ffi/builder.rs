@@ -121,7 +121,7 @@ pub extern "C" fn topoloc_view_attributes_init(
     attributes: *mut topoloc_view_attributes,
     size: usize,
 ) -> topoloc_status {
-    init_versioned(attributes, size)
+    init_versioned(attributes, size, "attributes")
 }
 
 /// Adds a view with `descriptor` (`len` floats, normalised here) to `place`; `attributes` may be
@@ -242,7 +242,7 @@ pub extern "C" fn topoloc_keyframe_options_init(
     options: *mut topoloc_keyframe_options,
     size: usize,
 ) -> topoloc_status {
-    init_versioned(options, size)
+    init_versioned(options, size, "options")
 }
 
 /// Builds a map from `count` keyframes in order (places by spacing and appearance novelty, edges

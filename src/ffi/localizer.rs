@@ -84,7 +84,7 @@ pub extern "C" fn topoloc_localizer_options_init(
     options: *mut topoloc_localizer_options,
     size: usize,
 ) -> topoloc_status {
-    init_versioned(options, size)
+    init_versioned(options, size, "options")
 }
 
 /// Creates a localizer on `map` (which it keeps alive; the caller may free its own handle).
@@ -193,7 +193,7 @@ impl Default for topoloc_frame {
 /// Errors: `_NULL_ARGUMENT`, `_STRUCT_SIZE` (size below the first published layout).
 #[no_mangle]
 pub extern "C" fn topoloc_frame_init(frame: *mut topoloc_frame, size: usize) -> topoloc_status {
-    init_versioned(frame, size)
+    init_versioned(frame, size, "frame")
 }
 
 /// One ranked hypothesis. Array element: its layout never changes.
@@ -267,7 +267,7 @@ impl Default for topoloc_result {
 /// Errors: `_NULL_ARGUMENT`, `_STRUCT_SIZE` (size below the first published layout).
 #[no_mangle]
 pub extern "C" fn topoloc_result_init(result: *mut topoloc_result, size: usize) -> topoloc_status {
-    init_versioned(result, size)
+    init_versioned(result, size, "result")
 }
 
 /// Localizes one frame and writes the answer into `*result`. The whole frame is validated

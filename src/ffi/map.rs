@@ -62,7 +62,7 @@ pub extern "C" fn topoloc_map_load_options_init(
     options: *mut topoloc_map_load_options,
     size: usize,
 ) -> topoloc_status {
-    init_versioned(options, size)
+    init_versioned(options, size, "options")
 }
 
 fn load_options(options: *const topoloc_map_load_options) -> Result<LoadOptions, FfiError> {
@@ -341,7 +341,7 @@ pub extern "C" fn topoloc_view_info_init(
     info: *mut topoloc_view_info,
     size: usize,
 ) -> topoloc_status {
-    init_versioned(info, size)
+    init_versioned(info, size, "info")
 }
 
 /// Fills `*out` with the attributes of `view`. Errors: `_UNKNOWN_VIEW`, `_STRUCT_SIZE`.

@@ -35,8 +35,9 @@ pub extern "C" fn topoloc_status_str(status: u32) -> *const c_char {
 
 /// Copies the message of the most recent failed call on this thread (NUL-terminated; "" if
 /// none) into `buf` of `len` bytes. `*needed` (if not NULL) receives the size required
-/// including the NUL, also when the buffer is too small. Returns `TOPOLOC_OK` or
-/// `TOPOLOC_ERR_BUFFER_TOO_SMALL`; never changes the stored message. Thread-safe: each thread
+/// including the NUL, also when the buffer is too small. Returns `TOPOLOC_OK`,
+/// `TOPOLOC_ERR_BUFFER_TOO_SMALL`, or `TOPOLOC_ERR_NULL_ARGUMENT` (NULL `buf` with `len` large
+/// enough); never changes the stored message. Thread-safe: each thread
 /// has its own last error.
 #[no_mangle]
 pub extern "C" fn topoloc_last_error_message(

@@ -74,9 +74,7 @@ impl MapBuilder {
     pub fn add_place(&mut self, position: Option<Point3<f64>>) -> Result<PlaceId, MapError> {
         if let Some(p) = position {
             if !p.iter().all(|x| x.is_finite()) {
-                return Err(MapError::InvalidArgument(
-                    "place position must be finite".into(),
-                ));
+                return Err(MapError::NonFinite("place position must be finite".into()));
             }
         }
         let id = PlaceId::try_from(self.place_positions.len())
@@ -106,7 +104,7 @@ impl MapBuilder {
                 .chain(pose.rotation.coords.iter())
                 .all(|x| x.is_finite());
             if !finite {
-                return Err(MapError::InvalidArgument("view pose must be finite".into()));
+                return Err(MapError::NonFinite("view pose must be finite".into()));
             }
         }
         normalize_descriptor_into(descriptor, self.identity.dim as usize, &mut self.scratch)?;
@@ -136,9 +134,12 @@ impl MapBuilder {
                 "edge from place {a} to itself"
             )));
         }
-        if !(weight.is_finite() && weight > 0.0) {
+        if !weight.is_finite() {
+            return Err(MapError::NonFinite(format!("edge weight {weight}")));
+        }
+        if weight <= 0.0 {
             return Err(MapError::InvalidArgument(format!(
-                "edge weight {weight} must be finite and > 0"
+                "edge weight {weight} must be > 0"
             )));
         }
         let (a, b) = (a.min(b), a.max(b));

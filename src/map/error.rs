@@ -62,6 +62,9 @@ pub enum MapError {
     /// A descriptor given to the builder is unusable.
     #[error("bad descriptor: {0}")]
     Descriptor(#[from] DescriptorError),
+    /// A number given to the builder (position, pose, weight) is NaN or infinite.
+    #[error("non-finite value: {0}")]
+    NonFinite(String),
     /// An argument is out of its valid range.
     #[error("invalid argument: {0}")]
     InvalidArgument(String),

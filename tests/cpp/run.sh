@@ -22,14 +22,15 @@ if [[ ! -f "$library" ]]; then
     exit 1
 fi
 
-# The library's SONAME is libtopoloc.so.<major>, which cargo does not create next to it: give
-# the loader that name in a private directory, and point the binaries' rpath there.
+# The library's SONAME (libtopoloc.so.MAJOR, or .so.0.MINOR before 1.0; see build.rs) is a name
+# cargo does not create next to it: give the loader that name in a private directory, and point
+# the binaries' rpath there.
 libdir="$out/lib"
 mkdir -p "$libdir"
 soname="$(readelf -d "$library" 2>/dev/null | sed -n 's/.*Library soname: \[\(.*\)\].*/\1/p')"
 if [[ -z "$soname" ]]; then
-    major="$(sed -n 's/^#define TOPOLOC_VERSION_MAJOR \([0-9]*\).*/\1/p' "$repo/include/topoloc.h")"
-    soname="libtopoloc.so.$major"
+    echo "error: $library has no SONAME (build.rs sets one)" >&2
+    exit 1
 fi
 ln -sfn "$library" "$libdir/libtopoloc.so"
 ln -sfn "$library" "$libdir/$soname"

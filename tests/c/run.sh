@@ -1,0 +1,167 @@
+#!/usr/bin/env bash
+# C ABI tests of topoloc, against an already built library (cargo build --release --lib).
+#
+#   bash tests/c/run.sh
+#
+# Environment:
+#   TOPOLOC_TARGET_DIR        directory holding libtopoloc.so and libtopoloc.a
+#                             (default: <repo>/target/release)
+#   TOPOLOC_C_BUILD_DIR       where test binaries go (default: <repo>/build/c-tests; recreated)
+#   TOPOLOC_CHECK_STATIC_LIBS set to 1 to also ask cargo which system libraries a static link needs
+#                             and fail if that differs from the list pinned below (runs cargo)
+#   CC, CXX                   compilers (default: cc, c++)
+#
+# Sections: exported symbols vs header, SONAME, header alone (C11 and C++17), the test program
+# against the shared library, again under ASan+UBSan, under valgrind (if installed), and linked
+# statically against libtopoloc.a.
+set -euo pipefail
+
+here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
+repo="$(cd "$here/../.." && pwd)"
+target="${TOPOLOC_TARGET_DIR:-$repo/target/release}"
+target="$(cd "$target" 2>/dev/null && pwd)" || {
+    echo "error: TOPOLOC_TARGET_DIR '${TOPOLOC_TARGET_DIR:-$repo/target/release}' does not exist;" \
+        "build the library first: cargo build --release --lib" >&2
+    exit 1
+}
+build="${TOPOLOC_C_BUILD_DIR:-$repo/build/c-tests}"
+CC="${CC:-cc}"
+CXX="${CXX:-c++}"
+
+# System libraries a static link against libtopoloc.a needs, as printed ONCE by
+#   cargo rustc --release --lib --crate-type staticlib -- --print native-static-libs
+# (rustc 1.95, x86_64-unknown-linux-gnu, glibc). CMakeLists.txt's TOPOLOC_NATIVE_STATIC_LIBS must
+# be the same string (checked below); it feeds Topoloc::topoloc_static and topoloc.pc.
+# TOPOLOC_CHECK_STATIC_LIBS=1 re-asks cargo and fails when the list changes (e.g. after adding a
+# dependency or a toolchain update).
+PINNED_STATIC_LIBS="-lgcc_s -lutil -lrt -lpthread -lm -ldl -lc"
+
+CFLAGS_STRICT=(-std=c11 -Wall -Wextra -Werror -pedantic)
+CXXFLAGS_STRICT=(-std=c++17 -Wall -Wextra -Werror -pedantic)
+
+section() { printf '\n==> %s\n' "$*"; }
+fail() { printf 'FAILED: %s\n' "$*" >&2; exit 1; }
+
+# Runs a test binary, shows its output, and checks its exit status and its summary line.
+run_test() {
+    local log="$1"
+    shift
+    local status=0
+    "$@" 2>&1 | tee "$log" || status=$?
+    [[ $status -eq 0 ]] || fail "$* exited with status $status"
+    grep -Eq '^[0-9]+ passed, 0 failed$' "$log" || fail "$*: no '<N> passed, 0 failed' line"
+}
+
+for f in libtopoloc.so libtopoloc.a; do
+    [[ -f "$target/$f" ]] || fail "$target/$f is missing; build it with: cargo build --release --lib"
+done
+
+rm -rf "$build"
+mkdir -p "$build/lib"
+# The library's SONAME is libtopoloc.so.MAJOR (libtopoloc.so.0.MINOR before 1.0, see build.rs),
+# which is what the test programs ask the dynamic loader for: give them the installed layout
+# (soname link and dev link).
+major="$(sed -n 's/^#define TOPOLOC_VERSION_MAJOR \([0-9][0-9]*\)$/\1/p' "$repo/include/topoloc.h")"
+minor="$(sed -n 's/^#define TOPOLOC_VERSION_MINOR \([0-9][0-9]*\)$/\1/p' "$repo/include/topoloc.h")"
+[[ -n "$major" && -n "$minor" ]] || fail "no TOPOLOC_VERSION_MAJOR/MINOR in include/topoloc.h"
+if [[ "$major" == 0 ]]; then expected_soname="libtopoloc.so.0.$minor"; else expected_soname="libtopoloc.so.$major"; fi
+ln -s "$target/libtopoloc.so" "$build/lib/$expected_soname"
+ln -s "$expected_soname" "$build/lib/libtopoloc.so"
+LINK_SHARED=(-L"$build/lib" -Wl,-rpath,"$build/lib" -ltopoloc -pthread)
+
+echo "library:   $target"
+echo "build dir: $build"
+echo "compilers: $("$CC" --version | head -n1) / $("$CXX" --version | head -n1)"
+
+section "SONAME"
+soname="$(readelf -d "$target/libtopoloc.so" | sed -n 's/.*(SONAME).*\[\(.*\)\]$/\1/p')"
+echo "SONAME: ${soname:-<none>}"
+[[ "$soname" == "$expected_soname" ]] || fail "SONAME is '${soname}', expected $expected_soname"
+
+section "exported symbols match the header's declarations"
+header_functions="$(grep -E '^[A-Za-z_][A-Za-z0-9_ ]*[ *]topoloc_[a-z0-9_]+\(' "$repo/include/topoloc.h" |
+    sed -E 's/^.*[ *](topoloc_[a-z0-9_]+)\(.*$/\1/' | sort -u)"
+exported="$(nm -D --defined-only "$target/libtopoloc.so" | awk '$2 == "T" && $3 ~ /^topoloc_/ { print $3 }' | sort -u)"
+missing="$(comm -23 <(echo "$header_functions") <(echo "$exported"))"
+extra="$(comm -13 <(echo "$header_functions") <(echo "$exported"))"
+echo "$(echo "$header_functions" | wc -l) functions declared, $(echo "$exported" | wc -l) exported"
+[[ -z "$missing" ]] || fail "declared in topoloc.h but not exported by the library: $missing"
+[[ -z "$extra" ]] || fail "exported by the library but not declared in topoloc.h: $extra"
+# readelf, not nm: the archive's objects carry embedded LLVM bitcode, which binutils' nm hands to
+# the system LLVM plugin (older than rustc's LLVM) and then reports no symbols.
+static_exported="$(readelf -Ws "$target/libtopoloc.a" 2>/dev/null |
+    awk '$4 == "FUNC" && $5 == "GLOBAL" && $7 != "UND" && $8 ~ /^topoloc_/ { print $8 }' | sort -u)"
+[[ "$static_exported" == "$exported" ]] || fail "libtopoloc.a and libtopoloc.so define different topoloc_ functions"
+
+section "header alone: C11 and C++17, included twice"
+"$CC" "${CFLAGS_STRICT[@]}" -Wstrict-prototypes -Wundef -Wshadow -I"$repo/include" \
+    "$here/header_alone.c" -o "$build/header_alone_c" "${LINK_SHARED[@]}"
+"$CXX" "${CXXFLAGS_STRICT[@]}" -Wundef -Wshadow -I"$repo/include" \
+    "$here/header_alone.cpp" -o "$build/header_alone_cpp" "${LINK_SHARED[@]}"
+"$build/header_alone_c"
+"$build/header_alone_cpp"
+echo "ok"
+
+section "test_topoloc: shared library"
+"$CC" "${CFLAGS_STRICT[@]}" -g -O1 -I"$repo/include" "$here/test_topoloc.c" \
+    -o "$build/test_topoloc" "${LINK_SHARED[@]}"
+run_test "$build/shared.log" "$build/test_topoloc"
+
+section "test_topoloc: AddressSanitizer + UndefinedBehaviorSanitizer"
+"$CC" "${CFLAGS_STRICT[@]}" -g -O1 -fsanitize=address,undefined -fno-omit-frame-pointer \
+    -I"$repo/include" "$here/test_topoloc.c" -o "$build/test_topoloc_asan" "${LINK_SHARED[@]}"
+lsan_env=()
+if [[ -f "$here/lsan.supp" ]]; then
+    lsan_env=(LSAN_OPTIONS="suppressions=$here/lsan.supp:print_suppressions=1")
+fi
+run_test "$build/asan.log" env ASAN_OPTIONS=detect_leaks=1 \
+    UBSAN_OPTIONS=halt_on_error=1:print_stacktrace=1 "${lsan_env[@]}" "$build/test_topoloc_asan"
+
+section "test_topoloc: valgrind"
+if command -v valgrind >/dev/null 2>&1; then
+    # valgrind.supp holds only a commented one-time allocation of the Rust runtime.
+    run_test "$build/valgrind.log" valgrind --quiet --error-exitcode=1 --leak-check=full \
+        --suppressions="$here/valgrind.supp" "$build/test_topoloc"
+else
+    echo "SKIPPED: valgrind is not installed"
+fi
+
+section "system libraries for a static link"
+echo "pinned: $PINNED_STATIC_LIBS"
+cmake_libs="$(sed -n 's/^set(TOPOLOC_NATIVE_STATIC_LIBS "\(.*\)")$/\1/p' "$repo/CMakeLists.txt")"
+[[ "$cmake_libs" == "$PINNED_STATIC_LIBS" ]] ||
+    fail "CMakeLists.txt's TOPOLOC_NATIVE_STATIC_LIBS ('$cmake_libs') differs from PINNED_STATIC_LIBS here"
+if [[ "${TOPOLOC_CHECK_STATIC_LIBS:-0}" == "1" ]]; then
+    cargo_env=()
+    # Use the cargo target dir that holds TOPOLOC_TARGET_DIR (<target-dir>/release).
+    if [[ "$(basename "$target")" == "release" ]]; then
+        cargo_env=(CARGO_TARGET_DIR="$(dirname "$target")")
+    fi
+    cargo_log="$build/native-static-libs.log"
+    if ! (cd "$repo" && env "${cargo_env[@]}" cargo rustc --release --lib --crate-type staticlib \
+        -- --print native-static-libs) >"$cargo_log" 2>&1; then
+        cat "$cargo_log" >&2
+        fail "cargo rustc --print native-static-libs failed"
+    fi
+    printed="$(sed -n 's/^.*native-static-libs: //p' "$cargo_log" | tail -n1)"
+    echo "cargo:  ${printed:-<nothing printed>}"
+    if [[ "$printed" != "$PINNED_STATIC_LIBS" ]]; then
+        fail "the system libraries a static link needs changed: cargo prints '$printed'," \
+            "tests/c/run.sh pins '$PINNED_STATIC_LIBS'. Update PINNED_STATIC_LIBS here and" \
+            "TOPOLOC_NATIVE_STATIC_LIBS in CMakeLists.txt (it feeds TopolocConfig.cmake and topoloc.pc)."
+    fi
+    echo "unchanged"
+else
+    echo "(not re-checked; set TOPOLOC_CHECK_STATIC_LIBS=1 to compare with cargo's list)"
+fi
+
+section "test_topoloc: linked statically against libtopoloc.a"
+# shellcheck disable=SC2086 # the pinned list is a word list on purpose
+"$CC" "${CFLAGS_STRICT[@]}" -g -O1 -I"$repo/include" "$here/test_topoloc.c" \
+    -o "$build/test_topoloc_static" "$target/libtopoloc.a" $PINNED_STATIC_LIBS -pthread
+if readelf -d "$build/test_topoloc_static" | grep -q 'libtopoloc'; then
+    fail "the static test program depends on a shared libtopoloc"
+fi
+run_test "$build/static.log" "$build/test_topoloc_static"
+
+section "all C ABI checks passed"

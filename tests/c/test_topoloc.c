@@ -1,0 +1,1997 @@
+/*
+ * C11 tests of the topoloc C ABI (include/topoloc.h), linked against the built library.
+ *
+ * Built by tests/c/run.sh with -std=c11 -Wall -Wextra -Werror -pedantic, and run plain, under
+ * AddressSanitizer + UndefinedBehaviorSanitizer, under valgrind, and linked statically.
+ *
+ * Self-contained harness: CHECK* macros count passes and failures; the last line printed is
+ * "N passed, M failed" and the exit status is non-zero when anything failed.
+ *
+ * The world used throughout: PLACES places on a line (with a loop edge), VIEWS_PER_PLACE views
+ * each, DIM-dimensional descriptors from a fixed-seed generator. Views of one place are close to
+ * each other, views of different places nearly orthogonal, and frames are noisy copies of views,
+ * so the right answer is known for every frame.
+ */
+#define _POSIX_C_SOURCE 200809L
+
+#include "topoloc.h"
+
+#include <errno.h>
+#include <pthread.h>
+#include <stdbool.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+
+/* ------------------------------------------------------------------------------------------ */
+/* Harness                                                                                     */
+/* ------------------------------------------------------------------------------------------ */
+
+static unsigned long g_passed;
+static unsigned long g_failed;
+
+static void check_impl(bool ok, const char *expr, const char *file, int line)
+{
+    if (ok) {
+        g_passed++;
+        return;
+    }
+    g_failed++;
+    fprintf(stderr, "FAIL %s:%d: %s\n", file, line, expr);
+}
+
+/* Last error message of this thread, in a static buffer (the harness is single-threaded). */
+static const char *last_error(void)
+{
+    static char buf[1024];
+    size_t needed = 0;
+    buf[0] = '\0';
+    if (topoloc_last_error_message(buf, sizeof buf, &needed) != TOPOLOC_OK) {
+        snprintf(buf, sizeof buf, "<message of %zu bytes does not fit>", needed);
+    }
+    return buf;
+}
+
+static void check_status_impl(topoloc_status got, uint32_t want, const char *expr, const char *file,
+                              int line)
+{
+    if ((uint32_t)got == want) {
+        g_passed++;
+        return;
+    }
+    g_failed++;
+    fprintf(stderr, "FAIL %s:%d: %s\n    returned %u (%s), expected %u (%s); last error: \"%s\"\n",
+            file, line, expr, (unsigned)got, topoloc_status_str((uint32_t)got), (unsigned)want,
+            topoloc_status_str(want), last_error());
+}
+
+#define CHECK(cond) check_impl((cond) ? true : false, #cond, __FILE__, __LINE__)
+#define CHECK_OK(expr) check_status_impl((expr), TOPOLOC_OK, #expr, __FILE__, __LINE__)
+#define CHECK_STATUS(expr, want) check_status_impl((expr), (uint32_t)(want), #expr, __FILE__, __LINE__)
+#define CHECK_NEAR(a, b, tol) CHECK(((a) - (b)) <= (tol) && ((b) - (a)) <= (tol))
+
+/* Sets the last error to a known message, so that a following call can be shown to set its own. */
+static char g_primed[512];
+static void prime_last_error(void)
+{
+    topoloc_map_builder *b = NULL;
+    topoloc_status st = topoloc_map_builder_new("", NULL, 4, &b);
+    if (st != TOPOLOC_ERR_INVALID_ARGUMENT || b != NULL) {
+        fprintf(stderr, "harness: could not prime the last error (status %u)\n", (unsigned)st);
+        topoloc_map_builder_free(b);
+    }
+    snprintf(g_primed, sizeof g_primed, "%s", last_error());
+}
+
+/* Checks that `got` is TOPOLOC_ERR_NULL_ARGUMENT, with a fresh, non-empty message naming `name`. */
+static void check_null_impl(topoloc_status got, const char *name, const char *expr,
+                            const char *file, int line)
+{
+    const char *msg;
+    check_status_impl(got, TOPOLOC_ERR_NULL_ARGUMENT, expr, file, line);
+    msg = last_error();
+    check_impl(msg[0] != '\0', "last error message is not empty", file, line);
+    check_impl(strcmp(msg, g_primed) != 0, "the call set its own last error message", file, line);
+    if (strstr(msg, name) == NULL) {
+        g_failed++;
+        fprintf(stderr, "FAIL %s:%d: %s\n    message \"%s\" does not name '%s'\n", file, line, expr,
+                msg, name);
+    } else {
+        g_passed++;
+    }
+}
+
+#define CHECK_NULL(expr, name)                                                                     \
+    do {                                                                                           \
+        topoloc_status check_null_status_;                                                         \
+        prime_last_error();                                                                        \
+        check_null_status_ = (expr);                                                               \
+        check_null_impl(check_null_status_, (name), #expr, __FILE__, __LINE__);                    \
+    } while (0)
+
+/* Checks that a failed call left a non-empty message. */
+#define CHECK_HAS_MESSAGE() CHECK(last_error()[0] != '\0')
+
+static void section(const char *name)
+{
+    printf("-- %s\n", name);
+    fflush(stdout);
+}
+
+/* ------------------------------------------------------------------------------------------ */
+/* Test world                                                                                  */
+/* ------------------------------------------------------------------------------------------ */
+
+#define DIM 32u
+#define PLACES 6u
+#define VIEWS_PER_PLACE 4u
+#define VIEWS (PLACES * VIEWS_PER_PLACE)
+#define EDGES 6u
+#define KIND "test-desc"
+#define MODEL "test-model-v1"
+/* The last view is added without attributes, to exercise "absent" answers. */
+#define BARE_VIEW (VIEWS - 1u)
+
+static float g_view_desc[VIEWS][DIM];  /* as given to the builder (not unit norm) */
+static double g_place_pos[PLACES][3];
+static double g_view_pose[VIEWS][16];  /* world_T_camera, row-major */
+static char g_view_image[VIEWS][64];
+/* Edges sorted by (a, b), as topoloc_map_edge reports them. */
+static const uint32_t g_edges[EDGES][2] = {{0, 1}, {0, 5}, {1, 2}, {2, 3}, {3, 4}, {4, 5}};
+static float g_edge_weight[EDGES];
+
+static uint64_t g_rng = 0x9E3779B97F4A7C15u;
+
+static double rng_uniform(void)
+{
+    /* xorshift64* */
+    g_rng ^= g_rng >> 12;
+    g_rng ^= g_rng << 25;
+    g_rng ^= g_rng >> 27;
+    return (double)((g_rng * 2685821657736338717u) >> 11) * (1.0 / 9007199254740992.0);
+}
+
+/* Zero-mean, roughly normal (Irwin-Hall of 4 uniforms). */
+static float rng_normalish(void)
+{
+    return (float)(rng_uniform() + rng_uniform() + rng_uniform() + rng_uniform() - 2.0);
+}
+
+static void init_world(void)
+{
+    static const double c[4] = {1.0, 0.0, -1.0, 0.0};
+    static const double s[4] = {0.0, 1.0, 0.0, -1.0};
+    uint32_t p, j, d, e;
+    float base[DIM];
+    for (p = 0; p < PLACES; p++) {
+        g_place_pos[p][0] = 2.0 * p;
+        g_place_pos[p][1] = 1.0;
+        g_place_pos[p][2] = 0.5;
+        for (d = 0; d < DIM; d++) {
+            base[d] = rng_normalish();
+        }
+        for (j = 0; j < VIEWS_PER_PLACE; j++) {
+            uint32_t v = p * VIEWS_PER_PLACE + j;
+            float scale = (float)(1 + v % 3); /* not unit norm: the builder normalises */
+            double *m = g_view_pose[v];
+            for (d = 0; d < DIM; d++) {
+                g_view_desc[v][d] = scale * (base[d] + 0.3f * rng_normalish());
+            }
+            /* Yaw j * 90 degrees about z at the place's position. */
+            memset(m, 0, sizeof g_view_pose[v]);
+            m[0] = c[j];
+            m[1] = -s[j];
+            m[4] = s[j];
+            m[5] = c[j];
+            m[10] = 1.0;
+            m[3] = g_place_pos[p][0];
+            m[7] = g_place_pos[p][1];
+            m[11] = g_place_pos[p][2];
+            m[15] = 1.0;
+            snprintf(g_view_image[v], sizeof g_view_image[v], "images/place_%u/view_%u.png",
+                     (unsigned)p, (unsigned)j);
+        }
+    }
+    for (e = 0; e < EDGES; e++) {
+        g_edge_weight[e] = 1.0f + 0.5f * (float)e;
+    }
+}
+
+/* NaN and infinity computed at run time (no libm, no constant-folding diagnostics). */
+static double make_nan(void)
+{
+    volatile double zero = 0.0;
+    return zero / zero;
+}
+
+static float make_inf(void)
+{
+    volatile float big = 1e30f;
+    return big * big;
+}
+
+static double norm_of(const float *x, size_t n)
+{
+    double sum = 0.0;
+    size_t i;
+    for (i = 0; i < n; i++) {
+        sum += (double)x[i] * (double)x[i];
+    }
+    /* Newton iterations instead of libm's sqrt, to keep the link line minimal. */
+    {
+        double r = sum > 1.0 ? sum : 1.0;
+        int k;
+        for (k = 0; k < 60; k++) {
+            r = 0.5 * (r + sum / r);
+        }
+        return r;
+    }
+}
+
+/* A frame descriptor: view `v`'s descriptor plus noise of relative size `noise`. */
+static void noisy_copy(float out[DIM], uint32_t v, float noise)
+{
+    uint32_t d;
+    double n = norm_of(g_view_desc[v], DIM) / 5.66; /* ~ per-component scale */
+    for (d = 0; d < DIM; d++) {
+        out[d] = g_view_desc[v][d] + noise * (float)n * rng_normalish();
+    }
+}
+
+static bool contains_u32(const uint32_t *xs, size_t n, uint32_t x)
+{
+    size_t i;
+    for (i = 0; i < n; i++) {
+        if (xs[i] == x) {
+            return true;
+        }
+    }
+    return false;
+}
+
+/* Builds the test world with the builder; NULL on failure (failures are counted). */
+static topoloc_map *build_world_map(void)
+{
+    topoloc_map_builder *b = NULL;
+    topoloc_map *map = NULL;
+    uint32_t p, j, e;
+    CHECK_OK(topoloc_map_builder_new(KIND, MODEL, DIM, &b));
+    if (b == NULL) {
+        return NULL;
+    }
+    for (p = 0; p < PLACES; p++) {
+        uint32_t id = 12345;
+        CHECK_OK(topoloc_map_builder_add_place(b, g_place_pos[p], &id));
+        CHECK(id == p);
+    }
+    for (p = 0; p < PLACES; p++) {
+        for (j = 0; j < VIEWS_PER_PLACE; j++) {
+            uint32_t v = p * VIEWS_PER_PLACE + j;
+            uint32_t id = 12345;
+            topoloc_view_attributes attributes;
+            CHECK_OK(topoloc_view_attributes_default(&attributes));
+            CHECK(attributes.struct_size == sizeof attributes);
+            CHECK(!attributes.has_keyframe_id && attributes.world_T_camera == NULL &&
+                  attributes.image == NULL);
+            attributes.has_keyframe_id = true;
+            attributes.keyframe_id = 1000u + v;
+            attributes.world_T_camera = g_view_pose[v];
+            attributes.image = g_view_image[v];
+            CHECK_OK(topoloc_map_builder_add_view(b, p, g_view_desc[v], DIM,
+                                                  v == BARE_VIEW ? NULL : &attributes, &id));
+            CHECK(id == v);
+        }
+    }
+    for (e = 0; e < EDGES; e++) {
+        /* Give some edges as (b, a): the map stores a < b. */
+        uint32_t a = g_edges[e][e % 2], c = g_edges[e][1 - e % 2];
+        CHECK_OK(topoloc_map_builder_add_edge(b, a, c, g_edge_weight[e]));
+    }
+    CHECK_OK(topoloc_map_builder_build(b, &map));
+    topoloc_map_builder_free(b);
+    return map;
+}
+
+/* ------------------------------------------------------------------------------------------ */
+/* Temporary files                                                                             */
+/* ------------------------------------------------------------------------------------------ */
+
+static char g_tmpdir[4096];
+
+static void tmp_path(char *out, size_t len, const char *name)
+{
+    snprintf(out, len, "%s/%s", g_tmpdir, name);
+}
+
+static bool write_file(const char *path, const unsigned char *data, size_t len)
+{
+    FILE *f = fopen(path, "wb");
+    bool ok;
+    if (f == NULL) {
+        return false;
+    }
+    ok = fwrite(data, 1, len, f) == len;
+    return fclose(f) == 0 && ok;
+}
+
+/* Reads a whole file into a malloc'd buffer. */
+static unsigned char *read_file(const char *path, size_t *len)
+{
+    FILE *f = fopen(path, "rb");
+    unsigned char *data = NULL;
+    long size;
+    if (f == NULL) {
+        return NULL;
+    }
+    if (fseek(f, 0, SEEK_END) == 0 && (size = ftell(f)) >= 0 && fseek(f, 0, SEEK_SET) == 0) {
+        data = malloc((size_t)size + 1);
+        if (data != NULL && fread(data, 1, (size_t)size, f) != (size_t)size) {
+            free(data);
+            data = NULL;
+        }
+        *len = (size_t)size;
+    }
+    fclose(f);
+    return data;
+}
+
+/* ------------------------------------------------------------------------------------------ */
+/* Tests                                                                                       */
+/* ------------------------------------------------------------------------------------------ */
+
+static void test_version(void)
+{
+    char composed[64];
+    section("version and ABI");
+    CHECK(topoloc_version() != NULL);
+    CHECK(strcmp(topoloc_version(), TOPOLOC_VERSION_STRING) == 0);
+    snprintf(composed, sizeof composed, "%d.%d.%d", TOPOLOC_VERSION_MAJOR, TOPOLOC_VERSION_MINOR,
+             TOPOLOC_VERSION_PATCH);
+    CHECK(strcmp(composed, TOPOLOC_VERSION_STRING) == 0);
+    CHECK(topoloc_version() == topoloc_version()); /* static string */
+    CHECK(topoloc_abi_version() == TOPOLOC_ABI_VERSION);
+    CHECK(TOPOLOC_OK == 0);
+}
+
+static void test_status_str(void)
+{
+    static const uint32_t known[] = {
+        TOPOLOC_OK,
+        TOPOLOC_ERR_NULL_ARGUMENT,
+        TOPOLOC_ERR_INVALID_ARGUMENT,
+        TOPOLOC_ERR_BUFFER_TOO_SMALL,
+        TOPOLOC_ERR_STRUCT_SIZE,
+        TOPOLOC_ERR_INVALID_UTF8,
+        TOPOLOC_ERR_IO,
+        TOPOLOC_ERR_NOT_A_MAP,
+        TOPOLOC_ERR_TRUNCATED,
+        TOPOLOC_ERR_CORRUPT,
+        TOPOLOC_ERR_UNSUPPORTED_VERSION,
+        TOPOLOC_ERR_DESCRIPTOR_MISMATCH,
+        TOPOLOC_ERR_EMPTY_MAP,
+        TOPOLOC_ERR_INVALID_MAP,
+        TOPOLOC_ERR_UNKNOWN_PLACE,
+        TOPOLOC_ERR_UNKNOWN_VIEW,
+        TOPOLOC_ERR_DIMENSION_MISMATCH,
+        TOPOLOC_ERR_NON_FINITE,
+        TOPOLOC_ERR_ZERO_DESCRIPTOR,
+        TOPOLOC_ERR_TIMESTAMP,
+        TOPOLOC_ERR_INVALID_OPTION,
+        TOPOLOC_ERR_PANIC,
+    };
+    static const uint32_t unknown[] = {6u, 99u, 110u, 199u, 205u, 899u, 901u, 65536u, 0xFFFFFFFFu};
+    const size_t n_known = sizeof known / sizeof known[0];
+    size_t i, j;
+    section("topoloc_status_str");
+    /* Values are part of the ABI: they never change. */
+    CHECK(TOPOLOC_ERR_NULL_ARGUMENT == 1 && TOPOLOC_ERR_IO == 100 && TOPOLOC_ERR_CORRUPT == 103 &&
+          TOPOLOC_ERR_DIMENSION_MISMATCH == 200 && TOPOLOC_ERR_PANIC == 900);
+    for (i = 0; i < n_known; i++) {
+        const char *s = topoloc_status_str(known[i]);
+        CHECK(s != NULL && s[0] != '\0');
+        CHECK(s != NULL && strcmp(s, "unknown status code") != 0);
+        for (j = 0; j < i; j++) {
+            CHECK(s != NULL && strcmp(s, topoloc_status_str(known[j])) != 0);
+        }
+    }
+    CHECK(strcmp(topoloc_status_str(TOPOLOC_OK), "ok") == 0);
+    CHECK(strcmp(topoloc_status_str(TOPOLOC_ERR_CORRUPT), "corrupt map file") == 0);
+    for (i = 0; i < sizeof unknown / sizeof unknown[0]; i++) {
+        const char *s = topoloc_status_str(unknown[i]);
+        CHECK(s != NULL && strcmp(s, "unknown status code") == 0);
+    }
+}
+
+/* Reads every accessor of the test world's map and compares with what was built. */
+static void check_world_accessors(const topoloc_map *map)
+{
+    size_t count = 0, needed = 0;
+    uint32_t dim = 0, p, v, e;
+    char text[128];
+    size_t n_neighbours[PLACES] = {0};
+
+    CHECK_OK(topoloc_map_place_count(map, &count));
+    CHECK(count == PLACES);
+    CHECK_OK(topoloc_map_view_count(map, &count));
+    CHECK(count == VIEWS);
+    CHECK_OK(topoloc_map_edge_count(map, &count));
+    CHECK(count == EDGES);
+    CHECK_OK(topoloc_map_descriptor_dim(map, &dim));
+    CHECK(dim == DIM);
+
+    memset(text, 'x', sizeof text);
+    CHECK_OK(topoloc_map_descriptor_kind(map, text, sizeof text, &needed));
+    CHECK(strcmp(text, KIND) == 0);
+    CHECK(needed == strlen(KIND) + 1);
+    CHECK_OK(topoloc_map_descriptor_kind(map, text, strlen(KIND) + 1, NULL)); /* exact fit */
+    CHECK(strcmp(text, KIND) == 0);
+    CHECK_OK(topoloc_map_descriptor_model(map, text, sizeof text, &needed));
+    CHECK(strcmp(text, MODEL) == 0);
+    CHECK(needed == strlen(MODEL) + 1);
+
+    for (e = 0; e < EDGES; e++) {
+        n_neighbours[g_edges[e][0]]++;
+        n_neighbours[g_edges[e][1]]++;
+    }
+    for (p = 0; p < PLACES; p++) {
+        uint32_t ids[16];
+        double xyz[3] = {-1.0, -1.0, -1.0};
+        bool has_position = false;
+        size_t i;
+        count = 999;
+        CHECK_OK(topoloc_map_neighbours(map, p, ids, 16, &count));
+        CHECK(count == n_neighbours[p]);
+        for (e = 0; e < EDGES; e++) {
+            if (g_edges[e][0] == p) {
+                CHECK(contains_u32(ids, count, g_edges[e][1]));
+            } else if (g_edges[e][1] == p) {
+                CHECK(contains_u32(ids, count, g_edges[e][0]));
+            }
+        }
+        count = 999;
+        CHECK_OK(topoloc_map_place_views(map, p, ids, 16, &count));
+        CHECK(count == VIEWS_PER_PLACE);
+        for (i = 0; i < VIEWS_PER_PLACE; i++) {
+            CHECK(contains_u32(ids, count, p * VIEWS_PER_PLACE + (uint32_t)i));
+        }
+        CHECK_OK(topoloc_map_place_views(map, p, ids, 16, NULL)); /* count is optional */
+        CHECK_OK(topoloc_map_place_position(map, p, xyz, &has_position));
+        CHECK(has_position);
+        CHECK(xyz[0] == g_place_pos[p][0] && xyz[1] == g_place_pos[p][1] &&
+              xyz[2] == g_place_pos[p][2]);
+    }
+
+    for (e = 0; e < EDGES; e++) {
+        uint32_t a = 99, b = 99;
+        float w = -1.0f;
+        CHECK_OK(topoloc_map_edge(map, e, &a, &b, &w));
+        CHECK(a == g_edges[e][0] && b == g_edges[e][1]);
+        CHECK(a < b);
+        CHECK(w == g_edge_weight[e]);
+    }
+
+    for (v = 0; v < VIEWS; v++) {
+        topoloc_view_info info;
+        float desc[DIM];
+        double n = norm_of(g_view_desc[v], DIM);
+        uint32_t d;
+        int k;
+        memset(&info, 0xAB, sizeof info);
+        CHECK_OK(topoloc_view_info_default(&info));
+        CHECK_OK(topoloc_map_view_info(map, v, &info));
+        CHECK(info.struct_size == sizeof info);
+        CHECK(info.place == v / VIEWS_PER_PLACE);
+        if (v == BARE_VIEW) {
+            CHECK(!info.has_keyframe_id);
+            CHECK(!info.has_pose);
+            for (k = 0; k < 16; k++) {
+                CHECK(info.world_T_camera[k] == ((k % 5 == 0) ? 1.0 : 0.0)); /* identity */
+            }
+        } else {
+            CHECK(info.has_keyframe_id);
+            CHECK(info.keyframe_id == 1000u + v);
+            CHECK(info.has_pose);
+            for (k = 0; k < 16; k++) {
+                CHECK_NEAR(info.world_T_camera[k], g_view_pose[v][k], 1e-9);
+            }
+        }
+
+        memset(text, 'x', sizeof text);
+        needed = 0;
+        CHECK_OK(topoloc_map_view_image(map, v, text, sizeof text, &needed));
+        if (v == BARE_VIEW) {
+            CHECK(text[0] == '\0');
+            CHECK(needed == 1);
+        } else {
+            CHECK(strcmp(text, g_view_image[v]) == 0);
+            CHECK(needed == strlen(g_view_image[v]) + 1);
+        }
+
+        CHECK_OK(topoloc_map_view_descriptor(map, v, desc, DIM));
+        for (d = 0; d < DIM; d++) {
+            CHECK_NEAR((double)desc[d], (double)g_view_desc[v][d] / n, 1e-6);
+        }
+        CHECK_NEAR(norm_of(desc, DIM), 1.0, 1e-5);
+        CHECK_OK(topoloc_map_view_descriptor(map, v, desc, DIM + 5)); /* larger buffer is fine */
+    }
+}
+
+/* True when the candidate list is well formed: sorted by probability, the first is the result. */
+static bool candidates_consistent(const topoloc_result *r)
+{
+    size_t i;
+    if (r->candidates_len == 0) {
+        return true;
+    }
+    if (r->candidates[0].place != r->place || r->candidates[0].view != r->view ||
+        r->candidates[0].probability != r->confidence ||
+        r->candidates[0].similarity != r->similarity) {
+        return false;
+    }
+    for (i = 0; i < r->candidates_len; i++) {
+        const topoloc_candidate *c = &r->candidates[i];
+        if (!(c->probability >= 0.0f && c->probability <= 1.0f) || c->place >= PLACES ||
+            c->view >= VIEWS || c->view / VIEWS_PER_PLACE != c->place) {
+            return false;
+        }
+        if (i > 0 && c->probability > r->candidates[i - 1].probability) {
+            return false;
+        }
+    }
+    return true;
+}
+
+static bool candidates_distinct(const topoloc_result *r)
+{
+    size_t i, j;
+    for (i = 0; i < r->candidates_len; i++) {
+        for (j = 0; j < i; j++) {
+            if (r->candidates[i].place == r->candidates[j].place) {
+                return false;
+            }
+        }
+    }
+    return true;
+}
+
+static void test_full_flow(void)
+{
+    topoloc_map *built = NULL, *loaded = NULL, *from_memory = NULL;
+    topoloc_localizer *loc = NULL;
+    topoloc_localizer_options options;
+    topoloc_frame frame;
+    topoloc_result result;
+    topoloc_candidate candidates[8];
+    char path[4200];
+    unsigned char *bytes;
+    size_t len = 0, count = 0;
+    float desc[DIM];
+    double odometry[16] = {1, 0, 0, 2, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1};
+    double t = 100.0;
+    uint64_t expected_index = 0;
+    uint32_t k, rep;
+
+    section("full flow: builder -> build -> save -> load -> accessors -> localize -> reset");
+    built = build_world_map();
+    CHECK(built != NULL);
+    if (built == NULL) {
+        return;
+    }
+    check_world_accessors(built);
+
+    tmp_path(path, sizeof path, "world.topoloc");
+    CHECK_OK(topoloc_map_save(built, path));
+    CHECK_OK(topoloc_map_save(built, path)); /* replacing an existing file */
+    topoloc_map_free(built);
+
+    CHECK_OK(topoloc_map_load(path, NULL, &loaded));
+    if (loaded == NULL) {
+        return;
+    }
+    check_world_accessors(loaded);
+
+    bytes = read_file(path, &len);
+    CHECK(bytes != NULL && len > 0);
+    if (bytes != NULL) {
+        CHECK_OK(topoloc_map_load_from_memory(bytes, len, NULL, &from_memory));
+        memset(bytes, 0, len); /* the map copied what it needs */
+        free(bytes);
+        if (from_memory != NULL) {
+            check_world_accessors(from_memory);
+        }
+        topoloc_map_free(from_memory);
+    }
+
+    CHECK_OK(topoloc_localizer_options_default(&options));
+    CHECK(options.struct_size == sizeof options);
+    CHECK(options.mode == TOPOLOC_MODE_FILTER);
+    CHECK(options.top_k == 5);
+    CHECK(options.expected_descriptor_kind == NULL && options.expected_descriptor_model == NULL);
+    CHECK_OK(topoloc_localizer_new(loaded, &options, &loc));
+    /* The localizer keeps its own reference: the caller's handle may go now. */
+    topoloc_map_free(loaded);
+    if (loc == NULL) {
+        return;
+    }
+
+    CHECK_OK(topoloc_frame_default(&frame));
+    CHECK(frame.struct_size == sizeof frame);
+    CHECK(frame.descriptor == NULL && frame.descriptor_len == 0 && frame.odometry == NULL);
+    CHECK_OK(topoloc_result_default(&result));
+    CHECK(result.struct_size == sizeof result);
+    CHECK(result.candidates == NULL && result.candidates_capacity == 0);
+    result.candidates = candidates;
+    result.candidates_capacity = sizeof candidates / sizeof candidates[0];
+
+    /* Walk along the line of places and back over the loop edge to place 0. */
+    for (k = 0; k <= PLACES; k++) {
+        uint32_t place = k % PLACES;
+        for (rep = 0; rep < 3; rep++) {
+            uint32_t source = place * VIEWS_PER_PLACE + (rep + k) % VIEWS_PER_PLACE;
+            noisy_copy(desc, source, 0.02f);
+            frame.timestamp = t;
+            t += 0.1;
+            frame.descriptor = desc;
+            frame.descriptor_len = DIM;
+            frame.odometry = (rep == 0 && k > 0) ? odometry : NULL;
+            CHECK_OK(topoloc_localizer_process(loc, &frame, &result));
+            CHECK(result.struct_size == sizeof result);
+            CHECK(result.frame_index == expected_index);
+            expected_index++;
+            CHECK(result.place == place);
+            CHECK(result.view == source);
+            CHECK(result.similarity > 0.99f && result.similarity <= 1.0001f);
+            CHECK(result.confidence > 0.5f && result.confidence <= 1.0f);
+            CHECK(!result.off_map);
+            CHECK(result.off_map_probability >= 0.0f && result.off_map_probability < 0.5f);
+            CHECK(result.candidates == candidates);
+            CHECK(result.candidates_capacity == 8);
+            CHECK(result.candidates_len == 5); /* min(top_k = 5, places = 6, capacity = 8) */
+            CHECK(candidates_consistent(&result));
+            CHECK(candidates_distinct(&result));
+        }
+    }
+
+    /* Reset: history forgotten, the frame index restarts and earlier timestamps are fine. */
+    CHECK_OK(topoloc_localizer_reset(loc));
+    noisy_copy(desc, 3 * VIEWS_PER_PLACE + 1, 0.02f);
+    frame.timestamp = 0.0;
+    frame.odometry = NULL;
+    CHECK_OK(topoloc_localizer_process(loc, &frame, &result));
+    CHECK(result.frame_index == 0);
+    CHECK(result.place == 3);
+    CHECK(candidates_consistent(&result));
+    frame.timestamp = 0.0; /* equal timestamps are allowed */
+    CHECK_OK(topoloc_localizer_process(loc, &frame, &result));
+    CHECK(result.frame_index == 1);
+    CHECK(result.place == 3);
+
+    /* Smaller candidate buffers: min(top_k, capacity). */
+    frame.timestamp = 1.0;
+    result.candidates_capacity = 2;
+    CHECK_OK(topoloc_localizer_process(loc, &frame, &result));
+    CHECK(result.candidates_len == 2);
+    CHECK(candidates_consistent(&result));
+    result.candidates = NULL;
+    result.candidates_capacity = 0;
+    CHECK_OK(topoloc_localizer_process(loc, &frame, &result));
+    CHECK(result.candidates_len == 0);
+    CHECK(result.place == 3);
+    CHECK(result.frame_index == 3);
+    topoloc_localizer_free(loc);
+
+    /* top_k above the number of places: every place is a candidate. */
+    CHECK_OK(topoloc_map_load(path, NULL, &loaded));
+    options.top_k = 10;
+    loc = NULL;
+    CHECK_OK(topoloc_localizer_new(loaded, &options, &loc));
+    if (loc != NULL) {
+        result.candidates = candidates;
+        result.candidates_capacity = 8;
+        CHECK_OK(topoloc_localizer_process(loc, &frame, &result));
+        CHECK(result.candidates_len == PLACES);
+        CHECK(candidates_consistent(&result));
+        CHECK(candidates_distinct(&result));
+        {
+            float sum = 0.0f;
+            size_t i;
+            for (i = 0; i < result.candidates_len; i++) {
+                sum += result.candidates[i].probability;
+            }
+            /* Every place is listed: the place probabilities and off-map add up to 1. */
+            CHECK_NEAR(sum + result.off_map_probability, 1.0f, 1e-4f);
+        }
+    }
+    topoloc_localizer_free(loc);
+
+    /* Localizer with expected descriptor that matches (and "" meaning any). */
+    CHECK_OK(topoloc_localizer_options_default(&options));
+    options.expected_descriptor_kind = KIND;
+    options.expected_descriptor_model = "";
+    loc = NULL;
+    CHECK_OK(topoloc_localizer_new(loaded, &options, &loc));
+    topoloc_localizer_free(loc);
+    count = 0;
+    CHECK_OK(topoloc_map_place_count(loaded, &count)); /* still valid */
+    CHECK(count == PLACES);
+    topoloc_map_free(loaded);
+    remove(path);
+}
+
+static void test_single_frame(void)
+{
+    topoloc_map *map = build_world_map();
+    topoloc_localizer *single = NULL, *fresh = NULL;
+    topoloc_localizer_options options;
+    topoloc_frame frame;
+    topoloc_result r1, r2;
+    topoloc_candidate c1[5], c2[5];
+    float desc[DIM];
+    uint32_t places[] = {4, 0, 2, 5, 1}; /* jumps between non-neighbours */
+    size_t i;
+
+    section("single-frame mode");
+    if (map == NULL) {
+        return;
+    }
+    CHECK_OK(topoloc_localizer_options_default(&options));
+    options.mode = TOPOLOC_MODE_SINGLE_FRAME;
+    CHECK_OK(topoloc_localizer_new(map, &options, &single));
+    if (single == NULL) {
+        topoloc_map_free(map);
+        return;
+    }
+    CHECK_OK(topoloc_frame_default(&frame));
+    CHECK_OK(topoloc_result_default(&r1));
+    CHECK_OK(topoloc_result_default(&r2));
+    r1.candidates = c1;
+    r1.candidates_capacity = 5;
+    r2.candidates = c2;
+    r2.candidates_capacity = 5;
+    for (i = 0; i < sizeof places / sizeof places[0]; i++) {
+        uint32_t source = places[i] * VIEWS_PER_PLACE + (uint32_t)i % VIEWS_PER_PLACE;
+        size_t j;
+        noisy_copy(desc, source, 0.02f);
+        frame.descriptor = desc;
+        frame.descriptor_len = DIM;
+        frame.timestamp = 10.0 - (double)i; /* decreasing: allowed in single-frame mode */
+        CHECK_OK(topoloc_localizer_process(single, &frame, &r1));
+        CHECK(r1.frame_index == i);
+        CHECK(r1.place == places[i]);
+        CHECK(r1.view == source);
+        CHECK(candidates_consistent(&r1));
+        /* No history: the same answer as a localizer that sees only this frame. */
+        CHECK_OK(topoloc_localizer_new(map, &options, &fresh));
+        if (fresh != NULL) {
+            CHECK_OK(topoloc_localizer_process(fresh, &frame, &r2));
+            CHECK(r2.frame_index == 0);
+            CHECK(r2.place == r1.place && r2.view == r1.view);
+            CHECK(r2.confidence == r1.confidence && r2.similarity == r1.similarity);
+            CHECK(r2.off_map_probability == r1.off_map_probability);
+            CHECK(r2.candidates_len == r1.candidates_len);
+            for (j = 0; j < r1.candidates_len && j < r2.candidates_len; j++) {
+                CHECK(c1[j].place == c2[j].place && c1[j].view == c2[j].view &&
+                      c1[j].probability == c2[j].probability);
+            }
+        }
+        topoloc_localizer_free(fresh);
+        fresh = NULL;
+    }
+    topoloc_localizer_free(single);
+    topoloc_map_free(map);
+}
+
+static void test_from_keyframes(void)
+{
+    /* With poses: 5 spots 3 m apart, visited out and back; the way back sees new appearances. */
+    enum { SPOTS = 5, KEYFRAMES = 2 * SPOTS };
+    static float desc[KEYFRAMES][DIM];
+    static double poses[KEYFRAMES][16];
+    topoloc_keyframe keyframes[KEYFRAMES];
+    topoloc_keyframe_options options;
+    topoloc_map *map = NULL;
+    size_t count = 0, i;
+    uint32_t d, v;
+    char kind[32];
+
+    section("map from keyframes");
+    for (i = 0; i < KEYFRAMES; i++) {
+        size_t spot = i < SPOTS ? i : KEYFRAMES - 1 - i;
+        double *m = poses[i];
+        for (d = 0; d < DIM; d++) {
+            desc[i][d] = rng_normalish();
+        }
+        memset(m, 0, sizeof poses[i]);
+        m[0] = m[5] = m[10] = m[15] = 1.0;
+        m[3] = 3.0 * (double)spot + (i < SPOTS ? 0.0 : 0.1);
+        keyframes[i].id = 500u + i;
+        keyframes[i].descriptor = desc[i];
+        keyframes[i].descriptor_len = DIM;
+        keyframes[i].world_T_camera = poses[i];
+    }
+    CHECK_OK(topoloc_keyframe_options_default(&options));
+    CHECK(options.struct_size == sizeof options);
+    CHECK(options.place_spacing_m == 2.0);
+    CHECK(options.max_views_per_place == 4);
+    options.neighbour_radius_m = 2.5; /* below the 3 m spot spacing: only consecutive edges */
+    CHECK_OK(topoloc_map_from_keyframes("kf-desc", NULL, DIM, keyframes, KEYFRAMES, &options, &map));
+    if (map != NULL) {
+        CHECK_OK(topoloc_map_place_count(map, &count));
+        CHECK(count == SPOTS);
+        CHECK_OK(topoloc_map_view_count(map, &count));
+        CHECK(count == KEYFRAMES);
+        CHECK_OK(topoloc_map_edge_count(map, &count));
+        CHECK(count == SPOTS - 1);
+        CHECK_OK(topoloc_map_descriptor_kind(map, kind, sizeof kind, NULL));
+        CHECK(strcmp(kind, "kf-desc") == 0);
+        CHECK_OK(topoloc_map_descriptor_model(map, kind, sizeof kind, &count));
+        CHECK(strcmp(kind, "") == 0 && count == 1);
+        for (v = 0; v < KEYFRAMES; v++) {
+            topoloc_view_info info;
+            double xyz[3];
+            bool has_position = false;
+            CHECK_OK(topoloc_view_info_default(&info));
+            CHECK_OK(topoloc_map_view_info(map, v, &info));
+            CHECK(info.has_keyframe_id && info.keyframe_id >= 500u && info.keyframe_id < 510u);
+            CHECK(info.has_pose);
+            /* The view's keyframe and its place sit at the same spot. */
+            CHECK_OK(topoloc_map_place_position(map, info.place, xyz, &has_position));
+            CHECK(has_position);
+            CHECK_NEAR(xyz[0], poses[info.keyframe_id - 500u][3], 0.1 + 1e-9);
+        }
+        /* A keyframe's own descriptor localizes to its place. */
+        {
+            topoloc_localizer *loc = NULL;
+            topoloc_frame frame;
+            topoloc_result result;
+            topoloc_view_info info;
+            CHECK_OK(topoloc_localizer_new(map, NULL, &loc));
+            CHECK_OK(topoloc_frame_default(&frame));
+            CHECK_OK(topoloc_result_default(&result));
+            frame.descriptor = desc[7];
+            frame.descriptor_len = DIM;
+            if (loc != NULL) {
+                CHECK_OK(topoloc_localizer_process(loc, &frame, &result));
+                CHECK_OK(topoloc_view_info_default(&info));
+                CHECK_OK(topoloc_map_view_info(map, result.view, &info));
+                CHECK(info.keyframe_id == 507u);
+                CHECK(result.candidates_len == 0); /* no buffer given */
+            }
+            topoloc_localizer_free(loc);
+        }
+        topoloc_map_free(map);
+        map = NULL;
+    }
+
+    /* Without poses: a new place whenever the appearance changes; duplicates are dropped. */
+    {
+        topoloc_keyframe plain[6];
+        double xyz[3];
+        bool has_position = true;
+        for (i = 0; i < 6; i++) {
+            plain[i].id = i;
+            plain[i].descriptor = desc[i / 2]; /* pairs of identical keyframes */
+            plain[i].descriptor_len = DIM;
+            plain[i].world_T_camera = NULL;
+        }
+        CHECK_OK(topoloc_map_from_keyframes("kf-desc", "m", DIM, plain, 6, NULL, &map));
+        if (map != NULL) {
+            CHECK_OK(topoloc_map_place_count(map, &count));
+            CHECK(count == 3);
+            CHECK_OK(topoloc_map_view_count(map, &count));
+            CHECK(count == 3);
+            CHECK_OK(topoloc_map_edge_count(map, &count));
+            CHECK(count == 2);
+            CHECK_OK(topoloc_map_place_position(map, 0, xyz, &has_position));
+            CHECK(!has_position);
+            CHECK(xyz[0] == 0.0 && xyz[1] == 0.0 && xyz[2] == 0.0);
+        }
+        topoloc_map_free(map);
+        map = NULL;
+
+        /* Errors. */
+        CHECK_STATUS(topoloc_map_from_keyframes("k", NULL, DIM, NULL, 0, NULL, &map),
+                     TOPOLOC_ERR_EMPTY_MAP);
+        CHECK_HAS_MESSAGE();
+        plain[3].world_T_camera = poses[0]; /* a mix of keyframes with and without poses */
+        CHECK_STATUS(topoloc_map_from_keyframes("k", NULL, DIM, plain, 6, NULL, &map),
+                     TOPOLOC_ERR_INVALID_ARGUMENT);
+        CHECK_HAS_MESSAGE();
+        plain[3].world_T_camera = NULL;
+        plain[2].descriptor_len = DIM - 1;
+        CHECK_STATUS(topoloc_map_from_keyframes("k", NULL, DIM, plain, 6, NULL, &map),
+                     TOPOLOC_ERR_INVALID_ARGUMENT);
+        CHECK(strstr(last_error(), "keyframe 2") != NULL);
+        plain[2].descriptor_len = DIM;
+        CHECK_OK(topoloc_keyframe_options_default(&options));
+        options.max_views_per_place = 0;
+        CHECK_STATUS(topoloc_map_from_keyframes("k", NULL, DIM, plain, 6, &options, &map),
+                     TOPOLOC_ERR_INVALID_ARGUMENT);
+        CHECK(strstr(last_error(), "max_views_per_place") != NULL);
+        options.struct_size = 0;
+        CHECK_STATUS(topoloc_map_from_keyframes("k", NULL, DIM, plain, 6, &options, &map),
+                     TOPOLOC_ERR_STRUCT_SIZE);
+        CHECK_HAS_MESSAGE();
+        CHECK(map == NULL); /* never written on error */
+    }
+}
+
+static void test_builder_errors(void)
+{
+    topoloc_map_builder *b = NULL;
+    topoloc_map *map = NULL;
+    topoloc_view_attributes attributes;
+    uint32_t place = 77, view = 77;
+    float desc[DIM];
+    double bad_pose[16] = {2, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1}; /* a scale */
+    double nan_position[3];
+    size_t count = 0;
+    uint32_t d;
+
+    section("builder errors");
+    memcpy(desc, g_view_desc[0], sizeof desc);
+    nan_position[0] = 0.0;
+    nan_position[1] = make_nan();
+    nan_position[2] = 0.0;
+
+    CHECK_STATUS(topoloc_map_builder_new("", NULL, DIM, &b), TOPOLOC_ERR_INVALID_ARGUMENT);
+    CHECK_HAS_MESSAGE();
+    CHECK_STATUS(topoloc_map_builder_new(KIND, NULL, 0, &b), TOPOLOC_ERR_INVALID_ARGUMENT);
+    CHECK_HAS_MESSAGE();
+    CHECK_STATUS(topoloc_map_builder_new("\xff\xfe", NULL, DIM, &b), TOPOLOC_ERR_INVALID_UTF8);
+    CHECK_HAS_MESSAGE();
+    CHECK_STATUS(topoloc_map_builder_new(KIND, "\xc3", DIM, &b), TOPOLOC_ERR_INVALID_UTF8);
+    CHECK(b == NULL);
+
+    CHECK_OK(topoloc_map_builder_new(KIND, NULL, DIM, &b));
+    if (b == NULL) {
+        return;
+    }
+    CHECK_STATUS(topoloc_map_builder_build(b, &map), TOPOLOC_ERR_EMPTY_MAP);
+    CHECK_HAS_MESSAGE();
+    CHECK_OK(topoloc_map_builder_add_place(b, NULL, &place));
+    CHECK(place == 0);
+    CHECK_STATUS(topoloc_map_builder_build(b, &map), TOPOLOC_ERR_INVALID_MAP); /* no views */
+    CHECK_HAS_MESSAGE();
+    CHECK(map == NULL);
+
+    CHECK_STATUS(topoloc_map_builder_add_view(b, 1, desc, DIM, NULL, &view),
+                 TOPOLOC_ERR_UNKNOWN_PLACE);
+    CHECK_HAS_MESSAGE();
+    CHECK_STATUS(topoloc_map_builder_add_view(b, 0, desc, DIM - 1, NULL, &view),
+                 TOPOLOC_ERR_DIMENSION_MISMATCH);
+    CHECK_HAS_MESSAGE();
+    CHECK_STATUS(topoloc_map_builder_add_view(b, 0, desc, DIM + 1, NULL, &view),
+                 TOPOLOC_ERR_DIMENSION_MISMATCH);
+    desc[5] = (float)nan_position[1];
+    CHECK_STATUS(topoloc_map_builder_add_view(b, 0, desc, DIM, NULL, &view), TOPOLOC_ERR_NON_FINITE);
+    CHECK_HAS_MESSAGE();
+    desc[5] = make_inf();
+    CHECK_STATUS(topoloc_map_builder_add_view(b, 0, desc, DIM, NULL, &view), TOPOLOC_ERR_NON_FINITE);
+    for (d = 0; d < DIM; d++) {
+        desc[d] = 0.0f;
+    }
+    CHECK_STATUS(topoloc_map_builder_add_view(b, 0, desc, DIM, NULL, &view),
+                 TOPOLOC_ERR_ZERO_DESCRIPTOR);
+    CHECK_HAS_MESSAGE();
+    memcpy(desc, g_view_desc[0], sizeof desc);
+    CHECK_OK(topoloc_view_attributes_default(&attributes));
+    attributes.world_T_camera = bad_pose;
+    CHECK_STATUS(topoloc_map_builder_add_view(b, 0, desc, DIM, &attributes, &view),
+                 TOPOLOC_ERR_INVALID_ARGUMENT);
+    CHECK_HAS_MESSAGE();
+    bad_pose[0] = 1.0;
+    bad_pose[15] = 2.0; /* last row not 0 0 0 1 */
+    CHECK_STATUS(topoloc_map_builder_add_view(b, 0, desc, DIM, &attributes, &view),
+                 TOPOLOC_ERR_INVALID_ARGUMENT);
+    bad_pose[15] = 1.0;
+    bad_pose[3] = nan_position[1];
+    CHECK_STATUS(topoloc_map_builder_add_view(b, 0, desc, DIM, &attributes, &view),
+                 TOPOLOC_ERR_NON_FINITE);
+    attributes.world_T_camera = NULL;
+    attributes.image = "\xff";
+    CHECK_STATUS(topoloc_map_builder_add_view(b, 0, desc, DIM, &attributes, &view),
+                 TOPOLOC_ERR_INVALID_UTF8);
+    attributes.image = NULL;
+    attributes.struct_size = 0;
+    CHECK_STATUS(topoloc_map_builder_add_view(b, 0, desc, DIM, &attributes, &view),
+                 TOPOLOC_ERR_STRUCT_SIZE);
+    CHECK_HAS_MESSAGE();
+    CHECK(view == 77); /* never written on error */
+
+    /* After all those errors the builder is unchanged: the next view is view 0. */
+    CHECK_OK(topoloc_view_attributes_default(&attributes));
+    CHECK_OK(topoloc_map_builder_add_view(b, 0, desc, DIM, &attributes, &view));
+    CHECK(view == 0);
+
+    /* A NaN position is refused as a non-finite value, like NaN poses and descriptors. */
+    CHECK_STATUS(topoloc_map_builder_add_place(b, nan_position, &place), TOPOLOC_ERR_NON_FINITE);
+    CHECK_HAS_MESSAGE();
+    CHECK_OK(topoloc_map_builder_add_place(b, NULL, &place));
+    CHECK(place == 1);
+    CHECK_OK(topoloc_map_builder_add_view(b, 1, g_view_desc[5], DIM, NULL, &view));
+    CHECK(view == 1);
+
+    CHECK_STATUS(topoloc_map_builder_add_edge(b, 0, 0, 1.0f), TOPOLOC_ERR_INVALID_ARGUMENT);
+    CHECK_HAS_MESSAGE();
+    CHECK_STATUS(topoloc_map_builder_add_edge(b, 0, 2, 1.0f), TOPOLOC_ERR_UNKNOWN_PLACE);
+    CHECK_HAS_MESSAGE();
+    CHECK_STATUS(topoloc_map_builder_add_edge(b, 9, 0, 1.0f), TOPOLOC_ERR_UNKNOWN_PLACE);
+    CHECK_STATUS(topoloc_map_builder_add_edge(b, 0, 1, 0.0f), TOPOLOC_ERR_INVALID_ARGUMENT);
+    CHECK_STATUS(topoloc_map_builder_add_edge(b, 0, 1, -1.0f), TOPOLOC_ERR_INVALID_ARGUMENT);
+    CHECK_STATUS(topoloc_map_builder_add_edge(b, 0, 1, (float)nan_position[1]),
+                 TOPOLOC_ERR_NON_FINITE);
+    CHECK_OK(topoloc_map_builder_add_edge(b, 1, 0, 0.5f));
+    CHECK_STATUS(topoloc_map_builder_add_edge(b, 0, 1, 0.5f), TOPOLOC_ERR_INVALID_ARGUMENT);
+    CHECK(strstr(last_error(), "exists") != NULL);
+
+    /* The builder stays usable after build: two maps from it. */
+    CHECK_OK(topoloc_map_builder_build(b, &map));
+    if (map != NULL) {
+        topoloc_map *second = NULL;
+        CHECK_OK(topoloc_map_place_count(map, &count));
+        CHECK(count == 2);
+        CHECK_OK(topoloc_map_edge_count(map, &count));
+        CHECK(count == 1);
+        CHECK_OK(topoloc_map_builder_add_place(b, NULL, &place));
+        CHECK_OK(topoloc_map_builder_add_view(b, 2, g_view_desc[9], DIM, NULL, &view));
+        CHECK_OK(topoloc_map_builder_build(b, &second));
+        if (second != NULL) {
+            CHECK_OK(topoloc_map_place_count(second, &count));
+            CHECK(count == 3);
+        }
+        CHECK_OK(topoloc_map_place_count(map, &count));
+        CHECK(count == 2); /* the first map is unaffected */
+        topoloc_map_free(second);
+    }
+    topoloc_map_free(map);
+    topoloc_map_builder_free(b);
+}
+
+static void test_null_arguments(const topoloc_map *map)
+{
+    topoloc_map_builder *b = NULL;
+    topoloc_map *m = NULL;
+    topoloc_localizer *loc = NULL;
+    topoloc_frame frame;
+    topoloc_result result;
+    topoloc_view_info info;
+    topoloc_keyframe keyframe;
+    char buf[64];
+    float desc[DIM];
+    uint32_t u = 0, u2 = 0, ids[8];
+    size_t n = 0;
+    float w = 0.0f;
+    double xyz[3];
+    bool has = false;
+    unsigned char bytes[16] = {0};
+    topoloc_map_builder *const sentinel_builder = (topoloc_map_builder *)&u;
+
+    section("NULL arguments");
+    memcpy(desc, g_view_desc[0], sizeof desc);
+
+    /* _free(NULL) is a no-op. */
+    topoloc_map_builder_free(NULL);
+    topoloc_map_free(NULL);
+    topoloc_localizer_free(NULL);
+    CHECK(true);
+
+    /* The _init functions behind the _default(p) macros refuse NULL. */
+    CHECK_NULL(topoloc_view_attributes_init(NULL, sizeof(topoloc_view_attributes)), "NULL");
+    CHECK_NULL(topoloc_keyframe_options_init(NULL, sizeof(topoloc_keyframe_options)), "NULL");
+    CHECK_NULL(topoloc_localizer_options_init(NULL, sizeof(topoloc_localizer_options)), "NULL");
+    CHECK_NULL(topoloc_frame_init(NULL, sizeof(topoloc_frame)), "NULL");
+    CHECK_NULL(topoloc_result_init(NULL, sizeof(topoloc_result)), "NULL");
+    CHECK_NULL(topoloc_map_load_options_init(NULL, sizeof(topoloc_map_load_options)), "NULL");
+    CHECK_NULL(topoloc_view_info_init(NULL, sizeof(topoloc_view_info)), "NULL");
+
+    /* Builder. */
+    b = sentinel_builder;
+    CHECK_NULL(topoloc_map_builder_new(NULL, NULL, DIM, &b), "kind");
+    CHECK(b == sentinel_builder); /* out-parameter untouched */
+    CHECK_NULL(topoloc_map_builder_new(KIND, NULL, DIM, NULL), "out");
+    b = NULL;
+    CHECK_OK(topoloc_map_builder_new(KIND, NULL, DIM, &b)); /* model may be NULL */
+    CHECK_NULL(topoloc_map_builder_add_place(NULL, NULL, &u), "builder");
+    CHECK_NULL(topoloc_map_builder_add_place(b, NULL, NULL), "place_out");
+    CHECK_OK(topoloc_map_builder_add_place(b, NULL, &u)); /* position may be NULL */
+    CHECK_NULL(topoloc_map_builder_add_view(NULL, 0, desc, DIM, NULL, &u), "builder");
+    CHECK_NULL(topoloc_map_builder_add_view(b, 0, NULL, DIM, NULL, &u), "descriptor");
+    CHECK_NULL(topoloc_map_builder_add_view(b, 0, desc, DIM, NULL, NULL), "view_out");
+    CHECK_OK(topoloc_map_builder_add_view(b, 0, desc, DIM, NULL, &u)); /* attributes may be NULL */
+    CHECK_NULL(topoloc_map_builder_add_edge(NULL, 0, 1, 1.0f), "builder");
+    m = (topoloc_map *)&u;
+    CHECK_NULL(topoloc_map_builder_build(NULL, &m), "builder");
+    CHECK(m == (topoloc_map *)&u);
+    CHECK_NULL(topoloc_map_builder_build(b, NULL), "out");
+    topoloc_map_builder_free(b);
+
+    /* Keyframes. */
+    keyframe.id = 1;
+    keyframe.descriptor = desc;
+    keyframe.descriptor_len = DIM;
+    keyframe.world_T_camera = NULL;
+    m = NULL;
+    CHECK_NULL(topoloc_map_from_keyframes(NULL, NULL, DIM, &keyframe, 1, NULL, &m), "kind");
+    CHECK_NULL(topoloc_map_from_keyframes(KIND, NULL, DIM, NULL, 1, NULL, &m), "keyframes");
+    CHECK_NULL(topoloc_map_from_keyframes(KIND, NULL, DIM, &keyframe, 1, NULL, NULL), "out");
+    keyframe.descriptor = NULL;
+    CHECK_NULL(topoloc_map_from_keyframes(KIND, NULL, DIM, &keyframe, 1, NULL, &m),
+               "keyframes[0].descriptor");
+    CHECK(m == NULL);
+
+    /* Loading and saving. */
+    CHECK_NULL(topoloc_map_load(NULL, NULL, &m), "path");
+    CHECK_NULL(topoloc_map_load("/nonexistent/map", NULL, NULL), "out");
+    CHECK_NULL(topoloc_map_load_from_memory(NULL, sizeof bytes, NULL, &m), "data");
+    CHECK_NULL(topoloc_map_load_from_memory(bytes, sizeof bytes, NULL, NULL), "out");
+    CHECK_NULL(topoloc_map_save(NULL, "/tmp/never-written.topoloc"), "map");
+    CHECK_NULL(topoloc_map_save(map, NULL), "path");
+    CHECK(m == NULL);
+
+    /* Accessors. */
+    CHECK_NULL(topoloc_map_place_count(NULL, &n), "map");
+    CHECK_NULL(topoloc_map_place_count(map, NULL), "out");
+    CHECK_NULL(topoloc_map_view_count(NULL, &n), "map");
+    CHECK_NULL(topoloc_map_view_count(map, NULL), "out");
+    CHECK_NULL(topoloc_map_edge_count(NULL, &n), "map");
+    CHECK_NULL(topoloc_map_edge_count(map, NULL), "out");
+    CHECK_NULL(topoloc_map_descriptor_dim(NULL, &u), "map");
+    CHECK_NULL(topoloc_map_descriptor_dim(map, NULL), "out");
+    CHECK_NULL(topoloc_map_descriptor_kind(NULL, buf, sizeof buf, &n), "map");
+    CHECK_NULL(topoloc_map_descriptor_kind(map, NULL, sizeof buf, &n), "buf");
+    CHECK_NULL(topoloc_map_descriptor_model(NULL, buf, sizeof buf, &n), "map");
+    CHECK_NULL(topoloc_map_descriptor_model(map, NULL, sizeof buf, &n), "buf");
+    CHECK_NULL(topoloc_map_neighbours(NULL, 0, ids, 8, &n), "map");
+    CHECK_NULL(topoloc_map_neighbours(map, 0, NULL, 8, &n), "buf");
+    CHECK_NULL(topoloc_map_place_views(NULL, 0, ids, 8, &n), "map");
+    CHECK_NULL(topoloc_map_place_views(map, 0, NULL, 8, &n), "buf");
+    CHECK_NULL(topoloc_map_place_position(NULL, 0, xyz, &has), "map");
+    CHECK_NULL(topoloc_map_place_position(map, 0, NULL, &has), "xyz");
+    CHECK_NULL(topoloc_map_place_position(map, 0, xyz, NULL), "has_position");
+    CHECK_NULL(topoloc_map_edge(NULL, 0, &u, &u2, &w), "map");
+    CHECK_NULL(topoloc_map_edge(map, 0, NULL, &u2, &w), "a");
+    CHECK_NULL(topoloc_map_edge(map, 0, &u, NULL, &w), "b");
+    CHECK_NULL(topoloc_map_edge(map, 0, &u, &u2, NULL), "weight");
+    CHECK_OK(topoloc_view_info_default(&info));
+    CHECK_NULL(topoloc_map_view_info(NULL, 0, &info), "map");
+    CHECK_NULL(topoloc_map_view_info(map, 0, NULL), "out");
+    CHECK_NULL(topoloc_map_view_image(NULL, 0, buf, sizeof buf, &n), "map");
+    CHECK_NULL(topoloc_map_view_image(map, 0, NULL, sizeof buf, &n), "buf");
+    CHECK_NULL(topoloc_map_view_descriptor(NULL, 0, desc, DIM), "map");
+    CHECK_NULL(topoloc_map_view_descriptor(map, 0, NULL, DIM), "buf");
+
+    /* Localizer. */
+    loc = (topoloc_localizer *)&u;
+    CHECK_NULL(topoloc_localizer_new(NULL, NULL, &loc), "map");
+    CHECK(loc == (topoloc_localizer *)&u);
+    CHECK_NULL(topoloc_localizer_new(map, NULL, NULL), "out");
+    loc = NULL;
+    CHECK_OK(topoloc_localizer_new(map, NULL, &loc)); /* options may be NULL */
+    CHECK_NULL(topoloc_localizer_reset(NULL), "localizer");
+    CHECK_OK(topoloc_frame_default(&frame));
+    frame.descriptor = desc;
+    frame.descriptor_len = DIM;
+    CHECK_OK(topoloc_result_default(&result));
+    CHECK_NULL(topoloc_localizer_process(NULL, &frame, &result), "localizer");
+    CHECK_NULL(topoloc_localizer_process(loc, NULL, &result), "frame");
+    CHECK_NULL(topoloc_localizer_process(loc, &frame, NULL), "result");
+    frame.descriptor = NULL;
+    CHECK_NULL(topoloc_localizer_process(loc, &frame, &result), "frame.descriptor");
+    frame.descriptor = desc;
+    result.candidates_capacity = 4; /* capacity without a buffer */
+    CHECK_NULL(topoloc_localizer_process(loc, &frame, &result), "result.candidates");
+    result.candidates_capacity = 0;
+    CHECK_OK(topoloc_localizer_process(loc, &frame, &result));
+    CHECK(result.frame_index == 0); /* none of the failed calls counted as a frame */
+    topoloc_localizer_free(loc);
+
+    /* The last error message: a NULL buffer with room claimed is refused, the message kept. */
+    {
+        char before[512];
+        snprintf(before, sizeof before, "%s", last_error());
+        CHECK(topoloc_last_error_message(NULL, 100, NULL) == TOPOLOC_ERR_NULL_ARGUMENT);
+        CHECK(strcmp(before, last_error()) == 0);
+    }
+}
+
+static void test_buffers_too_small(const topoloc_map *map)
+{
+    char buf[256];
+    char small[4];
+    size_t needed = 0, count = 0, len;
+    uint32_t ids[1] = {4242};
+    float desc[DIM];
+
+    section("buffers too small");
+    /* Last error message. */
+    CHECK_STATUS(topoloc_map_neighbours(map, 999, ids, 1, &count), TOPOLOC_ERR_UNKNOWN_PLACE);
+    needed = 0;
+    CHECK_STATUS(topoloc_last_error_message(NULL, 0, &needed), TOPOLOC_ERR_BUFFER_TOO_SMALL);
+    CHECK(needed > 1);
+    len = needed;
+    memset(buf, 'z', sizeof buf);
+    needed = 0;
+    CHECK_STATUS(topoloc_last_error_message(buf, len - 1, &needed), TOPOLOC_ERR_BUFFER_TOO_SMALL);
+    CHECK(needed == len);
+    CHECK(buf[0] == 'z' && buf[len - 2] == 'z'); /* nothing written */
+    CHECK_STATUS(topoloc_last_error_message(buf, 1, NULL), TOPOLOC_ERR_BUFFER_TOO_SMALL);
+    CHECK(len <= sizeof buf);
+    CHECK_OK(topoloc_last_error_message(buf, len, &needed)); /* exact fit */
+    CHECK(needed == len && strlen(buf) == len - 1);
+    CHECK(strstr(buf, "999") != NULL);
+    CHECK(strcmp(buf, last_error()) == 0); /* reading it does not change it */
+
+    /* Descriptor kind and model. */
+    memset(small, 'z', sizeof small);
+    needed = 0;
+    CHECK_STATUS(topoloc_map_descriptor_kind(map, small, sizeof small, &needed),
+                 TOPOLOC_ERR_BUFFER_TOO_SMALL);
+    CHECK(needed == strlen(KIND) + 1);
+    CHECK(small[0] == 'z' && small[3] == 'z');
+    CHECK_HAS_MESSAGE();
+    needed = 0;
+    CHECK_STATUS(topoloc_map_descriptor_kind(map, NULL, 0, &needed), TOPOLOC_ERR_BUFFER_TOO_SMALL);
+    CHECK(needed == strlen(KIND) + 1);
+    CHECK_STATUS(topoloc_map_descriptor_kind(map, buf, strlen(KIND), NULL),
+                 TOPOLOC_ERR_BUFFER_TOO_SMALL); /* no room for the NUL */
+    needed = 0;
+    CHECK_STATUS(topoloc_map_descriptor_model(map, small, sizeof small, &needed),
+                 TOPOLOC_ERR_BUFFER_TOO_SMALL);
+    CHECK(needed == strlen(MODEL) + 1);
+    needed = 0;
+    CHECK_STATUS(topoloc_map_view_image(map, 0, small, sizeof small, &needed),
+                 TOPOLOC_ERR_BUFFER_TOO_SMALL);
+    CHECK(needed == strlen(g_view_image[0]) + 1);
+
+    /* Neighbours and place views. */
+    count = 0;
+    CHECK_STATUS(topoloc_map_neighbours(map, 2, ids, 1, &count), TOPOLOC_ERR_BUFFER_TOO_SMALL);
+    CHECK(count == 2);
+    CHECK(ids[0] == 4242);
+    CHECK_HAS_MESSAGE();
+    count = 0;
+    CHECK_STATUS(topoloc_map_neighbours(map, 0, NULL, 0, &count), TOPOLOC_ERR_BUFFER_TOO_SMALL);
+    CHECK(count == 2);
+    count = 0;
+    CHECK_STATUS(topoloc_map_place_views(map, 1, ids, 1, &count), TOPOLOC_ERR_BUFFER_TOO_SMALL);
+    CHECK(count == VIEWS_PER_PLACE);
+    CHECK_STATUS(topoloc_map_place_views(map, 1, ids, 1, NULL), TOPOLOC_ERR_BUFFER_TOO_SMALL);
+
+    /* View descriptor. */
+    desc[0] = 42.0f;
+    CHECK_STATUS(topoloc_map_view_descriptor(map, 0, desc, DIM - 1), TOPOLOC_ERR_BUFFER_TOO_SMALL);
+    CHECK(desc[0] == 42.0f);
+    CHECK_HAS_MESSAGE();
+}
+
+static void test_unknown_ids(const topoloc_map *map)
+{
+    uint32_t ids[8], a = 0, b = 0;
+    size_t count = 12345;
+    double xyz[3] = {7.0, 7.0, 7.0};
+    bool has = true;
+    float w = 0.0f, desc[DIM];
+    char buf[64];
+    topoloc_view_info info;
+
+    section("unknown place and view ids");
+    CHECK_STATUS(topoloc_map_neighbours(map, PLACES, ids, 8, &count), TOPOLOC_ERR_UNKNOWN_PLACE);
+    CHECK_HAS_MESSAGE();
+    CHECK_STATUS(topoloc_map_neighbours(map, 0xFFFFFFFFu, ids, 8, &count),
+                 TOPOLOC_ERR_UNKNOWN_PLACE);
+    CHECK_STATUS(topoloc_map_place_views(map, PLACES, ids, 8, &count), TOPOLOC_ERR_UNKNOWN_PLACE);
+    CHECK_STATUS(topoloc_map_place_position(map, PLACES, xyz, &has), TOPOLOC_ERR_UNKNOWN_PLACE);
+    CHECK(xyz[0] == 7.0 && has); /* untouched */
+    CHECK_OK(topoloc_view_info_default(&info));
+    CHECK_STATUS(topoloc_map_view_info(map, VIEWS, &info), TOPOLOC_ERR_UNKNOWN_VIEW);
+    CHECK_HAS_MESSAGE();
+    CHECK_STATUS(topoloc_map_view_image(map, VIEWS, buf, sizeof buf, NULL),
+                 TOPOLOC_ERR_UNKNOWN_VIEW);
+    CHECK_STATUS(topoloc_map_view_descriptor(map, VIEWS, desc, DIM), TOPOLOC_ERR_UNKNOWN_VIEW);
+    CHECK_STATUS(topoloc_map_view_descriptor(map, 0xFFFFFFFFu, desc, DIM),
+                 TOPOLOC_ERR_UNKNOWN_VIEW);
+    CHECK_STATUS(topoloc_map_edge(map, EDGES, &a, &b, &w), TOPOLOC_ERR_INVALID_ARGUMENT);
+    CHECK_HAS_MESSAGE();
+    CHECK_STATUS(topoloc_map_edge(map, (size_t)-1, &a, &b, &w), TOPOLOC_ERR_INVALID_ARGUMENT);
+    info.struct_size = 0;
+    CHECK_STATUS(topoloc_map_view_info(map, 0, &info), TOPOLOC_ERR_STRUCT_SIZE);
+    CHECK_HAS_MESSAGE();
+    info.struct_size = sizeof info - 1;
+    CHECK_STATUS(topoloc_map_view_info(map, 0, &info), TOPOLOC_ERR_STRUCT_SIZE);
+}
+
+/* Every field of two results is identical (fields, not bytes: padding may be uninitialised). */
+static bool identical_result(const topoloc_result *a, const topoloc_result *b)
+{
+    return a->struct_size == b->struct_size && a->frame_index == b->frame_index &&
+           a->place == b->place && a->view == b->view && a->confidence == b->confidence &&
+           a->similarity == b->similarity && a->off_map_probability == b->off_map_probability &&
+           a->off_map == b->off_map && a->candidates == b->candidates &&
+           a->candidates_capacity == b->candidates_capacity &&
+           a->candidates_len == b->candidates_len;
+}
+
+/* Results of two localizers agree exactly. */
+static bool same_result(const topoloc_result *a, const topoloc_result *b)
+{
+    size_t i;
+    if (a->frame_index != b->frame_index || a->place != b->place || a->view != b->view ||
+        a->confidence != b->confidence || a->similarity != b->similarity ||
+        a->off_map_probability != b->off_map_probability || a->off_map != b->off_map ||
+        a->candidates_len != b->candidates_len) {
+        return false;
+    }
+    for (i = 0; i < a->candidates_len; i++) {
+        const topoloc_candidate *x = &a->candidates[i], *y = &b->candidates[i];
+        if (x->place != y->place || x->view != y->view || x->probability != y->probability ||
+            x->similarity != y->similarity) {
+            return false;
+        }
+    }
+    return true;
+}
+
+static void test_bad_frames(const topoloc_map *map)
+{
+    enum { FRAMES = 14, BAD_KINDS = 11 };
+    static const uint32_t walk[FRAMES] = {0, 0, 1, 1, 2, 2, 3, 3, 4, 4, 5, 5, 0, 0};
+    static const uint32_t expected_status[BAD_KINDS] = {
+        TOPOLOC_ERR_DIMENSION_MISMATCH, /* 0: too short */
+        TOPOLOC_ERR_DIMENSION_MISMATCH, /* 1: too long */
+        TOPOLOC_ERR_NON_FINITE,         /* 2: NaN in the descriptor */
+        TOPOLOC_ERR_NON_FINITE,         /* 3: infinity in the descriptor */
+        TOPOLOC_ERR_ZERO_DESCRIPTOR,    /* 4: all zeros */
+        TOPOLOC_ERR_TIMESTAMP,          /* 5: timestamp going backwards */
+        TOPOLOC_ERR_NON_FINITE,         /* 6: NaN timestamp */
+        TOPOLOC_ERR_INVALID_ARGUMENT,   /* 7: odometry that is not a rigid transform */
+        TOPOLOC_ERR_NON_FINITE,         /* 8: NaN in the odometry */
+        TOPOLOC_ERR_STRUCT_SIZE,        /* 9: frame.struct_size 0 */
+        TOPOLOC_ERR_STRUCT_SIZE,        /* 10: result.struct_size 0 */
+    };
+    topoloc_localizer *a = NULL, *b = NULL;
+    topoloc_frame good, bad;
+    topoloc_result ra, rb, snapshot;
+    topoloc_candidate ca[5], cb[5], csnap[5];
+    float desc[DIM], bad_desc[DIM + 4];
+    double nan = 0.0, odometry[16], bad_odometry[16];
+    size_t i, d;
+
+    section("bad frames leave the localizer and the result unchanged");
+    nan = make_nan();
+    CHECK_OK(topoloc_localizer_new(map, NULL, &a));
+    CHECK_OK(topoloc_localizer_new(map, NULL, &b));
+    if (a == NULL || b == NULL) {
+        topoloc_localizer_free(a);
+        topoloc_localizer_free(b);
+        return;
+    }
+    memset(ca, 0, sizeof ca);
+    memset(cb, 0, sizeof cb);
+    CHECK_OK(topoloc_frame_default(&good));
+    CHECK_OK(topoloc_result_default(&ra));
+    CHECK_OK(topoloc_result_default(&rb));
+    ra.candidates = ca;
+    ra.candidates_capacity = 5;
+    rb.candidates = cb;
+    rb.candidates_capacity = 5;
+    memset(odometry, 0, sizeof odometry);
+    odometry[0] = odometry[5] = odometry[10] = odometry[15] = 1.0;
+    odometry[3] = 1.0;
+
+    for (i = 0; i < FRAMES; i++) {
+        uint32_t source = walk[i] * VIEWS_PER_PLACE + (uint32_t)(i % VIEWS_PER_PLACE);
+        size_t kind;
+        noisy_copy(desc, source, 0.05f);
+        good.timestamp = 1.0 + (double)i;
+        good.descriptor = desc;
+        good.descriptor_len = DIM;
+        good.odometry = (i % 3 == 1) ? odometry : NULL;
+
+        /* Before every good frame, A sees one or two bad ones; B never does. */
+        for (kind = i % BAD_KINDS; kind < BAD_KINDS; kind += 6) {
+            topoloc_status st;
+            topoloc_result *target = &ra;
+            topoloc_result zero_size;
+            bad = good;
+            memcpy(bad_desc, desc, sizeof desc);
+            bad_desc[DIM] = 1.0f;
+            bad.descriptor = bad_desc;
+            memcpy(bad_odometry, odometry, sizeof odometry);
+            switch (kind) {
+            case 0: bad.descriptor_len = DIM - 1; break;
+            case 1: bad.descriptor_len = DIM + 1; break;
+            case 2: bad_desc[DIM / 2] = (float)nan; break;
+            case 3: bad_desc[0] = -make_inf(); break;
+            case 4:
+                for (d = 0; d < DIM; d++) {
+                    bad_desc[d] = 0.0f;
+                }
+                break;
+            case 5: bad.timestamp = good.timestamp - 1.5; break; /* before the previous frame */
+            case 6: bad.timestamp = nan; break;
+            case 7:
+                bad_odometry[0] = 1.1; /* scaled, not a rotation */
+                bad.odometry = bad_odometry;
+                break;
+            case 8:
+                bad_odometry[7] = nan;
+                bad.odometry = bad_odometry;
+                break;
+            case 9: bad.struct_size = 0; break;
+            case 10:
+                zero_size = ra;
+                zero_size.struct_size = 0;
+                target = &zero_size;
+                break;
+            default: break;
+            }
+            if (kind == 5 && i == 0) {
+                continue; /* the first frame has no predecessor */
+            }
+            snapshot = ra;
+            memcpy(csnap, ca, sizeof csnap);
+            st = topoloc_localizer_process(a, &bad, target);
+            check_status_impl(st, expected_status[kind], "process(bad frame)", __FILE__, __LINE__);
+            if (st != expected_status[kind]) {
+                fprintf(stderr, "    (bad frame kind %zu before good frame %zu)\n", kind, i);
+            }
+            CHECK_HAS_MESSAGE();
+            CHECK(identical_result(&snapshot, &ra));
+            CHECK(memcmp(csnap, ca, sizeof csnap) == 0);
+        }
+
+        CHECK_OK(topoloc_localizer_process(a, &good, &ra));
+        CHECK_OK(topoloc_localizer_process(b, &good, &rb));
+        CHECK(ra.frame_index == i);
+        CHECK(ra.place == walk[i]);
+        CHECK(same_result(&ra, &rb));
+    }
+
+    /* The same holds across a reset. */
+    CHECK_OK(topoloc_localizer_reset(a));
+    CHECK_OK(topoloc_localizer_reset(b));
+    good.timestamp = 0.5;
+    CHECK_OK(topoloc_localizer_process(a, &good, &ra));
+    CHECK_OK(topoloc_localizer_process(b, &good, &rb));
+    CHECK(ra.frame_index == 0);
+    CHECK(same_result(&ra, &rb));
+    topoloc_localizer_free(a);
+    topoloc_localizer_free(b);
+}
+
+static void test_options_errors(const topoloc_map *map)
+{
+    topoloc_localizer_options options;
+    topoloc_localizer *loc = NULL;
+
+    section("localizer options: struct_size, invalid options, descriptor mismatch");
+    CHECK_OK(topoloc_localizer_options_default(&options));
+    options.struct_size = 0;
+    CHECK_STATUS(topoloc_localizer_new(map, &options, &loc), TOPOLOC_ERR_STRUCT_SIZE);
+    CHECK_HAS_MESSAGE();
+    options.struct_size = sizeof options - 1;
+    CHECK_STATUS(topoloc_localizer_new(map, &options, &loc), TOPOLOC_ERR_STRUCT_SIZE);
+
+    CHECK_OK(topoloc_localizer_options_default(&options));
+    options.mode = 7;
+    CHECK_STATUS(topoloc_localizer_new(map, &options, &loc), TOPOLOC_ERR_INVALID_OPTION);
+    CHECK_HAS_MESSAGE();
+    CHECK_OK(topoloc_localizer_options_default(&options));
+    options.top_k = 0;
+    CHECK_STATUS(topoloc_localizer_new(map, &options, &loc), TOPOLOC_ERR_INVALID_OPTION);
+    CHECK_OK(topoloc_localizer_options_default(&options));
+    options.temperature = 0.0f;
+    CHECK_STATUS(topoloc_localizer_new(map, &options, &loc), TOPOLOC_ERR_INVALID_OPTION);
+    CHECK_OK(topoloc_localizer_options_default(&options));
+    options.stay_probability = 1.5f;
+    CHECK_STATUS(topoloc_localizer_new(map, &options, &loc), TOPOLOC_ERR_INVALID_OPTION);
+
+    CHECK_OK(topoloc_localizer_options_default(&options));
+    options.expected_descriptor_kind = "another-desc";
+    CHECK_STATUS(topoloc_localizer_new(map, &options, &loc), TOPOLOC_ERR_DESCRIPTOR_MISMATCH);
+    CHECK_HAS_MESSAGE();
+    options.expected_descriptor_kind = KIND;
+    options.expected_descriptor_model = "another-model";
+    CHECK_STATUS(topoloc_localizer_new(map, &options, &loc), TOPOLOC_ERR_DESCRIPTOR_MISMATCH);
+    options.expected_descriptor_model = "\xff";
+    CHECK_STATUS(topoloc_localizer_new(map, &options, &loc), TOPOLOC_ERR_INVALID_UTF8);
+    CHECK(loc == NULL);
+    options.expected_descriptor_model = MODEL;
+    CHECK_OK(topoloc_localizer_new(map, &options, &loc));
+    topoloc_localizer_free(loc);
+}
+
+static void test_files(void)
+{
+    topoloc_map *built = build_world_map(), *m = NULL;
+    topoloc_map_load_options options;
+    char path[4200], other[4200];
+    unsigned char *bytes = NULL, *copy = NULL;
+    size_t len = 0, off, header_end;
+    size_t tested = 0;
+    static const char not_a_map[] = "hello, this is a text file and not a topoloc map\n";
+
+    section("map files: missing, foreign, truncated, corrupt, mismatched");
+    if (built == NULL) {
+        return;
+    }
+    tmp_path(path, sizeof path, "files.topoloc");
+    CHECK_OK(topoloc_map_save(built, path));
+
+    /* Saving where that is impossible. */
+    tmp_path(other, sizeof other, "no-such-dir/map.topoloc");
+    CHECK_STATUS(topoloc_map_save(built, other), TOPOLOC_ERR_IO);
+    CHECK_HAS_MESSAGE();
+    CHECK_STATUS(topoloc_map_save(built, "\xff.topoloc"), TOPOLOC_ERR_INVALID_UTF8);
+
+    /* Missing file, directory, invalid UTF-8 path. */
+    tmp_path(other, sizeof other, "missing.topoloc");
+    CHECK_STATUS(topoloc_map_load(other, NULL, &m), TOPOLOC_ERR_IO);
+    CHECK_HAS_MESSAGE();
+    CHECK(strstr(last_error(), "missing.topoloc") != NULL);
+    {
+        topoloc_status st = topoloc_map_load(g_tmpdir, NULL, &m);
+        CHECK(st != TOPOLOC_OK);
+        CHECK(st == TOPOLOC_ERR_IO || st == TOPOLOC_ERR_NOT_A_MAP);
+    }
+    CHECK_STATUS(topoloc_map_load("\xff\xfe", NULL, &m), TOPOLOC_ERR_INVALID_UTF8);
+
+    /* Not a map: a text file, an empty file, no bytes. */
+    tmp_path(other, sizeof other, "text.txt");
+    CHECK(write_file(other, (const unsigned char *)not_a_map, sizeof not_a_map - 1));
+    CHECK_STATUS(topoloc_map_load(other, NULL, &m), TOPOLOC_ERR_NOT_A_MAP);
+    CHECK_HAS_MESSAGE();
+    CHECK_STATUS(topoloc_map_load_from_memory((const uint8_t *)not_a_map, sizeof not_a_map - 1,
+                                              NULL, &m),
+                 TOPOLOC_ERR_NOT_A_MAP);
+    CHECK(write_file(other, (const unsigned char *)"", 0));
+    CHECK_STATUS(topoloc_map_load(other, NULL, &m), TOPOLOC_ERR_NOT_A_MAP);
+    CHECK_STATUS(topoloc_map_load_from_memory((const uint8_t *)not_a_map, 0, NULL, &m),
+                 TOPOLOC_ERR_NOT_A_MAP);
+    CHECK_STATUS(topoloc_map_load_from_memory(NULL, 0, NULL, &m), TOPOLOC_ERR_NOT_A_MAP);
+    remove(other);
+    CHECK(m == NULL);
+
+    bytes = read_file(path, &len);
+    CHECK(bytes != NULL && len > 16);
+    if (bytes == NULL || len <= 16) {
+        free(bytes);
+        topoloc_map_free(built);
+        remove(path);
+        return;
+    }
+    copy = malloc(len + 16);
+    CHECK(copy != NULL);
+    if (copy == NULL) {
+        free(bytes);
+        topoloc_map_free(built);
+        return;
+    }
+    /* safetensors: 8-byte little-endian header length, JSON header, data. */
+    header_end = 8;
+    for (off = 0; off < 8; off++) {
+        header_end += (size_t)bytes[off] << (8 * off);
+    }
+    CHECK(header_end < len);
+
+    /* Truncated at every offset: from memory everywhere, from a file at a few offsets. */
+    tmp_path(other, sizeof other, "truncated.topoloc");
+    for (off = 0; off < len; off++) {
+        topoloc_status st = topoloc_map_load_from_memory(bytes, off, NULL, &m);
+        bool ok = st == TOPOLOC_ERR_TRUNCATED || st == TOPOLOC_ERR_NOT_A_MAP ||
+                  st == TOPOLOC_ERR_CORRUPT;
+        if (!ok) {
+            fprintf(stderr, "    truncated at %zu of %zu: status %u\n", off, len, (unsigned)st);
+        }
+        CHECK(ok);
+        if (off > header_end) {
+            CHECK(st == TOPOLOC_ERR_TRUNCATED); /* the header promises more data */
+        }
+        if (off == 0 || off == 1 || off == 7 || off == 8 || off == 9 || off == header_end / 2 ||
+            off == header_end || off == len / 2 || off == len - 1) {
+            CHECK(write_file(other, bytes, off));
+            st = topoloc_map_load(other, NULL, &m);
+            CHECK(st == TOPOLOC_ERR_TRUNCATED || st == TOPOLOC_ERR_NOT_A_MAP ||
+                  st == TOPOLOC_ERR_CORRUPT);
+            CHECK_HAS_MESSAGE();
+            tested++;
+        }
+    }
+    CHECK(tested == 9);
+    CHECK(m == NULL);
+
+    /* One flipped bit at every offset (the bit varies with the offset): never OK. */
+    {
+        size_t undetected = 0;
+        for (off = 0; off < len; off++) {
+            topoloc_status st;
+            memcpy(copy, bytes, len);
+            copy[off] ^= (unsigned char)(1u << (off % 8));
+            st = topoloc_map_load_from_memory(copy, len, NULL, &m);
+            if (st == TOPOLOC_OK) {
+                undetected++;
+                fprintf(stderr, "    flipped bit %zu of byte %zu (of %zu) not detected\n", off % 8,
+                        off, len);
+                topoloc_map_free(m);
+                m = NULL;
+            } else if (off >= header_end) {
+                CHECK(st == TOPOLOC_ERR_CORRUPT); /* data bytes: the checksum catches them */
+            }
+        }
+        CHECK(undetected == 0);
+        /* And through a file. */
+        memcpy(copy, bytes, len);
+        copy[len - 3] ^= 0x40;
+        CHECK(write_file(other, copy, len));
+        CHECK_STATUS(topoloc_map_load(other, NULL, &m), TOPOLOC_ERR_CORRUPT);
+        CHECK_HAS_MESSAGE();
+        memcpy(copy, bytes, len);
+        copy[header_end - 20] ^= 0x01;
+        CHECK(write_file(other, copy, len));
+        CHECK(topoloc_map_load(other, NULL, &m) != TOPOLOC_OK);
+        CHECK(m == NULL);
+    }
+
+    /* Trailing garbage. */
+    memcpy(copy, bytes, len);
+    memset(copy + len, 0, 16);
+    CHECK_STATUS(topoloc_map_load_from_memory(copy, len + 16, NULL, &m), TOPOLOC_ERR_CORRUPT);
+
+    /* A newer major format version. */
+    {
+        static const char key[] = "version\\\":\\\"";
+        size_t klen = sizeof key - 1, found = 0;
+        memcpy(copy, bytes, len);
+        for (off = 8; off + klen < header_end; off++) {
+            if (memcmp(copy + off, key, klen) == 0) {
+                found = off + klen;
+                break;
+            }
+        }
+        CHECK(found != 0);
+        if (found != 0) {
+            CHECK(copy[found] == '1');
+            copy[found] = '9';
+            CHECK_STATUS(topoloc_map_load_from_memory(copy, len, NULL, &m),
+                         TOPOLOC_ERR_UNSUPPORTED_VERSION);
+            CHECK_HAS_MESSAGE();
+        }
+    }
+
+    /* Descriptor mismatch at load. */
+    CHECK_OK(topoloc_map_load_options_default(&options));
+    CHECK(options.struct_size == sizeof options);
+    CHECK(options.expected_descriptor_kind == NULL && options.expected_descriptor_dim == 0);
+    options.expected_descriptor_kind = "another-desc";
+    CHECK_STATUS(topoloc_map_load(path, &options, &m), TOPOLOC_ERR_DESCRIPTOR_MISMATCH);
+    CHECK_HAS_MESSAGE();
+    CHECK_STATUS(topoloc_map_load_from_memory(bytes, len, &options, &m),
+                 TOPOLOC_ERR_DESCRIPTOR_MISMATCH);
+    options.expected_descriptor_kind = KIND;
+    options.expected_descriptor_model = "another-model";
+    CHECK_STATUS(topoloc_map_load(path, &options, &m), TOPOLOC_ERR_DESCRIPTOR_MISMATCH);
+    options.expected_descriptor_model = MODEL;
+    options.expected_descriptor_dim = DIM + 1;
+    CHECK_STATUS(topoloc_map_load(path, &options, &m), TOPOLOC_ERR_DESCRIPTOR_MISMATCH);
+    CHECK(m == NULL);
+    options.expected_descriptor_dim = DIM;
+    CHECK_OK(topoloc_map_load(path, &options, &m));
+    topoloc_map_free(m);
+    m = NULL;
+    options.expected_descriptor_kind = "";
+    options.expected_descriptor_model = NULL;
+    options.expected_descriptor_dim = 0;
+    CHECK_OK(topoloc_map_load(path, &options, &m));
+    topoloc_map_free(m);
+    m = NULL;
+    options.struct_size = 0;
+    CHECK_STATUS(topoloc_map_load(path, &options, &m), TOPOLOC_ERR_STRUCT_SIZE);
+    CHECK_HAS_MESSAGE();
+    CHECK_STATUS(topoloc_map_load_from_memory(bytes, len, &options, &m), TOPOLOC_ERR_STRUCT_SIZE);
+    CHECK(m == NULL);
+
+    remove(other);
+    remove(path);
+    free(copy);
+    free(bytes);
+    topoloc_map_free(built);
+}
+
+static bool all_bytes(const unsigned char *p, size_t n, unsigned char value)
+{
+    size_t i;
+    for (i = 0; i < n; i++) {
+        if (p[i] != value) {
+            return false;
+        }
+    }
+    return true;
+}
+
+/* The versioned structs: _init sizes, and callers built against a newer (larger) or broken
+ * struct_size. A library must never write past the caller's struct. */
+static void test_versioned_structs(const topoloc_map *map)
+{
+    /* What a caller compiled against a newer header (with appended fields) looks like. */
+    struct newer_frame {
+        topoloc_frame f;
+        unsigned char tail[64];
+    } nf;
+    struct newer_result {
+        topoloc_result r;
+        unsigned char tail[64];
+    } nr;
+    struct newer_info {
+        topoloc_view_info i;
+        unsigned char tail[64];
+    } ni;
+    struct newer_options {
+        topoloc_localizer_options o;
+        unsigned char tail[64];
+    } no;
+    topoloc_frame frame;
+    topoloc_result result;
+    topoloc_localizer_options options;
+    topoloc_keyframe_options kf_options;
+    topoloc_map_load_options load_options;
+    topoloc_view_attributes attributes;
+    topoloc_view_info info;
+    topoloc_localizer *loc = NULL;
+    float desc[DIM];
+
+    section("versioned structs: _init sizes, larger and smaller struct_size");
+    /* Defaults. */
+    CHECK_OK(topoloc_frame_default(&frame));
+    CHECK(frame.struct_size == sizeof frame && frame.timestamp == 0.0);
+    CHECK_OK(topoloc_result_default(&result));
+    CHECK(result.struct_size == sizeof result && result.candidates_len == 0);
+    CHECK_OK(topoloc_localizer_options_default(&options));
+    CHECK(options.struct_size == sizeof options);
+    CHECK(options.temperature > 0.0f && options.stay_probability > 0.0f);
+    CHECK_OK(topoloc_keyframe_options_default(&kf_options));
+    CHECK(kf_options.struct_size == sizeof kf_options && kf_options.neighbour_radius_m == 3.0);
+    CHECK_OK(topoloc_map_load_options_default(&load_options));
+    CHECK(load_options.struct_size == sizeof load_options);
+    CHECK_OK(topoloc_view_attributes_default(&attributes));
+    CHECK(attributes.struct_size == sizeof attributes);
+    CHECK_OK(topoloc_view_info_default(&info));
+    CHECK(info.struct_size == sizeof info && !info.has_pose && !info.has_keyframe_id);
+
+    /* Sizes below the published layout are refused, and nothing is written. */
+    memset(&frame, 0x5A, sizeof frame);
+    CHECK_STATUS(topoloc_frame_init(&frame, 0), TOPOLOC_ERR_STRUCT_SIZE);
+    CHECK_HAS_MESSAGE();
+    CHECK(all_bytes((const unsigned char *)&frame, sizeof frame, 0x5A));
+    CHECK_STATUS(topoloc_frame_init(&frame, sizeof frame - 1), TOPOLOC_ERR_STRUCT_SIZE);
+    CHECK_STATUS(topoloc_result_init(&result, sizeof(size_t)), TOPOLOC_ERR_STRUCT_SIZE);
+    CHECK_STATUS(topoloc_localizer_options_init(&options, 1), TOPOLOC_ERR_STRUCT_SIZE);
+    CHECK_STATUS(topoloc_keyframe_options_init(&kf_options, 0), TOPOLOC_ERR_STRUCT_SIZE);
+    CHECK_STATUS(topoloc_map_load_options_init(&load_options, 0), TOPOLOC_ERR_STRUCT_SIZE);
+    CHECK_STATUS(topoloc_view_attributes_init(&attributes, 0), TOPOLOC_ERR_STRUCT_SIZE);
+    CHECK_STATUS(topoloc_view_info_init(&info, 0), TOPOLOC_ERR_STRUCT_SIZE);
+
+    /* A newer caller's larger struct: the library fills what it knows, says so in struct_size,
+     * and leaves the rest alone. */
+    memset(&nf, 0xEE, sizeof nf);
+    CHECK_OK(topoloc_frame_init(&nf.f, sizeof nf));
+    CHECK(nf.f.struct_size == sizeof(topoloc_frame));
+    CHECK(nf.f.descriptor == NULL && nf.f.odometry == NULL && nf.f.descriptor_len == 0);
+    CHECK(all_bytes(nf.tail, sizeof nf.tail, 0xEE));
+    memset(&no, 0xEE, sizeof no);
+    CHECK_OK(topoloc_localizer_options_init(&no.o, sizeof no));
+    CHECK(no.o.struct_size == sizeof(topoloc_localizer_options));
+    CHECK(all_bytes(no.tail, sizeof no.tail, 0xEE));
+
+    /* Larger struct_size on input (options, frame) and output (result, view info). */
+    no.o.struct_size = sizeof no;
+    memset(no.tail, 0, sizeof no.tail); /* a newer caller's appended fields, zeroed */
+    CHECK_OK(topoloc_localizer_new(map, &no.o, &loc));
+    if (loc != NULL) {
+        memcpy(desc, g_view_desc[6], sizeof desc);
+        nf.f.struct_size = sizeof nf;
+        nf.f.descriptor = desc;
+        nf.f.descriptor_len = DIM;
+        memset(&nr, 0xEE, sizeof nr);
+        nr.r.struct_size = sizeof nr;
+        nr.r.candidates = NULL;
+        nr.r.candidates_capacity = 0;
+        CHECK_OK(topoloc_localizer_process(loc, &nf.f, &nr.r));
+        CHECK(nr.r.struct_size == sizeof nr); /* the caller's size is kept */
+        CHECK(nr.r.place == 1 && nr.r.view == 6 && nr.r.frame_index == 0);
+        CHECK(nr.r.candidates_len == 0);
+        CHECK(all_bytes(nr.tail, sizeof nr.tail, 0xEE));
+
+        /* A result whose struct_size is too small is refused, untouched. */
+        nr.r.struct_size = sizeof(topoloc_result) - 8;
+        nr.r.place = 4242;
+        CHECK_STATUS(topoloc_localizer_process(loc, &nf.f, &nr.r), TOPOLOC_ERR_STRUCT_SIZE);
+        CHECK(nr.r.place == 4242);
+        /* So is a frame. */
+        nf.f.struct_size = 4;
+        nr.r.struct_size = sizeof nr;
+        CHECK_STATUS(topoloc_localizer_process(loc, &nf.f, &nr.r), TOPOLOC_ERR_STRUCT_SIZE);
+        CHECK(nr.r.place == 4242);
+        /* Neither counted as a frame. */
+        nf.f.struct_size = sizeof(topoloc_frame);
+        nr.r.struct_size = sizeof(topoloc_result);
+        CHECK_OK(topoloc_localizer_process(loc, &nf.f, &nr.r));
+        CHECK(nr.r.frame_index == 1);
+    }
+    topoloc_localizer_free(loc);
+
+    memset(&ni, 0xEE, sizeof ni);
+    ni.i.struct_size = sizeof ni;
+    CHECK_OK(topoloc_map_view_info(map, 5, &ni.i));
+    CHECK(ni.i.struct_size == sizeof ni);
+    CHECK(ni.i.place == 1 && ni.i.has_keyframe_id && ni.i.keyframe_id == 1005u);
+    CHECK(all_bytes(ni.tail, sizeof ni.tail, 0xEE));
+}
+
+/* Threads: a shared const map, one localizer per thread, per-thread last errors. */
+struct thread_job {
+    const topoloc_map *map;
+    unsigned id;
+    unsigned failures;
+    char first_failure[160];
+};
+
+static void job_fail(struct thread_job *job, const char *what)
+{
+    if (job->failures++ == 0) {
+        snprintf(job->first_failure, sizeof job->first_failure, "%s", what);
+    }
+}
+
+static void *thread_main(void *arg)
+{
+    struct thread_job *job = arg;
+    topoloc_localizer *loc = NULL;
+    topoloc_frame frame;
+    topoloc_result result;
+    topoloc_candidate candidates[3];
+    float desc[DIM];
+    char msg[256], expect[32];
+    size_t needed = 0, count = 0;
+    uint32_t ids[4];
+    unsigned round, k;
+
+    /* A new thread has no last error. */
+    if (topoloc_last_error_message(msg, sizeof msg, &needed) != TOPOLOC_OK || msg[0] != '\0' ||
+        needed != 1) {
+        job_fail(job, "fresh thread's last error is not empty");
+    }
+    if (topoloc_localizer_new(job->map, NULL, &loc) != TOPOLOC_OK) {
+        job_fail(job, "localizer_new");
+        return NULL;
+    }
+    if (topoloc_frame_default(&frame) != TOPOLOC_OK || topoloc_result_default(&result) != TOPOLOC_OK) {
+        job_fail(job, "_default");
+    }
+    result.candidates = candidates;
+    result.candidates_capacity = 3;
+    for (round = 0; round < 20; round++) {
+        /* Each thread's own error, read back after other threads have set theirs. */
+        uint32_t bad_place = 1000u + job->id * 100u + round;
+        snprintf(expect, sizeof expect, "%u", (unsigned)bad_place);
+        if (topoloc_map_neighbours(job->map, bad_place, ids, 4, &count) !=
+            TOPOLOC_ERR_UNKNOWN_PLACE) {
+            job_fail(job, "unknown place not refused");
+        }
+        for (k = 0; k < PLACES; k++) {
+            /* Deterministic per thread: no shared generator. */
+            uint32_t source = k * VIEWS_PER_PLACE + (job->id + round) % VIEWS_PER_PLACE, d;
+            for (d = 0; d < DIM; d++) {
+                desc[d] = g_view_desc[source][d] * (1.0f + 0.01f * (float)((d + job->id) % 3));
+            }
+            frame.descriptor = desc;
+            frame.descriptor_len = DIM;
+            frame.timestamp = (double)(round * PLACES + k);
+            if (topoloc_localizer_process(loc, &frame, &result) != TOPOLOC_OK) {
+                job_fail(job, "process");
+            } else if (result.place != k || result.view != source ||
+                       result.frame_index != (uint64_t)(round * PLACES + k) ||
+                       result.candidates_len != 3) {
+                job_fail(job, "wrong localization");
+            }
+        }
+        if (topoloc_last_error_message(msg, sizeof msg, NULL) != TOPOLOC_OK ||
+            strstr(msg, expect) == NULL) {
+            job_fail(job, "last error message overwritten by another thread");
+        }
+    }
+    topoloc_localizer_free(loc);
+    return NULL;
+}
+
+static void test_threads(const topoloc_map *map)
+{
+    enum { THREADS = 4 };
+    pthread_t threads[THREADS];
+    struct thread_job jobs[THREADS];
+    bool started[THREADS];
+    unsigned i;
+
+    section("threads: shared map, one localizer per thread, thread-local last error");
+    for (i = 0; i < THREADS; i++) {
+        memset(&jobs[i], 0, sizeof jobs[i]);
+        jobs[i].map = map;
+        jobs[i].id = i;
+        started[i] = pthread_create(&threads[i], NULL, thread_main, &jobs[i]) == 0;
+        CHECK(started[i]);
+    }
+    for (i = 0; i < THREADS; i++) {
+        if (started[i]) {
+            CHECK(pthread_join(threads[i], NULL) == 0);
+            if (jobs[i].failures != 0) {
+                fprintf(stderr, "    thread %u: %u failures, first: %s\n", i, jobs[i].failures,
+                        jobs[i].first_failure);
+            }
+            CHECK(jobs[i].failures == 0);
+        }
+    }
+}
+
+static bool make_tmpdir(void)
+{
+    const char *base = getenv("TMPDIR");
+    if (base == NULL || base[0] == '\0') {
+        base = "/tmp";
+    }
+    snprintf(g_tmpdir, sizeof g_tmpdir, "%s/topoloc-c-test-XXXXXX", base);
+    if (mkdtemp(g_tmpdir) == NULL) {
+        fprintf(stderr, "mkdtemp(%s): %s\n", g_tmpdir, strerror(errno));
+        return false;
+    }
+    return true;
+}
+
+int main(void)
+{
+    topoloc_map *map;
+
+    setvbuf(stdout, NULL, _IOLBF, 0);
+    printf("topoloc C ABI tests: library %s (ABI %u), header %s (ABI %d)\n", topoloc_version(),
+           (unsigned)topoloc_abi_version(), TOPOLOC_VERSION_STRING, TOPOLOC_ABI_VERSION);
+    init_world();
+    if (!make_tmpdir()) {
+        printf("0 passed, 1 failed\n");
+        return 1;
+    }
+
+    test_version();
+    test_status_str();
+    test_full_flow();
+    test_single_frame();
+    test_from_keyframes();
+    test_builder_errors();
+    test_files();
+
+    map = build_world_map();
+    CHECK(map != NULL);
+    if (map != NULL) {
+        test_null_arguments(map);
+        test_buffers_too_small(map);
+        test_unknown_ids(map);
+        test_bad_frames(map);
+        test_options_errors(map);
+        test_versioned_structs(map);
+        test_threads(map);
+    }
+    topoloc_map_free(map);
+
+    /* Everything written went to the temporary directory and was removed: rmdir must succeed
+     * (this also shows that saving leaves no temporary files behind). */
+    if (rmdir(g_tmpdir) != 0) {
+        fprintf(stderr, "rmdir(%s): %s\n", g_tmpdir, strerror(errno));
+        CHECK(!"temporary directory is empty at the end");
+    } else {
+        CHECK(true);
+    }
+
+    printf("%lu passed, %lu failed\n", g_passed, g_failed);
+    return g_failed == 0 ? 0 : 1;
+}

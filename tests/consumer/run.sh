@@ -1,0 +1,128 @@
+#!/usr/bin/env bash
+# Installs topoloc with CMake into a temporary prefix and builds a separate consumer project
+# against it with find_package(Topoloc): C (shared and static) and C++ (when topoloc.hpp is
+# installed). Also checks the installed layout, the SONAME, pkg-config, and that the installed
+# tree still works after being moved elsewhere.
+#
+#   bash tests/consumer/run.sh
+#
+# Environment:
+#   TOPOLOC_CARGO_TARGET_DIR    cargo target dir handed to CMake (default: <repo>/target, so an
+#                               existing cargo build is reused)
+#   TOPOLOC_CONSUMER_BUILD_DIR  scratch dir (default: <repo>/build/consumer-test; recreated)
+set -euo pipefail
+
+here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
+repo="$(cd "$here/../.." && pwd)"
+cargo_target="${TOPOLOC_CARGO_TARGET_DIR:-$repo/target}"
+work="${TOPOLOC_CONSUMER_BUILD_DIR:-$repo/build/consumer-test}"
+prefix="$work/install"
+generator_args=()
+if command -v ninja >/dev/null 2>&1; then
+    generator_args=(-G Ninja)
+fi
+
+section() { printf '\n==> %s\n' "$*"; }
+fail() { printf 'FAILED: %s\n' "$*" >&2; exit 1; }
+
+version="$(sed -n '/^\[package\]/,/^\[/ s/^version *= *"\([0-9.]*\)".*/\1/p' "$repo/Cargo.toml" | head -n1)"
+[[ -n "$version" ]] || fail "no [package] version in Cargo.toml"
+major="${version%%.*}"
+minor="${version#*.}"; minor="${minor%%.*}"
+# SONAME rule of build.rs: libtopoloc.so.MAJOR, or libtopoloc.so.0.MINOR before 1.0.
+if [[ "$major" == 0 ]]; then expected_soname="libtopoloc.so.0.$minor"; else expected_soname="libtopoloc.so.$major"; fi
+echo "topoloc $version; cargo target dir: $cargo_target; scratch dir: $work"
+
+rm -rf "$work"
+mkdir -p "$work"
+
+section "configure, build (cargo) and install topoloc into $prefix"
+cmake -S "$repo" -B "$work/topoloc-build" "${generator_args[@]}" \
+    -DCMAKE_INSTALL_PREFIX="$prefix" \
+    -DTOPOLOC_CARGO_TARGET_DIR="$cargo_target" \
+    -DTOPOLOC_ENABLE_TESTS=OFF
+cmake --build "$work/topoloc-build"
+cmake --install "$work/topoloc-build"
+
+libdir_rel="$(sed -n 's/^CMAKE_INSTALL_LIBDIR:PATH=//p' "$work/topoloc-build/CMakeCache.txt")"
+includedir_rel="$(sed -n 's/^CMAKE_INSTALL_INCLUDEDIR:PATH=//p' "$work/topoloc-build/CMakeCache.txt")"
+libdir="$prefix/${libdir_rel:-lib}"
+includedir="$prefix/${includedir_rel:-include}"
+
+section "installed layout"
+( cd "$prefix" && find . \( -type f -o -type l \) | sort | sed 's/^/  /' )
+real="$libdir/libtopoloc.so.$version"
+[[ -f "$real" && ! -L "$real" ]] || fail "$real is missing or not a regular file"
+[[ -L "$libdir/$expected_soname" ]] || fail "$expected_soname is not a symbolic link"
+[[ "$(readlink "$libdir/$expected_soname")" == "libtopoloc.so.$version" ]] ||
+    fail "$expected_soname -> $(readlink "$libdir/$expected_soname"), expected libtopoloc.so.$version"
+[[ -L "$libdir/libtopoloc.so" ]] || fail "libtopoloc.so is not a symbolic link"
+[[ "$(readlink "$libdir/libtopoloc.so")" == "$expected_soname" ]] ||
+    fail "libtopoloc.so -> $(readlink "$libdir/libtopoloc.so"), expected $expected_soname"
+[[ "$(readlink -f "$libdir/libtopoloc.so")" == "$(readlink -f "$real")" ]] || fail "symlink chain is broken"
+[[ -x "$real" ]] || fail "$real is not executable (shared libraries are installed 0755)"
+for f in "$libdir/libtopoloc.a" "$includedir/topoloc.h" \
+    "$libdir/cmake/Topoloc/TopolocConfig.cmake" "$libdir/cmake/Topoloc/TopolocConfigVersion.cmake" \
+    "$libdir/pkgconfig/topoloc.pc"; do
+    [[ -f "$f" ]] || fail "$f is missing"
+done
+if [[ -f "$repo/include/topoloc.hpp" ]]; then
+    cmp -s "$repo/include/topoloc.hpp" "$includedir/topoloc.hpp" || fail "topoloc.hpp not installed"
+else
+    echo "note: include/topoloc.hpp does not exist in the source tree; not installed"
+fi
+cmp -s "$repo/include/topoloc.h" "$includedir/topoloc.h" || fail "installed topoloc.h differs"
+# Relocatable: no absolute path of the prefix or the source/build trees in the package files.
+if grep -rlF -e "$prefix" -e "$repo" "$libdir/cmake/Topoloc" "$libdir/pkgconfig"; then
+    fail "the files above contain absolute paths: the install would not be relocatable"
+fi
+echo "ok"
+
+section "SONAME"
+soname="$(readelf -d "$real" | sed -n 's/.*(SONAME).*\[\(.*\)\]$/\1/p')"
+echo "SONAME of libtopoloc.so.$version: ${soname:-<none>}"
+[[ "$soname" == "$expected_soname" ]] || fail "SONAME is '$soname', expected $expected_soname"
+
+section "pkg-config"
+export PKG_CONFIG_PATH="$libdir/pkgconfig"
+pc_flags="$(pkg-config --cflags --libs topoloc)"
+echo "pkg-config --cflags --libs topoloc: $pc_flags"
+echo "pkg-config --static --libs topoloc: $(pkg-config --static --libs topoloc)"
+[[ "$(pkg-config --modversion topoloc)" == "$version" ]] || fail "pkg-config --modversion is not $version"
+[[ "$(readlink -f "$(pkg-config --variable=includedir topoloc)")" == "$(readlink -f "$includedir")" ]] ||
+    fail "pkg-config includedir does not point at $includedir"
+[[ "$(readlink -f "$(pkg-config --variable=libdir topoloc)")" == "$(readlink -f "$libdir")" ]] ||
+    fail "pkg-config libdir does not point at $libdir"
+for lib in -lgcc_s -lutil -lrt -lpthread -lm -ldl; do
+    [[ " $(pkg-config --static --libs topoloc) " == *" $lib "* ]] || fail "pkg-config --static lacks $lib"
+done
+# Build and run the consumer with nothing but pkg-config's flags (plus an rpath).
+# shellcheck disable=SC2046
+cc -std=c11 -Wall -Wextra -Werror -pedantic $(pkg-config --cflags topoloc) "$here/main.c" \
+    -o "$work/consumer_pkgconfig" $(pkg-config --libs topoloc) -Wl,-rpath,"$libdir"
+"$work/consumer_pkgconfig"
+
+# Configures, builds and runs the consumer project against an installed prefix.
+build_consumer() {
+    local against="$1" build="$2"
+    cmake -S "$here" -B "$build" "${generator_args[@]}" -DCMAKE_PREFIX_PATH="$against"
+    cmake --build "$build"
+    ( cd "$build" && ctest --output-on-failure )
+    if readelf -d "$build/consumer_c_static" | grep -q 'libtopoloc'; then
+        fail "consumer_c_static depends on a shared libtopoloc"
+    fi
+    readelf -d "$build/consumer_c" | grep -q "NEEDED.*\[$expected_soname\]" ||
+        fail "consumer_c does not record NEEDED $expected_soname"
+}
+
+section "consumer project: find_package(Topoloc) from $prefix"
+build_consumer "$prefix" "$work/consumer-build"
+if [[ ! -f "$includedir/topoloc.hpp" ]]; then
+    echo "note: consumer_cpp not built (topoloc.hpp is not installed)"
+fi
+
+section "consumer project against the install moved elsewhere (relocatable package)"
+mv "$prefix" "$work/moved-install"
+build_consumer "$work/moved-install" "$work/consumer-build-moved"
+
+section "all consumer checks passed"
