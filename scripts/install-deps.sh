@@ -1,10 +1,12 @@
 #!/usr/bin/env bash
-# Installs what topoloc's builds and tests need on a Debian machine (bookworm), idempotently:
+# Installs what topoloc's builds and tests need on a Debian machine (bookworm), idempotently
+# (the ONNX model and runtime are set up by scripts/setup-models.sh):
 # Debian packages only when missing (apt-get update only then), Python packages only when their
 # import fails. The Rust toolchain is expected (rustup); this script does not install it.
 set -euo pipefail
 
-packages=(build-essential cmake pkg-config valgrind)
+# OpenCV 4.6 (image work) needs clang + libclang for the opencv crate's binding generator.
+packages=(build-essential cmake pkg-config valgrind libopencv-dev clang libclang-dev)
 missing=()
 for p in "${packages[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")

@@ -5,6 +5,7 @@ set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$root"
 bash scripts/install-deps.sh
+bash scripts/setup-models.sh
 
 section() { printf '\n=== %s ===\n' "$1"; }
 

@@ -13,6 +13,7 @@
 
 #![warn(missing_docs)]
 
+pub mod describe;
 pub mod eval;
 pub mod ffi;
 pub mod localize;

@@ -1,6 +1,7 @@
 //! The `topoloc` command: the demo (the README's main job), and benchmark helpers.
 
 mod demo;
+mod images;
 mod memory;
 mod process;
 mod sweep;
@@ -64,6 +65,36 @@ enum Command {
         #[arg(long, value_delimiter = ',', default_value = "0,0.5,1,2")]
         margins: Vec<f32>,
     },
+    /// Place recognition on frame-aligned image folders with the ONNX multi-level backend.
+    EvalImages {
+        /// Folder of map (reference) images, in frame order.
+        #[arg(long)]
+        map_images: PathBuf,
+        /// Folder of query images; query frame i matches map frame i.
+        #[arg(long)]
+        images: PathBuf,
+        /// Frame tolerance for a correct match.
+        #[arg(long, default_value_t = 2)]
+        tolerance: usize,
+        /// PCA output dimension (limited by the number of map frames).
+        #[arg(long, default_value_t = 512)]
+        dim: usize,
+        /// Network outputs to pool (comma-separated).
+        #[arg(long, value_delimiter = ',', default_value = "f6,f13,f17,f18")]
+        taps: Vec<String>,
+        /// Pooling grid per tap, ROWSxCOLS.
+        #[arg(long, default_value = "4x4")]
+        grid: String,
+        /// Localizer temperature.
+        #[arg(long, default_value_t = 0.03)]
+        temperature: f32,
+        /// Localizer stay probability (filter mode).
+        #[arg(long, default_value_t = 0.7)]
+        stay_probability: f32,
+        /// Print JSON.
+        #[arg(long)]
+        json: bool,
+    },
     /// (internal) Child process of bench-memory: load MAP and report its figures as JSON.
     #[command(hide = true)]
     MeasureMap { map: PathBuf },
@@ -89,6 +120,33 @@ fn main() -> Result<()> {
             temperatures,
             margins,
         } => sweep::run(worlds, frames, &temperatures, &margins),
+        Command::EvalImages {
+            map_images,
+            images,
+            tolerance,
+            dim,
+            taps,
+            grid,
+            temperature,
+            stay_probability,
+            json,
+        } => {
+            let (rows, cols) = grid
+                .split_once('x')
+                .ok_or_else(|| anyhow::anyhow!("--grid must look like 4x4"))?;
+            let grid = (rows.parse()?, cols.parse()?);
+            images::run(&images::EvalImagesArgs {
+                map_images,
+                images,
+                tolerance,
+                dim,
+                taps,
+                grid,
+                temperature,
+                stay_probability,
+                json,
+            })
+        }
         Command::MeasureMap { map } => memory::measure(&map),
     }
 }

@@ -1,0 +1,247 @@
+//! The ONNX backend: a CNN run by ONNX Runtime (loaded at run time, so the library works without
+//! it until an ONNX model is asked for), whose selected feature maps become a multi-level vector.
+
+use super::image::ImageView;
+use super::mlf::{multi_level, FeatureMap};
+use super::DescribeError;
+use opencv::core::Size;
+use opencv::prelude::*;
+use ort::session::Session;
+use ort::value::TensorRef;
+use sha2::{Digest, Sha256};
+use std::path::{Path, PathBuf};
+use std::sync::OnceLock;
+
+/// ImageNet normalisation of the default backbone (torchvision MobileNetV2), RGB order.
+const MEAN: [f32; 3] = [0.485, 0.456, 0.406];
+const STD: [f32; 3] = [0.229, 0.224, 0.225];
+/// File name of the default model in the cache (made by scripts/setup-models.sh).
+pub const DEFAULT_MODEL_FILE: &str = "models/mobilenetv2-mlf.onnx";
+
+/// Where the ONNX backend finds its files, and what it extracts.
+#[derive(Clone, Debug, PartialEq)]
+pub struct OnnxOptions {
+    /// ONNX Runtime shared library; else `TOPOLOC_ORT_LIBRARY`, `ORT_DYLIB_PATH`, then the cache.
+    pub runtime: Option<PathBuf>,
+    /// Model file; else the cache's default MobileNetV2 multi-level export.
+    pub model: Option<PathBuf>,
+    /// Output names of the feature maps to use (the default model names them `f{block}`).
+    pub taps: Vec<String>,
+    /// Pooling grid (rows, columns) per tap.
+    pub grid: (usize, usize),
+    /// Network input size (width, height); images are resized to it.
+    pub input_size: (u32, u32),
+    /// ONNX Runtime intra-op threads.
+    pub threads: usize,
+}
+
+impl Default for OnnxOptions {
+    fn default() -> Self {
+        Self {
+            runtime: None,
+            model: None,
+            taps: ["f6", "f13", "f17", "f18"]
+                .iter()
+                .map(|s| s.to_string())
+                .collect(),
+            grid: (4, 4),
+            input_size: (320, 240),
+            threads: 1,
+        }
+    }
+}
+
+/// The cache folder of set-up files: `TOPOLOC_CACHE`, else `~/.cache/topoloc`.
+pub fn cache_dir() -> PathBuf {
+    std::env::var_os("TOPOLOC_CACHE")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| {
+            PathBuf::from(std::env::var_os("HOME").unwrap_or_default()).join(".cache/topoloc")
+        })
+}
+
+/// Candidate paths of the ONNX Runtime library, in the order they are tried.
+fn runtime_candidates(explicit: Option<&Path>) -> Vec<PathBuf> {
+    let mut out: Vec<PathBuf> = explicit.map(Path::to_path_buf).into_iter().collect();
+    for var in ["TOPOLOC_ORT_LIBRARY", "ORT_DYLIB_PATH"] {
+        if let Some(p) = std::env::var_os(var) {
+            out.push(PathBuf::from(p));
+        }
+    }
+    let dir = cache_dir().join("onnxruntime");
+    let mut cached: Vec<PathBuf> = std::fs::read_dir(&dir)
+        .into_iter()
+        .flatten()
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| {
+            p.file_name()
+                .and_then(|n| n.to_str())
+                .is_some_and(|n| n.starts_with("libonnxruntime.so"))
+        })
+        .collect();
+    cached.sort();
+    if cached.is_empty() {
+        cached.push(dir.join("libonnxruntime.so.<version>"));
+    }
+    out.extend(cached);
+    out
+}
+
+/// The process-wide ONNX Runtime environment: the runtime library can be loaded once per process.
+fn environment(
+    explicit: Option<&Path>,
+) -> Result<&'static ort::environment::Environment, DescribeError> {
+    static ENVIRONMENT: OnceLock<Result<ort::environment::Environment, String>> = OnceLock::new();
+    let tried = runtime_candidates(explicit);
+    let result = ENVIRONMENT.get_or_init(|| {
+        let Some(path) = tried.iter().find(|p| p.is_file()) else {
+            return Err(String::new());
+        };
+        ort::init_from(path)
+            .map_err(|e| format!("loading {}: {e}", path.display()))?
+            .build()
+            .map_err(|e| {
+                format!(
+                    "creating the ONNX Runtime environment from {}: {e}",
+                    path.display()
+                )
+            })
+    });
+    match result {
+        Ok(env) => Ok(env),
+        Err(reason) => Err(DescribeError::BackendUnavailable {
+            what: "ONNX Runtime".into(),
+            tried,
+            hint: if reason.is_empty() {
+                "run scripts/setup-models.sh, or pass the library path (option or TOPOLOC_ORT_LIBRARY)".into()
+            } else {
+                reason.clone()
+            },
+        }),
+    }
+}
+
+/// A loaded CNN that turns images into raw multi-level vectors (before PCA).
+pub struct OnnxMlf {
+    session: Session,
+    options: OnnxOptions,
+    model_sha256: String,
+    input: Vec<f32>,
+}
+
+impl OnnxMlf {
+    /// Loads the runtime and the model; fails with a typed error naming every path tried.
+    pub fn new(options: OnnxOptions) -> Result<Self, DescribeError> {
+        if options.taps.is_empty() || options.grid.0 == 0 || options.grid.1 == 0 {
+            return Err(DescribeError::InvalidArgument(
+                "ONNX backend needs at least one tap and a non-empty grid".into(),
+            ));
+        }
+        let (w, h) = options.input_size;
+        if !(32..=2048).contains(&w) || !(32..=2048).contains(&h) {
+            return Err(DescribeError::InvalidArgument(format!(
+                "input size {w}x{h} must lie in 32..2048 per side"
+            )));
+        }
+        let model = options
+            .model
+            .clone()
+            .unwrap_or_else(|| cache_dir().join(DEFAULT_MODEL_FILE));
+        let bytes = std::fs::read(&model).map_err(|e| DescribeError::BackendUnavailable {
+            what: "ONNX model".into(),
+            tried: vec![model.clone()],
+            hint: format!("{e}; run scripts/setup-models.sh or pass the model path"),
+        })?;
+        let env = environment(options.runtime.as_deref())?;
+        let onnx = |e: ort::Error| DescribeError::Model(format!("{}: {e}", model.display()));
+        let session = Session::builder(env)
+            .map_err(onnx)?
+            .with_intra_threads(options.threads.max(1))
+            .map_err(|e| onnx(e.into()))?
+            .commit_from_memory(&bytes)
+            .map_err(onnx)?;
+        let outputs: Vec<&str> = session.outputs().iter().map(|o| o.name()).collect();
+        if let Some(missing) = options.taps.iter().find(|t| !outputs.contains(&t.as_str())) {
+            return Err(DescribeError::Model(format!(
+                "{} has no output '{missing}' (it has {outputs:?})",
+                model.display()
+            )));
+        }
+        let model_sha256 = format!("{:x}", Sha256::digest(&bytes));
+        Ok(Self {
+            session,
+            options,
+            model_sha256,
+            input: Vec::new(),
+        })
+    }
+
+    /// Describes the model, taps, pooling and preprocessing: the descriptor identity's model field.
+    pub fn identity(&self) -> String {
+        let o = &self.options;
+        format!(
+            "sha256:{} taps={} grid={}x{} input={}x{} rgb/255 imagenet-mean-std",
+            &self.model_sha256[..16],
+            o.taps.join(","),
+            o.grid.0,
+            o.grid.1,
+            o.input_size.0,
+            o.input_size.1
+        )
+    }
+
+    /// The options it was created with.
+    pub fn options(&self) -> &OnnxOptions {
+        &self.options
+    }
+
+    /// Runs the network on one image and returns the raw multi-level vector.
+    pub fn raw_features(&mut self, image: &ImageView<'_>) -> Result<Vec<f32>, DescribeError> {
+        let (w, h) = self.options.input_size;
+        let rgb = image.to_rgb_resized(Size::new(w as i32, h as i32))?;
+        let pixels = rgb.data_bytes()?;
+        let plane = (w * h) as usize;
+        self.input.resize(3 * plane, 0.0);
+        for (i, px) in pixels.chunks_exact(3).enumerate() {
+            for c in 0..3 {
+                self.input[c * plane + i] = (f32::from(px[c]) / 255.0 - MEAN[c]) / STD[c];
+            }
+        }
+        let tensor = TensorRef::from_array_view((
+            [1usize, 3, h as usize, w as usize],
+            self.input.as_slice(),
+        ))
+        .map_err(|e| DescribeError::Model(e.to_string()))?;
+        let outputs = self
+            .session
+            .run(ort::inputs!["input" => tensor])
+            .map_err(|e| DescribeError::Model(e.to_string()))?;
+        let mut levels = Vec::with_capacity(self.options.taps.len());
+        for tap in &self.options.taps {
+            let (shape, values) = outputs[tap.as_str()]
+                .try_extract_tensor::<f32>()
+                .map_err(|e| DescribeError::Model(e.to_string()))?;
+            if shape.len() != 4 || shape[0] != 1 {
+                return Err(DescribeError::Model(format!(
+                    "output '{tap}' has shape {shape:?}, expected [1, C, H, W]"
+                )));
+            }
+            levels.push((
+                shape[1] as usize,
+                shape[2] as usize,
+                shape[3] as usize,
+                values,
+            ));
+        }
+        let maps: Vec<FeatureMap> = levels
+            .iter()
+            .map(|&(channels, height, width, values)| FeatureMap {
+                channels,
+                height,
+                width,
+                values,
+            })
+            .collect();
+        Ok(multi_level(&maps, self.options.grid.0, self.options.grid.1))
+    }
+}
