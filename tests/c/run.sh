@@ -34,7 +34,7 @@ CXX="${CXX:-c++}"
 # be the same string (checked below); it feeds Topoloc::topoloc_static and topoloc.pc.
 # TOPOLOC_CHECK_STATIC_LIBS=1 re-asks cargo and fails when the list changes (e.g. after adding a
 # dependency or a toolchain update).
-PINNED_STATIC_LIBS="-lgcc_s -lutil -lrt -lpthread -lm -ldl -lc"
+PINNED_STATIC_LIBS="-ldl -lstdc++ -lopencv_calib3d -lopencv_features2d -lopencv_flann -lopencv_imgcodecs -lopencv_imgproc -lopencv_core -lgcc_s -lutil -lrt -lpthread -lm -ldl -lc"
 
 CFLAGS_STRICT=(-std=c11 -Wall -Wextra -Werror -pedantic)
 CXXFLAGS_STRICT=(-std=c++17 -Wall -Wextra -Werror -pedantic)
