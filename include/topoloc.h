@@ -264,11 +264,11 @@ typedef struct topoloc_localizer_options {
    */
   uint32_t mode;
   /**
-   * Softmax temperature of the observation likelihood (> 0). Default 0.03.
+   * Softmax temperature of the observation likelihood (> 0). Default 0.2.
    */
   float temperature;
   /**
-   * Probability of staying at a place between frames without odometry. Default 0.7.
+   * Probability that the off-map state persists from one frame to the next. Default 0.7.
    */
   float stay_probability;
   /**

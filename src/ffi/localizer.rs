@@ -32,9 +32,9 @@ pub struct topoloc_localizer_options {
     pub struct_size: usize,
     /// `TOPOLOC_MODE_FILTER` or `TOPOLOC_MODE_SINGLE_FRAME`.
     pub mode: u32,
-    /// Softmax temperature of the observation likelihood (> 0). Default 0.03.
+    /// Softmax temperature of the observation likelihood (> 0). Default 0.2.
     pub temperature: f32,
-    /// Probability of staying at a place between frames without odometry. Default 0.7.
+    /// Probability that the off-map state persists from one frame to the next. Default 0.7.
     pub stay_probability: f32,
     /// Probability of a jump anywhere per frame (kidnap recovery). Default 0.01.
     pub jump_probability: f32,
@@ -128,6 +128,8 @@ pub extern "C" fn topoloc_localizer_new(
                 o.expected_descriptor_model,
                 0,
             )?,
+            // The motion model's speed classes are not in the C options yet: defaults.
+            ..LocalizerOptions::default()
         };
         let localizer = Localizer::new(map, options)?;
         write_out(

@@ -128,7 +128,7 @@ fn struct_size_is_checked_and_defaults_fill_it() {
         topoloc_localizer_options_init(&mut options, size),
         TOPOLOC_OK
     );
-    assert_eq!((options.struct_size, options.temperature), (size, 0.03));
+    assert_eq!((options.struct_size, options.temperature), (size, 0.2));
     assert_eq!(
         topoloc_localizer_options_init(&mut options, 4),
         TOPOLOC_ERR_STRUCT_SIZE

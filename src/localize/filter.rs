@@ -1,21 +1,31 @@
-//! Forward filter (HMM) over the place graph, and a two-state on-map / off-map filter beside it.
+//! Forward filter (HMM) over the place graph with direction and speed, and a two-state
+//! on-map / off-map filter beside it.
 //!
-//! **Place belief** over the M places, each frame:
+//! **Motion belief.** The hidden state is a heading (at place a, facing neighbour b; see
+//! `motion.rs`) times a speed class v (the chance of advancing one edge per frame, from the
+//! `speeds` option). Each frame:
 //!
-//! 1. *Predict.* From place i the robot stays with probability `s_i` or moves to a neighbour j
-//!    with probability `(1 - s_i) w_ij / sum_k w_ik` (edge weights; a place without neighbours
-//!    keeps its belief). `s_i` is the `stay_probability` option, or, when the frame carries
-//!    odometry and the place's edges have lengths, `exp(-d / mean_edge_length_i)` for a travelled
-//!    distance d. The result is mixed with a uniform jump (`jump_probability`) so that a
-//!    kidnapped robot recovers.
-//! 2. *Update.* Place likelihood `exp((score_i - m) / T)` with the place score (best view
-//!    similarity), temperature T and m the largest exponent argument (the shift cancels in the
-//!    normalisation and keeps exp() in range). Normalise.
+//! 1. *Predict.* A state advances with probability v (or `min(1, d / length)` when the frame
+//!    carries odometry with travelled distance d and the edge has a length) onto the
+//!    continuations of its heading, which do not turn back except at a dead end, and otherwise
+//!    stays. Of the staying belief, `turn_probability` spreads over the other headings of the
+//!    same place (the robot turns). `speed_change_probability` moves belief to the neighbouring
+//!    speed classes. Finally a uniform jump (`jump_probability`) lets a kidnapped robot recover.
+//! 2. *Update.* Every state at place a is weighted by `exp((score_a - m) / T)` with the place
+//!    score (best view similarity), temperature T and m the largest exponent argument (the shift
+//!    cancels in the normalisation). Normalise. The place belief is the marginal over headings
+//!    and speeds.
+//!
+//! Carrying direction and speed is what lets evidence accumulate along a route: a first-order
+//! filter that only knows adjacency lags a camera that advances one place per frame and cannot
+//! beat single-frame matching on real sequences (BENCHMARKS.md).
 //!
 //! **Off-map probability** q, filtered separately so that a stretch of unrecognisable frames
-//! does not erase the place belief: q enters with `off_map_probability` per frame and stays with
+//! does not erase the motion belief: q enters with `off_map_probability` per frame and stays with
 //! `stay_probability`; its update weighs the off-map likelihood against the on-map marginal
-//! likelihood `sum_i prior_i * likelihood_i`. The off-map hypothesis scores what the best of M
+//! likelihood `sum_places predicted_place * likelihood`, both at their own temperature
+//! `off_map_temperature` (deciding on-map vs off-map is a different question from which place,
+//! and wants sharper evidence). The off-map hypothesis scores what the best of M
 //! unrelated places would score in this frame: `mean + (sqrt(2 ln M) + margin) * std` of the
 //! frame's place scores without the best one (the expected maximum of M Gaussian draws plus
 //! `off_map_margin` standard deviations), never below the absolute floor `off_map_similarity`.
@@ -23,20 +33,25 @@
 //!
 //! Single-frame mode skips the prediction and starts every frame from the initial prior.
 
+use super::motion::Headings;
 use crate::map::Map;
 
 /// Below this many places the frame's score statistics say nothing about the background.
 pub(crate) const MIN_PLACES_FOR_BACKGROUND: usize = 10;
 
 /// Fixed parameters of the filter, validated by the localizer options.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Debug)]
 pub(crate) struct FilterParams {
     pub temperature: f64,
     pub stay_probability: f64,
+    pub speeds: Vec<f64>,
+    pub speed_change_probability: f64,
+    pub turn_probability: f64,
     pub jump_probability: f64,
     pub off_map_probability: f64,
     pub off_map_similarity: f64,
     pub off_map_margin: f64,
+    pub off_map_temperature: f64,
 }
 
 /// Score of the off-map hypothesis for one frame (see the module documentation). The
@@ -57,88 +72,123 @@ fn off_map_score(params: &FilterParams, place_scores: &[f32], max_score: f64) ->
         .max(params.off_map_similarity)
 }
 
-/// Place belief, off-map probability, and scratch buffers.
+/// Motion belief, place marginals, off-map probability, and scratch buffers.
 pub(crate) struct Belief {
-    /// Posterior over the M places given that the robot is on the map.
+    headings: Headings,
+    speeds: usize,
+    /// Probability of each (heading, speed) state, index `heading * speeds + speed`, given that
+    /// the robot is on the map.
+    states: Vec<f64>,
+    /// Initial (and jump) probability of a state of each heading: places share the mass
+    /// uniformly, then the headings and speeds of each place.
+    prior: Vec<f64>,
+    /// Posterior over the M places given that the robot is on the map (marginal of `states`).
     pub places: Vec<f64>,
     /// Posterior probability that the robot is off the map.
     pub off_map: f64,
     scratch: Vec<f64>,
-    /// Mean length of each place's edges, when both ends have positions.
-    mean_edge_length: Vec<Option<f64>>,
+    turned: Vec<f64>,
 }
 
 impl Belief {
-    pub fn new(map: &Map) -> Self {
+    pub fn new(map: &Map, params: &FilterParams) -> Self {
+        let headings = Headings::new(map);
         let m = map.place_count();
-        let positions = map.place_positions();
-        let mean_edge_length = (0..m)
-            .map(|p| {
-                let here = positions[p]?;
-                let (ids, _) = map.neighbours(p as u32).expect("place in range");
-                let lengths: Vec<f64> = ids
-                    .iter()
-                    .map(|&j| positions[j as usize].map(|q| (q - here).norm()))
-                    .collect::<Option<_>>()?;
-                let mean = lengths.iter().sum::<f64>() / lengths.len().max(1) as f64;
-                (!lengths.is_empty() && mean > 0.0).then_some(mean)
-            })
+        let speeds = params.speeds.len();
+        let prior = (0..headings.len())
+            .map(|h| 1.0 / (m * headings.degree(headings.from[h] as usize) * speeds) as f64)
             .collect();
+        let n = headings.len() * speeds;
         Self {
+            states: vec![0.0; n],
+            scratch: vec![0.0; n],
+            turned: vec![0.0; m * speeds],
+            prior,
             places: vec![0.0; m],
             off_map: 0.0,
-            scratch: vec![0.0; m],
-            mean_edge_length,
+            headings,
+            speeds,
         }
     }
 
-    /// Sets the belief to the prior used before any frame: uniform over places, off-map with
-    /// `off_map_probability`.
+    /// Sets the belief to the prior used before any frame: uniform over places (then over their
+    /// headings and speeds), off-map with `off_map_probability`.
     pub fn set_initial(&mut self, params: &FilterParams) {
-        let m = self.places.len();
-        self.places.fill(1.0 / m as f64);
+        let s = self.speeds;
+        for (h, &p) in self.prior.iter().enumerate() {
+            self.states[h * s..(h + 1) * s].fill(p);
+        }
         self.off_map = params.off_map_probability;
     }
 
-    /// Propagates the belief along the graph. `travelled` is the odometry distance in metres
-    /// since the previous frame, when the frame carries odometry.
-    pub fn predict(&mut self, map: &Map, params: &FilterParams, travelled: Option<f64>) {
-        let m = self.places.len();
-        let moved = &mut self.scratch;
-        moved.fill(0.0);
-        for i in 0..m {
-            let b = self.places[i];
-            if b == 0.0 {
-                continue;
+    /// Moves the belief one frame along the graph (step 1 of the module documentation).
+    /// `travelled` is the odometry distance in metres since the previous frame, if known.
+    pub fn predict(&mut self, params: &FilterParams, travelled: Option<f64>) {
+        let (s, headings) = (self.speeds, &self.headings);
+        let next = &mut self.scratch;
+        next.fill(0.0);
+        self.turned.fill(0.0);
+        for h in 0..headings.len() {
+            let stationary = headings.from[h] == headings.to[h];
+            for (v, &speed) in params.speeds.iter().enumerate() {
+                let mass = self.states[h * s + v];
+                if mass == 0.0 {
+                    continue;
+                }
+                let advance = match (stationary, travelled, headings.length[h]) {
+                    (true, _, _) => 0.0,
+                    (false, Some(d), Some(len)) if len > 0.0 => (d / len).min(1.0),
+                    _ => speed,
+                };
+                let stay = mass * (1.0 - advance);
+                next[h * s + v] += stay * (1.0 - params.turn_probability);
+                self.turned[headings.from[h] as usize * s + v] += stay * params.turn_probability;
+                if advance > 0.0 {
+                    for (g, share) in headings.next(h) {
+                        next[g * s + v] += mass * advance * share;
+                    }
+                }
             }
-            let (ids, weights) = map.neighbours(i as u32).expect("place in range");
-            let total_weight: f64 = weights.iter().map(|&w| f64::from(w)).sum();
-            if ids.is_empty() || total_weight <= 0.0 {
-                moved[i] += b;
-                continue;
-            }
-            let stay = match (travelled, self.mean_edge_length[i]) {
-                (Some(d), Some(len)) => (-d / len).exp(),
-                _ => params.stay_probability,
-            };
-            moved[i] += b * stay;
-            let share = b * (1.0 - stay) / total_weight;
-            for (&j, &w) in ids.iter().zip(weights) {
-                moved[j as usize] += share * f64::from(w);
+        }
+        for (p, turned) in self.turned.chunks_exact(s).enumerate() {
+            let range = headings.place_offsets[p] as usize..headings.place_offsets[p + 1] as usize;
+            let degree = range.len() as f64;
+            for h in range {
+                for v in 0..s {
+                    next[h * s + v] += turned[v] / degree;
+                }
             }
         }
         let keep = 1.0 - params.jump_probability;
-        let uniform = params.jump_probability / m as f64;
-        for (b, &p) in self.places.iter_mut().zip(moved.iter()) {
-            *b = keep * p + uniform;
+        let change = if s > 1 {
+            params.speed_change_probability
+        } else {
+            0.0
+        };
+        for (h, &prior) in self.prior.iter().enumerate() {
+            let row = &next[h * s..(h + 1) * s];
+            for v in 0..s {
+                let below = if v > 0 {
+                    row[v - 1] * if v + 1 < s { 0.5 } else { 1.0 }
+                } else {
+                    0.0
+                };
+                let above = if v + 1 < s {
+                    row[v + 1] * if v > 0 { 0.5 } else { 1.0 }
+                } else {
+                    0.0
+                };
+                let mixed = row[v] * (1.0 - change) + change * (below + above);
+                self.states[h * s + v] = keep * mixed + params.jump_probability * prior;
+            }
         }
         self.off_map = self.off_map * params.stay_probability
             + (1.0 - self.off_map) * params.off_map_probability;
     }
 
-    /// Multiplies by the observation likelihoods and normalises both filters. If every place
-    /// underflows to zero (possible only with zero jump probability), the place belief restarts
-    /// from the likelihood alone.
+    /// Multiplies by the observation likelihoods and normalises both filters, then computes the
+    /// place marginals. If every state underflows to zero (possible only with zero jump
+    /// probability), the motion belief restarts from the prior.
     pub fn update(&mut self, params: &FilterParams, place_scores: &[f32]) {
         let max_score = place_scores
             .iter()
@@ -146,22 +196,53 @@ impl Belief {
         let off_score = off_map_score(params, place_scores, max_score);
         let shift = max_score.max(off_score);
         let inv_t = 1.0 / params.temperature;
-        let mut on_map_likelihood = 0.0;
-        for (b, &s) in self.places.iter_mut().zip(place_scores) {
-            *b *= ((f64::from(s) - shift) * inv_t).exp();
-            on_map_likelihood += *b;
+        let s = self.speeds;
+        // Predicted place marginals first: the off-map filter weighs them with its own temperature.
+        self.places.fill(0.0);
+        for (h, states) in self.states.chunks_exact(s).enumerate() {
+            self.places[self.headings.from[h] as usize] += states.iter().sum::<f64>();
         }
-        if !(on_map_likelihood > 0.0 && on_map_likelihood.is_finite()) {
+        let inv_t_off = 1.0 / params.off_map_temperature;
+        let likelihood_off_scale = |score: f64| ((score - shift) * inv_t_off).exp();
+        let on_map_evidence: f64 = self
+            .places
+            .iter()
+            .zip(place_scores)
+            .map(|(p, &score)| p * likelihood_off_scale(f64::from(score)))
+            .sum();
+        let off_map_evidence = likelihood_off_scale(off_score);
+
+        let likelihood: &mut Vec<f64> = &mut self.places;
+        likelihood
+            .iter_mut()
+            .zip(place_scores)
+            .for_each(|(l, &score)| *l = ((f64::from(score) - shift) * inv_t).exp());
+        let mut total = 0.0;
+        for (h, states) in self.states.chunks_exact_mut(s).enumerate() {
+            let l = likelihood[self.headings.from[h] as usize];
+            for state in states {
+                *state *= l;
+                total += *state;
+            }
+        }
+        if !(total > 0.0 && total.is_finite()) {
             let off_map = self.off_map;
             self.set_initial(params);
             self.off_map = off_map;
             return self.update(params, place_scores);
         }
-        let inv_total = 1.0 / on_map_likelihood;
-        self.places.iter_mut().for_each(|b| *b *= inv_total);
-
-        let off = self.off_map * ((off_score - shift) * inv_t).exp();
-        let on = (1.0 - self.off_map) * on_map_likelihood;
+        let inv_total = 1.0 / total;
+        self.places.fill(0.0);
+        for (h, states) in self.states.chunks_exact_mut(s).enumerate() {
+            let mut sum = 0.0;
+            for state in states {
+                *state *= inv_total;
+                sum += *state;
+            }
+            self.places[self.headings.from[h] as usize] += sum;
+        }
+        let off = self.off_map * off_map_evidence;
+        let on = (1.0 - self.off_map) * on_map_evidence;
         self.off_map = if off + on > 0.0 {
             off / (off + on)
         } else {

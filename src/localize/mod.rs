@@ -5,6 +5,7 @@
 
 mod error;
 mod filter;
+mod motion;
 mod similarity;
 
 pub use error::LocalizeError;
@@ -31,11 +32,11 @@ pub enum Mode {
 pub struct LocalizerOptions {
     /// Filter or single-frame.
     pub mode: Mode,
-    /// Softmax temperature turning similarities into likelihoods; smaller trusts the
-    /// appearance more. Default 0.03.
+    /// Softmax temperature turning similarities into likelihoods for the motion belief; smaller
+    /// trusts each frame's appearance more, larger lets evidence accumulate along the route.
+    /// Default 0.2 (best OHA, then R@100P, on held-out generated worlds; BENCHMARKS.md).
     pub temperature: f32,
-    /// Probability of staying at a place between two frames when no odometry is given.
-    /// Default 0.7.
+    /// Probability that the off-map state persists from one frame to the next. Default 0.7.
     pub stay_probability: f32,
     /// Probability of a jump to any place (kidnapping, relocalization). Default 0.01.
     pub jump_probability: f32,
@@ -48,24 +49,41 @@ pub struct LocalizerOptions {
     /// score to beat the off-map hypothesis (see `filter.rs`; negative values lower the bar,
     /// since neighbouring places make the background scores correlated). Default -1.0.
     pub off_map_margin: f32,
+    /// Temperature of the on-map vs off-map decision (see `filter.rs`). Default 0.03.
+    pub off_map_temperature: f32,
     /// Candidates reported per frame. Default 5.
     pub top_k: usize,
     /// Refuse maps built with another descriptor than this one.
     pub expected: ExpectedDescriptor,
+    /// Speed classes of the motion model: the chance of advancing one edge per frame, each in
+    /// [0, 1], at most [`MAX_SPEED_CLASSES`]. Default 1, 0.5, 0.2, 0.05, 0 (from a camera that
+    /// advances a place every frame to a standing one). Odometry, when given, sets the advance.
+    pub speeds: Vec<f32>,
+    /// Per-frame probability of moving to a neighbouring speed class. Default 0.05.
+    pub speed_change_probability: f32,
+    /// Per-frame probability of turning to another heading at the same place. Default 0.02.
+    pub turn_probability: f32,
 }
+
+/// Most speed classes the motion model accepts.
+pub const MAX_SPEED_CLASSES: usize = 8;
 
 impl Default for LocalizerOptions {
     fn default() -> Self {
         Self {
             mode: Mode::Filter,
-            temperature: 0.03,
+            temperature: 0.2,
             stay_probability: 0.7,
             jump_probability: 0.01,
             off_map_probability: 0.01,
             off_map_similarity: 0.2,
             off_map_margin: -1.0,
+            off_map_temperature: 0.03,
             top_k: 5,
             expected: ExpectedDescriptor::default(),
+            speeds: vec![1.0, 0.5, 0.2, 0.05, 0.0],
+            speed_change_probability: 0.05,
+            turn_probability: 0.02,
         }
     }
 }
@@ -76,6 +94,9 @@ impl LocalizerOptions {
         let prob = |x: f32| x.is_finite() && (0.0..=1.0).contains(&x);
         if !(self.temperature.is_finite() && self.temperature > 0.0) {
             return bad("temperature must be finite and > 0");
+        }
+        if !(self.off_map_temperature.is_finite() && self.off_map_temperature > 0.0) {
+            return bad("off_map_temperature must be finite and > 0");
         }
         if !prob(self.stay_probability) {
             return bad("stay_probability must lie in [0, 1]");
@@ -93,6 +114,15 @@ impl LocalizerOptions {
         if !self.off_map_margin.is_finite() {
             return bad("off_map_margin must be finite");
         }
+        if self.speeds.is_empty()
+            || self.speeds.len() > MAX_SPEED_CLASSES
+            || !self.speeds.iter().all(|&v| prob(v))
+        {
+            return bad("speeds must hold 1 to 8 values in [0, 1]");
+        }
+        if !prob(self.speed_change_probability) || !prob(self.turn_probability) {
+            return bad("speed_change_probability and turn_probability must lie in [0, 1]");
+        }
         if self.top_k == 0 {
             return bad("top_k must be at least 1");
         }
@@ -103,6 +133,10 @@ impl LocalizerOptions {
             off_map_probability: f64::from(self.off_map_probability),
             off_map_similarity: f64::from(self.off_map_similarity),
             off_map_margin: f64::from(self.off_map_margin),
+            off_map_temperature: f64::from(self.off_map_temperature),
+            speeds: self.speeds.iter().map(|&v| f64::from(v)).collect(),
+            speed_change_probability: f64::from(self.speed_change_probability),
+            turn_probability: f64::from(self.turn_probability),
         })
     }
 }
@@ -180,7 +214,7 @@ impl Localizer {
         let params = options.filter_params()?;
         map.descriptor().check_compatible(&options.expected)?;
         let (n, m) = (map.view_count(), map.place_count());
-        let mut belief = Belief::new(&map);
+        let mut belief = Belief::new(&map, &params);
         belief.set_initial(&params);
         Ok(Self {
             belief,
@@ -281,7 +315,7 @@ impl Localizer {
             &mut self.best_views,
         );
         if filtering && self.initialized {
-            self.belief.predict(&self.map, &self.params, travelled);
+            self.belief.predict(&self.params, travelled);
         } else {
             self.belief.set_initial(&self.params);
         }

@@ -86,6 +86,15 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         params.query_noise
     ));
 
+    let queries: Vec<Vec<f32>> = sequence
+        .frames
+        .iter()
+        .map(|f| f.descriptor.clone())
+        .collect();
+    let spread = crate::images::similarity_spread(&map, &queries);
+    say(format!(
+        "similarity spread (median std of a frame's similarities to all views): {spread:.3}"
+    ));
     let hops = HopDistances::from_map(&map);
     let configs = [
         ("single-frame", Mode::SingleFrame, false),

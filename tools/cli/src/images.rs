@@ -27,7 +27,6 @@ pub struct EvalImagesArgs {
     pub taps: Vec<String>,
     pub grid: (usize, usize),
     pub temperature: f32,
-    pub stay_probability: f32,
     pub json: bool,
 }
 
@@ -104,6 +103,10 @@ pub fn run(args: &EvalImagesArgs) -> Result<()> {
         "describe_ms_median".into(),
         json!(median_and_p90(&describe_ms).0),
     );
+    report.insert(
+        "similarity_std_median".into(),
+        json!(similarity_spread(&map, &queries)),
+    );
     if !args.json {
         println!(
             "map: {} frames from {}; query: {} frames from {}",
@@ -133,7 +136,6 @@ pub fn run(args: &EvalImagesArgs) -> Result<()> {
         let options = LocalizerOptions {
             mode,
             temperature: args.temperature,
-            stay_probability: args.stay_probability,
             top_k: 5,
             ..Default::default()
         };
@@ -181,4 +183,23 @@ pub fn run(args: &EvalImagesArgs) -> Result<()> {
         println!("\ntolerance: +-{} frames", args.tolerance);
     }
     Ok(())
+}
+
+/// Median over queries of the standard deviation of a query's similarities to all map views:
+/// the scale that the localizer temperature is relative to.
+pub(crate) fn similarity_spread(map: &topoloc::Map, queries: &[Vec<f32>]) -> f64 {
+    let d = map.dim();
+    let stds: Vec<f64> = queries
+        .iter()
+        .map(|q| {
+            let sims: Vec<f64> = map
+                .descriptors()
+                .chunks_exact(d)
+                .map(|v| v.iter().zip(q).map(|(a, b)| f64::from(a * b)).sum())
+                .collect();
+            let mean = sims.iter().sum::<f64>() / sims.len() as f64;
+            (sims.iter().map(|s| (s - mean).powi(2)).sum::<f64>() / sims.len() as f64).sqrt()
+        })
+        .collect();
+    median_and_p90(&stds).0
 }

@@ -85,12 +85,9 @@ enum Command {
         /// Pooling grid per tap, ROWSxCOLS.
         #[arg(long, default_value = "4x4")]
         grid: String,
-        /// Localizer temperature.
-        #[arg(long, default_value_t = 0.03)]
+        /// Localizer temperature (the library default).
+        #[arg(long, default_value_t = 0.2)]
         temperature: f32,
-        /// Localizer stay probability (filter mode).
-        #[arg(long, default_value_t = 0.7)]
-        stay_probability: f32,
         /// Print JSON.
         #[arg(long)]
         json: bool,
@@ -128,7 +125,6 @@ fn main() -> Result<()> {
             taps,
             grid,
             temperature,
-            stay_probability,
             json,
         } => {
             let (rows, cols) = grid
@@ -143,7 +139,6 @@ fn main() -> Result<()> {
                 taps,
                 grid,
                 temperature,
-                stay_probability,
                 json,
             })
         }
