@@ -117,6 +117,37 @@ fn filter_beats_single_frame_on_noisy_walk() {
 }
 
 #[test]
+fn filter_keeps_up_with_a_camera_advancing_one_place_per_frame() {
+    // Neighbouring places look alike, as consecutive frames of a real sequence do: a filter that
+    // lags one place behind is then wrong, which is how an adjacency-only filter loses to
+    // single frames on real data. The motion model must keep up, in both directions.
+    let map = Arc::new(common::smooth_chain_map(120, DIM, 0.3));
+    for direction in ["forward", "backward"] {
+        let mut truth: Vec<u32> = (0..120).collect();
+        if direction == "backward" {
+            truth.reverse();
+        }
+        let frames: Vec<Vec<f32>> = truth
+            .iter()
+            .map(|&p| query(&map, p, 1.0, u64::from(p)))
+            .collect();
+        let single = accuracy(
+            &run(&mut localizer(&map, Mode::SingleFrame), &frames),
+            &truth,
+        );
+        let filtered = accuracy(&run(&mut localizer(&map, Mode::Filter), &frames), &truth);
+        assert!(
+            single < 0.8,
+            "noise too weak to test anything: single-frame accuracy {single}"
+        );
+        assert!(
+            filtered > single + 0.15,
+            "{direction}: filter {filtered} vs single {single}"
+        );
+    }
+}
+
+#[test]
 fn kidnapped_robot_recovers() {
     let map = Arc::new(chain_map(40, 4, DIM));
     let mut loc = localizer(&map, Mode::Filter);

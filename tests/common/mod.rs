@@ -62,3 +62,27 @@ pub fn chain_map(places: u32, views: u32, dim: u32) -> Map {
     }
     builder.build().unwrap()
 }
+
+/// A chain of `places` places (one view each) whose descriptors drift smoothly: each place is
+/// its predecessor plus a small random step, so that neighbours look alike, as consecutive
+/// frames of a real sequence do.
+pub fn smooth_chain_map(places: u32, dim: u32, step: f32) -> Map {
+    let mut builder =
+        MapBuilder::new(DescriptorIdentity::new("test", "smooth-chain", dim).unwrap());
+    let mut current = unit_vector(7, dim as usize);
+    for p in 0..places {
+        let place = builder.add_place(None).unwrap();
+        builder
+            .add_view(place, &current, ViewAttributes::default())
+            .unwrap();
+        if p > 0 {
+            builder.add_edge(p - 1, p, 1.0).unwrap();
+        }
+        current = mix(
+            &current,
+            &unit_vector(1000 + u64::from(p), dim as usize),
+            step,
+        );
+    }
+    builder.build().unwrap()
+}
