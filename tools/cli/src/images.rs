@@ -27,6 +27,7 @@ pub struct EvalImagesArgs {
     pub taps: Vec<String>,
     pub grid: (usize, usize),
     pub temperature: f32,
+    pub pca_samples: usize,
     pub json: bool,
 }
 
@@ -73,7 +74,10 @@ pub fn run(args: &EvalImagesArgs) -> Result<()> {
     let (query_raw, describe_ms) = describe_all(&mut backend, &query_files)?;
 
     let raw_dim = map_raw[0].len();
-    let pca = Pca::fit(&map_raw.concat(), raw_dim, args.dim, false)?;
+    // PCA on at most `pca_samples` map frames, evenly spaced (the thin SVD costs n^2 x raw_dim).
+    let stride = map_raw.len().div_ceil(args.pca_samples.max(2));
+    let fit_rows: Vec<f32> = map_raw.iter().step_by(stride).flatten().copied().collect();
+    let pca = Pca::fit(&fit_rows, raw_dim, args.dim, false)?;
     let identity = DescriptorIdentity::new(
         "onnx-mlf",
         format!("{} pca={}", backend.identity(), pca.output_dim),

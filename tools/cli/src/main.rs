@@ -88,6 +88,9 @@ enum Command {
         /// Localizer temperature (the library default).
         #[arg(long, default_value_t = 0.2)]
         temperature: f32,
+        /// Most map frames the PCA is fitted on (evenly spaced).
+        #[arg(long, default_value_t = 1000)]
+        pca_samples: usize,
         /// Print JSON.
         #[arg(long)]
         json: bool,
@@ -125,6 +128,7 @@ fn main() -> Result<()> {
             taps,
             grid,
             temperature,
+            pca_samples,
             json,
         } => {
             let (rows, cols) = grid
@@ -139,6 +143,7 @@ fn main() -> Result<()> {
                 taps,
                 grid,
                 temperature,
+                pca_samples,
                 json,
             })
         }
