@@ -753,7 +753,8 @@ class Localizer(_SingleThreaded):
     ``mode``: ``"filter"`` (forward filter over the graph; timestamps must not decrease) or
     ``"single_frame"`` (every frame judged on its own). Every other option left as ``None``
     takes the library default (:func:`localizer_options_default`): ``temperature`` (> 0),
-    ``stay_probability``, ``jump_probability``, ``off_map_probability`` (0 disables off-map),
+    ``stay_probability`` (persistence of the off-map state), ``jump_probability``,
+    ``off_map_probability`` (0 disables off-map),
     ``off_map_similarity``, ``off_map_margin``, ``top_k`` (candidates per frame, >= 1).
     ``expected_kind`` / ``expected_model`` refuse maps built with another descriptor
     (:class:`DescriptorMismatchError`). Invalid options raise :class:`InvalidOptionError`.
