@@ -368,3 +368,30 @@ fn descriptor_identity_and_options_are_checked() {
         ));
     }
 }
+
+#[test]
+fn extreme_options_never_underflow_the_belief() {
+    // A tiny temperature with an off-map floor above every score: all place likelihoods would
+    // underflow if they were scaled against the off-map score.
+    let map = Arc::new(chain_map(20, 2, DIM));
+    let options = LocalizerOptions {
+        temperature: 1e-4,
+        off_map_similarity: 1.0,
+        jump_probability: 0.0,
+        ..Default::default()
+    };
+    let mut loc = Localizer::new(map.clone(), options).unwrap();
+    for i in 0..5u32 {
+        let d = query(&map, 3 + i, 1.0, u64::from(i));
+        let r = loc
+            .localize(&Frame {
+                timestamp: f64::from(i),
+                descriptor: &d,
+                odometry: None,
+            })
+            .unwrap();
+        assert!(r.confidence.is_finite() && r.off_map_probability.is_finite());
+        let total: f32 = r.candidates.iter().map(|c| c.probability).sum();
+        assert!(total <= 1.0 + 1e-5);
+    }
+}

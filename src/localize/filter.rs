@@ -12,8 +12,8 @@
 //!    same place (the robot turns). `speed_change_probability` moves belief to the neighbouring
 //!    speed classes. Finally a uniform jump (`jump_probability`) lets a kidnapped robot recover.
 //! 2. *Update.* Every state at place a is weighted by `exp((score_a - m) / T)` with the place
-//!    score (best view similarity), temperature T and m the largest exponent argument (the shift
-//!    cancels in the normalisation). Normalise. The place belief is the marginal over headings
+//!    score (best view similarity), temperature T and m the best place score (the shift cancels
+//!    in the normalisation, and the best place's likelihood is exactly 1). Normalise. The place belief is the marginal over headings
 //!    and speeds.
 //!
 //! Carrying direction and speed is what lets evidence accumulate along a route: a first-order
@@ -194,42 +194,40 @@ impl Belief {
             .iter()
             .fold(f32::NEG_INFINITY, |a, &b| a.max(b)) as f64;
         let off_score = off_map_score(params, place_scores, max_score);
-        let shift = max_score.max(off_score);
-        let inv_t = 1.0 / params.temperature;
         let s = self.speeds;
-        // Predicted place marginals first: the off-map filter weighs them with its own temperature.
+        // Predicted place marginals first: the off-map filter weighs them with its own
+        // temperature, against the off-map score (both shifted by the larger of the two).
         self.places.fill(0.0);
         for (h, states) in self.states.chunks_exact(s).enumerate() {
             self.places[self.headings.from[h] as usize] += states.iter().sum::<f64>();
         }
+        let off_shift = max_score.max(off_score);
         let inv_t_off = 1.0 / params.off_map_temperature;
-        let likelihood_off_scale = |score: f64| ((score - shift) * inv_t_off).exp();
+        let off_map_scale = |score: f64| ((score - off_shift) * inv_t_off).exp();
         let on_map_evidence: f64 = self
             .places
             .iter()
             .zip(place_scores)
-            .map(|(p, &score)| p * likelihood_off_scale(f64::from(score)))
+            .map(|(p, &score)| p * off_map_scale(f64::from(score)))
             .sum();
-        let off_map_evidence = likelihood_off_scale(off_score);
+        let off_map_evidence = off_map_scale(off_score);
 
+        // Place likelihoods relative to the best place: the best is exactly 1, so the motion
+        // belief cannot underflow to zero wherever the prior is positive.
+        let inv_t = 1.0 / params.temperature;
         let likelihood: &mut Vec<f64> = &mut self.places;
         likelihood
             .iter_mut()
             .zip(place_scores)
-            .for_each(|(l, &score)| *l = ((f64::from(score) - shift) * inv_t).exp());
-        let mut total = 0.0;
-        for (h, states) in self.states.chunks_exact_mut(s).enumerate() {
-            let l = likelihood[self.headings.from[h] as usize];
-            for state in states {
-                *state *= l;
-                total += *state;
-            }
-        }
+            .for_each(|(l, &score)| *l = ((f64::from(score) - max_score) * inv_t).exp());
+        let mut total = self.weigh_states();
         if !(total > 0.0 && total.is_finite()) {
+            // The predicted belief had no mass where the evidence is (zero jump probability):
+            // restart the motion belief from the prior, whose every state is positive.
             let off_map = self.off_map;
             self.set_initial(params);
             self.off_map = off_map;
-            return self.update(params, place_scores);
+            total = self.weigh_states();
         }
         let inv_total = 1.0 / total;
         self.places.fill(0.0);
@@ -248,5 +246,19 @@ impl Belief {
         } else {
             0.0
         };
+    }
+
+    /// Multiplies every state by the likelihood of its place (held in `places`) and returns the
+    /// total mass.
+    fn weigh_states(&mut self) -> f64 {
+        let mut total = 0.0;
+        for (h, states) in self.states.chunks_exact_mut(self.speeds).enumerate() {
+            let l = self.places[self.headings.from[h] as usize];
+            for state in states {
+                *state *= l;
+                total += *state;
+            }
+        }
+        total
     }
 }
