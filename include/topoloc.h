@@ -34,7 +34,74 @@
 #define topoloc_frame_default(p) topoloc_frame_init((p), sizeof *(p))
 #define topoloc_result_default(p) topoloc_result_init((p), sizeof *(p))
 #define topoloc_view_info_default(p) topoloc_view_info_init((p), sizeof *(p))
+#define topoloc_image_map_options_default(p) topoloc_image_map_options_init((p), sizeof *(p))
 
+
+/**
+ * No image (the frame carries a descriptor only).
+ */
+#define TOPOLOC_PIXEL_NONE 0
+
+/**
+ * 8-bit grey, one byte per pixel.
+ */
+#define TOPOLOC_PIXEL_GRAY8 1
+
+/**
+ * 8-bit red, green, blue.
+ */
+#define TOPOLOC_PIXEL_RGB8 2
+
+/**
+ * 8-bit blue, green, red (OpenCV's `CV_8UC3` order).
+ */
+#define TOPOLOC_PIXEL_BGR8 3
+
+/**
+ * 8-bit red, green, blue, alpha.
+ */
+#define TOPOLOC_PIXEL_RGBA8 4
+
+/**
+ * 8-bit blue, green, red, alpha.
+ */
+#define TOPOLOC_PIXEL_BGRA8 5
+
+/**
+ * Backend choice: the map's own describer when it has one (localizer), or the ONNX backend
+ * (map building).
+ */
+#define TOPOLOC_BACKEND_AUTO 0
+
+/**
+ * No describer: frames must carry descriptors (localizer only).
+ */
+#define TOPOLOC_BACKEND_NONE 1
+
+/**
+ * ONNX multi-level CNN features (needs ONNX Runtime and the model).
+ */
+#define TOPOLOC_BACKEND_ONNX 2
+
+/**
+ * VLAD of OpenCV ORB features (no learned weights).
+ */
+#define TOPOLOC_BACKEND_VLAD_ORB 3
+
+/**
+ * VLAD of OpenCV SIFT features.
+ */
+#define TOPOLOC_BACKEND_VLAD_SIFT 4
+
+/**
+ * Build stage reported to the progress callback: describing images (`done` of `total`).
+ */
+#define TOPOLOC_STAGE_DESCRIBING 0
+
+/**
+ * Build stage reported to the progress callback: fitting PCA/codebook and assembling (0 or 1 of 1).
+ */
+#define TOPOLOC_STAGE_FITTING 1
 
 /**
  * Filter mode: forward filter over the graph (default).
@@ -146,6 +213,32 @@ enum topoloc_status
    */
   TOPOLOC_ERR_INVALID_OPTION = 204,
   /**
+   * An image buffer is unusable (size, stride, length, pixel format); the message says why.
+   */
+  TOPOLOC_ERR_INVALID_IMAGE = 300,
+  /**
+   * The image carries no place information (blank, constant, no local feature): the frame
+   * was not localized and the localizer state is unchanged.
+   */
+  TOPOLOC_ERR_UNINFORMATIVE_IMAGE = 301,
+  /**
+   * A runtime or model file is missing or cannot be loaded; the message names every path tried.
+   */
+  TOPOLOC_ERR_BACKEND_UNAVAILABLE = 302,
+  /**
+   * The model file loaded but does not work (corrupt, missing outputs, run error).
+   */
+  TOPOLOC_ERR_MODEL = 303,
+  /**
+   * The frame has an image but the localizer cannot describe images (the map stores no
+   * describer, or the localizer was created with `TOPOLOC_BACKEND_NONE`).
+   */
+  TOPOLOC_ERR_NO_DESCRIBER = 304,
+  /**
+   * The progress callback asked to stop.
+   */
+  TOPOLOC_ERR_CANCELLED = 305,
+  /**
    * A bug inside topoloc was caught at the boundary; the object involved should be freed.
    */
   TOPOLOC_ERR_PANIC = 900,
@@ -251,6 +344,104 @@ typedef struct topoloc_keyframe {
 } topoloc_keyframe;
 
 /**
+ * How `topoloc_map_build_from_image_files` / `_from_images` build a map. Initialise with
+ * `topoloc_image_map_options_default`.
+ */
+typedef struct topoloc_image_map_options {
+  /**
+   * `sizeof(topoloc_image_map_options)`, set by the `_default` function.
+   */
+  size_t struct_size;
+  /**
+   * `TOPOLOC_BACKEND_ONNX` (also for `_AUTO`, the default), `_VLAD_ORB` or `_VLAD_SIFT`.
+   */
+  uint32_t backend;
+  /**
+   * Descriptor dimension D (at most the number of images minus one). Default 512.
+   */
+  uint32_t dim;
+  /**
+   * Without poses: consecutive images per place (1, or 4 for yaw views); with poses: most
+   * views per place. Default 1.
+   */
+  uint32_t views_per_place;
+  /**
+   * Describing threads; 0 = one per core. Default 0.
+   */
+  uint32_t threads;
+  /**
+   * ONNX model file; NULL or "" = the cache's default (scripts/setup-models.sh).
+   */
+  const char *onnx_model_path;
+  /**
+   * ONNX Runtime library; NULL or "" = `TOPOLOC_ORT_LIBRARY`, `ORT_DYLIB_PATH`, the cache.
+   */
+  const char *onnx_runtime_path;
+  /**
+   * ONNX outputs to pool, comma-separated; NULL or "" = "f6,f13,f17,f18".
+   */
+  const char *onnx_taps;
+  /**
+   * ONNX pooling grid rows and columns (1 = global pooling). Default 4 x 4.
+   */
+  uint32_t grid_rows;
+  /**
+   * See `grid_rows`.
+   */
+  uint32_t grid_cols;
+  /**
+   * VLAD codebook size. Default 64.
+   */
+  uint32_t vlad_clusters;
+  /**
+   * TUM trajectory with one pose per image (same order); NULL or "" = none (a sequence map).
+   */
+  const char *poses_tum_path;
+  /**
+   * Place spacing in metres when poses are given. Default 2.0.
+   */
+  double place_spacing_m;
+} topoloc_image_map_options;
+
+/**
+ * Progress of a long operation: `stage` is a `TOPOLOC_STAGE_*` value, `done` of `total` units.
+ * Called on the thread that called the building function, about ten times a second. Return
+ * `true` to go on, `false` to cancel (the function then returns `TOPOLOC_ERR_CANCELLED`).
+ */
+typedef bool (*topoloc_progress_fn)(void *user_data, uint32_t stage, size_t done, size_t total);
+
+/**
+ * A borrowed image: `height` rows of `stride` bytes, each starting with `width` pixels.
+ * Plain data, embedded in other structs; all-zero means "no image".
+ */
+typedef struct topoloc_image {
+  /**
+   * First byte of the first row; read only during the call it is passed to.
+   */
+  const uint8_t *data;
+  /**
+   * Bytes readable at `data` (at least `stride * (height - 1) + width * channels`).
+   */
+  size_t data_len;
+  /**
+   * Width in pixels (1..8192).
+   */
+  uint32_t width;
+  /**
+   * Height in pixels (1..8192).
+   */
+  uint32_t height;
+  /**
+   * Bytes from one row to the next (>= width * channels).
+   */
+  size_t stride;
+  /**
+   * One of the `TOPOLOC_PIXEL_*` formats; `TOPOLOC_PIXEL_NONE` means no image.
+   */
+  uint32_t format;
+} topoloc_image;
+
+/**
  * Localizer parameters. Initialise with `topoloc_localizer_options_default`; the defaults and
  * meaning of each field are those of the Rust `LocalizerOptions`.
  */
@@ -300,6 +491,20 @@ typedef struct topoloc_localizer_options {
    * Refuse maps built with another descriptor model; NULL or "" = any.
    */
   const char *expected_descriptor_model;
+  /**
+   * Describing image frames: `TOPOLOC_BACKEND_AUTO` (default) loads the map's describer when
+   * the map has one; `_NONE` never (descriptor frames only, no runtime needed); `_ONNX` or
+   * `_VLAD_*` also require the map to use that backend (else `_DESCRIPTOR_MISMATCH`).
+   */
+  uint32_t image_backend;
+  /**
+   * ONNX model file; NULL or "" = the cache's default. Must be the map's model (by hash).
+   */
+  const char *onnx_model_path;
+  /**
+   * ONNX Runtime library; NULL or "" = `TOPOLOC_ORT_LIBRARY`, `ORT_DYLIB_PATH`, the cache.
+   */
+  const char *onnx_runtime_path;
 } topoloc_localizer_options;
 
 /**
@@ -326,6 +531,11 @@ typedef struct topoloc_frame {
    * Motion since the previous frame `previous_T_current`, 16 doubles row-major 4x4; NULL = none.
    */
   const double *odometry;
+  /**
+   * The camera image, described with the map's backend when `descriptor_len` is 0 (the
+   * localizer must have a describer). Default: no image (`TOPOLOC_PIXEL_NONE`).
+   */
+  struct topoloc_image image;
 } topoloc_frame;
 
 /**
@@ -517,6 +727,31 @@ topoloc_status topoloc_map_from_keyframes(const char *kind, const char *model, u
 
 /**
  * Fills the first `size` bytes of `*options` with defaults and sets `struct_size`; call it
+ * through the header macro `topoloc_image_map_options_default(options)`.
+ * Errors: `_NULL_ARGUMENT`, `_STRUCT_SIZE`.
+ */
+topoloc_status topoloc_image_map_options_init(struct topoloc_image_map_options *options, size_t size);
+
+/**
+ * Builds a map from `count` image files (any format OpenCV reads), describing them in
+ * parallel; the map stores its describer, so localizers on it accept image frames. Views
+ * record their image's index (as keyframe id) and path. `options` may be NULL for defaults
+ * (ONNX backend); `progress` may be NULL. On success `*out` owns a new map.
+ * Errors: `_INVALID_ARGUMENT` (fewer than 2 images, bad options, pose count), `_INVALID_IMAGE`
+ * (an unreadable file; the message names it), `_BACKEND_UNAVAILABLE`, `_MODEL`, `_IO` (poses
+ * file), `_CANCELLED`, `_NULL_ARGUMENT`, `_INVALID_UTF8`, `_STRUCT_SIZE`.
+ */
+topoloc_status topoloc_map_build_from_image_files(const char *const *paths, size_t count, const struct topoloc_image_map_options *options, topoloc_progress_fn progress, void *user_data, struct topoloc_map **out);
+
+/**
+ * Builds a map from `count` images in memory (see `topoloc_map_build_from_image_files`; the
+ * views have no path). The pixels are only read during the call.
+ * Errors: as `topoloc_map_build_from_image_files`, with `_INVALID_IMAGE` for a bad buffer.
+ */
+topoloc_status topoloc_map_build_from_images(const struct topoloc_image *images, size_t count, const struct topoloc_image_map_options *options, topoloc_progress_fn progress, void *user_data, struct topoloc_map **out);
+
+/**
+ * Fills the first `size` bytes of `*options` with defaults and sets `struct_size`; call it
  * through the header macro `topoloc_localizer_options_default(options)`, which passes `sizeof *(options)`.
  * Errors: `_NULL_ARGUMENT`, `_STRUCT_SIZE` (size below the first published layout).
  */
@@ -524,8 +759,13 @@ topoloc_status topoloc_localizer_options_init(struct topoloc_localizer_options *
 
 /**
  * Creates a localizer on `map` (which it keeps alive; the caller may free its own handle).
- * `options` may be NULL for defaults. On success `*out` owns a new localizer.
- * Errors: `_INVALID_OPTION`, `_DESCRIPTOR_MISMATCH`, `_STRUCT_SIZE`, `_NULL_ARGUMENT`.
+ * `options` may be NULL for defaults. With `image_backend` `TOPOLOC_BACKEND_AUTO` and a map
+ * built from images, the map's describer is loaded now (for ONNX: the runtime and model).
+ * On success `*out` owns a new localizer.
+ * Errors: `_INVALID_OPTION`, `_DESCRIPTOR_MISMATCH` (also another backend or model file than
+ * the map's), `_BACKEND_UNAVAILABLE` (paths tried in the message; pass
+ * `TOPOLOC_BACKEND_NONE` to localize descriptors only), `_MODEL`, `_NO_DESCRIBER` (a backend
+ * was required but the map stores none), `_STRUCT_SIZE`, `_NULL_ARGUMENT`, `_INVALID_UTF8`.
  */
 topoloc_status topoloc_localizer_new(const struct topoloc_map *map, const struct topoloc_localizer_options *options, struct topoloc_localizer **out);
 
@@ -556,9 +796,14 @@ topoloc_status topoloc_result_init(struct topoloc_result *result, size_t size);
 /**
  * Localizes one frame and writes the answer into `*result`. The whole frame is validated
  * first: on any error the localizer state and `*result` are unchanged.
+ * A frame with `descriptor_len` 0 and an image is described first (the localizer needs a
+ * describer: see `topoloc_localizer_new`).
  * Errors: `_DIMENSION_MISMATCH`, `_NON_FINITE`, `_ZERO_DESCRIPTOR`, `_TIMESTAMP`,
- * `_INVALID_ARGUMENT` (odometry not a rigid transform), `_STRUCT_SIZE`, `_NULL_ARGUMENT`.
- * Cost: one pass over the map's descriptors plus O(places + edges); no allocation.
+ * `_INVALID_ARGUMENT` (odometry not a rigid transform), `_INVALID_IMAGE`,
+ * `_UNINFORMATIVE_IMAGE` (blank or featureless image: state unchanged), `_NO_DESCRIBER`,
+ * `_MODEL`, `_STRUCT_SIZE`, `_NULL_ARGUMENT`.
+ * Cost: describing the image (if any), then one pass over the map's descriptors plus
+ * O(places + edges); no allocation for descriptor frames.
  */
 topoloc_status topoloc_localizer_process(struct topoloc_localizer *localizer, const struct topoloc_frame *frame, struct topoloc_result *result);
 

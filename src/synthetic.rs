@@ -210,6 +210,7 @@ impl SequenceFrame {
             timestamp: self.timestamp,
             descriptor: &self.descriptor,
             odometry: Some(self.odometry),
+            image: None,
         }
     }
 }

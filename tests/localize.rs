@@ -43,6 +43,7 @@ fn run(localizer: &mut Localizer, frames: &[Vec<f32>]) -> Vec<Localization> {
                     timestamp: i as f64 * 0.1,
                     descriptor: d,
                     odometry: None,
+                    image: None,
                 })
                 .unwrap()
         })
@@ -83,6 +84,7 @@ fn clean_queries_find_their_place_and_view() {
                     timestamp: 0.0,
                     descriptor: d,
                     odometry: None,
+                    image: None,
                 })
                 .unwrap();
             assert_eq!((r.place, r.view), (place, view));
@@ -186,6 +188,7 @@ fn frames_from_another_world_are_off_map_and_tracking_resumes() {
             timestamp: t,
             descriptor: &f.descriptor,
             odometry: None,
+            image: None,
         })
         .unwrap()
     };
@@ -224,6 +227,7 @@ fn odometry_without_motion_keeps_the_place() {
         timestamp: 0.0,
         descriptor: &d5,
         odometry: None,
+        image: None,
     })
     .unwrap();
     // An ambiguous frame halfway between places 5 and 6: with zero motion the belief stays at 5.
@@ -233,6 +237,7 @@ fn odometry_without_motion_keeps_the_place() {
             timestamp: 0.1,
             descriptor: &between,
             odometry: Some(still),
+            image: None,
         })
         .unwrap();
     assert_eq!(r.place, 5);
@@ -264,7 +269,8 @@ fn bad_frames_leave_the_state_unchanged() {
             loc.localize(&Frame {
                 timestamp: t,
                 descriptor: &nan,
-                odometry: None
+                odometry: None,
+                image: None,
             }),
             Err(LocalizeError::Descriptor(_))
         ));
@@ -272,7 +278,8 @@ fn bad_frames_leave_the_state_unchanged() {
             loc.localize(&Frame {
                 timestamp: t,
                 descriptor: &zero,
-                odometry: None
+                odometry: None,
+                image: None,
             }),
             Err(LocalizeError::Descriptor(_))
         ));
@@ -280,7 +287,8 @@ fn bad_frames_leave_the_state_unchanged() {
             loc.localize(&Frame {
                 timestamp: t,
                 descriptor: &short,
-                odometry: None
+                odometry: None,
+                image: None,
             }),
             Err(LocalizeError::Descriptor(_))
         ));
@@ -288,7 +296,8 @@ fn bad_frames_leave_the_state_unchanged() {
             loc.localize(&Frame {
                 timestamp: f64::NAN,
                 descriptor: d,
-                odometry: None
+                odometry: None,
+                image: None,
             }),
             Err(LocalizeError::Timestamp(_))
         ));
@@ -297,7 +306,8 @@ fn bad_frames_leave_the_state_unchanged() {
                 loc.localize(&Frame {
                     timestamp: t - 1.0,
                     descriptor: d,
-                    odometry: None
+                    odometry: None,
+                    image: None,
                 }),
                 Err(LocalizeError::Timestamp(_))
             ));
@@ -307,6 +317,7 @@ fn bad_frames_leave_the_state_unchanged() {
                 timestamp: t,
                 descriptor: d,
                 odometry: None,
+                image: None,
             })
             .unwrap(),
         );
@@ -388,6 +399,7 @@ fn extreme_options_never_underflow_the_belief() {
                 timestamp: f64::from(i),
                 descriptor: &d,
                 odometry: None,
+                image: None,
             })
             .unwrap();
         assert!(r.confidence.is_finite() && r.off_map_probability.is_finite());

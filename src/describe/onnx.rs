@@ -190,6 +190,11 @@ impl OnnxMlf {
         )
     }
 
+    /// SHA-256 (hex) of the model file.
+    pub fn model_sha256(&self) -> &str {
+        &self.model_sha256
+    }
+
     /// The options it was created with.
     pub fn options(&self) -> &OnnxOptions {
         &self.options

@@ -2,8 +2,9 @@
 //! boundary, and checked conversions of raw pointers. All unsafe pointer handling of the C ABI
 //! goes through the helpers here.
 
+use crate::describe::DescribeError;
 use crate::localize::LocalizeError;
-use crate::map::{DescriptorError, MapError};
+use crate::map::{DescriptorError, ImageMapError, MapError};
 use std::cell::RefCell;
 use std::ffi::{c_char, CStr, CString};
 use std::panic::{catch_unwind, AssertUnwindSafe};
@@ -59,6 +60,21 @@ pub enum topoloc_status {
     TOPOLOC_ERR_TIMESTAMP = 203,
     /// A localizer option is out of range.
     TOPOLOC_ERR_INVALID_OPTION = 204,
+    // 300..399: images and descriptor backends
+    /// An image buffer is unusable (size, stride, length, pixel format); the message says why.
+    TOPOLOC_ERR_INVALID_IMAGE = 300,
+    /// The image carries no place information (blank, constant, no local feature): the frame
+    /// was not localized and the localizer state is unchanged.
+    TOPOLOC_ERR_UNINFORMATIVE_IMAGE = 301,
+    /// A runtime or model file is missing or cannot be loaded; the message names every path tried.
+    TOPOLOC_ERR_BACKEND_UNAVAILABLE = 302,
+    /// The model file loaded but does not work (corrupt, missing outputs, run error).
+    TOPOLOC_ERR_MODEL = 303,
+    /// The frame has an image but the localizer cannot describe images (the map stores no
+    /// describer, or the localizer was created with `TOPOLOC_BACKEND_NONE`).
+    TOPOLOC_ERR_NO_DESCRIBER = 304,
+    /// The progress callback asked to stop.
+    TOPOLOC_ERR_CANCELLED = 305,
     // 900..999: internal
     /// A bug inside topoloc was caught at the boundary; the object involved should be freed.
     TOPOLOC_ERR_PANIC = 900,
@@ -91,6 +107,12 @@ impl topoloc_status {
             202 => c"all-zero descriptor",
             203 => c"timestamp goes backwards",
             204 => c"invalid localizer option",
+            300 => c"invalid image",
+            301 => c"uninformative image",
+            302 => c"descriptor backend unavailable",
+            303 => c"model error",
+            304 => c"no describer for images",
+            305 => c"cancelled",
             900 => c"internal error (panic caught)",
             _ => c"unknown status code",
         }
@@ -168,7 +190,37 @@ impl From<LocalizeError> for FfiError {
             }
             LocalizeError::Timestamp(_) => Self::new(TOPOLOC_ERR_TIMESTAMP, e.to_string()),
             LocalizeError::Odometry(_) => Self::new(TOPOLOC_ERR_NON_FINITE, e.to_string()),
+            LocalizeError::Describe(d) => d.into(),
+            LocalizeError::NoDescriber(_) => Self::new(TOPOLOC_ERR_NO_DESCRIBER, e.to_string()),
         }
+    }
+}
+
+impl From<DescribeError> for FfiError {
+    fn from(e: DescribeError) -> Self {
+        let status = match &e {
+            DescribeError::InvalidImage(_) => TOPOLOC_ERR_INVALID_IMAGE,
+            DescribeError::InvalidArgument(_) => TOPOLOC_ERR_INVALID_ARGUMENT,
+            DescribeError::BackendUnavailable { .. } => TOPOLOC_ERR_BACKEND_UNAVAILABLE,
+            DescribeError::Model(_) | DescribeError::OpenCv(_) => TOPOLOC_ERR_MODEL,
+            DescribeError::Uninformative(_) => TOPOLOC_ERR_UNINFORMATIVE_IMAGE,
+            DescribeError::Mismatch(_) => TOPOLOC_ERR_DESCRIPTOR_MISMATCH,
+        };
+        Self::new(status, e.to_string())
+    }
+}
+
+impl From<ImageMapError> for FfiError {
+    fn from(e: ImageMapError) -> Self {
+        let message = e.to_string();
+        let status = match e {
+            ImageMapError::Image { error, .. } | ImageMapError::Describe(error) => {
+                FfiError::from(error).status
+            }
+            ImageMapError::Map(m) => FfiError::from(m).status,
+            ImageMapError::Cancelled => TOPOLOC_ERR_CANCELLED,
+        };
+        Self::new(status, message)
     }
 }
 

@@ -1,12 +1,16 @@
 //! C functions of the localizer: create, process a frame, reset, free.
 
 use super::boundary::{
-    borrow, borrow_mut, check_out, free_handle, init_versioned, into_handle, read_versioned, run,
-    slice, struct_size_of, write_out, write_versioned, FfiError, Versioned,
+    borrow, borrow_mut, check_out, free_handle, init_versioned, into_handle, optional_string,
+    read_versioned, run, slice, struct_size_of, write_out, write_versioned, FfiError, Versioned,
 };
 use super::convert::{expected_descriptor, optional_pose};
+use super::images::{
+    backend_kind, image_view, topoloc_image, TOPOLOC_BACKEND_AUTO, TOPOLOC_BACKEND_NONE,
+};
 use super::map::topoloc_map;
 use super::topoloc_status;
+use crate::describe::DescriberOptions;
 use crate::localize::{Frame, Localization, Localizer, LocalizerOptions, Mode};
 use std::ffi::c_char;
 
@@ -51,10 +55,20 @@ pub struct topoloc_localizer_options {
     pub expected_descriptor_kind: *const c_char,
     /// Refuse maps built with another descriptor model; NULL or "" = any.
     pub expected_descriptor_model: *const c_char,
+    // ABI 1.1 (topoloc 0.1): images.
+    /// Describing image frames: `TOPOLOC_BACKEND_AUTO` (default) loads the map's describer when
+    /// the map has one; `_NONE` never (descriptor frames only, no runtime needed); `_ONNX` or
+    /// `_VLAD_*` also require the map to use that backend (else `_DESCRIPTOR_MISMATCH`).
+    pub image_backend: u32,
+    /// ONNX model file; NULL or "" = the cache's default. Must be the map's model (by hash).
+    pub onnx_model_path: *const c_char,
+    /// ONNX Runtime library; NULL or "" = `TOPOLOC_ORT_LIBRARY`, `ORT_DYLIB_PATH`, the cache.
+    pub onnx_runtime_path: *const c_char,
 }
 
 impl Versioned for topoloc_localizer_options {
-    const MIN_SIZE: usize = std::mem::size_of::<Self>();
+    /// The ABI 1.0 layout ended before `image_backend`.
+    const MIN_SIZE: usize = std::mem::offset_of!(Self, image_backend);
 }
 
 impl Default for topoloc_localizer_options {
@@ -72,6 +86,9 @@ impl Default for topoloc_localizer_options {
             top_k: d.top_k as u32,
             expected_descriptor_kind: std::ptr::null(),
             expected_descriptor_model: std::ptr::null(),
+            image_backend: TOPOLOC_BACKEND_AUTO,
+            onnx_model_path: std::ptr::null(),
+            onnx_runtime_path: std::ptr::null(),
         }
     }
 }
@@ -88,8 +105,13 @@ pub extern "C" fn topoloc_localizer_options_init(
 }
 
 /// Creates a localizer on `map` (which it keeps alive; the caller may free its own handle).
-/// `options` may be NULL for defaults. On success `*out` owns a new localizer.
-/// Errors: `_INVALID_OPTION`, `_DESCRIPTOR_MISMATCH`, `_STRUCT_SIZE`, `_NULL_ARGUMENT`.
+/// `options` may be NULL for defaults. With `image_backend` `TOPOLOC_BACKEND_AUTO` and a map
+/// built from images, the map's describer is loaded now (for ONNX: the runtime and model).
+/// On success `*out` owns a new localizer.
+/// Errors: `_INVALID_OPTION`, `_DESCRIPTOR_MISMATCH` (also another backend or model file than
+/// the map's), `_BACKEND_UNAVAILABLE` (paths tried in the message; pass
+/// `TOPOLOC_BACKEND_NONE` to localize descriptors only), `_MODEL`, `_NO_DESCRIBER` (a backend
+/// was required but the map stores none), `_STRUCT_SIZE`, `_NULL_ARGUMENT`, `_INVALID_UTF8`.
 #[no_mangle]
 pub extern "C" fn topoloc_localizer_new(
     map: *const topoloc_map,
@@ -131,7 +153,27 @@ pub extern "C" fn topoloc_localizer_new(
             // The motion model's speed classes are not in the C options yet: defaults.
             ..LocalizerOptions::default()
         };
-        let localizer = Localizer::new(map, options)?;
+        let has_describer = map.describer().is_some();
+        let wanted = backend_kind(o.image_backend, None)?;
+        let localizer = match (o.image_backend, has_describer) {
+            (TOPOLOC_BACKEND_NONE, _) | (TOPOLOC_BACKEND_AUTO, false) => {
+                Localizer::new(map, options)?
+            }
+            _ => {
+                let describer = DescriberOptions {
+                    backend: wanted,
+                    onnx_runtime: optional_string(
+                        o.onnx_runtime_path,
+                        "options.onnx_runtime_path",
+                    )?
+                    .map(Into::into),
+                    onnx_model: optional_string(o.onnx_model_path, "options.onnx_model_path")?
+                        .map(Into::into),
+                    threads: 1,
+                };
+                Localizer::with_describer(map, options, &describer)?
+            }
+        };
         write_out(
             out,
             into_handle(topoloc_localizer {
@@ -172,10 +214,15 @@ pub struct topoloc_frame {
     pub descriptor_len: usize,
     /// Motion since the previous frame `previous_T_current`, 16 doubles row-major 4x4; NULL = none.
     pub odometry: *const f64,
+    // ABI 1.1 (topoloc 0.1): images.
+    /// The camera image, described with the map's backend when `descriptor_len` is 0 (the
+    /// localizer must have a describer). Default: no image (`TOPOLOC_PIXEL_NONE`).
+    pub image: topoloc_image,
 }
 
 impl Versioned for topoloc_frame {
-    const MIN_SIZE: usize = std::mem::size_of::<Self>();
+    /// The ABI 1.0 layout ended before `image`.
+    const MIN_SIZE: usize = std::mem::offset_of!(Self, image);
 }
 
 impl Default for topoloc_frame {
@@ -186,6 +233,7 @@ impl Default for topoloc_frame {
             descriptor: std::ptr::null(),
             descriptor_len: 0,
             odometry: std::ptr::null(),
+            image: topoloc_image::default(),
         }
     }
 }
@@ -274,9 +322,14 @@ pub extern "C" fn topoloc_result_init(result: *mut topoloc_result, size: usize) 
 
 /// Localizes one frame and writes the answer into `*result`. The whole frame is validated
 /// first: on any error the localizer state and `*result` are unchanged.
+/// A frame with `descriptor_len` 0 and an image is described first (the localizer needs a
+/// describer: see `topoloc_localizer_new`).
 /// Errors: `_DIMENSION_MISMATCH`, `_NON_FINITE`, `_ZERO_DESCRIPTOR`, `_TIMESTAMP`,
-/// `_INVALID_ARGUMENT` (odometry not a rigid transform), `_STRUCT_SIZE`, `_NULL_ARGUMENT`.
-/// Cost: one pass over the map's descriptors plus O(places + edges); no allocation.
+/// `_INVALID_ARGUMENT` (odometry not a rigid transform), `_INVALID_IMAGE`,
+/// `_UNINFORMATIVE_IMAGE` (blank or featureless image: state unchanged), `_NO_DESCRIBER`,
+/// `_MODEL`, `_STRUCT_SIZE`, `_NULL_ARGUMENT`.
+/// Cost: describing the image (if any), then one pass over the map's descriptors plus
+/// O(places + edges); no allocation for descriptor frames.
 #[no_mangle]
 pub extern "C" fn topoloc_localizer_process(
     localizer: *mut topoloc_localizer,
@@ -296,6 +349,7 @@ pub extern "C" fn topoloc_localizer_process(
             timestamp: f.timestamp,
             descriptor: slice(f.descriptor, f.descriptor_len, "frame.descriptor")?,
             odometry: optional_pose(f.odometry, "frame.odometry")?,
+            image: image_view(&f.image, "frame.image")?,
         };
         state.localizer.process(&frame, &mut state.scratch)?;
         let out = &state.scratch;

@@ -21,12 +21,14 @@
 mod boundary;
 mod builder;
 mod convert;
+mod images;
 mod localizer;
 mod map;
 mod version;
 
 pub use boundary::topoloc_status;
 pub use builder::*;
+pub use images::*;
 pub use localizer::*;
 pub use map::*;
 pub use version::*;

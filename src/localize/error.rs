@@ -1,5 +1,6 @@
 //! Errors of the localizer.
 
+use crate::describe::DescribeError;
 use crate::map::{DescriptorError, MapError};
 
 /// What can go wrong when creating a localizer or processing a frame. On error the localizer's
@@ -18,6 +19,14 @@ pub enum LocalizeError {
     /// Frame timestamp is NaN/Inf or earlier than the previous frame's.
     #[error("bad timestamp: {0}")]
     Timestamp(String),
+    /// Describing the frame's image failed (bad image, uninformative image, backend error), or
+    /// the describer does not fit the map.
+    #[error(transparent)]
+    Describe(#[from] DescribeError),
+    /// The frame has an image but no descriptor, and the localizer has no describer (create it
+    /// with `Localizer::with_describer` on a map built from images).
+    #[error("the frame carries no descriptor and this localizer cannot describe images: {0}")]
+    NoDescriber(String),
     /// Odometry is not finite.
     #[error("bad odometry: {0}")]
     Odometry(String),

@@ -10,6 +10,8 @@ mod similarity;
 
 pub use error::LocalizeError;
 
+use crate::describe::image::ImageView;
+use crate::describe::{Describer, DescriberOptions};
 use crate::map::{normalize_descriptor_into, ExpectedDescriptor, Map, PlaceId, ViewId};
 use filter::{Belief, FilterParams};
 use nalgebra::Isometry3;
@@ -141,13 +143,17 @@ impl LocalizerOptions {
     }
 }
 
-/// One camera frame, described by the host.
-#[derive(Clone, Debug)]
+/// One camera frame: a descriptor computed by the host, or an image the localizer describes.
+#[derive(Clone, Debug, Default)]
 pub struct Frame<'a> {
     /// Time in seconds; must not decrease in filter mode.
     pub timestamp: f64,
-    /// Global descriptor of the frame (D values; normalised internally).
+    /// Global descriptor of the frame (D values; normalised internally). When empty, `image` is
+    /// described with the map's own backend; when given, it is used and `image` is not described.
     pub descriptor: &'a [f32],
+    /// The camera image, described when `descriptor` is empty (needs a localizer made with
+    /// [`Localizer::with_describer`]).
+    pub image: Option<ImageView<'a>>,
     /// Motion since the previous frame, `previous_T_current`, from the host's odometry.
     pub odometry: Option<Isometry3<f64>>,
 }
@@ -205,6 +211,8 @@ pub struct Localizer {
     place_scores: Vec<f32>,
     best_views: Vec<u32>,
     order: Vec<u32>,
+    describer: Option<Describer>,
+    described: Vec<f32>,
 }
 
 impl Localizer {
@@ -227,9 +235,37 @@ impl Localizer {
             place_scores: vec![0.0; m],
             best_views: vec![0; m],
             order: (0..m as u32).collect(),
+            describer: None,
+            described: Vec::with_capacity(map.dim()),
             options,
             map,
         })
+    }
+
+    /// Creates a localizer that also describes images, with the describer model stored in the
+    /// map (maps built from images have one). Loads the backend now, so a missing runtime or
+    /// model, or a backend or model file other than the map's, fails here with a typed error
+    /// (`DescribeError::BackendUnavailable`, `DescribeError::Mismatch`).
+    pub fn with_describer(
+        map: Arc<Map>,
+        options: LocalizerOptions,
+        describer: &DescriberOptions,
+    ) -> Result<Self, LocalizeError> {
+        let model = map.describer().cloned().ok_or_else(|| {
+            LocalizeError::NoDescriber(format!(
+                "the map ({}) stores no describer; it was built from descriptors, not images",
+                map.descriptor()
+            ))
+        })?;
+        let describer = Describer::new(model, describer)?;
+        let mut localizer = Self::new(map, options)?;
+        localizer.describer = Some(describer);
+        Ok(localizer)
+    }
+
+    /// True when the localizer can describe images.
+    pub fn describes_images(&self) -> bool {
+        self.describer.is_some()
     }
 
     /// The map this localizer reads.
@@ -305,7 +341,19 @@ impl Localizer {
             }
             None => None,
         };
-        normalize_descriptor_into(frame.descriptor, self.map.dim(), &mut self.query)?;
+        let descriptor: &[f32] = match (frame.descriptor.is_empty(), &frame.image) {
+            (true, Some(image)) => {
+                let describer = self.describer.as_mut().ok_or_else(|| {
+                    LocalizeError::NoDescriber(
+                        "create the localizer with Localizer::with_describer".into(),
+                    )
+                })?;
+                describer.describe(image, &mut self.described)?;
+                &self.described
+            }
+            _ => frame.descriptor,
+        };
+        normalize_descriptor_into(descriptor, self.map.dim(), &mut self.query)?;
 
         similarity::view_similarities(&self.map, &self.query, &mut self.view_scores);
         similarity::pool_places(

@@ -16,16 +16,25 @@
 //! | `place_position` | F64 | M x 3 | position in metres (0 when absent) |
 //! | `edges` | U32 | E x 2 | undirected edges, a < b, sorted |
 //! | `edge_weight` | F32 | E | edge weights |
+//! | `describer_pca_mean` | F32 | F | (1.1, maps built from images) PCA mean of the raw vectors |
+//! | `describer_pca_components` | F32 | D x F | (1.1) PCA projection rows |
+//! | `describer_codebook` | F32 | K x L | (1.1, VLAD only) codebook of K centres of local descriptors |
 //!
 //! The only metadata key, `topoloc`, holds a JSON object with `format` (`"topoloc-map"`),
 //! `version` (`"MAJOR.MINOR"`), `descriptor` (`kind`, `model`, `dim`), `creator`, the counts, and
 //! `crc32`: the CRC-32 (hex) of that JSON serialised without `crc32`, followed by every tensor's
-//! bytes in tensor-name order, so that any flipped byte is detected. Readers accept any file of the
+//! bytes in tensor-name order, so that any flipped byte is detected. Since 1.1 the JSON may hold
+//! `describer` (the backend and its configuration, see [`BackendSpec`]), and the checksummed
+//! JSON is the metadata object re-serialised as a generic JSON value without `crc32`, so that
+//! fields added by newer minor versions stay covered (1.0 re-serialised its own struct). Readers accept any file of the
 //! same major version; a newer minor version may add tensors, which older readers ignore.
 
 use super::{
     DescriptorIdentity, DescriptorStore, Edge, ExpectedDescriptor, Map, MapError, ViewRecord,
 };
+use crate::describe::describer::{BackendSpec, DescriberModel};
+use crate::describe::pca::Pca;
+use crate::describe::vlad::Codebook;
 use nalgebra::{Isometry3, Point3, Quaternion, Translation3, UnitQuaternion};
 use safetensors::{Dtype, SafeTensors, View};
 use serde::{Deserialize, Serialize};
@@ -33,13 +42,14 @@ use std::borrow::Cow;
 use std::collections::HashMap;
 use std::io::Write;
 use std::path::Path;
+use std::sync::Arc;
 
 /// Value of the `format` field that marks a safetensors file as a topoloc map.
 pub const FORMAT_NAME: &str = "topoloc-map";
 /// Major format version written and read by this build.
 pub const FORMAT_VERSION_MAJOR: u32 = 1;
 /// Minor format version written by this build.
-pub const FORMAT_VERSION_MINOR: u32 = 0;
+pub const FORMAT_VERSION_MINOR: u32 = 1;
 
 const META_KEY: &str = "topoloc";
 /// Longest JSON header accepted; far above any real map's header (a few hundred bytes).
@@ -68,6 +78,9 @@ struct FileMeta {
     places: u64,
     views: u64,
     edges: u64,
+    /// The describer's backend (1.1, maps built from images).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    describer: Option<BackendSpec>,
     /// Absent while the checksum itself is computed.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     crc32: Option<String>,
@@ -175,7 +188,7 @@ impl Map {
         let edges: Vec<u32> = self.edges().iter().flat_map(|e| [e.a, e.b]).collect();
         let edge_weight: Vec<f32> = self.edges().iter().map(|e| e.weight).collect();
 
-        let tensors: Vec<(&str, OutTensor)> = vec![
+        let mut tensors: Vec<(&str, OutTensor)> = vec![
             (
                 "descriptors",
                 OutTensor::new(Dtype::F32, vec![n, d], descriptor_bytes),
@@ -241,10 +254,36 @@ impl Map {
                 ),
             ),
         ];
-        debug_assert!(
-            tensors.windows(2).all(|w| w[0].0 < w[1].0),
-            "tensors listed in name order"
-        );
+        if let Some(model) = self.describer() {
+            let pca = &model.pca;
+            tensors.push((
+                "describer_pca_mean",
+                OutTensor::new(
+                    Dtype::F32,
+                    vec![pca.input_dim],
+                    le_bytes(&pca.mean, f32::to_le_bytes),
+                ),
+            ));
+            tensors.push((
+                "describer_pca_components",
+                OutTensor::new(
+                    Dtype::F32,
+                    vec![pca.output_dim, pca.input_dim],
+                    le_bytes(&pca.components, f32::to_le_bytes),
+                ),
+            ));
+            if let Some(c) = &model.codebook {
+                tensors.push((
+                    "describer_codebook",
+                    OutTensor::new(
+                        Dtype::F32,
+                        vec![c.clusters, c.dim],
+                        le_bytes(&c.centres, f32::to_le_bytes),
+                    ),
+                ));
+            }
+        }
+        tensors.sort_by_key(|(name, _)| *name);
 
         let meta = FileMeta {
             format: FORMAT_NAME.into(),
@@ -254,9 +293,11 @@ impl Map {
             places: m as u64,
             views: n as u64,
             edges: e as u64,
+            describer: self.describer().map(|m| m.spec.clone()),
             crc32: None,
         };
-        let unsigned_json = serde_json::to_string(&meta).expect("map metadata serialises");
+        let unsigned_json =
+            canonical_json(serde_json::to_value(&meta).expect("map metadata serialises"));
         let crc = checksum(&unsigned_json, tensors.iter().map(|(_, t)| &*t.bytes));
         let meta = FileMeta {
             crc32: Some(crc),
@@ -376,6 +417,7 @@ struct ParsedMap {
     views: Vec<ViewRecord>,
     place_positions: Vec<Option<Point3<f64>>>,
     edges: Vec<Edge>,
+    describer: Option<DescriberModel>,
 }
 
 impl ParsedMap {
@@ -388,12 +430,64 @@ impl ParsedMap {
             self.place_positions,
             self.edges,
         )
+        .and_then(|map| match self.describer {
+            Some(model) => map.with_describer(Arc::new(model)),
+            None => Ok(map),
+        })
         .map_err(|e| match e {
-            MapError::Invalid(msg) => MapError::Corrupt(msg),
+            MapError::Invalid(msg) | MapError::InvalidArgument(msg) => MapError::Corrupt(msg),
             MapError::EmptyMap => MapError::Corrupt("the map has no places".into()),
+            MapError::DescriptorMismatch { .. } => {
+                MapError::Corrupt(format!("the stored describer does not fit the map: {e}"))
+            }
             other => other,
         })
     }
+}
+
+/// Serialises a metadata object without its `crc32` field: the checksummed form since 1.1.
+fn canonical_json(mut value: serde_json::Value) -> String {
+    if let Some(object) = value.as_object_mut() {
+        object.remove("crc32");
+    }
+    value.to_string()
+}
+
+/// Reads the describer's arrays (PCA, codebook) for a map of descriptor dimension `dim`.
+fn read_describer(
+    reader: &TensorReader<'_, '_>,
+    spec: BackendSpec,
+    dim: usize,
+) -> Result<DescriberModel, MapError> {
+    let mean = decode_f32(reader.get_any_len("describer_pca_mean", Dtype::F32)?);
+    let input_dim = mean.len();
+    let components = reader.f32s("describer_pca_components", &[dim, input_dim])?;
+    let codebook = match &spec {
+        BackendSpec::Vlad(o) => {
+            let centres = decode_f32(reader.get_any_len("describer_codebook", Dtype::F32)?);
+            let local_dim = input_dim / o.clusters.max(1);
+            reader.get("describer_codebook", Dtype::F32, &[o.clusters, local_dim])?;
+            Some(
+                Codebook::from_parts(o.clusters, local_dim, centres)
+                    .map_err(|e| MapError::Corrupt(format!("describer codebook: {e}")))?,
+            )
+        }
+        BackendSpec::Onnx { .. } => None,
+    };
+    let model = DescriberModel {
+        spec,
+        pca: Pca {
+            input_dim,
+            output_dim: dim,
+            mean,
+            components,
+        },
+        codebook,
+    };
+    model
+        .validate()
+        .map_err(|e| MapError::Corrupt(format!("describer: {e}")))?;
+    Ok(model)
 }
 
 /// Decides whether a damaged header still looks like the start of a topoloc map, which tells a
@@ -470,7 +564,9 @@ fn parse(bytes: &[u8], options: &LoadOptions) -> Result<ParsedMap, MapError> {
         )));
     }
 
-    let mut meta: FileMeta = serde_json::from_str(meta_json)
+    let meta_object: serde_json::Value = serde_json::from_str(meta_json)
+        .map_err(|e| MapError::Corrupt(format!("topoloc metadata: {e}")))?;
+    let mut meta: FileMeta = serde_json::from_value(meta_object.clone())
         .map_err(|e| MapError::Corrupt(format!("topoloc metadata: {e}")))?;
     if meta.format != FORMAT_NAME {
         return Err(MapError::NotAMap(format!(
@@ -496,7 +592,11 @@ fn parse(bytes: &[u8], options: &LoadOptions) -> Result<ParsedMap, MapError> {
     let st = SafeTensors::deserialize(bytes)
         .map_err(|e| MapError::Corrupt(format!("safetensors: {e}")))?;
     let stored_crc = meta.crc32.take().unwrap_or_default();
-    let unsigned_json = serde_json::to_string(&meta).expect("map metadata serialises");
+    let unsigned_json = if meta.version == "1.0" {
+        serde_json::to_string(&meta).expect("map metadata serialises")
+    } else {
+        canonical_json(meta_object)
+    };
     let mut names: Vec<&str> = st.names();
     names.sort_unstable();
     let tensors: Vec<_> = names
@@ -584,9 +684,15 @@ fn parse(bytes: &[u8], options: &LoadOptions) -> Result<ParsedMap, MapError> {
         })
         .collect();
 
+    let describer = match meta.describer {
+        Some(spec) => Some(read_describer(&reader, spec, d)?),
+        None => None,
+    };
+
     Ok(ParsedMap {
         identity: meta.descriptor,
         creator: meta.creator,
+        describer,
         descriptor_bytes,
         views,
         place_positions,

@@ -12,15 +12,23 @@
 mod builder;
 mod error;
 mod file;
+mod from_images;
 mod keyframes;
+mod tum;
 
 pub use builder::{MapBuilder, ViewAttributes};
 pub use error::MapError;
 pub use file::{LoadOptions, FORMAT_NAME, FORMAT_VERSION_MAJOR, FORMAT_VERSION_MINOR};
+pub use from_images::{
+    build_from_images, BuildStage, ImageMapError, ImageMapOptions, ImageMapReport, ImageSource,
+};
 pub use keyframes::{from_keyframes, Keyframe, KeyframeOptions};
+pub use tum::{parse_tum, read_tum, TimedPose};
 
+use crate::describe::DescriberModel;
 use nalgebra::{Isometry3, Point3};
 use serde::{Deserialize, Serialize};
+use std::sync::Arc;
 
 /// Index of a place in a map, `0..map.place_count()`.
 pub type PlaceId = u32;
@@ -190,6 +198,8 @@ pub struct Map {
     neighbour_offsets: Vec<u32>,
     neighbour_ids: Vec<PlaceId>,
     neighbour_weights: Vec<f32>,
+    /// How to describe images for this map, when it was built from images.
+    describer: Option<Arc<DescriberModel>>,
 }
 
 impl std::fmt::Debug for Map {
@@ -323,7 +333,34 @@ impl Map {
             neighbour_offsets,
             neighbour_ids,
             neighbour_weights,
+            describer: None,
         })
+    }
+
+    /// Attaches the describer model that produced the map's descriptors, so that localizers can
+    /// describe images themselves. Its identity must equal the map's descriptor identity.
+    pub fn with_describer(mut self, model: Arc<DescriberModel>) -> Result<Self, MapError> {
+        model
+            .validate()
+            .map_err(|e| MapError::InvalidArgument(format!("describer model: {e}")))?;
+        let identity = model.identity();
+        if identity != self.identity {
+            return Err(MapError::DescriptorMismatch {
+                map: self.identity.clone(),
+                expected: ExpectedDescriptor {
+                    kind: Some(identity.kind),
+                    model: Some(identity.model),
+                    dim: Some(identity.dim),
+                },
+            });
+        }
+        self.describer = Some(model);
+        Ok(self)
+    }
+
+    /// The describer model stored with the map (maps built from images have one).
+    pub fn describer(&self) -> Option<&Arc<DescriberModel>> {
+        self.describer.as_ref()
     }
 
     /// The descriptor that produced this map's vectors.

@@ -91,7 +91,7 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         .iter()
         .map(|f| f.descriptor.clone())
         .collect();
-    let spread = crate::images::similarity_spread(&map, &queries);
+    let spread = similarity_spread(&map, &queries);
     say(format!(
         "similarity spread (median std of a frame's similarities to all views): {spread:.3}"
     ));
@@ -191,6 +191,7 @@ pub(crate) fn evaluate(
             timestamp: f.timestamp,
             descriptor: &f.descriptor,
             odometry: use_odometry.then_some(f.odometry),
+            image: None,
         };
         let start = Instant::now();
         localizer.process(&frame, &mut out)?;
@@ -222,4 +223,23 @@ pub(crate) fn evaluate(
         ms_median,
         ms_p90,
     })
+}
+
+/// Median over queries of the standard deviation of a query's similarities to all map views:
+/// the scale that the localizer temperature is relative to.
+fn similarity_spread(map: &topoloc::Map, queries: &[Vec<f32>]) -> f64 {
+    let d = map.dim();
+    let stds: Vec<f64> = queries
+        .iter()
+        .map(|q| {
+            let sims: Vec<f64> = map
+                .descriptors()
+                .chunks_exact(d)
+                .map(|v| v.iter().zip(q).map(|(a, b)| f64::from(a * b)).sum())
+                .collect();
+            let mean = sims.iter().sum::<f64>() / sims.len() as f64;
+            (sims.iter().map(|s| (s - mean).powi(2)).sum::<f64>() / sims.len() as f64).sqrt()
+        })
+        .collect();
+    crate::process::median_and_p90(&stds).0
 }

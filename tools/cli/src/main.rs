@@ -1,8 +1,12 @@
-//! The `topoloc` command: the demo (the README's main job), and benchmark helpers.
+//! The `topoloc` command: the demo (the README's main job), maps from images, evaluation, and
+//! benchmark helpers.
 
+mod backend_args;
+mod build_map;
 mod demo;
-mod images;
+mod eval;
 mod memory;
+mod plot;
 mod process;
 mod sweep;
 
@@ -65,36 +69,11 @@ enum Command {
         #[arg(long, value_delimiter = ',', default_value = "0,0.5,1,2")]
         margins: Vec<f32>,
     },
-    /// Place recognition on frame-aligned image folders with the ONNX multi-level backend.
-    EvalImages {
-        /// Folder of map (reference) images, in frame order.
-        #[arg(long)]
-        map_images: PathBuf,
-        /// Folder of query images; query frame i matches map frame i.
-        #[arg(long)]
-        images: PathBuf,
-        /// Frame tolerance for a correct match.
-        #[arg(long, default_value_t = 2)]
-        tolerance: usize,
-        /// PCA output dimension (limited by the number of map frames).
-        #[arg(long, default_value_t = 512)]
-        dim: usize,
-        /// Network outputs to pool (comma-separated).
-        #[arg(long, value_delimiter = ',', default_value = "f6,f13,f17,f18")]
-        taps: Vec<String>,
-        /// Pooling grid per tap, ROWSxCOLS.
-        #[arg(long, default_value = "4x4")]
-        grid: String,
-        /// Localizer temperature (the library default).
-        #[arg(long, default_value_t = 0.2)]
-        temperature: f32,
-        /// Most map frames the PCA is fitted on (evenly spaced).
-        #[arg(long, default_value_t = 1000)]
-        pca_samples: usize,
-        /// Print JSON.
-        #[arg(long)]
-        json: bool,
-    },
+    /// Build a map from an image folder; the describer (backend, PCA, codebook) is stored in it.
+    BuildMap(build_map::BuildMapArgs),
+    /// Localize a query image folder against a map built from images and report R@N, R@100P,
+    /// latency (and MNA/OHA with ground-truth nodes), single-frame and filtered.
+    Eval(eval::EvalArgs),
     /// (internal) Child process of bench-memory: load MAP and report its figures as JSON.
     #[command(hide = true)]
     MeasureMap { map: PathBuf },
@@ -120,33 +99,8 @@ fn main() -> Result<()> {
             temperatures,
             margins,
         } => sweep::run(worlds, frames, &temperatures, &margins),
-        Command::EvalImages {
-            map_images,
-            images,
-            tolerance,
-            dim,
-            taps,
-            grid,
-            temperature,
-            pca_samples,
-            json,
-        } => {
-            let (rows, cols) = grid
-                .split_once('x')
-                .ok_or_else(|| anyhow::anyhow!("--grid must look like 4x4"))?;
-            let grid = (rows.parse()?, cols.parse()?);
-            images::run(&images::EvalImagesArgs {
-                map_images,
-                images,
-                tolerance,
-                dim,
-                taps,
-                grid,
-                temperature,
-                pca_samples,
-                json,
-            })
-        }
+        Command::BuildMap(args) => build_map::run(&args),
+        Command::Eval(args) => eval::run(&args),
         Command::MeasureMap { map } => memory::measure(&map),
     }
 }

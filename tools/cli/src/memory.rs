@@ -84,6 +84,7 @@ pub fn measure(path: &Path) -> Result<()> {
             timestamp: f64::from(i),
             descriptor: &descriptor,
             odometry: None,
+            image: None,
         })?;
     }
     let (rss_after, peak) = resident_memory_mib().context("needs /proc/self/status")?;

@@ -89,6 +89,7 @@ fn off_map_rate(
             timestamp: f.timestamp,
             descriptor: &f.descriptor,
             odometry: Some(f.odometry),
+            image: None,
         };
         localizer.process(&frame, &mut out)?;
         flagged += usize::from(i >= settle && out.off_map);

@@ -1,0 +1,646 @@
+//! The describer: one object that turns an image into the map's D-dimensional descriptor, and
+//! the model it needs (backend configuration, PCA, VLAD codebook) as stored in a map.
+//!
+//! Building a map: an [`Extractor`] per thread turns images into [`RawFeatures`]; [`fit`] learns
+//! the [`DescriberModel`] (codebook and PCA) from all of them and returns every image's
+//! descriptor. Localizing: [`Describer::new`] loads the backend named by a map's model, checks
+//! that it is the very same (model file hash, taps, preprocessing), and describes query images.
+
+use super::image::ImageView;
+use super::onnx::{OnnxMlf, OnnxOptions};
+use super::pca::Pca;
+use super::vlad::{Codebook, LocalExtractor, LocalFeature, LocalFeatures, VladOptions};
+use super::DescribeError;
+use crate::map::DescriptorIdentity;
+use serde::{Deserialize, Serialize};
+use std::path::PathBuf;
+use std::sync::Arc;
+
+/// Preprocessing of the ONNX backend, recorded in its identity.
+pub const ONNX_PREPROCESSING: &str = "rgb/255 imagenet-mean-std";
+
+/// The descriptor backends.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum BackendKind {
+    /// A CNN run by ONNX Runtime, multi-level pooled (the seed's MLF).
+    Onnx,
+    /// VLAD over OpenCV local features; needs no learned weights.
+    Vlad,
+}
+
+impl BackendKind {
+    /// Lower-case name, as used on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            BackendKind::Onnx => "onnx",
+            BackendKind::Vlad => "vlad",
+        }
+    }
+}
+
+/// A backend and its options, for building a map.
+#[derive(Clone, Debug, PartialEq)]
+pub enum BackendConfig {
+    /// ONNX multi-level CNN features.
+    Onnx(OnnxOptions),
+    /// VLAD of local features.
+    Vlad(VladOptions),
+}
+
+impl BackendConfig {
+    /// Which backend this is.
+    pub fn kind(&self) -> BackendKind {
+        match self {
+            BackendConfig::Onnx(_) => BackendKind::Onnx,
+            BackendConfig::Vlad(_) => BackendKind::Vlad,
+        }
+    }
+}
+
+/// The backend as recorded in a map: everything that defines the descriptor except the learned
+/// arrays (PCA, codebook), which are stored as tensors. Serialised into the map's metadata.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "backend", rename_all = "lowercase")]
+pub enum BackendSpec {
+    /// ONNX multi-level features.
+    Onnx {
+        /// SHA-256 (hex) of the model file.
+        model_sha256: String,
+        /// Output names pooled, in order.
+        taps: Vec<String>,
+        /// Pooling grid, rows and columns.
+        grid: [usize; 2],
+        /// Network input, width and height.
+        input_size: [u32; 2],
+        /// Colour order and normalisation ([`ONNX_PREPROCESSING`]).
+        preprocessing: String,
+    },
+    /// VLAD of local features.
+    Vlad(VladOptions),
+}
+
+impl BackendSpec {
+    /// Which backend this is.
+    pub fn kind(&self) -> BackendKind {
+        match self {
+            BackendSpec::Onnx { .. } => BackendKind::Onnx,
+            BackendSpec::Vlad(_) => BackendKind::Vlad,
+        }
+    }
+
+    /// The descriptor family name stored in [`DescriptorIdentity::kind`].
+    pub fn family(&self) -> &'static str {
+        match self {
+            BackendSpec::Onnx { .. } => "onnx-mlf",
+            BackendSpec::Vlad(VladOptions {
+                feature: LocalFeature::Orb,
+                ..
+            }) => "vlad-orb",
+            BackendSpec::Vlad(VladOptions {
+                feature: LocalFeature::Sift,
+                ..
+            }) => "vlad-sift",
+        }
+    }
+
+    fn summary(&self) -> String {
+        match self {
+            BackendSpec::Onnx {
+                model_sha256,
+                taps,
+                grid,
+                input_size,
+                preprocessing,
+            } => format!(
+                "sha256:{} taps={} grid={}x{} input={}x{} {preprocessing}",
+                model_sha256.get(..16).unwrap_or(model_sha256),
+                taps.join(","),
+                grid[0],
+                grid[1],
+                input_size[0],
+                input_size[1]
+            ),
+            BackendSpec::Vlad(o) => format!(
+                "k={} max_features={} input={}x{} signed-sqrt intra-l2",
+                o.clusters, o.max_features, o.input_size.0, o.input_size.1
+            ),
+        }
+    }
+}
+
+/// Everything a map stores to describe new images exactly as its views were described.
+#[derive(Clone, Debug, PartialEq)]
+pub struct DescriberModel {
+    /// Backend and its configuration.
+    pub spec: BackendSpec,
+    /// Projection from raw vectors to the map's D dimensions.
+    pub pca: Pca,
+    /// VLAD vocabulary (VLAD backend only).
+    pub codebook: Option<Codebook>,
+}
+
+impl DescriberModel {
+    /// Checks that the parts fit together (codebook present exactly for VLAD, dimensions agree).
+    pub fn validate(&self) -> Result<(), DescribeError> {
+        let bad = |m: String| Err(DescribeError::InvalidArgument(m));
+        let pca = &self.pca;
+        if pca.output_dim == 0
+            || pca.mean.len() != pca.input_dim
+            || pca.components.len() != pca.output_dim * pca.input_dim
+        {
+            return bad(format!(
+                "PCA arrays do not match {}x{}",
+                pca.output_dim, pca.input_dim
+            ));
+        }
+        if !pca
+            .mean
+            .iter()
+            .chain(&pca.components)
+            .all(|x| x.is_finite())
+        {
+            return bad("PCA holds NaN or infinite values".into());
+        }
+        match (&self.spec, &self.codebook) {
+            (BackendSpec::Vlad(o), Some(c)) => {
+                o.validate()?;
+                if c.clusters != o.clusters || c.clusters * c.dim != pca.input_dim {
+                    return bad(format!(
+                        "codebook {}x{} does not match {} clusters and PCA input {}",
+                        c.clusters, c.dim, o.clusters, pca.input_dim
+                    ));
+                }
+                Ok(())
+            }
+            (BackendSpec::Onnx { taps, grid, .. }, None) => {
+                if taps.is_empty() || grid[0] == 0 || grid[1] == 0 {
+                    return bad("ONNX spec needs taps and a non-empty grid".into());
+                }
+                Ok(())
+            }
+            (BackendSpec::Vlad(_), None) => bad("VLAD model without a codebook".into()),
+            (BackendSpec::Onnx { .. }, Some(_)) => bad("ONNX model with a codebook".into()),
+        }
+    }
+
+    /// The identity of the descriptors this model produces: backend, its configuration, and a
+    /// fingerprint of the fitted arrays (two PCA fits give incompatible spaces).
+    pub fn identity(&self) -> DescriptorIdentity {
+        let mut hasher = crc32fast::Hasher::new();
+        for values in [&self.pca.mean, &self.pca.components] {
+            values.iter().for_each(|x| hasher.update(&x.to_le_bytes()));
+        }
+        if let Some(c) = &self.codebook {
+            c.centres
+                .iter()
+                .for_each(|x| hasher.update(&x.to_le_bytes()));
+        }
+        DescriptorIdentity {
+            kind: self.spec.family().into(),
+            model: format!(
+                "{} pca={}x{} fit={:08x}",
+                self.spec.summary(),
+                self.pca.output_dim,
+                self.pca.input_dim,
+                hasher.finalize()
+            ),
+            dim: self.pca.output_dim as u32,
+        }
+    }
+}
+
+/// An image's features before the learned steps (codebook, PCA).
+#[derive(Clone, Debug)]
+pub enum RawFeatures {
+    /// The raw multi-level CNN vector.
+    Mlf(Vec<f32>),
+    /// Local descriptors, aggregated by VLAD once the codebook is trained.
+    Local(LocalFeatures),
+}
+
+enum Engine {
+    Onnx(Box<OnnxMlf>),
+    Vlad(LocalExtractor),
+}
+
+/// Turns images into [`RawFeatures`]. Holds a loaded backend; one per thread (`Send`, not `Sync`).
+pub struct Extractor {
+    engine: Engine,
+    spec: BackendSpec,
+}
+
+impl Extractor {
+    /// Loads the backend: for ONNX the runtime and model (typed errors name every path tried).
+    pub fn new(config: &BackendConfig) -> Result<Self, DescribeError> {
+        Ok(match config {
+            BackendConfig::Onnx(options) => {
+                let mlf = OnnxMlf::new(options.clone())?;
+                let spec = BackendSpec::Onnx {
+                    model_sha256: mlf.model_sha256().to_string(),
+                    taps: options.taps.clone(),
+                    grid: [options.grid.0, options.grid.1],
+                    input_size: [options.input_size.0, options.input_size.1],
+                    preprocessing: ONNX_PREPROCESSING.into(),
+                };
+                Self {
+                    engine: Engine::Onnx(Box::new(mlf)),
+                    spec,
+                }
+            }
+            BackendConfig::Vlad(options) => Self {
+                engine: Engine::Vlad(LocalExtractor::new(options)?),
+                spec: BackendSpec::Vlad(options.clone()),
+            },
+        })
+    }
+
+    /// The backend as it will be recorded in the map.
+    pub fn spec(&self) -> &BackendSpec {
+        &self.spec
+    }
+
+    /// Raw features of one image. Refuses images without content (every pixel within
+    /// [`CONSTANT_IMAGE_RANGE`] grey levels, or no local feature found) with
+    /// [`DescribeError::Uninformative`].
+    pub fn extract(&mut self, image: &ImageView<'_>) -> Result<RawFeatures, DescribeError> {
+        image.validate()?;
+        if is_constant(image) {
+            return Err(DescribeError::Uninformative(format!(
+                "every pixel lies within {CONSTANT_IMAGE_RANGE} grey levels (blank or constant image)"
+            )));
+        }
+        match self.run(image)? {
+            RawFeatures::Local(l) if l.count() == 0 => Err(DescribeError::Uninformative(
+                "no local features found in the image".into(),
+            )),
+            raw => Ok(raw),
+        }
+    }
+
+    /// Raw features of one image, also for images without content (their CNN features, or an
+    /// empty feature set), with `false` for those; for map building, where image indices must
+    /// stay aligned.
+    pub fn extract_keeping_uninformative(
+        &mut self,
+        image: &ImageView<'_>,
+    ) -> Result<(RawFeatures, bool), DescribeError> {
+        image.validate()?;
+        let constant = is_constant(image);
+        let raw = self.run(image)?;
+        let informative = !constant && !matches!(&raw, RawFeatures::Local(l) if l.count() == 0);
+        Ok((raw, informative))
+    }
+
+    fn run(&mut self, image: &ImageView<'_>) -> Result<RawFeatures, DescribeError> {
+        Ok(match &mut self.engine {
+            Engine::Onnx(mlf) => RawFeatures::Mlf(mlf.raw_features(image)?),
+            Engine::Vlad(local) => RawFeatures::Local(local.extract(image)?),
+        })
+    }
+}
+
+/// Images whose pixel values all lie within this many grey levels carry no place information.
+pub const CONSTANT_IMAGE_RANGE: u8 = 2;
+
+/// True when every channel value of the image lies within [`CONSTANT_IMAGE_RANGE`] levels.
+fn is_constant(image: &ImageView<'_>) -> bool {
+    let row_bytes = image.width as usize * image.format.channels();
+    let (mut lo, mut hi) = (u8::MAX, u8::MIN);
+    for row in image.data.chunks(image.stride).take(image.height as usize) {
+        for &v in &row[..row_bytes] {
+            lo = lo.min(v);
+            hi = hi.max(v);
+        }
+        if hi - lo > CONSTANT_IMAGE_RANGE {
+            return false;
+        }
+    }
+    true
+}
+
+/// How [`fit`] learns the model.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FitOptions {
+    /// Descriptor dimension D (at most the number of images minus one). Default 512.
+    pub dim: usize,
+    /// PCA is fitted on at most this many images, evenly spaced (the SVD costs n^2 x raw size).
+    /// Default 1000.
+    pub pca_samples: usize,
+    /// The VLAD codebook is trained on at most this many local features, evenly spaced.
+    /// Default 100,000.
+    pub codebook_samples: usize,
+    /// Scale PCA components to unit variance; `None` takes the backend's default (VLAD: yes,
+    /// ONNX: no; measured on Gardens Point, BENCHMARKS.md).
+    pub whiten: Option<bool>,
+}
+
+impl Default for FitOptions {
+    fn default() -> Self {
+        Self {
+            dim: 512,
+            pca_samples: 1000,
+            codebook_samples: 100_000,
+            whiten: None,
+        }
+    }
+}
+
+/// Learns the codebook (VLAD) and PCA from the map's raw features, and returns the model with
+/// every image's D-dimensional, unit-norm descriptor (in input order).
+pub fn fit(
+    spec: &BackendSpec,
+    raws: &[RawFeatures],
+    options: &FitOptions,
+) -> Result<(DescriberModel, Vec<Vec<f32>>), DescribeError> {
+    if raws.len() < 2 {
+        return Err(DescribeError::InvalidArgument(format!(
+            "a describer is fitted on at least 2 images, got {}",
+            raws.len()
+        )));
+    }
+    let (codebook, vectors) = match spec {
+        BackendSpec::Onnx { .. } => {
+            let vectors = raws
+                .iter()
+                .map(|r| match r {
+                    RawFeatures::Mlf(v) => Ok(v.clone()),
+                    RawFeatures::Local(_) => Err(wrong_raw_kind()),
+                })
+                .collect::<Result<Vec<_>, _>>()?;
+            (None, vectors)
+        }
+        BackendSpec::Vlad(o) => {
+            let locals = raws
+                .iter()
+                .map(|r| match r {
+                    RawFeatures::Local(l) => Ok(l),
+                    RawFeatures::Mlf(_) => Err(wrong_raw_kind()),
+                })
+                .collect::<Result<Vec<_>, _>>()?;
+            let codebook = train_codebook(&locals, o.clusters, options.codebook_samples)?;
+            let vectors = locals.iter().map(|l| codebook.vlad(l)).collect();
+            (Some(codebook), vectors)
+        }
+    };
+    let raw_dim = vectors[0].len();
+    if vectors.iter().any(|v| v.len() != raw_dim) {
+        return Err(DescribeError::InvalidArgument(
+            "raw vectors differ in length (mixed backends or taps)".into(),
+        ));
+    }
+    let step = vectors.len().div_ceil(options.pca_samples.max(2));
+    let rows: Vec<f32> = vectors.iter().step_by(step).flatten().copied().collect();
+    let whiten = options.whiten.unwrap_or(spec.kind() == BackendKind::Vlad);
+    let pca = Pca::fit(&rows, raw_dim, options.dim, whiten)?;
+    let descriptors = vectors
+        .iter()
+        .map(|v| pca.project(v))
+        .collect::<Result<Vec<_>, _>>()?;
+    let model = DescriberModel {
+        spec: spec.clone(),
+        pca,
+        codebook,
+    };
+    Ok((model, descriptors))
+}
+
+fn wrong_raw_kind() -> DescribeError {
+    DescribeError::InvalidArgument("raw features come from another backend than the spec".into())
+}
+
+fn train_codebook(
+    locals: &[&LocalFeatures],
+    clusters: usize,
+    max_samples: usize,
+) -> Result<Codebook, DescribeError> {
+    let dim = locals[0].dim;
+    let total: usize = locals.iter().map(|l| l.count()).sum();
+    let step = total.div_ceil(max_samples.max(clusters)).max(1);
+    let mut samples = Vec::with_capacity(total / step * dim + dim);
+    let mut index = 0usize;
+    for l in locals {
+        for row in l.values.chunks_exact(dim) {
+            if index % step == 0 {
+                samples.extend_from_slice(row);
+            }
+            index += 1;
+        }
+    }
+    Codebook::train(&samples, dim, clusters)
+}
+
+/// Where the describer finds its runtime files, and what the caller insists on.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct DescriberOptions {
+    /// Refuse maps built with another backend.
+    pub backend: Option<BackendKind>,
+    /// ONNX Runtime library (else `TOPOLOC_ORT_LIBRARY`, `ORT_DYLIB_PATH`, the cache).
+    pub onnx_runtime: Option<PathBuf>,
+    /// ONNX model file (else the cache's default); must be the very model the map was built with.
+    pub onnx_model: Option<PathBuf>,
+    /// ONNX Runtime intra-op threads; 0 means 1.
+    pub threads: usize,
+}
+
+/// Describes images exactly as a map's views were described. Not `Sync`: one per localizer.
+pub struct Describer {
+    model: Arc<DescriberModel>,
+    identity: DescriptorIdentity,
+    extractor: Extractor,
+}
+
+impl Describer {
+    /// Loads the backend the model names and checks that it is the same one: the same backend
+    /// as `options.backend` asks for, and for ONNX the same model file (by SHA-256). Mismatches
+    /// give [`DescribeError::Mismatch`]; missing files [`DescribeError::BackendUnavailable`].
+    pub fn new(
+        model: Arc<DescriberModel>,
+        options: &DescriberOptions,
+    ) -> Result<Self, DescribeError> {
+        model.validate()?;
+        if let Some(kind) = options.backend {
+            if kind != model.spec.kind() {
+                return Err(DescribeError::Mismatch(format!(
+                    "the map was built with the {} backend, the caller asked for {}",
+                    model.spec.kind().name(),
+                    kind.name()
+                )));
+            }
+        }
+        let config = match &model.spec {
+            BackendSpec::Onnx {
+                taps,
+                grid,
+                input_size,
+                preprocessing,
+                ..
+            } => {
+                if preprocessing != ONNX_PREPROCESSING {
+                    return Err(DescribeError::Mismatch(format!(
+                        "the map's preprocessing '{preprocessing}' is not supported by this build ('{ONNX_PREPROCESSING}')"
+                    )));
+                }
+                BackendConfig::Onnx(OnnxOptions {
+                    runtime: options.onnx_runtime.clone(),
+                    model: options.onnx_model.clone(),
+                    taps: taps.clone(),
+                    grid: (grid[0], grid[1]),
+                    input_size: (input_size[0], input_size[1]),
+                    threads: options.threads.max(1),
+                })
+            }
+            BackendSpec::Vlad(o) => BackendConfig::Vlad(o.clone()),
+        };
+        let extractor = Extractor::new(&config)?;
+        if extractor.spec() != &model.spec {
+            return Err(DescribeError::Mismatch(format!(
+                "the map was built with {}, the loaded backend is {}",
+                model.spec.summary(),
+                extractor.spec().summary()
+            )));
+        }
+        Ok(Self {
+            identity: model.identity(),
+            model,
+            extractor,
+        })
+    }
+
+    /// The identity of the descriptors produced (equal to the map's).
+    pub fn identity(&self) -> &DescriptorIdentity {
+        &self.identity
+    }
+
+    /// The model used.
+    pub fn model(&self) -> &Arc<DescriberModel> {
+        &self.model
+    }
+
+    /// Describes one image into `out` (D values, unit norm).
+    pub fn describe(
+        &mut self,
+        image: &ImageView<'_>,
+        out: &mut Vec<f32>,
+    ) -> Result<(), DescribeError> {
+        let raw = self.extractor.extract(image)?;
+        let vlad;
+        let vector = match &raw {
+            RawFeatures::Mlf(v) => v,
+            RawFeatures::Local(l) => {
+                let codebook = self
+                    .model
+                    .codebook
+                    .as_ref()
+                    .expect("validated: VLAD models have a codebook");
+                vlad = codebook.vlad(l);
+                &vlad
+            }
+        };
+        *out = self.model.pca.project(vector)?;
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::describe::image::PixelFormat;
+
+    #[test]
+    fn constant_images_are_detected_through_padding() {
+        let view = |data: &[u8]| {
+            is_constant(&ImageView {
+                width: 3,
+                height: 4,
+                stride: 8,
+                format: PixelFormat::Gray8,
+                data,
+            })
+        };
+        let mut data = vec![100u8; 4 * 8];
+        assert!(view(&data));
+        data[7] = 0; // padding byte: ignored
+        assert!(view(&data));
+        data[8 + 2] = 103; // a pixel 3 levels away
+        assert!(!view(&data));
+    }
+
+    #[test]
+    fn vlad_models_describe_and_identify_themselves() {
+        let options = VladOptions::default();
+        let spec = BackendSpec::Vlad(options.clone());
+        let mut extractor = Extractor::new(&BackendConfig::Vlad(options)).unwrap();
+        let images: Vec<Vec<u8>> = (0..6).map(|seed| textured(320, 240, seed)).collect();
+        let raws: Vec<RawFeatures> = images
+            .iter()
+            .map(|d| {
+                extractor
+                    .extract(&ImageView::packed(320, 240, PixelFormat::Gray8, d))
+                    .unwrap()
+            })
+            .collect();
+        let (model, descriptors) = fit(&spec, &raws, &FitOptions::default()).unwrap();
+        assert_eq!(model.pca.output_dim, 5, "n - 1 components");
+        let identity = model.identity();
+        assert_eq!(identity.kind, "vlad-orb");
+        assert_eq!(identity.dim, 5);
+        let mut describer = Describer::new(Arc::new(model), &DescriberOptions::default()).unwrap();
+        let mut out = Vec::new();
+        describer
+            .describe(
+                &ImageView::packed(320, 240, PixelFormat::Gray8, &images[3]),
+                &mut out,
+            )
+            .unwrap();
+        let diff: f32 = out
+            .iter()
+            .zip(&descriptors[3])
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f32::max);
+        assert!(
+            diff < 1e-5,
+            "describing a map image again gives its view: {diff}"
+        );
+        let blank = vec![7u8; 320 * 240];
+        assert!(matches!(
+            describer.describe(
+                &ImageView::packed(320, 240, PixelFormat::Gray8, &blank),
+                &mut out
+            ),
+            Err(DescribeError::Uninformative(_))
+        ));
+        let wrong = DescriberOptions {
+            backend: Some(BackendKind::Onnx),
+            ..Default::default()
+        };
+        assert!(matches!(
+            Describer::new(describer.model().clone(), &wrong),
+            Err(DescribeError::Mismatch(_))
+        ));
+    }
+
+    /// A deterministic textured grey image: overlapping rectangles of pseudo-random shades.
+    pub(crate) fn textured(width: usize, height: usize, seed: u64) -> Vec<u8> {
+        let mut state = seed
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        let mut next = move || {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (state >> 33) as usize
+        };
+        let mut data = vec![128u8; width * height];
+        for _ in 0..120 {
+            let (x0, y0) = (next() % width, next() % height);
+            let (w, h) = (8 + next() % 40, 8 + next() % 40);
+            let shade = (next() % 256) as u8;
+            for y in y0..(y0 + h).min(height) {
+                for x in x0..(x0 + w).min(width) {
+                    data[y * width + x] = shade;
+                }
+            }
+        }
+        data
+    }
+}

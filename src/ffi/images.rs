@@ -1,0 +1,364 @@
+//! C functions and types for images: the image view passed in frames, and maps built from
+//! image files or pixel buffers with a progress callback.
+
+use super::boundary::{
+    check_out, init_versioned, optional_string, read_versioned, run, slice, string, FfiError,
+    Versioned,
+};
+use super::map::topoloc_map;
+use super::topoloc_status;
+use crate::describe::image::{ImageView, PixelFormat};
+use crate::describe::onnx::OnnxOptions;
+use crate::describe::vlad::{LocalFeature, VladOptions};
+use crate::describe::{BackendConfig, BackendKind, FitOptions};
+use crate::map::{build_from_images, read_tum, BuildStage, ImageMapOptions, ImageSource};
+use std::ffi::{c_char, c_void};
+use std::path::Path;
+
+/// No image (the frame carries a descriptor only).
+pub const TOPOLOC_PIXEL_NONE: u32 = 0;
+/// 8-bit grey, one byte per pixel.
+pub const TOPOLOC_PIXEL_GRAY8: u32 = 1;
+/// 8-bit red, green, blue.
+pub const TOPOLOC_PIXEL_RGB8: u32 = 2;
+/// 8-bit blue, green, red (OpenCV's `CV_8UC3` order).
+pub const TOPOLOC_PIXEL_BGR8: u32 = 3;
+/// 8-bit red, green, blue, alpha.
+pub const TOPOLOC_PIXEL_RGBA8: u32 = 4;
+/// 8-bit blue, green, red, alpha.
+pub const TOPOLOC_PIXEL_BGRA8: u32 = 5;
+
+/// Backend choice: the map's own describer when it has one (localizer), or the ONNX backend
+/// (map building).
+pub const TOPOLOC_BACKEND_AUTO: u32 = 0;
+/// No describer: frames must carry descriptors (localizer only).
+pub const TOPOLOC_BACKEND_NONE: u32 = 1;
+/// ONNX multi-level CNN features (needs ONNX Runtime and the model).
+pub const TOPOLOC_BACKEND_ONNX: u32 = 2;
+/// VLAD of OpenCV ORB features (no learned weights).
+pub const TOPOLOC_BACKEND_VLAD_ORB: u32 = 3;
+/// VLAD of OpenCV SIFT features.
+pub const TOPOLOC_BACKEND_VLAD_SIFT: u32 = 4;
+
+/// Build stage reported to the progress callback: describing images (`done` of `total`).
+pub const TOPOLOC_STAGE_DESCRIBING: u32 = 0;
+/// Build stage reported to the progress callback: fitting PCA/codebook and assembling (0 or 1 of 1).
+pub const TOPOLOC_STAGE_FITTING: u32 = 1;
+
+/// A borrowed image: `height` rows of `stride` bytes, each starting with `width` pixels.
+/// Plain data, embedded in other structs; all-zero means "no image".
+#[repr(C)]
+#[derive(Clone, Copy)]
+pub struct topoloc_image {
+    /// First byte of the first row; read only during the call it is passed to.
+    pub data: *const u8,
+    /// Bytes readable at `data` (at least `stride * (height - 1) + width * channels`).
+    pub data_len: usize,
+    /// Width in pixels (1..8192).
+    pub width: u32,
+    /// Height in pixels (1..8192).
+    pub height: u32,
+    /// Bytes from one row to the next (>= width * channels).
+    pub stride: usize,
+    /// One of the `TOPOLOC_PIXEL_*` formats; `TOPOLOC_PIXEL_NONE` means no image.
+    pub format: u32,
+}
+
+impl Default for topoloc_image {
+    fn default() -> Self {
+        Self {
+            data: std::ptr::null(),
+            data_len: 0,
+            width: 0,
+            height: 0,
+            stride: 0,
+            format: TOPOLOC_PIXEL_NONE,
+        }
+    }
+}
+
+/// Reads a C image: `None` for `TOPOLOC_PIXEL_NONE`, a validated view otherwise.
+pub(crate) fn image_view<'a>(
+    image: &topoloc_image,
+    name: &str,
+) -> Result<Option<ImageView<'a>>, FfiError> {
+    let format = match image.format {
+        TOPOLOC_PIXEL_NONE => return Ok(None),
+        TOPOLOC_PIXEL_GRAY8 => PixelFormat::Gray8,
+        TOPOLOC_PIXEL_RGB8 => PixelFormat::Rgb8,
+        TOPOLOC_PIXEL_BGR8 => PixelFormat::Bgr8,
+        TOPOLOC_PIXEL_RGBA8 => PixelFormat::Rgba8,
+        TOPOLOC_PIXEL_BGRA8 => PixelFormat::Bgra8,
+        other => {
+            return Err(FfiError::new(
+                topoloc_status::TOPOLOC_ERR_INVALID_IMAGE,
+                format!("'{name}.format' is {other}, not a TOPOLOC_PIXEL_* format"),
+            ))
+        }
+    };
+    if image.data_len == 0 {
+        return Err(FfiError::new(
+            topoloc_status::TOPOLOC_ERR_INVALID_IMAGE,
+            format!("'{name}.data_len' is 0"),
+        ));
+    }
+    let data = slice(image.data, image.data_len, &format!("{name}.data"))?;
+    let view = ImageView {
+        width: image.width,
+        height: image.height,
+        stride: image.stride,
+        format,
+        data,
+    };
+    view.validate()?;
+    Ok(Some(view))
+}
+
+/// Progress of a long operation: `stage` is a `TOPOLOC_STAGE_*` value, `done` of `total` units.
+/// Called on the thread that called the building function, about ten times a second. Return
+/// `true` to go on, `false` to cancel (the function then returns `TOPOLOC_ERR_CANCELLED`).
+pub type topoloc_progress_fn = Option<
+    unsafe extern "C" fn(user_data: *mut c_void, stage: u32, done: usize, total: usize) -> bool,
+>;
+
+/// How `topoloc_map_build_from_image_files` / `_from_images` build a map. Initialise with
+/// `topoloc_image_map_options_default`.
+#[repr(C)]
+#[derive(Clone, Copy)]
+pub struct topoloc_image_map_options {
+    /// `sizeof(topoloc_image_map_options)`, set by the `_default` function.
+    pub struct_size: usize,
+    /// `TOPOLOC_BACKEND_ONNX` (also for `_AUTO`, the default), `_VLAD_ORB` or `_VLAD_SIFT`.
+    pub backend: u32,
+    /// Descriptor dimension D (at most the number of images minus one). Default 512.
+    pub dim: u32,
+    /// Without poses: consecutive images per place (1, or 4 for yaw views); with poses: most
+    /// views per place. Default 1.
+    pub views_per_place: u32,
+    /// Describing threads; 0 = one per core. Default 0.
+    pub threads: u32,
+    /// ONNX model file; NULL or "" = the cache's default (scripts/setup-models.sh).
+    pub onnx_model_path: *const c_char,
+    /// ONNX Runtime library; NULL or "" = `TOPOLOC_ORT_LIBRARY`, `ORT_DYLIB_PATH`, the cache.
+    pub onnx_runtime_path: *const c_char,
+    /// ONNX outputs to pool, comma-separated; NULL or "" = "f6,f13,f17,f18".
+    pub onnx_taps: *const c_char,
+    /// ONNX pooling grid rows and columns (1 = global pooling). Default 4 x 4.
+    pub grid_rows: u32,
+    /// See `grid_rows`.
+    pub grid_cols: u32,
+    /// VLAD codebook size. Default 64.
+    pub vlad_clusters: u32,
+    /// TUM trajectory with one pose per image (same order); NULL or "" = none (a sequence map).
+    pub poses_tum_path: *const c_char,
+    /// Place spacing in metres when poses are given. Default 2.0.
+    pub place_spacing_m: f64,
+}
+
+impl Versioned for topoloc_image_map_options {
+    const MIN_SIZE: usize = std::mem::size_of::<Self>();
+}
+
+impl Default for topoloc_image_map_options {
+    fn default() -> Self {
+        let onnx = OnnxOptions::default();
+        Self {
+            struct_size: std::mem::size_of::<Self>(),
+            backend: TOPOLOC_BACKEND_AUTO,
+            dim: FitOptions::default().dim as u32,
+            views_per_place: 1,
+            threads: 0,
+            onnx_model_path: std::ptr::null(),
+            onnx_runtime_path: std::ptr::null(),
+            onnx_taps: std::ptr::null(),
+            grid_rows: onnx.grid.0 as u32,
+            grid_cols: onnx.grid.1 as u32,
+            vlad_clusters: VladOptions::default().clusters as u32,
+            poses_tum_path: std::ptr::null(),
+            place_spacing_m: 2.0,
+        }
+    }
+}
+
+/// Fills the first `size` bytes of `*options` with defaults and sets `struct_size`; call it
+/// through the header macro `topoloc_image_map_options_default(options)`.
+/// Errors: `_NULL_ARGUMENT`, `_STRUCT_SIZE`.
+#[no_mangle]
+pub extern "C" fn topoloc_image_map_options_init(
+    options: *mut topoloc_image_map_options,
+    size: usize,
+) -> topoloc_status {
+    init_versioned(options, size, "options")
+}
+
+/// The backend kind a C backend code names (`_AUTO` maps to `default`).
+pub(crate) fn backend_kind(
+    code: u32,
+    default: Option<BackendKind>,
+) -> Result<Option<BackendKind>, FfiError> {
+    match code {
+        TOPOLOC_BACKEND_AUTO => Ok(default),
+        TOPOLOC_BACKEND_NONE => Ok(None),
+        TOPOLOC_BACKEND_ONNX => Ok(Some(BackendKind::Onnx)),
+        TOPOLOC_BACKEND_VLAD_ORB | TOPOLOC_BACKEND_VLAD_SIFT => Ok(Some(BackendKind::Vlad)),
+        other => Err(FfiError::invalid(format!(
+            "backend {other} is not a TOPOLOC_BACKEND_* value"
+        ))),
+    }
+}
+
+fn image_map_options(
+    options: *const topoloc_image_map_options,
+) -> Result<(ImageMapOptions, Option<String>), FfiError> {
+    let o = if options.is_null() {
+        topoloc_image_map_options::default()
+    } else {
+        read_versioned(options, topoloc_image_map_options::default(), "options")?
+    };
+    let backend = match o.backend {
+        TOPOLOC_BACKEND_AUTO | TOPOLOC_BACKEND_ONNX => {
+            let mut onnx = OnnxOptions {
+                runtime: optional_string(o.onnx_runtime_path, "options.onnx_runtime_path")?
+                    .map(Into::into),
+                model: optional_string(o.onnx_model_path, "options.onnx_model_path")?
+                    .map(Into::into),
+                grid: (o.grid_rows as usize, o.grid_cols as usize),
+                ..OnnxOptions::default()
+            };
+            if let Some(taps) = optional_string(o.onnx_taps, "options.onnx_taps")? {
+                onnx.taps = taps.split(',').map(|t| t.trim().to_string()).collect();
+            }
+            BackendConfig::Onnx(onnx)
+        }
+        TOPOLOC_BACKEND_VLAD_ORB | TOPOLOC_BACKEND_VLAD_SIFT => BackendConfig::Vlad(VladOptions {
+            feature: if o.backend == TOPOLOC_BACKEND_VLAD_ORB {
+                LocalFeature::Orb
+            } else {
+                LocalFeature::Sift
+            },
+            clusters: o.vlad_clusters as usize,
+            ..VladOptions::default()
+        }),
+        other => {
+            return Err(FfiError::invalid(format!(
+                "options.backend is {other}: use TOPOLOC_BACKEND_ONNX, _VLAD_ORB or _VLAD_SIFT"
+            )))
+        }
+    };
+    let mut built = ImageMapOptions {
+        backend,
+        fit: FitOptions {
+            dim: o.dim as usize,
+            ..FitOptions::default()
+        },
+        views_per_place: o.views_per_place as usize,
+        threads: o.threads as usize,
+        ..ImageMapOptions::default()
+    };
+    built.keyframes.place_spacing_m = o.place_spacing_m;
+    built.keyframes.neighbour_radius_m = 1.5 * o.place_spacing_m;
+    let poses = optional_string(o.poses_tum_path, "options.poses_tum_path")?;
+    Ok((built, poses))
+}
+
+/// Shared body of the two building functions.
+fn build(
+    sources: &[ImageSource<'_>],
+    options: *const topoloc_image_map_options,
+    progress: topoloc_progress_fn,
+    user_data: *mut c_void,
+    out: *mut *mut topoloc_map,
+) -> Result<(), FfiError> {
+    check_out(out, "out")?;
+    let (options, poses_path) = image_map_options(options)?;
+    let poses = match poses_path {
+        Some(path) => Some(
+            read_tum(Path::new(&path))?
+                .into_iter()
+                .map(|p| p.world_t_camera)
+                .collect::<Vec<_>>(),
+        ),
+        None => None,
+    };
+    let mut report = |stage: BuildStage, done: usize, total: usize| match progress {
+        // SAFETY: the caller passes a valid callback and its user data.
+        Some(callback) => unsafe {
+            callback(
+                user_data,
+                match stage {
+                    BuildStage::Describing => TOPOLOC_STAGE_DESCRIBING,
+                    BuildStage::Fitting => TOPOLOC_STAGE_FITTING,
+                },
+                done,
+                total,
+            )
+        },
+        None => true,
+    };
+    let (map, _) = build_from_images(sources, poses.as_deref(), &options, &mut report)?;
+    super::boundary::write_out(out, topoloc_map::into_raw(map));
+    Ok(())
+}
+
+/// Builds a map from `count` image files (any format OpenCV reads), describing them in
+/// parallel; the map stores its describer, so localizers on it accept image frames. Views
+/// record their image's index (as keyframe id) and path. `options` may be NULL for defaults
+/// (ONNX backend); `progress` may be NULL. On success `*out` owns a new map.
+/// Errors: `_INVALID_ARGUMENT` (fewer than 2 images, bad options, pose count), `_INVALID_IMAGE`
+/// (an unreadable file; the message names it), `_BACKEND_UNAVAILABLE`, `_MODEL`, `_IO` (poses
+/// file), `_CANCELLED`, `_NULL_ARGUMENT`, `_INVALID_UTF8`, `_STRUCT_SIZE`.
+#[no_mangle]
+pub extern "C" fn topoloc_map_build_from_image_files(
+    paths: *const *const c_char,
+    count: usize,
+    options: *const topoloc_image_map_options,
+    progress: topoloc_progress_fn,
+    user_data: *mut c_void,
+    out: *mut *mut topoloc_map,
+) -> topoloc_status {
+    run(|| {
+        let pointers = slice(paths, count, "paths")?;
+        let names = pointers
+            .iter()
+            .enumerate()
+            .map(|(i, &p)| string(p, &format!("paths[{i}]")))
+            .collect::<Result<Vec<_>, _>>()?;
+        let sources: Vec<ImageSource> = names
+            .iter()
+            .map(|n| ImageSource::File(Path::new(n)))
+            .collect();
+        build(&sources, options, progress, user_data, out)
+    })
+}
+
+/// Builds a map from `count` images in memory (see `topoloc_map_build_from_image_files`; the
+/// views have no path). The pixels are only read during the call.
+/// Errors: as `topoloc_map_build_from_image_files`, with `_INVALID_IMAGE` for a bad buffer.
+#[no_mangle]
+pub extern "C" fn topoloc_map_build_from_images(
+    images: *const topoloc_image,
+    count: usize,
+    options: *const topoloc_image_map_options,
+    progress: topoloc_progress_fn,
+    user_data: *mut c_void,
+    out: *mut *mut topoloc_map,
+) -> topoloc_status {
+    run(|| {
+        let images = slice(images, count, "images")?;
+        let sources = images
+            .iter()
+            .enumerate()
+            .map(|(i, image)| {
+                image_view(image, &format!("images[{i}]"))?
+                    .map(ImageSource::Pixels)
+                    .ok_or_else(|| {
+                        FfiError::new(
+                            topoloc_status::TOPOLOC_ERR_INVALID_IMAGE,
+                            format!("images[{i}] has format TOPOLOC_PIXEL_NONE"),
+                        )
+                    })
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        build(&sources, options, progress, user_data, out)
+    })
+}

@@ -1,0 +1,316 @@
+//! Maps built from images: every image is described in parallel (rayon), the describer model
+//! (PCA, VLAD codebook) is fitted on all of them, and the map is assembled either as a sequence
+//! (consecutive groups of `views_per_place` images form a place, places chained in order) or,
+//! with camera poses, by [`from_keyframes`] (places by spacing, revisits merged).
+//!
+//! The map stores its describer, so localizers created with `Localizer::with_describer`
+//! describe query images exactly as the map's images were. Each view records the index of its
+//! source image as its keyframe id and the image's path (when built from files).
+
+use super::{from_keyframes, Keyframe, KeyframeOptions, Map, MapBuilder, MapError, ViewAttributes};
+use crate::describe::describer::{fit, BackendConfig, Extractor, FitOptions, RawFeatures};
+use crate::describe::image::{read_rgb, ImageView, PixelFormat};
+use crate::describe::DescribeError;
+use nalgebra::Isometry3;
+use rayon::prelude::*;
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+/// How to build a map from images.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ImageMapOptions {
+    /// Descriptor backend and its options.
+    pub backend: BackendConfig,
+    /// How the describer model is fitted (D, samples).
+    pub fit: FitOptions,
+    /// Without poses: consecutive images per place (1, or 4 for the seed's yaw views). With
+    /// poses: the most views a place may hold. Default 1.
+    pub views_per_place: usize,
+    /// Place spacing and merging when poses are given.
+    pub keyframes: KeyframeOptions,
+    /// Worker threads describing images; 0 means one per core.
+    pub threads: usize,
+}
+
+impl Default for ImageMapOptions {
+    fn default() -> Self {
+        Self {
+            backend: BackendConfig::Vlad(Default::default()),
+            fit: FitOptions::default(),
+            views_per_place: 1,
+            keyframes: KeyframeOptions::default(),
+            threads: 0,
+        }
+    }
+}
+
+/// Where an image comes from.
+#[derive(Clone, Copy, Debug)]
+pub enum ImageSource<'a> {
+    /// A file OpenCV can decode; its path is recorded with the view.
+    File(&'a std::path::Path),
+    /// Pixels in memory.
+    Pixels(ImageView<'a>),
+}
+
+/// The stage a build is in, for progress reports.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum BuildStage {
+    /// Describing images: `done` of `total`.
+    Describing,
+    /// Fitting the describer model (codebook, PCA) and assembling the map.
+    Fitting,
+}
+
+/// What [`build_from_images`] did.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ImageMapReport {
+    /// Images described.
+    pub images: usize,
+    /// Images without content (blank, constant, no local feature) kept as views anyway, so that
+    /// image indices stay aligned; their descriptors carry no place information.
+    pub uninformative: Vec<usize>,
+    /// Wall time describing images, seconds.
+    pub describe_seconds: f64,
+    /// Wall time fitting and assembling, seconds.
+    pub fit_seconds: f64,
+}
+
+/// Errors of [`build_from_images`]: the image (index and source) that failed, or the step.
+#[derive(Debug, thiserror::Error)]
+pub enum ImageMapError {
+    /// Describing one image failed.
+    #[error("image {index} ({source_name}): {error}")]
+    Image {
+        /// Index in the input list.
+        index: usize,
+        /// Path, or "pixels".
+        source_name: String,
+        /// Why.
+        error: DescribeError,
+    },
+    /// Loading the backend or fitting the model failed.
+    #[error(transparent)]
+    Describe(#[from] DescribeError),
+    /// Assembling the map failed.
+    #[error(transparent)]
+    Map(#[from] MapError),
+    /// The progress callback asked to stop.
+    #[error("cancelled by the progress callback")]
+    Cancelled,
+}
+
+/// Describes `images` with the chosen backend, fits the describer and builds the map (see the
+/// module documentation). `poses`, when given, holds one `world_T_camera` per image.
+/// `progress(stage, done, total)` is called on the calling thread about ten times a second and
+/// at each stage change; returning `false` cancels the build ([`ImageMapError::Cancelled`]).
+pub fn build_from_images(
+    images: &[ImageSource<'_>],
+    poses: Option<&[Isometry3<f64>]>,
+    options: &ImageMapOptions,
+    progress: &mut dyn FnMut(BuildStage, usize, usize) -> bool,
+) -> Result<(Map, ImageMapReport), ImageMapError> {
+    if images.len() < 2 {
+        return Err(MapError::InvalidArgument(format!(
+            "a map from images needs at least 2 images, got {}",
+            images.len()
+        ))
+        .into());
+    }
+    if let Some(p) = poses {
+        if p.len() != images.len() {
+            return Err(MapError::InvalidArgument(format!(
+                "{} poses for {} images: give one pose per image",
+                p.len(),
+                images.len()
+            ))
+            .into());
+        }
+    }
+    if !(1..=64).contains(&options.views_per_place) {
+        return Err(MapError::InvalidArgument(format!(
+            "views_per_place is {}, must lie in 1..=64",
+            options.views_per_place
+        ))
+        .into());
+    }
+    // Load one extractor first so that a missing backend fails before any thread starts.
+    let first = Extractor::new(&options.backend)?;
+    let spec = first.spec().clone();
+    let start = Instant::now();
+    let raws = describe_in_parallel(images, first, options, progress)?;
+    let describe_seconds = start.elapsed().as_secs_f64();
+
+    if !progress(BuildStage::Fitting, 0, 1) {
+        return Err(ImageMapError::Cancelled);
+    }
+    let start = Instant::now();
+    let uninformative: Vec<usize> = raws
+        .iter()
+        .enumerate()
+        .filter(|(_, (_, informative))| !informative)
+        .map(|(i, _)| i)
+        .collect();
+    let raws: Vec<RawFeatures> = raws.into_iter().map(|(r, _)| r).collect();
+    let (model, descriptors) = fit(&spec, &raws, &options.fit)?;
+    let identity = model.identity();
+    let sources: Vec<Option<String>> = images
+        .iter()
+        .map(|s| match s {
+            ImageSource::File(p) => Some(p.display().to_string()),
+            ImageSource::Pixels(_) => None,
+        })
+        .collect();
+    let map = match poses {
+        Some(poses) => {
+            let keyframes: Vec<Keyframe> = descriptors
+                .iter()
+                .zip(poses)
+                .enumerate()
+                .map(|(i, (d, pose))| Keyframe {
+                    id: i as u64,
+                    descriptor: d,
+                    world_t_camera: Some(*pose),
+                })
+                .collect();
+            let keyframe_options = KeyframeOptions {
+                max_views_per_place: options.views_per_place as u32,
+                ..options.keyframes.clone()
+            };
+            from_keyframes(identity, &keyframes, &keyframe_options)?
+        }
+        None => sequence_map(identity, &descriptors, &sources, options.views_per_place)?,
+    };
+    let map = map.with_describer(Arc::new(model))?;
+    if !progress(BuildStage::Fitting, 1, 1) {
+        return Err(ImageMapError::Cancelled);
+    }
+    let report = ImageMapReport {
+        images: images.len(),
+        uninformative,
+        describe_seconds,
+        fit_seconds: start.elapsed().as_secs_f64(),
+    };
+    Ok((map, report))
+}
+
+/// Consecutive groups of `per_place` images form places, chained in order.
+fn sequence_map(
+    identity: crate::map::DescriptorIdentity,
+    descriptors: &[Vec<f32>],
+    sources: &[Option<String>],
+    per_place: usize,
+) -> Result<Map, MapError> {
+    let mut builder = MapBuilder::new(identity);
+    for (group, chunk) in descriptors.chunks(per_place).enumerate() {
+        let place = builder.add_place(None)?;
+        for (k, d) in chunk.iter().enumerate() {
+            let index = group * per_place + k;
+            builder.add_view(
+                place,
+                d,
+                ViewAttributes {
+                    keyframe_id: Some(index as u64),
+                    world_t_camera: None,
+                    image: sources[index].clone(),
+                },
+            )?;
+        }
+        if place > 0 {
+            builder.add_edge(place - 1, place, 1.0)?;
+        }
+    }
+    builder.build()
+}
+
+/// Raw features of every image, with whether it was informative; in input order.
+fn describe_in_parallel(
+    images: &[ImageSource<'_>],
+    first: Extractor,
+    options: &ImageMapOptions,
+    progress: &mut dyn FnMut(BuildStage, usize, usize) -> bool,
+) -> Result<Vec<(RawFeatures, bool)>, ImageMapError> {
+    let total = images.len();
+    let done = AtomicUsize::new(0);
+    let cancelled = AtomicBool::new(false);
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(options.threads)
+        .build()
+        .map_err(|e| DescribeError::InvalidArgument(format!("thread pool: {e}")))?;
+    let spare = std::sync::Mutex::new(Some(first));
+    let work = || {
+        pool.install(|| {
+            images
+                .par_iter()
+                .enumerate()
+                .map_init(
+                    || match spare.lock().map(|mut s| s.take()) {
+                        Ok(Some(e)) => Ok(e),
+                        _ => Extractor::new(&options.backend),
+                    },
+                    |extractor, (index, source)| {
+                        if cancelled.load(Ordering::Relaxed) {
+                            return Err(ImageMapError::Cancelled);
+                        }
+                        let extractor = extractor.as_mut().map_err(|e| {
+                            ImageMapError::Describe(DescribeError::Model(e.to_string()))
+                        })?;
+                        let result =
+                            describe_one(extractor, source).map_err(|error| ImageMapError::Image {
+                                index,
+                                source_name: match source {
+                                    ImageSource::File(p) => p.display().to_string(),
+                                    ImageSource::Pixels(_) => "pixels".into(),
+                                },
+                                error,
+                            });
+                        done.fetch_add(1, Ordering::Relaxed);
+                        result
+                    },
+                )
+                .collect::<Result<Vec<_>, _>>()
+        })
+    };
+    std::thread::scope(|scope| {
+        let handle = scope.spawn(work);
+        let mut last = usize::MAX;
+        while !handle.is_finished() {
+            let now = done.load(Ordering::Relaxed);
+            if now != last {
+                last = now;
+                if !progress(BuildStage::Describing, now, total) {
+                    cancelled.store(true, Ordering::Relaxed);
+                }
+            }
+            std::thread::sleep(Duration::from_millis(100));
+        }
+        let result = handle
+            .join()
+            .unwrap_or_else(|panic| std::panic::resume_unwind(panic));
+        if cancelled.load(Ordering::Relaxed) {
+            return Err(ImageMapError::Cancelled);
+        }
+        if result.is_ok() && !progress(BuildStage::Describing, total, total) {
+            return Err(ImageMapError::Cancelled);
+        }
+        result
+    })
+}
+
+/// Raw features of one image; uninformative images give the backend's output anyway (a blank
+/// image's CNN features, or an empty set of local features) and `false`.
+fn describe_one(
+    extractor: &mut Extractor,
+    source: &ImageSource<'_>,
+) -> Result<(RawFeatures, bool), DescribeError> {
+    let owned;
+    let view = match source {
+        ImageSource::File(path) => {
+            owned = read_rgb(path)?;
+            ImageView::packed(owned.0, owned.1, PixelFormat::Rgb8, &owned.2)
+        }
+        ImageSource::Pixels(view) => *view,
+    };
+    extractor.extract_keeping_uninformative(&view)
+}

@@ -1,0 +1,310 @@
+//! Images in: maps built from images store their describer (round trip through the file), a
+//! localizer describes image frames with it, identity mismatches and bad images give typed
+//! errors and leave the localizer unchanged. VLAD runs everywhere; the ONNX cases run when
+//! scripts/setup-models.sh has filled the cache (CI does) and are skipped otherwise.
+
+use std::sync::Arc;
+use topoloc::describe::image::{ImageView, PixelFormat};
+use topoloc::describe::onnx::{cache_dir, OnnxOptions, DEFAULT_MODEL_FILE};
+use topoloc::describe::vlad::VladOptions;
+use topoloc::describe::{
+    BackendConfig, BackendKind, BackendSpec, DescribeError, Describer, DescriberOptions,
+};
+use topoloc::map::{build_from_images, BuildStage, ImageMapError, ImageMapOptions, ImageSource};
+use topoloc::{Frame, LoadOptions, LocalizeError, Localizer, LocalizerOptions, Map, Mode};
+
+const W: usize = 320;
+const H: usize = 240;
+
+/// A deterministic "place": overlapping rectangles and bars of pseudo-random grey shades.
+fn place_image(seed: u64) -> Vec<u8> {
+    let mut state = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15).wrapping_add(7);
+    let mut next = move |m: usize| {
+        state = state
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (state >> 33) as usize % m
+    };
+    let mut data = vec![0u8; W * H];
+    for (i, px) in data.iter_mut().enumerate() {
+        *px = ((i % W) * 255 / W) as u8 / 2 + 40;
+    }
+    for _ in 0..150 {
+        let (x0, y0, w, h) = (next(W), next(H), 6 + next(50), 6 + next(50));
+        let shade = next(256) as u8;
+        for y in y0..(y0 + h).min(H) {
+            for x in x0..(x0 + w).min(W) {
+                data[y * W + x] = shade;
+            }
+        }
+    }
+    data
+}
+
+/// The same place seen again: brighter, shifted by a few pixels, with noise.
+fn revisit(image: &[u8], seed: u64) -> Vec<u8> {
+    let mut state = seed;
+    let mut out = vec![0u8; W * H];
+    for y in 0..H {
+        for x in 0..W {
+            let src = image[y * W + (x + 3).min(W - 1)];
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            let noise = ((state >> 60) as i32) - 8;
+            out[y * W + x] = (i32::from(src) * 11 / 10 + 10 + noise).clamp(0, 255) as u8;
+        }
+    }
+    out
+}
+
+fn gray(data: &[u8]) -> ImageView<'_> {
+    ImageView::packed(W as u32, H as u32, PixelFormat::Gray8, data)
+}
+
+fn no_progress(_: BuildStage, _: usize, _: usize) -> bool {
+    true
+}
+
+fn build(images: &[Vec<u8>], backend: BackendConfig) -> Result<Map, ImageMapError> {
+    let sources: Vec<ImageSource> = images
+        .iter()
+        .map(|d| ImageSource::Pixels(gray(d)))
+        .collect();
+    let options = ImageMapOptions {
+        backend,
+        threads: 2,
+        ..ImageMapOptions::default()
+    };
+    build_from_images(&sources, None, &options, &mut no_progress).map(|(map, _)| map)
+}
+
+fn image_frame(data: &[u8], t: f64) -> Frame<'_> {
+    Frame {
+        timestamp: t,
+        image: Some(gray(data)),
+        ..Frame::default()
+    }
+}
+
+fn onnx_available() -> bool {
+    let ok = cache_dir().join(DEFAULT_MODEL_FILE).is_file();
+    if !ok {
+        eprintln!("skipped: no ONNX model in {}", cache_dir().display());
+    }
+    ok
+}
+
+/// Builds a map from `places` images, saves and reloads it, and localizes revisits of every
+/// place single-frame: at least `min_correct` of them must be found.
+fn round_trip_and_localize(backend: BackendConfig, places: u64, min_correct: usize) {
+    let images: Vec<Vec<u8>> = (0..places).map(place_image).collect();
+    let built = build(&images, backend).expect("map from images");
+    assert_eq!(built.place_count(), places as usize);
+    assert_eq!(
+        built.view(3).unwrap().keyframe_id,
+        Some(3),
+        "image index kept"
+    );
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("images.topoloc");
+    built.save(&path).unwrap();
+    let map = Arc::new(Map::load(&path, &LoadOptions::default()).unwrap());
+    assert_eq!(map.descriptor(), built.descriptor());
+    assert_eq!(
+        map.describer().map(|m| m.as_ref()),
+        built.describer().map(|m| m.as_ref()),
+        "describer survives the file bit for bit"
+    );
+
+    let options = LocalizerOptions {
+        mode: Mode::SingleFrame,
+        ..Default::default()
+    };
+    let mut localizer =
+        Localizer::with_describer(map.clone(), options, &DescriberOptions::default()).unwrap();
+    assert!(localizer.describes_images());
+    let mut correct = 0;
+    for (p, image) in images.iter().enumerate() {
+        let query = revisit(image, p as u64 + 100);
+        let out = localizer.localize(&image_frame(&query, p as f64)).unwrap();
+        correct += usize::from(out.place as usize == p);
+    }
+    assert!(
+        correct >= min_correct,
+        "{correct} of {places} revisits localized (need {min_correct})"
+    );
+}
+
+#[test]
+fn vlad_maps_store_their_describer_and_localize_image_frames() {
+    round_trip_and_localize(BackendConfig::Vlad(VladOptions::default()), 12, 11);
+}
+
+#[test]
+fn onnx_maps_store_their_describer_and_localize_image_frames() {
+    if !onnx_available() {
+        return;
+    }
+    round_trip_and_localize(BackendConfig::Onnx(OnnxOptions::default()), 12, 11);
+}
+
+#[test]
+fn bad_images_give_typed_errors_and_leave_the_localizer_unchanged() {
+    let images: Vec<Vec<u8>> = (0..6).map(place_image).collect();
+    let map = Arc::new(build(&images, BackendConfig::Vlad(VladOptions::default())).unwrap());
+    let mut localizer =
+        Localizer::with_describer(map.clone(), Default::default(), &Default::default()).unwrap();
+    let mut twin = Localizer::with_describer(map, Default::default(), &Default::default()).unwrap();
+    let first = localizer.localize(&image_frame(&images[0], 0.0)).unwrap();
+    twin.localize(&image_frame(&images[0], 0.0)).unwrap();
+
+    let tiny = [128u8];
+    let constant = vec![90u8; W * H];
+    let black = vec![0u8; W * H * 3];
+    let cases: Vec<(&str, ImageView, fn(&LocalizeError) -> bool)> = vec![
+        (
+            "1x1",
+            ImageView::packed(1, 1, PixelFormat::Gray8, &tiny),
+            |e| matches!(e, LocalizeError::Describe(DescribeError::Uninformative(_))),
+        ),
+        (
+            "10000x10000",
+            ImageView::packed(10_000, 10_000, PixelFormat::Gray8, &tiny),
+            |e| matches!(e, LocalizeError::Describe(DescribeError::InvalidImage(_))),
+        ),
+        (
+            "zero width",
+            ImageView::packed(0, 10, PixelFormat::Gray8, &tiny),
+            |e| matches!(e, LocalizeError::Describe(DescribeError::InvalidImage(_))),
+        ),
+        (
+            "short stride",
+            ImageView {
+                stride: W - 1,
+                ..gray(&images[1])
+            },
+            |e| matches!(e, LocalizeError::Describe(DescribeError::InvalidImage(_))),
+        ),
+        ("short buffer", gray(&images[1][..W * H - 1]), |e| {
+            matches!(e, LocalizeError::Describe(DescribeError::InvalidImage(_)))
+        }),
+        ("constant", gray(&constant), |e| {
+            matches!(e, LocalizeError::Describe(DescribeError::Uninformative(_)))
+        }),
+        (
+            "all black RGB",
+            ImageView::packed(W as u32, H as u32, PixelFormat::Rgb8, &black),
+            |e| matches!(e, LocalizeError::Describe(DescribeError::Uninformative(_))),
+        ),
+    ];
+    for (t, (name, image, expected)) in cases.into_iter().enumerate() {
+        let frame = Frame {
+            timestamp: 1.0 + t as f64,
+            image: Some(image),
+            ..Frame::default()
+        };
+        match localizer.localize(&frame) {
+            Err(e) => assert!(expected(&e), "{name}: unexpected error {e}"),
+            Ok(out) => panic!("{name}: expected an error, got {out:?}"),
+        }
+    }
+    // Nothing above changed the state: both localizers agree on the next frame.
+    let a = localizer.localize(&image_frame(&images[1], 20.0)).unwrap();
+    let b = twin.localize(&image_frame(&images[1], 20.0)).unwrap();
+    assert_eq!(a, b);
+    assert_eq!(first.frame_index + 1, a.frame_index);
+}
+
+#[test]
+fn image_frames_need_a_describer() {
+    let images: Vec<Vec<u8>> = (0..4).map(place_image).collect();
+    let map = Arc::new(build(&images, BackendConfig::Vlad(VladOptions::default())).unwrap());
+    let mut plain = Localizer::new(map, Default::default()).unwrap();
+    assert!(matches!(
+        plain.localize(&image_frame(&images[0], 0.0)),
+        Err(LocalizeError::NoDescriber(_))
+    ));
+    let descriptors_only = Arc::new(topoloc::synthetic::random_map(5, 1, 8, 1));
+    assert!(matches!(
+        Localizer::with_describer(descriptors_only, Default::default(), &Default::default()),
+        Err(LocalizeError::NoDescriber(_))
+    ));
+}
+
+#[test]
+fn a_describer_of_another_backend_or_model_is_refused() {
+    let images: Vec<Vec<u8>> = (0..4).map(place_image).collect();
+    let map = Arc::new(build(&images, BackendConfig::Vlad(VladOptions::default())).unwrap());
+    let onnx = DescriberOptions {
+        backend: Some(BackendKind::Onnx),
+        ..Default::default()
+    };
+    assert!(matches!(
+        Localizer::with_describer(map.clone(), Default::default(), &onnx),
+        Err(LocalizeError::Describe(DescribeError::Mismatch(_)))
+    ));
+    if !onnx_available() {
+        return;
+    }
+    let onnx_map = build(&images, BackendConfig::Onnx(OnnxOptions::default())).unwrap();
+    let mut model = onnx_map.describer().unwrap().as_ref().clone();
+    if let BackendSpec::Onnx { model_sha256, .. } = &mut model.spec {
+        model_sha256.replace_range(0..4, "0000");
+    }
+    match Describer::new(Arc::new(model), &DescriberOptions::default()) {
+        Err(DescribeError::Mismatch(msg)) => assert!(msg.contains("sha256"), "{msg}"),
+        Err(e) => panic!("expected Mismatch, got {e}"),
+        Ok(_) => panic!("expected Mismatch, got a describer"),
+    }
+}
+
+#[test]
+fn a_corrupt_or_missing_model_file_is_a_typed_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let corrupt = dir.path().join("corrupt.onnx");
+    std::fs::write(&corrupt, b"this is not an ONNX model").unwrap();
+    let images: Vec<Vec<u8>> = (0..3).map(place_image).collect();
+    for (model, runtime_needed) in [(dir.path().join("missing.onnx"), false), (corrupt, true)] {
+        let backend = BackendConfig::Onnx(OnnxOptions {
+            model: Some(model.clone()),
+            ..OnnxOptions::default()
+        });
+        match build(&images, backend) {
+            Err(ImageMapError::Describe(DescribeError::BackendUnavailable { tried, .. })) => {
+                assert!(
+                    tried.contains(&model) || runtime_needed,
+                    "the path tried is named: {tried:?}"
+                )
+            }
+            Err(ImageMapError::Describe(DescribeError::Model(msg))) => {
+                assert!(runtime_needed && msg.contains("corrupt.onnx"), "{msg}")
+            }
+            Err(e) => panic!("{}: unexpected error {e}", model.display()),
+            Ok(_) => panic!("{}: expected an error", model.display()),
+        }
+    }
+}
+
+#[test]
+fn progress_is_reported_and_can_cancel() {
+    let images: Vec<Vec<u8>> = (0..8).map(place_image).collect();
+    let sources: Vec<ImageSource> = images
+        .iter()
+        .map(|d| ImageSource::Pixels(gray(d)))
+        .collect();
+    let mut seen = Vec::new();
+    let mut record = |stage: BuildStage, done: usize, total: usize| {
+        seen.push((stage, done, total));
+        true
+    };
+    build_from_images(&sources, None, &ImageMapOptions::default(), &mut record).unwrap();
+    assert_eq!(seen.first().map(|s| s.0), Some(BuildStage::Describing));
+    assert!(seen.contains(&(BuildStage::Describing, 8, 8)));
+    assert_eq!(seen.last(), Some(&(BuildStage::Fitting, 1, 1)));
+    let mut cancel = |_: BuildStage, _: usize, _: usize| false;
+    assert!(matches!(
+        build_from_images(&sources, None, &ImageMapOptions::default(), &mut cancel),
+        Err(ImageMapError::Cancelled)
+    ));
+}

@@ -1,0 +1,143 @@
+//! Command-line options shared by the commands that describe images: which backend, its
+//! options, and where its runtime files are; plus listing an image folder.
+
+use anyhow::{bail, Context, Result};
+use clap::{Args, ValueEnum};
+use std::path::{Path, PathBuf};
+use topoloc::describe::onnx::OnnxOptions;
+use topoloc::describe::vlad::{LocalFeature, VladOptions};
+use topoloc::describe::{BackendConfig, BackendKind, DescriberOptions};
+
+/// The descriptor backend on the command line.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum Backend {
+    /// MobileNetV2 multi-level features through ONNX Runtime (run scripts/setup-models.sh).
+    Onnx,
+    /// VLAD of OpenCV local features (no learned weights).
+    Vlad,
+}
+
+impl From<Backend> for BackendKind {
+    fn from(b: Backend) -> Self {
+        match b {
+            Backend::Onnx => BackendKind::Onnx,
+            Backend::Vlad => BackendKind::Vlad,
+        }
+    }
+}
+
+/// Local feature of the VLAD backend.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum Feature {
+    /// ORB (binary, fast).
+    Orb,
+    /// SIFT (slower, more distinctive).
+    Sift,
+}
+
+/// Where the ONNX backend's files are (both commands).
+#[derive(Args, Clone, Debug)]
+pub struct RuntimeArgs {
+    /// ONNX model file (default: the cache's MobileNetV2 export).
+    #[arg(long)]
+    pub onnx_model: Option<PathBuf>,
+    /// ONNX Runtime library (default: TOPOLOC_ORT_LIBRARY, ORT_DYLIB_PATH, then the cache).
+    #[arg(long)]
+    pub onnx_runtime: Option<PathBuf>,
+}
+
+impl RuntimeArgs {
+    /// Options for describing query images with a map's stored describer.
+    pub fn describer_options(&self, backend: Option<Backend>) -> DescriberOptions {
+        DescriberOptions {
+            backend: backend.map(Into::into),
+            onnx_runtime: self.onnx_runtime.clone(),
+            onnx_model: self.onnx_model.clone(),
+            threads: 1,
+        }
+    }
+}
+
+/// Backend choice and options for building a map.
+#[derive(Args, Clone, Debug)]
+pub struct BackendArgs {
+    /// Descriptor backend.
+    #[arg(long, value_enum, default_value_t = Backend::Onnx)]
+    pub backend: Backend,
+    /// ONNX: network outputs to pool (comma-separated).
+    #[arg(long, value_delimiter = ',', default_value = "f6,f13,f17,f18")]
+    pub taps: Vec<String>,
+    /// ONNX: pooling grid per tap, ROWSxCOLS (1x1 is plain global pooling).
+    #[arg(long, default_value = "4x4")]
+    pub grid: String,
+    /// VLAD: local feature.
+    #[arg(long, value_enum, default_value_t = Feature::Orb)]
+    pub feature: Feature,
+    /// VLAD: codebook size.
+    #[arg(long, default_value_t = 64)]
+    pub clusters: usize,
+    #[command(flatten)]
+    pub runtime: RuntimeArgs,
+}
+
+impl BackendArgs {
+    /// The library's backend configuration.
+    pub fn config(&self) -> Result<BackendConfig> {
+        Ok(match self.backend {
+            Backend::Onnx => {
+                let (rows, cols) = self
+                    .grid
+                    .split_once('x')
+                    .context("--grid must look like 4x4")?;
+                BackendConfig::Onnx(OnnxOptions {
+                    runtime: self.runtime.onnx_runtime.clone(),
+                    model: self.runtime.onnx_model.clone(),
+                    taps: self.taps.clone(),
+                    grid: (rows.parse()?, cols.parse()?),
+                    ..OnnxOptions::default()
+                })
+            }
+            Backend::Vlad => BackendConfig::Vlad(VladOptions {
+                feature: match self.feature {
+                    Feature::Orb => LocalFeature::Orb,
+                    Feature::Sift => LocalFeature::Sift,
+                },
+                clusters: self.clusters,
+                ..VladOptions::default()
+            }),
+        })
+    }
+}
+
+/// Image files (jpg, jpeg, png, bmp, pgm, ppm) in `dir`, sorted by name.
+pub fn image_files(dir: &Path) -> Result<Vec<PathBuf>> {
+    let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
+        .with_context(|| format!("reading image folder {}", dir.display()))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| {
+            p.extension().and_then(|e| e.to_str()).is_some_and(|e| {
+                ["jpg", "jpeg", "png", "bmp", "pgm", "ppm"]
+                    .contains(&e.to_ascii_lowercase().as_str())
+            })
+        })
+        .collect();
+    files.sort();
+    if files.is_empty() {
+        bail!("no images (jpg, png, bmp, pgm, ppm) in {}", dir.display());
+    }
+    Ok(files)
+}
+
+/// A progress bar on stderr (hidden when stderr is not a terminal).
+pub fn progress_bar(total: usize, what: &str) -> indicatif::ProgressBar {
+    let bar = indicatif::ProgressBar::new(total as u64);
+    bar.set_style(
+        indicatif::ProgressStyle::with_template(
+            "{msg:>12} [{bar:40}] {pos}/{len} {per_sec} eta {eta}",
+        )
+        .expect("valid template")
+        .progress_chars("=> "),
+    );
+    bar.set_message(what.to_string());
+    bar
+}

@@ -1,0 +1,150 @@
+//! `topoloc build-map`: a map from an image folder (optionally with a TUM trajectory), with the
+//! describer stored in it.
+
+use crate::backend_args::{image_files, progress_bar, BackendArgs};
+use anyhow::{bail, Result};
+use clap::Args;
+use serde_json::json;
+use std::path::PathBuf;
+use topoloc::describe::FitOptions;
+use topoloc::map::{
+    build_from_images, read_tum, BuildStage, ImageMapOptions, ImageSource, KeyframeOptions,
+};
+
+/// Options of `build-map`.
+#[derive(Args, Clone, Debug)]
+pub struct BuildMapArgs {
+    /// Folder of images, taken in file-name order.
+    #[arg(long)]
+    pub images: PathBuf,
+    /// TUM trajectory (`t tx ty tz qx qy qz qw`), one pose per image in the same order: places
+    /// are then made by spacing and revisits merged.
+    #[arg(long)]
+    pub poses: Option<PathBuf>,
+    #[command(flatten)]
+    pub backend: BackendArgs,
+    /// Without poses: consecutive images per place (4 for yaw views); with poses: most views
+    /// per place.
+    #[arg(long, default_value_t = 1)]
+    pub views_per_place: usize,
+    /// Place spacing in metres (with poses).
+    #[arg(long, default_value_t = 2.0)]
+    pub place_spacing: f64,
+    /// Descriptor dimension D (at most the number of images minus one).
+    #[arg(long, default_value_t = 512)]
+    pub dim: usize,
+    /// Most images the PCA is fitted on (evenly spaced).
+    #[arg(long, default_value_t = 1000)]
+    pub pca_samples: usize,
+    /// PCA whitening: auto (VLAD yes, ONNX no), yes or no.
+    #[arg(long, default_value = "auto")]
+    pub whiten: String,
+    /// Describing threads (0: one per core).
+    #[arg(long, default_value_t = 0)]
+    pub threads: usize,
+    /// Output map file.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Print one JSON object instead of text.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Runs the command.
+pub fn run(args: &BuildMapArgs) -> Result<()> {
+    let files = image_files(&args.images)?;
+    let poses = match &args.poses {
+        Some(path) => {
+            let poses = read_tum(path)?;
+            if poses.len() != files.len() {
+                bail!(
+                    "{} has {} poses for {} images in {}: give one pose per image, in file-name order",
+                    path.display(),
+                    poses.len(),
+                    files.len(),
+                    args.images.display()
+                );
+            }
+            Some(
+                poses
+                    .into_iter()
+                    .map(|p| p.world_t_camera)
+                    .collect::<Vec<_>>(),
+            )
+        }
+        None => None,
+    };
+    let whiten = match args.whiten.as_str() {
+        "auto" => None,
+        "yes" => Some(true),
+        "no" => Some(false),
+        other => bail!("--whiten is '{other}', expected auto, yes or no"),
+    };
+    let options = ImageMapOptions {
+        backend: args.backend.config()?,
+        fit: FitOptions {
+            dim: args.dim,
+            pca_samples: args.pca_samples,
+            whiten,
+            ..FitOptions::default()
+        },
+        views_per_place: args.views_per_place,
+        keyframes: KeyframeOptions {
+            place_spacing_m: args.place_spacing,
+            neighbour_radius_m: 1.5 * args.place_spacing,
+            ..KeyframeOptions::default()
+        },
+        threads: args.threads,
+    };
+    let sources: Vec<ImageSource> = files.iter().map(|f| ImageSource::File(f)).collect();
+    let bar = progress_bar(files.len(), "describing");
+    let mut report_progress = |stage: BuildStage, done: usize, _total: usize| {
+        match stage {
+            BuildStage::Describing => bar.set_position(done as u64),
+            BuildStage::Fitting => bar.set_message("fitting"),
+        }
+        true
+    };
+    let (map, report) =
+        build_from_images(&sources, poses.as_deref(), &options, &mut report_progress)?;
+    bar.finish_and_clear();
+    map.save(&args.out)?;
+    let summary = json!({
+        "map": args.out.display().to_string(),
+        "images": report.images,
+        "places": map.place_count(),
+        "views": map.view_count(),
+        "edges": map.edge_count(),
+        "descriptor": map.descriptor().to_string(),
+        "uninformative_images": report.uninformative,
+        "describe_seconds": report.describe_seconds,
+        "fit_seconds": report.fit_seconds,
+    });
+    if args.json {
+        println!("{summary}");
+    } else {
+        println!(
+            "{}: {} places, {} views, {} edges from {} images",
+            args.out.display(),
+            map.place_count(),
+            map.view_count(),
+            map.edge_count(),
+            report.images
+        );
+        println!("descriptor: {}", map.descriptor());
+        println!(
+            "describe {:.1} s ({:.1} ms per image, all threads), fit {:.1} s",
+            report.describe_seconds,
+            report.describe_seconds * 1e3 / report.images as f64,
+            report.fit_seconds
+        );
+        if !report.uninformative.is_empty() {
+            println!(
+                "warning: {} images without content (blank/constant or no local feature) kept as views: {:?}",
+                report.uninformative.len(),
+                report.uninformative
+            );
+        }
+    }
+    Ok(())
+}
