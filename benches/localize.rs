@@ -61,6 +61,7 @@ fn per_frame(c: &mut Criterion) {
                         timestamp: i as f64,
                         descriptor: &queries[i % queries.len()],
                         odometry: None,
+                        image: None,
                     };
                     localizer.process(&frame, &mut out).unwrap();
                     i += 1;
