@@ -164,10 +164,17 @@ impl DescriberModel {
         match (&self.spec, &self.codebook) {
             (BackendSpec::Vlad(o), Some(c)) => {
                 o.validate()?;
-                if c.clusters != o.clusters || c.clusters * c.dim != pca.input_dim {
+                if c.clusters != o.clusters
+                    || c.dim != o.feature.dim()
+                    || c.clusters * c.dim != pca.input_dim
+                {
                     return bad(format!(
-                        "codebook {}x{} does not match {} clusters and PCA input {}",
-                        c.clusters, c.dim, o.clusters, pca.input_dim
+                        "codebook {}x{} does not match {} clusters of {}-d features and PCA input {}",
+                        c.clusters,
+                        c.dim,
+                        o.clusters,
+                        o.feature.dim(),
+                        pca.input_dim
                     ));
                 }
                 Ok(())

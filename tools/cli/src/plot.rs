@@ -19,6 +19,9 @@ pub const FONT_PATH: &str = "/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf";
 /// The Debian package that installs [`FONT_PATH`].
 pub const FONT_PACKAGE: &str = "fonts-dejavu-core";
 
+/// Marks a query without a prediction in [`Series::predicted`].
+pub const NO_PREDICTION: usize = usize::MAX;
+
 /// Upper bound on the number of heat-map cells per axis; larger matrices are max-pooled in blocks.
 pub const MAX_HEATMAP_CELLS: usize = 800;
 
@@ -50,7 +53,8 @@ const NO_VALUE_COLOR: [u8; 3] = [128, 128, 128];
 pub struct Series<'a> {
     /// Name shown in the legends, e.g. `"single-frame"` or `"filter"`.
     pub name: &'a str,
-    /// Predicted map index per query frame (length = number of queries, each `< n_map`).
+    /// Predicted map index per query frame (length = number of queries, each `< n_map`, or
+    /// [`NO_PREDICTION`] for a query without a prediction, which is not drawn).
     pub predicted: &'a [usize],
     /// `(recall, precision)` points with recall ascending, each value in `[0, 1]`; drawn as a
     /// polyline in the given order (may be empty).
@@ -121,7 +125,7 @@ fn validate(
         );
     }
     if let Some(truth) = truth {
-        check_indices("ground truth", truth, n_queries, n_map)?;
+        check_indices("ground truth", truth, n_queries, n_map, false)?;
     }
     for s in series {
         check_indices(
@@ -129,6 +133,7 @@ fn validate(
             s.predicted,
             n_queries,
             n_map,
+            true,
         )?;
         for (k, &(recall, precision)) in s.precision_recall.iter().enumerate() {
             let ok = |v: f64| (0.0..=1.0).contains(&v);
@@ -143,15 +148,23 @@ fn validate(
     Ok(())
 }
 
-/// Checks that `indices` has one map index `< n_map` per query.
-fn check_indices(what: &str, indices: &[usize], n_queries: usize, n_map: usize) -> Result<()> {
+/// Checks that `indices` has one map index `< n_map` per query (or [`NO_PREDICTION`] when
+/// `allow_none`).
+fn check_indices(
+    what: &str,
+    indices: &[usize],
+    n_queries: usize,
+    n_map: usize,
+    allow_none: bool,
+) -> Result<()> {
     if indices.len() != n_queries {
         bail!(
             "{what} has {} entries, expected one per query ({n_queries})",
             indices.len()
         );
     }
-    if let Some((i, &m)) = indices.iter().enumerate().find(|&(_, &m)| m >= n_map) {
+    let bad = |m: usize| m >= n_map && !(allow_none && m == NO_PREDICTION);
+    if let Some((i, &m)) = indices.iter().enumerate().find(|&(_, &m)| bad(m)) {
         bail!("{what}: query {i} has map index {m}, but the map has only {n_map} frames");
     }
     Ok(())
@@ -387,6 +400,7 @@ where
             .predicted
             .iter()
             .enumerate()
+            .filter(|&(_, &m)| m != NO_PREDICTION)
             .map(|(i, &m)| (m as f64 + 0.5, i as f64 + 0.5));
         // Alternate marker shapes so overlapping series stay distinguishable.
         match k % 3 {
@@ -673,6 +687,14 @@ mod tests {
         flat[3] = f32::NAN;
         flat[4] = f32::NEG_INFINITY;
         write_evaluation_png(&path, "flat", &flat, 3, 4, None, &[]).unwrap();
+        // Queries without a prediction are allowed (and not drawn).
+        let predicted = [1, NO_PREDICTION, 3];
+        let series = [Series {
+            name: "partial",
+            predicted: &predicted,
+            precision_recall: &[],
+        }];
+        write_evaluation_png(&path, "partial", &flat, 3, 4, Some(&[0, 1, 2]), &series).unwrap();
     }
 
     #[test]
@@ -735,6 +757,33 @@ mod tests {
             &[good, short],
         ));
         assert!(e.contains("series \"s\" predictions has 1 entries"), "{e}");
+        let e = err(write_evaluation_png(
+            &path,
+            "t",
+            &sim,
+            2,
+            3,
+            Some(&[0, NO_PREDICTION]),
+            &[],
+        ));
+        assert!(e.contains("query 1 has map index"), "{e}");
+        let big = [0usize, 3];
+        let e = err(write_evaluation_png(
+            &path,
+            "t",
+            &sim,
+            2,
+            3,
+            None,
+            &[Series {
+                predicted: &big,
+                ..good
+            }],
+        ));
+        assert!(
+            e.contains("series \"s\" predictions: query 1 has map index 3"),
+            "{e}"
+        );
         let bad_pr = [(0.5, 1.5)];
         let e = err(write_evaluation_png(
             &path,

@@ -1,0 +1,162 @@
+//! Describing images, one thread, 320x240 input, D = 512: the ONNX multi-level descriptor, the
+//! VLAD-ORB descriptor, and the whole localize step (describe + filter) on a 1k-view map.
+//!
+//! Run: `cargo bench --bench describe` (add `-- --quick` for a shorter run). The ONNX cases need
+//! scripts/setup-models.sh (skipped with a message otherwise). The input is a 320x240 colour
+//! photograph-like image: a Gardens Point frame when ../shared/data is present (resized), else
+//! a generated textured image. Targets: ONNX <= 25 ms, VLAD-ORB <= 15 ms, localize within 1 ms
+//! of describe at 1k views. Figures are recorded in BENCHMARKS.md.
+
+use criterion::{criterion_group, criterion_main, Criterion};
+use std::hint::black_box;
+use std::path::Path;
+use std::sync::Arc;
+use std::time::Duration;
+use topoloc::describe::describer::RawFeatures;
+use topoloc::describe::image::{read_rgb, ImageView, PixelFormat};
+use topoloc::describe::onnx::{cache_dir, OnnxOptions, DEFAULT_MODEL_FILE};
+use topoloc::describe::pca::Pca;
+use topoloc::describe::vlad::{Codebook, VladOptions};
+use topoloc::describe::{BackendConfig, Describer, DescriberModel, Extractor};
+use topoloc::synthetic::random_map;
+use topoloc::{Frame, Localization, Localizer, LocalizerOptions, MapBuilder};
+
+const DIM: usize = 512;
+const VIEWS: usize = 1_000;
+const W: u32 = 320;
+const H: u32 = 240;
+
+/// A 320x240 RGB input: a real frame if the shared data is there, else a generated texture.
+fn input_image() -> Vec<u8> {
+    let real = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../shared/data/gardens-point/day_left/Image000.jpg");
+    if let Ok((w, h, rgb)) = read_rgb(&real) {
+        let mut out = vec![0u8; (W * H * 3) as usize];
+        // Nearest-neighbour resize: the bench measures describing a 320x240 input.
+        for y in 0..H as usize {
+            for x in 0..W as usize {
+                let (sx, sy) = (x * w as usize / W as usize, y * h as usize / H as usize);
+                let s = (sy * w as usize + sx) * 3;
+                out[(y * W as usize + x) * 3..][..3].copy_from_slice(&rgb[s..s + 3]);
+            }
+        }
+        eprintln!("input: {} resized to 320x240", real.display());
+        return out;
+    }
+    eprintln!("input: generated texture (no shared data)");
+    let mut state = 12345u64;
+    let mut next = move |m: u32| {
+        state = state
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        ((state >> 33) % u64::from(m)) as u32
+    };
+    let mut data: Vec<u8> = (0..W * H * 3).map(|i| ((i / 3) % W * 200 / W) as u8).collect();
+    for _ in 0..200 {
+        let (x0, y0, w, h) = (next(W), next(H), 4 + next(40), 4 + next(40));
+        let colour = [next(256) as u8, next(256) as u8, next(256) as u8];
+        for y in y0..(y0 + h).min(H) {
+            for x in x0..(x0 + w).min(W) {
+                data[((y * W + x) * 3) as usize..][..3].copy_from_slice(&colour);
+            }
+        }
+    }
+    data
+}
+
+/// A describer model for `config` with a D = 512 projection (random rows: the cost of PCA is
+/// what matters here, not its directions) and, for VLAD, a codebook trained on the input.
+fn model(config: &BackendConfig, image: &ImageView) -> Option<DescriberModel> {
+    let mut extractor = match Extractor::new(config) {
+        Ok(e) => e,
+        Err(e) => {
+            eprintln!("skipped {config:?}: {e}");
+            return None;
+        }
+    };
+    let raw = extractor.extract(image).expect("describable input");
+    let (input_dim, codebook) = match &raw {
+        RawFeatures::Mlf(v) => (v.len(), None),
+        RawFeatures::Local(l) => {
+            let clusters = VladOptions::default().clusters;
+            let codebook = Codebook::train(&l.values, l.dim, clusters).expect("codebook");
+            (clusters * l.dim, Some(codebook))
+        }
+    };
+    let components = (0..DIM * input_dim)
+        .map(|i| ((i * 2654435761) % 1000) as f32 / 1000.0 - 0.5)
+        .collect();
+    Some(DescriberModel {
+        spec: extractor.spec().clone(),
+        pca: Pca {
+            input_dim,
+            output_dim: DIM,
+            mean: vec![0.0; input_dim],
+            components,
+        },
+        codebook,
+    })
+}
+
+fn describe(c: &mut Criterion) {
+    let pixels = input_image();
+    let image = ImageView::packed(W, H, PixelFormat::Rgb8, &pixels);
+    let onnx_ready = cache_dir().join(DEFAULT_MODEL_FILE).is_file();
+    let mut configs = vec![("vlad-orb", BackendConfig::Vlad(VladOptions::default()))];
+    if onnx_ready {
+        configs.insert(0, ("onnx-mlf", BackendConfig::Onnx(OnnxOptions::default())));
+    } else {
+        eprintln!("skipped onnx-mlf: no model in {}", cache_dir().display());
+    }
+    let mut group = c.benchmark_group("describe_320x240");
+    group
+        .sample_size(30)
+        .measurement_time(Duration::from_secs(6));
+    for (name, config) in configs {
+        let Some(model) = model(&config, &image) else {
+            continue;
+        };
+        let model = Arc::new(model);
+        let mut describer = Describer::new(model.clone(), &Default::default()).unwrap();
+        let mut out = Vec::new();
+        group.bench_function(format!("{name}/describe"), |b| {
+            b.iter(|| describer.describe(black_box(&image), &mut out).unwrap())
+        });
+
+        // The same describer inside a localizer on a 1k-view map of its identity.
+        let random = random_map(VIEWS, 4, DIM, 3);
+        let mut builder = MapBuilder::new(model.identity());
+        for p in 0..random.place_count() as u32 {
+            builder.add_place(None).unwrap();
+            for &v in random.place_views(p).unwrap() {
+                builder
+                    .add_view(p, random.view_descriptor(v).unwrap(), Default::default())
+                    .unwrap();
+            }
+        }
+        for e in random.edges() {
+            builder.add_edge(e.a, e.b, e.weight).unwrap();
+        }
+        let map = Arc::new(builder.build().unwrap().with_describer(model).unwrap());
+        let mut localizer =
+            Localizer::with_describer(map, LocalizerOptions::default(), &Default::default())
+                .unwrap();
+        let mut result = Localization::default();
+        let mut t = 0.0;
+        group.bench_function(format!("{name}/localize_1k_views"), |b| {
+            b.iter(|| {
+                t += 0.1;
+                let frame = Frame {
+                    timestamp: t,
+                    image: Some(image),
+                    ..Frame::default()
+                };
+                localizer.process(black_box(&frame), &mut result).unwrap()
+            })
+        });
+    }
+    group.finish();
+}
+
+criterion_group!(benches, describe);
+criterion_main!(benches);
