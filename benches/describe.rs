@@ -51,7 +51,9 @@ fn input_image() -> Vec<u8> {
             .wrapping_add(1442695040888963407);
         ((state >> 33) % u64::from(m)) as u32
     };
-    let mut data: Vec<u8> = (0..W * H * 3).map(|i| ((i / 3) % W * 200 / W) as u8).collect();
+    let mut data: Vec<u8> = (0..W * H * 3)
+        .map(|i| ((i / 3) % W * 200 / W) as u8)
+        .collect();
     for _ in 0..200 {
         let (x0, y0, w, h) = (next(W), next(H), 4 + next(40), 4 + next(40));
         let colour = [next(256) as u8, next(256) as u8, next(256) as u8];

@@ -298,13 +298,17 @@ fn progress_is_reported_and_can_cancel() {
         seen.push((stage, done, total));
         true
     };
-    build_from_images(&sources, None, &ImageMapOptions::default(), &mut record).unwrap();
+    let options = ImageMapOptions {
+        backend: BackendConfig::Vlad(VladOptions::default()),
+        ..ImageMapOptions::default()
+    };
+    build_from_images(&sources, None, &options, &mut record).unwrap();
     assert_eq!(seen.first().map(|s| s.0), Some(BuildStage::Describing));
     assert!(seen.contains(&(BuildStage::Describing, 8, 8)));
     assert_eq!(seen.last(), Some(&(BuildStage::Fitting, 1, 1)));
     let mut cancel = |_: BuildStage, _: usize, _: usize| false;
     assert!(matches!(
-        build_from_images(&sources, None, &ImageMapOptions::default(), &mut cancel),
+        build_from_images(&sources, None, &options, &mut cancel),
         Err(ImageMapError::Cancelled)
     ));
 }

@@ -44,3 +44,25 @@ def test_readme_example_runs(tmp_path, monkeypatch, capsys):
     lines = capsys.readouterr().out.splitlines()
     assert [line.split()[:3] for line in lines] == [[str(i), str(i), str(i)] for i in range(4)]
     assert (tmp_path / "corridor.topomap").is_file()
+
+
+def test_readme_image_example_uses_the_real_api():
+    # The images example needs files, a video and OpenCV: it is compiled, not run, and every
+    # topoloc name and keyword argument it uses must exist.
+    text = (PYTHON_DIR / "README.md").read_text()
+    blocks = re.findall(r"```python\n(.*?)```", text, re.S)
+    code = next(b for b in blocks if "build_from_image_files" in b)
+    compile(code, "README.md", "exec")
+    for dotted in re.findall(r"topoloc\.([A-Za-z_]\w*(?:\.[A-Za-z_]\w*)?)", code):
+        obj = topoloc
+        for part in dotted.split("."):
+            obj = getattr(obj, part)
+    for fn in (topoloc.Map.build_from_image_files, topoloc.Localizer.process):
+        params = inspect.signature(fn).parameters
+        name = fn.__name__
+        call = re.search(rf"{name}\((.*?)\)\n", code, re.S)
+        if call:
+            for kw in re.findall(r"(\w+)=", call.group(1)):
+                assert kw in params, f"{name}() has no argument {kw!r}"
+    for kw in re.findall(r"loc\.process\(([^)]*)\)", code)[0].split(","):
+        assert kw.split("=")[0].strip() in inspect.signature(topoloc.Localizer.process).parameters

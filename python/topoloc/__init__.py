@@ -20,6 +20,10 @@ Quick start::
         r = loc.process(np.array([0.1, 0.9, 0, 0]), timestamp=0.0)
         print(r.place, r.confidence, r.candidates)
 
+Maps can also be built from camera images (``Map.build_from_images`` with uint8 numpy arrays,
+``Map.build_from_image_files`` with files or a folder); such maps store their describer, and
+a localizer on them accepts images: ``loc.process(image=frame, timestamp=t)``.
+
 Objects and threads: a :class:`Map` is immutable and may be shared by many threads; a
 :class:`Localizer` (one camera) and a :class:`MapBuilder` are single-threaded state. Every
 object owning a C handle is a context manager, has ``close()``, and is released when garbage
@@ -30,16 +34,21 @@ The shared library is found through ``TOPOLOC_LIBRARY``, next to this package, i
 """
 
 from ._errors import (
+    BackendUnavailableError,
     BufferTooSmallError,
+    CancelledError,
     CorruptMapError,
     DescriptorMismatchError,
     DimensionMismatchError,
     EmptyMapError,
     InvalidArgumentError,
+    InvalidImageError,
     InvalidMapError,
     InvalidOptionError,
     InvalidUTF8Error,
     MapIOError,
+    ModelError,
+    NoDescriberError,
     NonFiniteError,
     NotAMapError,
     NullArgumentError,
@@ -48,6 +57,7 @@ from ._errors import (
     TimestampError,
     TopolocError,
     TruncatedMapError,
+    UninformativeImageError,
     UnknownPlaceError,
     UnknownViewError,
     UnsupportedVersionError,
@@ -123,5 +133,11 @@ __all__ = [
     "ZeroDescriptorError",
     "TimestampError",
     "InvalidOptionError",
+    "InvalidImageError",
+    "UninformativeImageError",
+    "BackendUnavailableError",
+    "ModelError",
+    "NoDescriberError",
+    "CancelledError",
     "PanicError",
 ]

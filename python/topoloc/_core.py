@@ -10,7 +10,8 @@ import os
 import threading
 from ctypes import POINTER, byref, c_bool, c_char_p, c_double, c_float, c_size_t, c_uint8, c_uint32
 from dataclasses import dataclass, field
-from typing import Any, Dict, List, Optional, Tuple, Type, Union
+from pathlib import Path
+from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple, Type, Union
 
 import numpy as np
 
@@ -18,6 +19,7 @@ from . import _lib
 from ._errors import (
     DimensionMismatchError,
     InvalidArgumentError,
+    InvalidImageError,
     InvalidOptionError,
     InvalidUTF8Error,
     TopolocError,
@@ -113,6 +115,103 @@ def _f64_ptr(arr: np.ndarray):
     return arr.ctypes.data_as(POINTER(c_double))
 
 
+# --------------------------------------------------------------------------------------------
+# Images
+# --------------------------------------------------------------------------------------------
+
+#: Pixel format names -> (``TOPOLOC_PIXEL_*``, channels).
+_PIXEL_FORMATS = {
+    "gray": (_lib.PIXEL_GRAY8, 1),
+    "rgb": (_lib.PIXEL_RGB8, 3),
+    "bgr": (_lib.PIXEL_BGR8, 3),
+    "rgba": (_lib.PIXEL_RGBA8, 4),
+    "bgra": (_lib.PIXEL_BGRA8, 4),
+}
+#: Default pixel format by channel count.
+_DEFAULT_FORMAT = {1: "gray", 3: "rgb", 4: "rgba"}
+
+
+def _pixel_format(pixel_format: Optional[str], channels: int, name: str) -> int:
+    """The ``TOPOLOC_PIXEL_*`` code for ``pixel_format`` (``None``: the default for
+    ``channels``), checked against the array's channel count."""
+    if pixel_format is None:
+        pixel_format = _DEFAULT_FORMAT[channels]
+    if not isinstance(pixel_format, str):
+        raise TypeError(f"pixel_format must be a str, got {type(pixel_format).__name__}")
+    key = pixel_format.lower()
+    if key not in _PIXEL_FORMATS:
+        raise InvalidImageError(
+            f"pixel_format {pixel_format!r} is not one of {', '.join(repr(k) for k in _PIXEL_FORMATS)}"
+        )
+    code, wanted = _PIXEL_FORMATS[key]
+    if wanted != channels:
+        raise InvalidImageError(
+            f"{name} has {channels} channel(s) but pixel_format {pixel_format!r} has {wanted}"
+        )
+    return code
+
+
+def _rows_packed(arr: np.ndarray, channels: int) -> bool:
+    """Whether ``arr`` (H, W) or (H, W, C) of uint8 has contiguous pixels within each row and
+    rows at a positive stride of at least one row's bytes, the layout ``topoloc_image``
+    describes."""
+    h, w = arr.shape[:2]
+    strides = arr.strides
+    if arr.ndim == 3 and strides[2] != 1:
+        return False
+    if w > 1 and strides[1] != channels:
+        return False
+    return h == 1 or strides[0] >= w * channels
+
+
+def _image(image: Any, pixel_format: Optional[str], name: str) -> Tuple[_lib.topoloc_image, np.ndarray]:
+    """A ``topoloc_image`` borrowing the pixels of ``image`` and the array it points into (keep
+    that alive until the C call returns).
+
+    ``image``: uint8 array (H, W) grey, (H, W, 1) grey, (H, W, 3) RGB/BGR or (H, W, 4)
+    RGBA/BGRA. Arrays whose rows are contiguous are passed as they are, with their row stride
+    (e.g. a crop ``frame[10:200, 20:300]``); others (column steps, negative strides,
+    planar/transposed layouts) are copied first.
+    """
+    if isinstance(image, (str, bytes, os.PathLike)):
+        raise TypeError(f"{name} must be a numpy uint8 array of pixels, got a path ({image!r})")
+    arr = np.asarray(image)
+    if arr.dtype != np.uint8:
+        raise TypeError(
+            f"{name} must be a uint8 array (8 bits per channel), got dtype {arr.dtype}; "
+            "scale to 0..255 and convert with .astype(np.uint8)"
+        )
+    if arr.ndim == 2:
+        channels = 1
+    elif arr.ndim == 3 and arr.shape[2] in (1, 3, 4):
+        channels = int(arr.shape[2])
+    else:
+        raise InvalidImageError(
+            f"{name} must have shape (H, W) or (H, W, 1) for grey, (H, W, 3) for RGB/BGR or "
+            f"(H, W, 4) for RGBA/BGRA; got shape {arr.shape}"
+        )
+    fmt = _pixel_format(pixel_format, channels, name)
+    h, w = int(arr.shape[0]), int(arr.shape[1])
+    if h == 0 or w == 0:
+        raise InvalidImageError(f"{name} has shape {arr.shape}: width and height must be at least 1")
+    if h > _U32_MAX or w > _U32_MAX:
+        raise InvalidImageError(f"{name} has shape {arr.shape}: too large")
+    if arr.ndim == 3 and channels == 1:
+        arr = arr[:, :, 0]
+    if not _rows_packed(arr, channels):
+        arr = np.ascontiguousarray(arr)
+    row = w * channels
+    stride = int(arr.strides[0]) if h > 1 else row
+    out = _lib.topoloc_image()
+    out.data = ctypes.cast(arr.ctypes.data, POINTER(c_uint8))
+    out.data_len = stride * (h - 1) + row
+    out.width = w
+    out.height = h
+    out.stride = stride
+    out.format = fmt
+    return out, arr
+
+
 def _read_string(fn, *args) -> str:
     """Calls a ``(..., char *buf, size_t len, size_t *needed)`` function, growing the buffer."""
     needed = c_size_t(0)
@@ -198,6 +297,136 @@ def _load_options(expected_kind, expected_model, expected_dim) -> _lib.topoloc_m
     return options
 
 
+#: Backends a map can be built with -> ``TOPOLOC_BACKEND_*``.
+_BUILD_BACKENDS = {
+    "onnx": _lib.BACKEND_ONNX,
+    "vlad-orb": _lib.BACKEND_VLAD_ORB,
+    "vlad-sift": _lib.BACKEND_VLAD_SIFT,
+}
+#: Build stage codes -> names given to progress callbacks.
+_STAGES = {_lib.STAGE_DESCRIBING: "describing", _lib.STAGE_FITTING: "fitting"}
+#: File name extensions listed by :meth:`Map.build_from_image_files` given a folder.
+IMAGE_EXTENSIONS = (".jpg", ".jpeg", ".png", ".bmp", ".pgm", ".ppm")
+
+ProgressCallback = Callable[[str, int, int], Optional[bool]]
+
+
+def _backend_code(value: Union[str, int], table: Dict[str, int], name: str, error: Type[TopolocError]) -> int:
+    """A ``TOPOLOC_BACKEND_*`` code from its name (``"vlad-orb"``, also ``"vlad_orb"``) or code."""
+    if isinstance(value, str):
+        key = value.lower().replace("_", "-")
+        if key not in table:
+            raise error(f"{name} must be one of {', '.join(repr(k) for k in table)}, got {value!r}")
+        return table[key]
+    return _u32(value, name, error)
+
+
+def _backend_name(code: int, table: Dict[str, int]) -> Union[str, int]:
+    return next((k for k, v in table.items() if v == code), code)
+
+
+class _Progress:
+    """Adapts a Python progress callable to ``topoloc_progress_fn``.
+
+    The C library calls :attr:`callback` on the thread that started the build. An exception
+    raised by the callable (including ``KeyboardInterrupt``) must not unwind through C (ctypes
+    would print and drop it): it is stored in :attr:`error`, the build is cancelled by
+    returning false, and the caller re-raises it once the C call has returned.
+    """
+
+    def __init__(self, progress: Optional[ProgressCallback]) -> None:
+        if progress is not None and not callable(progress):
+            raise TypeError(f"progress must be callable or None, got {type(progress).__name__}")
+        self.progress = progress
+        self.error: Optional[BaseException] = None
+        self.callback = _lib.topoloc_progress_fn(self._call)
+
+    def _call(self, _user_data: Any, stage: int, done: int, total: int) -> bool:
+        try:
+            if self.error is not None:
+                return False
+            if self.progress is None:
+                return True
+            answer = self.progress(_STAGES.get(stage, stage), int(done), int(total))
+            return answer is None or bool(answer)
+        except BaseException as e:  # noqa: B902 - KeyboardInterrupt too: cancel, re-raise later
+            self.error = e
+            return False
+
+    def finish(self, status: int, out) -> None:
+        """After the C call: re-raises the callback's exception (releasing a map built anyway),
+        or raises the exception for ``status``."""
+        error, self.error = self.error, None
+        if error is not None:
+            if status == _lib.TOPOLOC_OK and out:
+                lib.topoloc_map_free(out)
+            try:
+                raise error
+            finally:
+                error = None
+        check(status)
+
+
+def _image_map_options(
+    backend: Union[str, int],
+    dim: int,
+    views_per_place: int,
+    threads: int,
+    onnx_model_path: Optional[PathLike],
+    onnx_runtime_path: Optional[PathLike],
+    onnx_taps: Optional[Union[str, Sequence[str]]],
+    grid_rows: Optional[int],
+    grid_cols: Optional[int],
+    vlad_clusters: Optional[int],
+    poses_tum_path: Optional[PathLike],
+    place_spacing_m: Optional[float],
+) -> _lib.topoloc_image_map_options:
+    o = _lib.defaults(_lib.topoloc_image_map_options, lib.topoloc_image_map_options_init)
+    o.backend = _backend_code(backend, _BUILD_BACKENDS, "backend", InvalidArgumentError)
+    o.dim = _u32(dim, "dim")
+    o.views_per_place = _u32(views_per_place, "views_per_place")
+    o.threads = _u32(threads, "threads")
+    # c_char_p fields keep a reference to the bytes object in the struct (ctypes' _objects).
+    if onnx_model_path is not None:
+        o.onnx_model_path = _path(onnx_model_path, "onnx_model_path")
+    if onnx_runtime_path is not None:
+        o.onnx_runtime_path = _path(onnx_runtime_path, "onnx_runtime_path")
+    if onnx_taps is not None:
+        taps = onnx_taps if isinstance(onnx_taps, str) else ",".join(onnx_taps)
+        o.onnx_taps = _text(taps, "onnx_taps")
+    if grid_rows is not None:
+        o.grid_rows = _u32(grid_rows, "grid_rows")
+    if grid_cols is not None:
+        o.grid_cols = _u32(grid_cols, "grid_cols")
+    if vlad_clusters is not None:
+        o.vlad_clusters = _u32(vlad_clusters, "vlad_clusters")
+    if poses_tum_path is not None:
+        o.poses_tum_path = _path(poses_tum_path, "poses_tum_path")
+    if place_spacing_m is not None:
+        o.place_spacing_m = float(place_spacing_m)
+    return o
+
+
+def _image_files(paths: Union[PathLike, Sequence[PathLike]]) -> List[bytes]:
+    """Encoded file paths: the given sequence, or the image files of a folder sorted by name."""
+    if isinstance(paths, (str, bytes, os.PathLike)):
+        folder = Path(os.fsdecode(paths))
+        if not folder.is_dir():
+            raise InvalidArgumentError(
+                f"{os.fsdecode(paths)!r} is not a folder: give a folder of images or a list of image files"
+            )
+        files = sorted(
+            (p for p in folder.iterdir() if p.suffix.lower() in IMAGE_EXTENSIONS and p.is_file()),
+            key=lambda p: p.name,
+        )
+        if not files:
+            raise InvalidArgumentError(
+                f"no image files ({', '.join(IMAGE_EXTENSIONS)}) in the folder {str(folder)!r}"
+            )
+        return [_path(p) for p in files]
+    return [_path(p, f"paths[{i}]") for i, p in enumerate(paths)]
+
+
 class _Handle:
     """Owns one C handle: ``_ptr`` released with ``_free`` by :meth:`close`, the ``with``
     statement, or garbage collection. Methods called after :meth:`close` raise ``ValueError``."""
@@ -239,8 +468,11 @@ class Map(_Handle):
     """An immutable topological map: places (graph nodes) holding views (descriptors with
     optional keyframe id, pose and image reference), joined by weighted undirected edges.
 
-    Create one with :meth:`load`, :meth:`from_bytes`, :meth:`MapBuilder.build` or
-    :func:`map_from_keyframes`; the constructor is not public.
+    Create one with :meth:`load`, :meth:`from_bytes`, :meth:`build_from_images`,
+    :meth:`build_from_image_files`, :meth:`MapBuilder.build` or :func:`map_from_keyframes`; the
+    constructor is not public. Maps built from images store their describer (the backend's
+    identity and the fitted PCA/codebook), kept by :meth:`save`, so that a :class:`Localizer` on
+    them also accepts camera images.
 
     Ownership: the object owns one C ``topoloc_map`` handle, released by :meth:`close`, by the
     ``with`` statement, or when the object is garbage collected. :class:`Localizer` objects keep
@@ -252,7 +484,10 @@ class Map(_Handle):
     """
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
-        raise TypeError("use Map.load(), Map.from_bytes(), MapBuilder.build() or map_from_keyframes()")
+        raise TypeError(
+            "use Map.load(), Map.from_bytes(), Map.build_from_images(), Map.build_from_image_files(), "
+            "MapBuilder.build() or map_from_keyframes()"
+        )
 
     @classmethod
     def _adopt(cls, ptr) -> "Map":
@@ -305,6 +540,115 @@ class Map(_Handle):
                 buf.ctypes.data_as(POINTER(c_uint8)), buf.size, byref(options), byref(out)
             )
         )
+        return cls._adopt(out)
+
+    @classmethod
+    def build_from_images(
+        cls,
+        images: Sequence[Any],
+        backend: Union[str, int] = "onnx",
+        dim: int = 512,
+        views_per_place: int = 1,
+        threads: int = 0,
+        progress: Optional[ProgressCallback] = None,
+        *,
+        pixel_format: Optional[str] = None,
+        onnx_model_path: Optional[PathLike] = None,
+        onnx_runtime_path: Optional[PathLike] = None,
+        onnx_taps: Optional[Union[str, Sequence[str]]] = None,
+        grid_rows: Optional[int] = None,
+        grid_cols: Optional[int] = None,
+        vlad_clusters: Optional[int] = None,
+        poses_tum_path: Optional[PathLike] = None,
+        place_spacing_m: Optional[float] = None,
+    ) -> "Map":
+        """Builds a map from camera images in memory (``topoloc_map_build_from_images``).
+
+        ``images``: a sequence (or stacked array) of at least 2 uint8 arrays, each (H, W) grey,
+        (H, W, 3) or (H, W, 4) colour (sizes may differ). ``pixel_format`` (``"gray"``,
+        ``"rgb"``, ``"bgr"``, ``"rgba"``, ``"bgra"``) applies to every image; ``None`` means
+        ``"rgb"`` for 3 channels and ``"rgba"`` for 4. Arrays with contiguous rows are read in
+        place (crops included), others are copied. The pixels are only read during the call.
+
+        Every image is described with ``backend`` in parallel (``threads``, 0 = one per core):
+        ``"onnx"`` (a CNN run by ONNX Runtime; ``onnx_model_path`` / ``onnx_runtime_path``
+        default to the cache filled by ``scripts/setup-models.sh``, ``onnx_taps`` names the
+        outputs pooled on a ``grid_rows`` x ``grid_cols`` grid), ``"vlad-orb"`` or
+        ``"vlad-sift"`` (VLAD of OpenCV local features, ``vlad_clusters`` words; no learned
+        weights). A PCA to ``dim`` dimensions (at most the number of images minus one) is
+        fitted on all of them. Without ``poses_tum_path``, every ``views_per_place``
+        consecutive images form a place and places are chained in order; with a TUM trajectory
+        (one pose per image, same order), places are made by ``place_spacing_m`` and hold at
+        most ``views_per_place`` views. View ``v`` records its image index as keyframe id.
+        Options left as ``None`` take the library defaults.
+
+        ``progress(stage, done, total)``, if given, is called on this thread about ten times a
+        second with ``stage`` ``"describing"`` (``done`` of ``total`` images) or ``"fitting"``
+        (0 or 1 of 1); returning ``False`` cancels the build (:class:`CancelledError`;
+        returning ``None`` goes on). An exception raised by ``progress`` (or a
+        ``KeyboardInterrupt`` arriving while it runs) cancels the build and is re-raised here.
+
+        Returns a new :class:`Map` that stores its describer. Raises :class:`InvalidImageError`
+        (the message names the image), ``TypeError`` (not uint8), :class:`InvalidArgumentError`
+        (fewer than 2 images, bad options), :class:`BackendUnavailableError`,
+        :class:`ModelError`, :class:`MapIOError` (poses file), :class:`CancelledError`.
+        """
+        prepared = [_image(img, pixel_format, f"images[{i}]") for i, img in enumerate(images)]
+        n = len(prepared)
+        array = (_lib.topoloc_image * max(n, 1))()
+        for i, (img, _) in enumerate(prepared):
+            array[i] = img
+        options = _image_map_options(
+            backend, dim, views_per_place, threads, onnx_model_path, onnx_runtime_path, onnx_taps,
+            grid_rows, grid_cols, vlad_clusters, poses_tum_path, place_spacing_m,
+        )
+        reporter = _Progress(progress)
+        out = _lib.MapPtr()
+        status = lib.topoloc_map_build_from_images(array, n, byref(options), reporter.callback, None, byref(out))
+        del prepared  # the image array pointed into these until the call returned
+        reporter.finish(status, out)
+        return cls._adopt(out)
+
+    @classmethod
+    def build_from_image_files(
+        cls,
+        paths: Union[PathLike, Sequence[PathLike]],
+        backend: Union[str, int] = "onnx",
+        dim: int = 512,
+        views_per_place: int = 1,
+        threads: int = 0,
+        progress: Optional[ProgressCallback] = None,
+        *,
+        onnx_model_path: Optional[PathLike] = None,
+        onnx_runtime_path: Optional[PathLike] = None,
+        onnx_taps: Optional[Union[str, Sequence[str]]] = None,
+        grid_rows: Optional[int] = None,
+        grid_cols: Optional[int] = None,
+        vlad_clusters: Optional[int] = None,
+        poses_tum_path: Optional[PathLike] = None,
+        place_spacing_m: Optional[float] = None,
+    ) -> "Map":
+        """Builds a map from image files (``topoloc_map_build_from_image_files``): any format
+        OpenCV decodes, read and described in parallel.
+
+        ``paths``: a list of image files in sequence order, or a folder, whose ``.jpg``,
+        ``.jpeg``, ``.png``, ``.bmp``, ``.pgm`` and ``.ppm`` files are taken sorted by name.
+        View ``v`` records the index of its image as keyframe id and its path as image
+        reference (:meth:`view_image`). Other arguments, progress reports and errors as
+        :meth:`build_from_images`; an unreadable file raises :class:`InvalidImageError` naming
+        it, and a folder without images :class:`InvalidArgumentError`.
+        """
+        encoded = _image_files(paths)
+        n = len(encoded)
+        array = (c_char_p * max(n, 1))(*encoded)
+        options = _image_map_options(
+            backend, dim, views_per_place, threads, onnx_model_path, onnx_runtime_path, onnx_taps,
+            grid_rows, grid_cols, vlad_clusters, poses_tum_path, place_spacing_m,
+        )
+        reporter = _Progress(progress)
+        out = _lib.MapPtr()
+        status = lib.topoloc_map_build_from_image_files(array, n, byref(options), reporter.callback, None, byref(out))
+        reporter.finish(status, out)
         return cls._adopt(out)
 
     # -- lifetime ------------------------------------------------------------------------------
@@ -720,6 +1064,14 @@ class Result:
 
 
 _MODES = {"filter": _lib.MODE_FILTER, "single_frame": _lib.MODE_SINGLE_FRAME}
+#: Localizer ``image_backend`` names -> ``TOPOLOC_BACKEND_*``.
+_IMAGE_BACKENDS = {
+    "auto": _lib.BACKEND_AUTO,
+    "none": _lib.BACKEND_NONE,
+    "onnx": _lib.BACKEND_ONNX,
+    "vlad-orb": _lib.BACKEND_VLAD_ORB,
+    "vlad-sift": _lib.BACKEND_VLAD_SIFT,
+}
 _OPTION_FIELDS = (
     "temperature",
     "stay_probability",
@@ -732,7 +1084,9 @@ _OPTION_FIELDS = (
 
 def localizer_options_default() -> Dict[str, Any]:
     """The library's default localizer options (``topoloc_localizer_options_init``) as a dict
-    with keys ``mode`` ("filter"/"single_frame"), the float options and ``top_k``."""
+    with keys ``mode`` ("filter"/"single_frame"), the float options, ``top_k``,
+    ``expected_kind``, ``expected_model``, ``image_backend`` ("auto"), ``onnx_model_path`` and
+    ``onnx_runtime_path`` (``None``: the library's search)."""
     o = _lib.defaults(_lib.topoloc_localizer_options, lib.topoloc_localizer_options_init)
     return _options_dict(o)
 
@@ -744,6 +1098,9 @@ def _options_dict(o: _lib.topoloc_localizer_options) -> Dict[str, Any]:
     out["top_k"] = int(o.top_k)
     out["expected_kind"] = (o.expected_descriptor_kind or b"").decode("utf-8") or None
     out["expected_model"] = (o.expected_descriptor_model or b"").decode("utf-8") or None
+    out["image_backend"] = _backend_name(o.image_backend, _IMAGE_BACKENDS)
+    out["onnx_model_path"] = os.fsdecode(o.onnx_model_path) if o.onnx_model_path else None
+    out["onnx_runtime_path"] = os.fsdecode(o.onnx_runtime_path) if o.onnx_runtime_path else None
     return out
 
 
@@ -758,6 +1115,17 @@ class Localizer(_SingleThreaded):
     ``off_map_similarity``, ``off_map_margin``, ``top_k`` (candidates per frame, >= 1).
     ``expected_kind`` / ``expected_model`` refuse maps built with another descriptor
     (:class:`DescriptorMismatchError`). Invalid options raise :class:`InvalidOptionError`.
+
+    Images: a map built from images (:meth:`Map.build_from_images`) stores its describer.
+    ``image_backend`` says how image frames are described: ``"auto"`` (default) loads the
+    map's describer when it has one (for ONNX maps: ONNX Runtime and the model, now); ``"none"``
+    never (descriptor frames only, nothing loaded; image frames raise
+    :class:`NoDescriberError`); ``"onnx"``, ``"vlad-orb"`` or ``"vlad-sift"`` require the map's
+    describer to be that backend (:class:`DescriptorMismatchError` otherwise,
+    :class:`NoDescriberError` for a map without describer). ``onnx_model_path`` /
+    ``onnx_runtime_path`` override where the ONNX model (which must be the very file the map
+    was built with) and runtime are found. Loading fails with
+    :class:`BackendUnavailableError` or :class:`ModelError`.
 
     Ownership: owns a C ``topoloc_localizer`` handle, released by :meth:`close`, the ``with``
     statement or garbage collection. The localizer keeps its own reference to the map data, so
@@ -781,6 +1149,9 @@ class Localizer(_SingleThreaded):
         top_k: Optional[int] = None,
         expected_kind: Optional[str] = None,
         expected_model: Optional[str] = None,
+        image_backend: Union[str, int] = "auto",
+        onnx_model_path: Optional[PathLike] = None,
+        onnx_runtime_path: Optional[PathLike] = None,
     ) -> None:
         self._init_guard()
         self._free = lib.topoloc_localizer_free
@@ -808,6 +1179,11 @@ class Localizer(_SingleThreaded):
             options.top_k = _u32(top_k, "top_k", InvalidOptionError)
         options.expected_descriptor_kind = _text(expected_kind, "expected_kind")
         options.expected_descriptor_model = _text(expected_model, "expected_model")
+        options.image_backend = _backend_code(image_backend, _IMAGE_BACKENDS, "image_backend", InvalidOptionError)
+        if onnx_model_path is not None:
+            options.onnx_model_path = _path(onnx_model_path, "onnx_model_path")
+        if onnx_runtime_path is not None:
+            options.onnx_runtime_path = _path(onnx_runtime_path, "onnx_runtime_path")
 
         out = _lib.LocalizerPtr()
         check(lib.topoloc_localizer_new(map._h, byref(options), byref(out)))
@@ -833,20 +1209,51 @@ class Localizer(_SingleThreaded):
         need it)."""
         return self._map
 
-    def process(self, descriptor: Any, timestamp: float, odometry: Optional[Any] = None) -> Result:
-        """Localizes one frame.
+    def process(
+        self,
+        descriptor: Optional[Any] = None,
+        timestamp: Optional[float] = None,
+        odometry: Optional[Any] = None,
+        *,
+        image: Optional[Any] = None,
+        pixel_format: Optional[str] = None,
+    ) -> Result:
+        """Localizes one frame, given either its descriptor or its camera image.
 
         ``descriptor``: the frame's global descriptor, D floats (any 1-D array-like; normalised
-        by the library). ``timestamp``: seconds; must not decrease in filter mode (call
-        :meth:`reset` to start a new sequence). ``odometry``: optional motion since the previous
-        frame, ``previous_T_current``, a 4x4 rigid transform.
+        by the library). ``image`` (keyword, instead of ``descriptor``): the camera image as a
+        uint8 array, (H, W) grey or (H, W, 3) / (H, W, 4) colour, described with the map's
+        describer (the localizer needs one: see the class documentation). ``pixel_format``:
+        ``"rgb"`` (default for 3 channels), ``"bgr"`` (OpenCV), ``"rgba"`` (default for 4) or
+        ``"bgra"``. Arrays with contiguous rows (e.g. crops) are read in place with their row
+        stride, others are copied; the pixels are only read during the call.
+
+        ``timestamp``: seconds (required); must not decrease in filter mode (call :meth:`reset`
+        to start a new sequence). ``odometry``: optional motion since the previous frame,
+        ``previous_T_current``, a 4x4 rigid transform.
 
         The whole frame is validated first: on any error the localizer state is unchanged (the
         next successful frame continues the sequence). Raises :class:`DimensionMismatchError`,
         :class:`NonFiniteError`, :class:`ZeroDescriptorError`, :class:`TimestampError`,
-        :class:`InvalidArgumentError` (odometry not a rigid transform).
+        :class:`InvalidArgumentError` (odometry not a rigid transform); for images
+        ``TypeError`` (not uint8), :class:`InvalidImageError` (shape, size: the library accepts
+        1..8192 pixels a side), :class:`UninformativeImageError` (blank or featureless image),
+        :class:`NoDescriberError`, :class:`ModelError`.
         """
-        q = _descriptor(descriptor)
+        if timestamp is None:
+            raise TypeError("process() needs a timestamp")
+        if image is None:
+            if descriptor is None:
+                raise TypeError("process() needs a descriptor or an image")
+            if pixel_format is not None:
+                raise TypeError("pixel_format is only meaningful with an image")
+            q = _descriptor(descriptor)
+            img, pixels = None, None
+        else:
+            if descriptor is not None:
+                raise TypeError("give process() either a descriptor or an image, not both")
+            q = None
+            img, pixels = _image(image, pixel_format, "image")
         odo = None if odometry is None else _pose(odometry, "odometry")
         ts = float(timestamp)
         h = self._enter("process")
@@ -854,8 +1261,11 @@ class Localizer(_SingleThreaded):
             frame, result = self._frame, self._result
             frame.struct_size = ctypes.sizeof(_lib.topoloc_frame)
             frame.timestamp = ts
-            frame.descriptor = _f32_ptr(q)
-            frame.descriptor_len = q.size
+            if q is not None:
+                frame.descriptor = _f32_ptr(q)
+                frame.descriptor_len = q.size
+            if img is not None:
+                frame.image = img
             frame.odometry = None if odo is None else _f64_ptr(odo)
             result.struct_size = ctypes.sizeof(_lib.topoloc_result)
             result.candidates = self._candidates
@@ -866,6 +1276,7 @@ class Localizer(_SingleThreaded):
                 frame.descriptor = None
                 frame.descriptor_len = 0
                 frame.odometry = None
+                frame.image = _lib.topoloc_image()
             n = min(int(result.candidates_len), len(self._candidates))
             candidates = [
                 Candidate(int(c.place), int(c.view), float(c.probability), float(c.similarity))
@@ -883,7 +1294,7 @@ class Localizer(_SingleThreaded):
             )
         finally:
             self._leave()
-            del q, odo
+            del q, odo, pixels
 
     def reset(self) -> None:
         """Forgets all history: the next frame is treated as the first (frame_index 0, any

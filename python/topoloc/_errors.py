@@ -36,6 +36,12 @@ __all__ = [
     "ZeroDescriptorError",
     "TimestampError",
     "InvalidOptionError",
+    "InvalidImageError",
+    "UninformativeImageError",
+    "BackendUnavailableError",
+    "ModelError",
+    "NoDescriberError",
+    "CancelledError",
     "PanicError",
     "STATUS_NAMES",
     "error_class_for_status",
@@ -65,6 +71,12 @@ STATUS_NAMES: Dict[int, str] = {
     202: "TOPOLOC_ERR_ZERO_DESCRIPTOR",
     203: "TOPOLOC_ERR_TIMESTAMP",
     204: "TOPOLOC_ERR_INVALID_OPTION",
+    300: "TOPOLOC_ERR_INVALID_IMAGE",
+    301: "TOPOLOC_ERR_UNINFORMATIVE_IMAGE",
+    302: "TOPOLOC_ERR_BACKEND_UNAVAILABLE",
+    303: "TOPOLOC_ERR_MODEL",
+    304: "TOPOLOC_ERR_NO_DESCRIBER",
+    305: "TOPOLOC_ERR_CANCELLED",
     900: "TOPOLOC_ERR_PANIC",
 }
 
@@ -227,6 +239,51 @@ class InvalidOptionError(TopolocError, ValueError):
     STATUS = 204
 
 
+class InvalidImageError(TopolocError, ValueError):
+    """An image is unusable: wrong shape or pixel format for its channels, zero or too large a
+    size (the library accepts 1..8192 pixels a side), a bad stride, or an unreadable image file
+    (the message names it)."""
+
+    STATUS = 300
+
+
+class UninformativeImageError(TopolocError, ValueError):
+    """The image carries no place information (blank, constant, or no local feature found): the
+    frame was not localized and the localizer state is unchanged."""
+
+    STATUS = 301
+
+
+class BackendUnavailableError(TopolocError):
+    """A describing backend cannot be loaded: ONNX Runtime or the model file is missing or
+    cannot be opened (the message names every path tried). Create the localizer with
+    ``image_backend="none"`` to localize descriptors only."""
+
+    STATUS = 302
+
+
+class ModelError(TopolocError):
+    """The model file loaded but does not work (corrupt, missing outputs, run error), or a
+    local-feature extractor failed."""
+
+    STATUS = 303
+
+
+class NoDescriberError(TopolocError):
+    """A frame carries an image but the localizer cannot describe images: the map stores no
+    describer (it was built from descriptors) or the localizer was created with
+    ``image_backend="none"``; or a backend was required from a map that stores none."""
+
+    STATUS = 304
+
+
+class CancelledError(TopolocError):
+    """The progress callback of a map build asked to stop (returned ``False``). Not raised
+    when the callback itself raised: that exception is re-raised instead."""
+
+    STATUS = 305
+
+
 class PanicError(TopolocError):
     """A bug inside topoloc was caught at the C boundary; the object involved should be closed."""
 
@@ -256,6 +313,12 @@ _BY_STATUS: Dict[int, Type[TopolocError]] = {
         ZeroDescriptorError,
         TimestampError,
         InvalidOptionError,
+        InvalidImageError,
+        UninformativeImageError,
+        BackendUnavailableError,
+        ModelError,
+        NoDescriberError,
+        CancelledError,
         PanicError,
     )
 }

@@ -24,6 +24,7 @@ import ctypes.util
 import os
 import sys
 from ctypes import (
+    CFUNCTYPE,
     POINTER,
     Structure,
     c_bool,
@@ -35,6 +36,7 @@ from ctypes import (
     c_uint8,
     c_uint32,
     c_uint64,
+    c_void_p,
 )
 from pathlib import Path
 from typing import Callable, List, Mapping, Optional, Sequence, Tuple, Type, TypeVar
@@ -50,6 +52,25 @@ ENV_VAR = "TOPOLOC_LIBRARY"
 #: ``TOPOLOC_MODE_FILTER`` / ``TOPOLOC_MODE_SINGLE_FRAME``.
 MODE_FILTER = 0
 MODE_SINGLE_FRAME = 1
+
+#: ``TOPOLOC_PIXEL_*``: pixel formats of ``topoloc_image`` (8 bits per channel, interleaved).
+PIXEL_NONE = 0
+PIXEL_GRAY8 = 1
+PIXEL_RGB8 = 2
+PIXEL_BGR8 = 3
+PIXEL_RGBA8 = 4
+PIXEL_BGRA8 = 5
+
+#: ``TOPOLOC_BACKEND_*``: describing backends (localizer ``image_backend``, map ``backend``).
+BACKEND_AUTO = 0
+BACKEND_NONE = 1
+BACKEND_ONNX = 2
+BACKEND_VLAD_ORB = 3
+BACKEND_VLAD_SIFT = 4
+
+#: ``TOPOLOC_STAGE_*``: build stages reported to a progress callback.
+STAGE_DESCRIBING = 0
+STAGE_FITTING = 1
 
 TOPOLOC_OK = 0
 TOPOLOC_ERR_BUFFER_TOO_SMALL = 3
@@ -127,6 +148,39 @@ class topoloc_keyframe(Structure):
     ]
 
 
+class topoloc_image_map_options(Structure):
+    _fields_ = [
+        ("struct_size", c_size_t),
+        ("backend", c_uint32),
+        ("dim", c_uint32),
+        ("views_per_place", c_uint32),
+        ("threads", c_uint32),
+        ("onnx_model_path", c_char_p),
+        ("onnx_runtime_path", c_char_p),
+        ("onnx_taps", c_char_p),
+        ("grid_rows", c_uint32),
+        ("grid_cols", c_uint32),
+        ("vlad_clusters", c_uint32),
+        ("poses_tum_path", c_char_p),
+        ("place_spacing_m", c_double),
+    ]
+
+
+#: ``topoloc_progress_fn``: ``bool (*)(void *user_data, uint32_t stage, size_t done, size_t total)``.
+topoloc_progress_fn = CFUNCTYPE(c_bool, c_void_p, c_uint32, c_size_t, c_size_t)
+
+
+class topoloc_image(Structure):
+    _fields_ = [
+        ("data", POINTER(c_uint8)),
+        ("data_len", c_size_t),
+        ("width", c_uint32),
+        ("height", c_uint32),
+        ("stride", c_size_t),
+        ("format", c_uint32),
+    ]
+
+
 class topoloc_localizer_options(Structure):
     _fields_ = [
         ("struct_size", c_size_t),
@@ -140,6 +194,9 @@ class topoloc_localizer_options(Structure):
         ("top_k", c_uint32),
         ("expected_descriptor_kind", c_char_p),
         ("expected_descriptor_model", c_char_p),
+        ("image_backend", c_uint32),
+        ("onnx_model_path", c_char_p),
+        ("onnx_runtime_path", c_char_p),
     ]
 
 
@@ -150,6 +207,7 @@ class topoloc_frame(Structure):
         ("descriptor", POINTER(c_float)),
         ("descriptor_len", c_size_t),
         ("odometry", POINTER(c_double)),
+        ("image", topoloc_image),
     ]
 
 
@@ -205,6 +263,8 @@ STRUCTS = {
         topoloc_view_attributes,
         topoloc_keyframe_options,
         topoloc_keyframe,
+        topoloc_image_map_options,
+        topoloc_image,
         topoloc_localizer_options,
         topoloc_frame,
         topoloc_candidate,
@@ -239,6 +299,29 @@ SIGNATURES = {
     "topoloc_map_from_keyframes": (
         status_t,
         [c_char_p, c_char_p, c_uint32, _p(topoloc_keyframe), c_size_t, _p(topoloc_keyframe_options), _p(MapPtr)],
+    ),
+    "topoloc_image_map_options_init": (status_t, [_p(topoloc_image_map_options), c_size_t]),
+    "topoloc_map_build_from_image_files": (
+        status_t,
+        [
+            _p(c_char_p),
+            c_size_t,
+            _p(topoloc_image_map_options),
+            topoloc_progress_fn,
+            c_void_p,
+            _p(MapPtr),
+        ],
+    ),
+    "topoloc_map_build_from_images": (
+        status_t,
+        [
+            _p(topoloc_image),
+            c_size_t,
+            _p(topoloc_image_map_options),
+            topoloc_progress_fn,
+            c_void_p,
+            _p(MapPtr),
+        ],
     ),
     "topoloc_localizer_options_init": (status_t, [_p(topoloc_localizer_options), c_size_t]),
     "topoloc_localizer_new": (status_t, [MapPtr, _p(topoloc_localizer_options), _p(LocalizerPtr)]),

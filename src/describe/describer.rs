@@ -121,8 +121,19 @@ impl BackendSpec {
                 input_size[1]
             ),
             BackendSpec::Vlad(o) => format!(
-                "k={} max_features={} input={}x{} signed-sqrt intra-l2",
-                o.clusters, o.max_features, o.input_size.0, o.input_size.1
+                "k={} {} input={}x{} signed-sqrt intra-l2",
+                o.clusters,
+                if o.dense {
+                    format!(
+                        "dense step={} size={}",
+                        super::vlad::DENSE_STEP,
+                        super::vlad::DENSE_SIZE
+                    )
+                } else {
+                    format!("max_features={}", o.max_features)
+                },
+                o.input_size.0,
+                o.input_size.1
             ),
         }
     }
@@ -336,9 +347,11 @@ pub struct FitOptions {
     /// The VLAD codebook is trained on at most this many local features, evenly spaced.
     /// Default 100,000.
     pub codebook_samples: usize,
-    /// Scale PCA components to unit variance; `None` takes the backend's default (VLAD: yes,
-    /// ONNX: no; measured on Gardens Point, BENCHMARKS.md).
-    pub whiten: Option<bool>,
+    /// Scale PCA components to unit variance. Default `false` for both backends: fitted on the
+    /// map's own n images with D = n - 1 (small maps), whitening makes the map's views mutually
+    /// equidistant and throws their structure away (Gardens Point VLAD-ORB single-frame R@1
+    /// 0.580 whitened vs 0.645 not; BENCHMARKS.md).
+    pub whiten: bool,
 }
 
 impl Default for FitOptions {
@@ -347,7 +360,7 @@ impl Default for FitOptions {
             dim: 512,
             pca_samples: 1000,
             codebook_samples: 100_000,
-            whiten: None,
+            whiten: false,
         }
     }
 }
@@ -363,6 +376,12 @@ pub fn fit(
         return Err(DescribeError::InvalidArgument(format!(
             "a describer is fitted on at least 2 images, got {}",
             raws.len()
+        )));
+    }
+    if options.dim == 0 || options.pca_samples < 2 {
+        return Err(DescribeError::InvalidArgument(format!(
+            "descriptor dimension {} must be >= 1 and PCA samples {} >= 2",
+            options.dim, options.pca_samples
         )));
     }
     let (codebook, vectors) = match spec {
@@ -397,8 +416,7 @@ pub fn fit(
     }
     let step = vectors.len().div_ceil(options.pca_samples.max(2));
     let rows: Vec<f32> = vectors.iter().step_by(step).flatten().copied().collect();
-    let whiten = options.whiten.unwrap_or(spec.kind() == BackendKind::Vlad);
-    let pca = Pca::fit(&rows, raw_dim, options.dim, whiten)?;
+    let pca = Pca::fit(&rows, raw_dim, options.dim, options.whiten)?;
     let descriptors = vectors
         .iter()
         .map(|v| pca.project(v))

@@ -147,6 +147,12 @@ pub fn read_rgb(path: &std::path::Path) -> Result<(u32, u32, Vec<u8>), DescribeE
     let name = path.to_str().ok_or_else(|| {
         DescribeError::InvalidImage(format!("path {} is not UTF-8", path.display()))
     })?;
+    if !path.is_file() {
+        return Err(DescribeError::InvalidImage(format!(
+            "cannot read image '{}': no such file",
+            path.display()
+        )));
+    }
     let bgr = opencv::imgcodecs::imread(name, opencv::imgcodecs::IMREAD_COLOR)?;
     if bgr.empty() {
         return Err(DescribeError::InvalidImage(format!(

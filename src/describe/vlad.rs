@@ -57,12 +57,29 @@ pub struct VladOptions {
     /// Number of codebook centres (k-means clusters); the raw VLAD vector has
     /// `clusters x feature dim` values. Default 64, accepted 2..=1024.
     pub clusters: usize,
-    /// Most keypoints kept per image (the strongest). Default 1000, accepted 10..=20000.
+    /// Most keypoints kept per image (the strongest) when they are detected (not with `dense`).
+    /// Default 1000, accepted 10..=20000.
     pub max_features: usize,
     /// Images are resized to this (width, height) before detection, so that feature scales do
     /// not depend on the camera resolution. Default (320, 240), accepted 32..=2048 per side.
     pub input_size: (u32, u32),
+    /// Describe a regular grid of keypoints (every [`DENSE_STEP`] pixels, size
+    /// [`DENSE_SIZE`]) instead of detected ones (dense VLAD): every image gets the same number
+    /// of features wherever they lie, which helps on blurred, low-resolution or snowy images
+    /// where detectors find few stable corners. Default true: on Gardens Point single-frame R@1
+    /// is 0.775 dense vs 0.645 detected, on Nordland 0.016 vs 0.010, and it is as fast
+    /// (BENCHMARKS.md).
+    #[serde(default)]
+    pub dense: bool,
 }
+
+/// Grid step of dense keypoints, in pixels of the resized image.
+pub const DENSE_STEP: i32 = 8;
+/// Diameter of dense keypoints, in pixels of the resized image.
+pub const DENSE_SIZE: f32 = 16.0;
+/// Distance kept from the image border by dense keypoints: ORB drops keypoints closer than its
+/// edge threshold (31 pixels).
+const DENSE_BORDER: i32 = 32;
 
 impl Default for VladOptions {
     fn default() -> Self {
@@ -71,6 +88,7 @@ impl Default for VladOptions {
             clusters: 64,
             max_features: 1000,
             input_size: (320, 240),
+            dense: true,
         }
     }
 }
@@ -129,6 +147,7 @@ enum Detector {
 /// A reusable extractor (holds the OpenCV detector; not Sync, one per thread).
 pub struct LocalExtractor {
     detector: Detector,
+    dense: bool,
     feature: LocalFeature,
     max_features: usize,
     size: Size,
@@ -160,6 +179,7 @@ impl LocalExtractor {
         };
         Ok(Self {
             detector,
+            dense: options.dense,
             feature: options.feature,
             max_features: options.max_features,
             size: Size::new(options.input_size.0 as i32, options.input_size.1 as i32),
@@ -175,15 +195,20 @@ impl LocalExtractor {
         let mut grey = Mat::default();
         opencv::imgproc::cvt_color_def(&rgb, &mut grey, opencv::imgproc::COLOR_RGB2GRAY)?;
 
-        let mut keypoints = Vector::<KeyPoint>::new();
+        let mut keypoints = if self.dense {
+            dense_grid(self.size)?
+        } else {
+            Vector::<KeyPoint>::new()
+        };
         let mut descriptors = Mat::default();
         let mask = opencv::core::no_array();
+        let given = self.dense;
         match &mut self.detector {
             Detector::Orb(d) => {
-                d.detect_and_compute(&grey, &mask, &mut keypoints, &mut descriptors, false)?
+                d.detect_and_compute(&grey, &mask, &mut keypoints, &mut descriptors, given)?
             }
             Detector::Sift(d) => {
-                d.detect_and_compute(&grey, &mask, &mut keypoints, &mut descriptors, false)?
+                d.detect_and_compute(&grey, &mask, &mut keypoints, &mut descriptors, given)?
             }
         }
 
@@ -196,7 +221,13 @@ impl LocalExtractor {
         }
         // Detectors may keep a few more than asked when responses tie; their output is sorted
         // strongest first only for some of them, so simply keep the first max_features rows.
-        let rows = (descriptors.rows().max(0) as usize).min(self.max_features);
+        // A dense grid is kept whole (it is fixed by the input size).
+        let rows = descriptors.rows().max(0) as usize;
+        let rows = if self.dense {
+            rows
+        } else {
+            rows.min(self.max_features)
+        };
         let values = match self.feature {
             LocalFeature::Orb => {
                 let bytes = descriptor_rows::<u8>(&descriptors, CV_8U, ORB_BYTES, "ORB")?;
@@ -214,6 +245,19 @@ impl LocalExtractor {
     pub fn dim(&self) -> usize {
         self.feature.dim()
     }
+}
+
+/// Keypoints on a regular grid over an image of `size`, [`DENSE_BORDER`] pixels from its edges.
+fn dense_grid(size: Size) -> Result<Vector<KeyPoint>, DescribeError> {
+    let mut grid = Vector::<KeyPoint>::new();
+    for y in (DENSE_BORDER..size.height - DENSE_BORDER).step_by(DENSE_STEP as usize) {
+        for x in (DENSE_BORDER..size.width - DENSE_BORDER).step_by(DENSE_STEP as usize) {
+            grid.push(KeyPoint::new_coords(
+                x as f32, y as f32, DENSE_SIZE, 0.0, 0.0, 0, -1,
+            )?);
+        }
+    }
+    Ok(grid)
 }
 
 /// The descriptor matrix as a flat slice, after checking the element type and row length that
@@ -556,6 +600,7 @@ mod tests {
         let data = textured(320, 240, 2);
         let options = VladOptions {
             feature: LocalFeature::Sift,
+            dense: false,
             ..Default::default()
         };
         let f = extract(&options, 320, 240, &data);
@@ -569,17 +614,19 @@ mod tests {
         assert!(extract(&few, 320, 240, &data).count() <= 20);
         let orb_few = VladOptions {
             max_features: 20,
+            dense: false,
             ..Default::default()
         };
         assert!(extract(&orb_few, 320, 240, &data).count() <= 20);
     }
 
     #[test]
-    fn constant_images_give_no_features_and_a_zero_vlad() {
+    fn constant_images_give_no_detected_features_and_a_zero_vlad() {
         let blank = vec![77u8; 200 * 150];
         for feature in [LocalFeature::Orb, LocalFeature::Sift] {
             let options = VladOptions {
                 feature,
+                dense: false,
                 ..Default::default()
             };
             let f = extract(&options, 200, 150, &blank);
@@ -590,6 +637,30 @@ mod tests {
             let v = codebook.vlad(&f);
             assert_eq!(v.len(), 4 * f.dim);
             assert!(v.iter().all(|&x| x == 0.0));
+        }
+    }
+
+    #[test]
+    fn dense_keypoints_cover_a_fixed_grid_whatever_the_content() {
+        let grid = |size: i32, step: i32| ((size - 2 * DENSE_BORDER) + step - 1) / step;
+        let expected = (grid(320, DENSE_STEP) * grid(240, DENSE_STEP)) as usize;
+        let textured = textured(320, 240, 5);
+        let blank = vec![77u8; 320 * 240];
+        for feature in [LocalFeature::Orb, LocalFeature::Sift] {
+            let options = VladOptions {
+                feature,
+                dense: true,
+                max_features: 10,
+                ..Default::default()
+            };
+            for data in [&textured, &blank] {
+                let f = extract(&options, 320, 240, data);
+                assert_eq!(
+                    f.count(),
+                    expected,
+                    "{feature:?}: max_features does not apply"
+                );
+            }
         }
     }
 

@@ -110,7 +110,12 @@ pub(crate) fn image_view<'a>(
         format,
         data,
     };
-    view.validate()?;
+    view.validate().map_err(|e| {
+        FfiError::new(
+            topoloc_status::TOPOLOC_ERR_INVALID_IMAGE,
+            format!("{name}: {e}"),
+        )
+    })?;
     Ok(Some(view))
 }
 
@@ -191,6 +196,16 @@ pub extern "C" fn topoloc_image_map_options_init(
     init_versioned(options, size, "options")
 }
 
+/// The descriptor family a C backend code requires, if it names one precisely.
+pub(crate) fn backend_family(code: u32) -> Option<&'static str> {
+    match code {
+        TOPOLOC_BACKEND_ONNX => Some("onnx-mlf"),
+        TOPOLOC_BACKEND_VLAD_ORB => Some("vlad-orb"),
+        TOPOLOC_BACKEND_VLAD_SIFT => Some("vlad-sift"),
+        _ => None,
+    }
+}
+
 /// The backend kind a C backend code names (`_AUTO` maps to `default`).
 pub(crate) fn backend_kind(
     code: u32,
@@ -201,9 +216,10 @@ pub(crate) fn backend_kind(
         TOPOLOC_BACKEND_NONE => Ok(None),
         TOPOLOC_BACKEND_ONNX => Ok(Some(BackendKind::Onnx)),
         TOPOLOC_BACKEND_VLAD_ORB | TOPOLOC_BACKEND_VLAD_SIFT => Ok(Some(BackendKind::Vlad)),
-        other => Err(FfiError::invalid(format!(
-            "backend {other} is not a TOPOLOC_BACKEND_* value"
-        ))),
+        other => Err(FfiError::new(
+            topoloc_status::TOPOLOC_ERR_INVALID_OPTION,
+            format!("backend {other} is not a TOPOLOC_BACKEND_* value"),
+        )),
     }
 }
 

@@ -6,7 +6,8 @@ use super::boundary::{
 };
 use super::convert::{expected_descriptor, optional_pose};
 use super::images::{
-    backend_kind, image_view, topoloc_image, TOPOLOC_BACKEND_AUTO, TOPOLOC_BACKEND_NONE,
+    backend_family, backend_kind, image_view, topoloc_image, TOPOLOC_BACKEND_AUTO,
+    TOPOLOC_BACKEND_NONE,
 };
 use super::map::topoloc_map;
 use super::topoloc_status;
@@ -155,6 +156,17 @@ pub extern "C" fn topoloc_localizer_new(
         };
         let has_describer = map.describer().is_some();
         let wanted = backend_kind(o.image_backend, None)?;
+        if let (Some(family), Some(model)) = (backend_family(o.image_backend), map.describer()) {
+            if model.spec.family() != family {
+                return Err(FfiError::new(
+                    topoloc_status::TOPOLOC_ERR_DESCRIPTOR_MISMATCH,
+                    format!(
+                        "the map was built with the {} backend, options.image_backend asks for {family}",
+                        model.spec.family()
+                    ),
+                ));
+            }
+        }
         let localizer = match (o.image_backend, has_describer) {
             (TOPOLOC_BACKEND_NONE, _) | (TOPOLOC_BACKEND_AUTO, false) => {
                 Localizer::new(map, options)?

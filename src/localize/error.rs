@@ -25,7 +25,7 @@ pub enum LocalizeError {
     Describe(#[from] DescribeError),
     /// The frame has an image but no descriptor, and the localizer has no describer (create it
     /// with `Localizer::with_describer` on a map built from images).
-    #[error("the frame carries no descriptor and this localizer cannot describe images: {0}")]
+    #[error("cannot describe images: {0}")]
     NoDescriber(String),
     /// Odometry is not finite.
     #[error("bad odometry: {0}")]

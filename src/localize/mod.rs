@@ -28,8 +28,8 @@ pub enum Mode {
 }
 
 /// Localizer parameters. `temperature` and `off_map_margin` were chosen with `topoloc sweep`
-/// on generated worlds held out from the demo (table in BENCHMARKS.md); descriptors with other
-/// similarity spreads may want another `temperature`.
+/// on generated worlds held out from the demo (table in BENCHMARKS.md); the same temperature
+/// serves MobileNetV2 multi-level and VLAD descriptors on real images (BENCHMARKS.md).
 #[derive(Clone, Debug, PartialEq)]
 pub struct LocalizerOptions {
     /// Filter or single-frame.
@@ -37,6 +37,7 @@ pub struct LocalizerOptions {
     /// Softmax temperature turning similarities into likelihoods for the motion belief; smaller
     /// trusts each frame's appearance more, larger lets evidence accumulate along the route.
     /// Default 0.2 (best OHA, then R@100P, on held-out generated worlds; BENCHMARKS.md).
+    /// Scaling it with the map's similarity spread was measured and is worse on real images.
     pub temperature: f32,
     /// Probability that the off-map state persists from one frame to the next. Default 0.7.
     pub stay_probability: f32,
@@ -345,7 +346,7 @@ impl Localizer {
             (true, Some(image)) => {
                 let describer = self.describer.as_mut().ok_or_else(|| {
                     LocalizeError::NoDescriber(
-                        "create the localizer with Localizer::with_describer".into(),
+                        "the frame has an image but no descriptor, and this localizer has no describer (Rust: Localizer::with_describer; C: image_backend TOPOLOC_BACKEND_AUTO on a map built from images)".into(),
                     )
                 })?;
                 describer.describe(image, &mut self.described)?;

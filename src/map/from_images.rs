@@ -20,7 +20,7 @@ use std::time::{Duration, Instant};
 /// How to build a map from images.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ImageMapOptions {
-    /// Descriptor backend and its options.
+    /// Descriptor backend and its options. Default: ONNX (as the CLI and the C API).
     pub backend: BackendConfig,
     /// How the describer model is fitted (D, samples).
     pub fit: FitOptions,
@@ -36,7 +36,7 @@ pub struct ImageMapOptions {
 impl Default for ImageMapOptions {
     fn default() -> Self {
         Self {
-            backend: BackendConfig::Vlad(Default::default()),
+            backend: BackendConfig::Onnx(Default::default()),
             fit: FitOptions::default(),
             views_per_place: 1,
             keyframes: KeyframeOptions::default(),

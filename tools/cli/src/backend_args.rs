@@ -35,6 +35,15 @@ pub enum Feature {
     Sift,
 }
 
+/// Where VLAD describes local features.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum Keypoints {
+    /// A regular grid (dense VLAD).
+    Dense,
+    /// The strongest keypoints of the feature's detector.
+    Detected,
+}
+
 /// Where the ONNX backend's files are (both commands).
 #[derive(Args, Clone, Debug)]
 pub struct RuntimeArgs {
@@ -76,6 +85,9 @@ pub struct BackendArgs {
     /// VLAD: codebook size.
     #[arg(long, default_value_t = 64)]
     pub clusters: usize,
+    /// VLAD: keypoints on a dense grid (default) or detected by the feature's detector.
+    #[arg(long, value_enum, default_value_t = Keypoints::Dense)]
+    pub keypoints: Keypoints,
     #[command(flatten)]
     pub runtime: RuntimeArgs,
 }
@@ -103,6 +115,7 @@ impl BackendArgs {
                     Feature::Sift => LocalFeature::Sift,
                 },
                 clusters: self.clusters,
+                dense: self.keypoints == Keypoints::Dense,
                 ..VladOptions::default()
             }),
         })

@@ -36,9 +36,9 @@ pub struct BuildMapArgs {
     /// Most images the PCA is fitted on (evenly spaced).
     #[arg(long, default_value_t = 1000)]
     pub pca_samples: usize,
-    /// PCA whitening: auto (VLAD yes, ONNX no), yes or no.
-    #[arg(long, default_value = "auto")]
-    pub whiten: String,
+    /// Whiten the PCA (unit variance per component; see FitOptions::whiten).
+    #[arg(long)]
+    pub whiten: bool,
     /// Describing threads (0: one per core).
     #[arg(long, default_value_t = 0)]
     pub threads: usize,
@@ -74,18 +74,12 @@ pub fn run(args: &BuildMapArgs) -> Result<()> {
         }
         None => None,
     };
-    let whiten = match args.whiten.as_str() {
-        "auto" => None,
-        "yes" => Some(true),
-        "no" => Some(false),
-        other => bail!("--whiten is '{other}', expected auto, yes or no"),
-    };
     let options = ImageMapOptions {
         backend: args.backend.config()?,
         fit: FitOptions {
             dim: args.dim,
             pca_samples: args.pca_samples,
-            whiten,
+            whiten: args.whiten,
             ..FitOptions::default()
         },
         views_per_place: args.views_per_place,

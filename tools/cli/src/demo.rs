@@ -86,14 +86,9 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         params.query_noise
     ));
 
-    let queries: Vec<Vec<f32>> = sequence
-        .frames
-        .iter()
-        .map(|f| f.descriptor.clone())
-        .collect();
-    let spread = similarity_spread(&map, &queries);
+    let spread = map.similarity_spread();
     say(format!(
-        "similarity spread (median std of a frame's similarities to all views): {spread:.3}"
+        "similarity spread of the map (median std of a view's similarities to other places): {spread:.3}"
     ));
     let hops = HopDistances::from_map(&map);
     let configs = [
@@ -223,23 +218,4 @@ pub(crate) fn evaluate(
         ms_median,
         ms_p90,
     })
-}
-
-/// Median over queries of the standard deviation of a query's similarities to all map views:
-/// the scale that the localizer temperature is relative to.
-fn similarity_spread(map: &topoloc::Map, queries: &[Vec<f32>]) -> f64 {
-    let d = map.dim();
-    let stds: Vec<f64> = queries
-        .iter()
-        .map(|q| {
-            let sims: Vec<f64> = map
-                .descriptors()
-                .chunks_exact(d)
-                .map(|v| v.iter().zip(q).map(|(a, b)| f64::from(a * b)).sum())
-                .collect();
-            let mean = sims.iter().sum::<f64>() / sims.len() as f64;
-            (sims.iter().map(|s| (s - mean).powi(2)).sum::<f64>() / sims.len() as f64).sqrt()
-        })
-        .collect();
-    crate::process::median_and_p90(&stds).0
 }

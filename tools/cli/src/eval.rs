@@ -145,6 +145,7 @@ pub fn run(args: &EvalArgs) -> Result<()> {
     };
     let mut similarity = vec![f32::NAN; files.len() * map_images];
     let mut runs = Vec::new();
+    let mut report_temperature = 0.0;
     for &(name, mode) in modes {
         let mut options = LocalizerOptions {
             mode,
@@ -155,6 +156,7 @@ pub fn run(args: &EvalArgs) -> Result<()> {
             options.temperature = t;
         }
         let mut localizer = Localizer::new(map.clone(), options)?;
+        report_temperature = localizer.options().temperature;
         let run = localize_all(
             name,
             &mut localizer,
@@ -173,6 +175,8 @@ pub fn run(args: &EvalArgs) -> Result<()> {
     report.insert("map_images".into(), json!(map_images));
     report.insert("tolerance".into(), json!(args.tolerance));
     report.insert("uninformative_frames".into(), json!(uninformative.len()));
+    report.insert("similarity_spread".into(), json!(map.similarity_spread()));
+    report.insert("temperature".into(), json!(report_temperature));
     let describe_median = median_and_p90(&describe_ms).0;
     report.insert("describe_ms_median".into(), json!(describe_median));
     let mut curves = Vec::new();
@@ -431,6 +435,11 @@ fn print_table(report: &JsonMap<String, Value>, runs: &[ModeRun], describe_media
         report["descriptor"].as_str().unwrap_or_default(),
         report["frames"],
         report["tolerance"]
+    );
+    println!(
+        "similarity spread {:.3}, filter temperature {:.3}",
+        report["similarity_spread"].as_f64().unwrap_or(0.0),
+        report["temperature"].as_f64().unwrap_or(0.0)
     );
     if report["uninformative_frames"].as_u64() != Some(0) {
         println!(

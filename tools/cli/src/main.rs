@@ -63,10 +63,10 @@ enum Command {
         #[arg(long, default_value_t = 1000)]
         frames: usize,
         /// Temperatures to try.
-        #[arg(long, value_delimiter = ',', default_value = "0.01,0.02,0.03,0.05")]
+        #[arg(long, value_delimiter = ',', default_value = "0.1,0.2,0.3")]
         temperatures: Vec<f32>,
         /// Off-map margins to try.
-        #[arg(long, value_delimiter = ',', default_value = "0,0.5,1,2")]
+        #[arg(long, value_delimiter = ',', default_value = "-1,0,1")]
         margins: Vec<f32>,
     },
     /// Build a map from an image folder; the describer (backend, PCA, codebook) is stored in it.

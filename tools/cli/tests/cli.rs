@@ -86,7 +86,10 @@ fn build_map_and_eval_follow_the_contract() {
     ]));
     assert_eq!(built["places"], places);
     assert_eq!(built["views"], places);
-    assert!(built["descriptor"].as_str().unwrap().starts_with("vlad-orb"));
+    assert!(built["descriptor"]
+        .as_str()
+        .unwrap()
+        .starts_with("vlad-orb"));
 
     let (predictions, plot) = (dir.path().join("p.csv"), dir.path().join("p.png"));
     let report = json(&topoloc(&[
@@ -114,7 +117,10 @@ fn build_map_and_eval_follow_the_contract() {
     }
     assert_eq!(report["frames"], places);
     assert_eq!(report["mode"], "filter");
-    assert!(report["single_frame"]["r_at_1"].as_f64().unwrap() >= 0.9, "{report}");
+    assert!(
+        report["single_frame"]["r_at_1"].as_f64().unwrap() >= 0.9,
+        "{report}"
+    );
     assert!(report["r_at_5"].as_f64().unwrap() >= report["r_at_1"].as_f64().unwrap());
     assert!(report.get("mna").is_none(), "no ground-truth nodes given");
 
@@ -131,7 +137,10 @@ fn build_map_and_eval_follow_the_contract() {
         for candidate in &fields[3..] {
             let (index, score) = candidate.split_once(':').expect("index:score");
             assert!(index.parse::<usize>().unwrap() < places as usize);
-            assert!(score.parse::<f64>().unwrap() <= confidence + 1e-6, "ranked: {row}");
+            assert!(
+                score.parse::<f64>().unwrap() <= confidence + 1e-6,
+                "ranked: {row}"
+            );
         }
     }
     let png = std::fs::read(&plot).unwrap();

@@ -1,0 +1,605 @@
+"""Images in: maps built from numpy images and image files store their describer (also through
+save/load), localizers describe image frames with it, progress callbacks report, cancel and
+re-raise, bad images give typed errors before or inside the library and leave the localizer
+unchanged, strided arrays are read in place. The VLAD backend needs nothing and always runs; the
+ONNX cases run when scripts/setup-models.sh has filled ~/.cache/topoloc (skipped otherwise)."""
+
+from __future__ import annotations
+
+import dataclasses
+import threading
+import traceback
+from pathlib import Path
+from typing import List
+
+import numpy as np
+import pytest
+
+import topoloc
+from topoloc import _core
+
+W, H = 320, 240
+PLACES = 12
+ONNX_MODEL = Path.home() / ".cache" / "topoloc" / "models" / "mobilenetv2-mlf.onnx"
+
+needs_onnx = pytest.mark.skipif(not ONNX_MODEL.is_file(), reason=f"no ONNX model at {ONNX_MODEL}")
+
+
+def place_image(seed: int, w: int = W, h: int = H) -> np.ndarray:
+    """A deterministic textured grey "place": a horizontal ramp under 150 rectangles of random
+    shades and sizes."""
+    rng = np.random.default_rng(seed)
+    img = np.tile((np.arange(w) * 255 // w // 2 + 40).astype(np.uint8), (h, 1))
+    for _ in range(150):
+        x0, y0 = rng.integers(0, w), rng.integers(0, h)
+        rw, rh = rng.integers(6, 56, size=2)
+        img[y0 : y0 + rh, x0 : x0 + rw] = rng.integers(0, 256)
+    return img
+
+
+def revisit(img: np.ndarray, seed: int) -> np.ndarray:
+    """The same place seen again: shifted 3 pixels left, 10% brighter plus 10, with noise."""
+    rng = np.random.default_rng(seed)
+    shifted = np.concatenate([img[:, 3:], np.repeat(img[:, -1:], 3, axis=1)], axis=1).astype(np.int32)
+    noisy = shifted * 11 // 10 + 10 + rng.integers(-8, 8, size=img.shape)
+    return np.clip(noisy, 0, 255).astype(np.uint8)
+
+
+def colour(img: np.ndarray, seed: int) -> np.ndarray:
+    """An RGB image whose channels differ: the grey image, a shifted copy and its negative."""
+    return np.stack([img, np.roll(img, seed + 5, axis=1), 255 - img], axis=-1)
+
+
+def write_pgm(path: Path, img: np.ndarray) -> None:
+    path.write_bytes(b"P5\n%d %d\n255\n" % (img.shape[1], img.shape[0]) + img.tobytes())
+
+
+def write_ppm(path: Path, rgb: np.ndarray) -> None:
+    path.write_bytes(b"P6\n%d %d\n255\n" % (rgb.shape[1], rgb.shape[0]) + np.ascontiguousarray(rgb).tobytes())
+
+
+@pytest.fixture(scope="module")
+def images() -> List[np.ndarray]:
+    return [place_image(1000 + i) for i in range(PLACES)]
+
+
+@pytest.fixture(scope="module")
+def vlad_map(images):
+    m = topoloc.Map.build_from_images(images, backend="vlad-orb", threads=2)
+    yield m
+    m.close()
+
+
+def answer(r: topoloc.Result) -> topoloc.Result:
+    """A result without its frame index, to compare single-frame answers to different frames."""
+    return dataclasses.replace(r, frame_index=0)
+
+
+# ---------------------------------------------------------------------------------------------
+# Maps from images, localizing image frames
+# ---------------------------------------------------------------------------------------------
+
+
+def test_vlad_map_from_numpy_images(vlad_map):
+    m = vlad_map
+    assert (m.place_count, m.view_count, m.edge_count) == (PLACES, PLACES, PLACES - 1)
+    assert m.descriptor_kind == "vlad-orb"
+    assert m.dim == PLACES - 1  # dim 512 capped at images - 1
+    assert m.view_info(3).keyframe_id == 3 and m.view_info(3).place == 3  # image index kept
+    assert m.view_image(3) == ""  # pixels in memory: no path
+    assert list(m.neighbours(5)) == [4, 6]  # a sequence: consecutive places chained
+
+
+def test_revisits_are_localized_single_frame(vlad_map, images):
+    with topoloc.Localizer(vlad_map, mode="single_frame") as loc:
+        assert loc.options["image_backend"] == "auto"
+        found = []
+        for p, img in enumerate(images):
+            r = loc.process(image=revisit(img, 100 + p), timestamp=float(p))
+            found.append(r.place)
+            assert r.candidates[0].place == r.place and 0 < r.confidence <= 1
+        correct = sum(f == p for p, f in enumerate(found))
+        assert correct >= PLACES - 1, found
+
+
+def test_revisits_are_followed_in_filter_mode(vlad_map, images):
+    with topoloc.Localizer(vlad_map) as loc:
+        results = [loc.process(image=revisit(img, 200 + p), timestamp=0.1 * p) for p, img in enumerate(images)]
+    assert [r.place for r in results] == list(range(PLACES))
+    assert [r.frame_index for r in results] == list(range(PLACES))
+
+
+def test_image_frames_and_descriptor_frames_mix(vlad_map, images):
+    with topoloc.Localizer(vlad_map, mode="single_frame") as loc:
+        assert loc.process(vlad_map.view_descriptor(4), 0.0).place == 4
+        assert loc.process(image=images[7], timestamp=1.0).place == 7
+        assert loc.process(vlad_map.view_descriptor(2), timestamp=2.0).place == 2
+
+
+def test_colour_formats(vlad_map, images):
+    grey = revisit(images[5], 9)
+    with topoloc.Localizer(vlad_map, mode="single_frame") as loc:
+        expected = loc.process(image=grey, timestamp=0.0)
+        assert expected.place == 5
+        # Equal channels: every colour layout describes like the grey image.
+        rgb = np.repeat(grey[:, :, None], 3, axis=2)
+        rgba = np.concatenate([rgb, np.full_like(grey[:, :, None], 255)], axis=2)
+        for img, fmt in [(grey[:, :, None], None), (rgb, None), (rgb, "rgb"), (rgb, "bgr"),
+                         (rgba, None), (rgba, "rgba"), (rgba, "bgra")]:
+            r = loc.process(image=img, pixel_format=fmt, timestamp=0.0)
+            assert r.place == 5 and r.similarity == pytest.approx(expected.similarity, abs=1e-3), fmt
+        # Distinct channels: the same pixels in RGB and in BGR order give the same answer.
+        c = colour(images[3], 3)
+        a = loc.process(image=c, timestamp=0.0)
+        assert answer(loc.process(image=c[:, :, ::-1], pixel_format="bgr", timestamp=0.0)) == answer(a)
+        bgra = np.concatenate([c[:, :, ::-1], np.zeros_like(c[:, :, :1])], axis=2)
+        assert answer(loc.process(image=bgra, pixel_format="BGRA", timestamp=0.0)) == answer(a)
+
+
+def test_views_per_place_groups_consecutive_images(images):
+    m = topoloc.Map.build_from_images(images, backend="vlad-orb", views_per_place=2, dim=8, threads=2)
+    with m:
+        assert (m.place_count, m.view_count, m.dim) == (PLACES // 2, PLACES, 8)
+        assert list(m.place_views(2)) == [4, 5]
+
+
+def test_vlad_sift_backend(images):
+    with topoloc.Map.build_from_images(images[:6], backend="vlad_sift", threads=2) as m:
+        assert m.descriptor_kind == "vlad-sift" and m.dim == 5
+        with topoloc.Localizer(m, mode="single_frame", image_backend="vlad-sift") as loc:
+            assert loc.process(image=revisit(images[2], 1), timestamp=0.0).place == 2
+
+
+# ---------------------------------------------------------------------------------------------
+# Progress, cancellation, exceptions in the callback
+# ---------------------------------------------------------------------------------------------
+
+
+def test_progress_is_reported_on_the_calling_thread(images):
+    seen, threads = [], set()
+
+    def progress(stage, done, total):
+        seen.append((stage, done, total))
+        threads.add(threading.get_ident())
+        # returns None: goes on
+
+    with topoloc.Map.build_from_images(images[:8], backend="vlad-orb", progress=progress) as m:
+        assert m.place_count == 8
+    assert seen[0][0] == "describing"
+    assert ("describing", 8, 8) in seen
+    assert seen[-1] == ("fitting", 1, 1)
+    assert {s for s, _, _ in seen} == {"describing", "fitting"}
+    assert all(0 <= d <= t for _, d, t in seen)
+    assert threads == {threading.get_ident()}
+
+
+@pytest.mark.parametrize("stop_at", ["describing", "fitting"])
+def test_progress_returning_false_cancels(images, stop_at):
+    calls = []
+
+    def progress(stage, done, total):
+        calls.append(stage)
+        return stage != stop_at
+
+    with pytest.raises(topoloc.CancelledError) as e:
+        topoloc.Map.build_from_images(images[:6], backend="vlad-orb", progress=progress)
+    assert e.value.status == 305 and "cancel" in e.value.message
+    assert calls[-1] == stop_at and calls.count(stop_at) == 1  # not called again after False
+
+
+class Boom(Exception):
+    pass
+
+
+@pytest.mark.parametrize("exc_type", [Boom, KeyboardInterrupt])
+def test_exception_in_progress_cancels_and_is_reraised(images, exc_type, capfd):
+    calls = []
+    raised = exc_type("stop here")
+
+    def progress(stage, done, total):
+        calls.append(stage)
+        raise raised
+
+    with pytest.raises(exc_type) as e:
+        topoloc.Map.build_from_images(images[:6], backend="vlad-orb", progress=progress)
+    assert e.value is raised
+    assert len(calls) == 1  # the build stopped at the first report
+    assert "in progress" in "".join(traceback.format_tb(e.value.__traceback__))  # the callback's frame
+    assert "Exception ignored" not in capfd.readouterr().err  # nothing swallowed by ctypes
+
+
+def test_exception_in_progress_of_a_file_build(tmp_path, images):
+    for i, img in enumerate(images[:3]):
+        write_pgm(tmp_path / f"{i}.pgm", img)
+
+    def progress(stage, done, total):
+        raise ZeroDivisionError("from the callback")
+
+    with pytest.raises(ZeroDivisionError, match="from the callback"):
+        topoloc.Map.build_from_image_files(tmp_path, backend="vlad-orb", progress=progress)
+    # The next build is unaffected.
+    with topoloc.Map.build_from_image_files(tmp_path, backend="vlad-orb", progress=lambda *a: True) as m:
+        assert m.place_count == 3
+
+
+def test_progress_must_be_callable(images):
+    with pytest.raises(TypeError, match="progress"):
+        topoloc.Map.build_from_images(images[:3], backend="vlad-orb", progress=42)
+
+
+# ---------------------------------------------------------------------------------------------
+# Save / load keep the describer
+# ---------------------------------------------------------------------------------------------
+
+
+def test_save_and_load_keep_the_describer(vlad_map, images, tmp_path):
+    path = tmp_path / "images.topomap"
+    vlad_map.save(path)
+    queries = [revisit(img, 300 + p) for p, img in enumerate(images)]
+    with topoloc.Localizer(vlad_map, mode="single_frame") as loc:
+        before = [loc.process(image=q, timestamp=0.0) for q in queries]
+    for loaded in (topoloc.Map.load(path, expected_kind="vlad-orb"), topoloc.Map.from_bytes(path.read_bytes())):
+        with loaded:
+            assert loaded.descriptor_model == vlad_map.descriptor_model
+            np.testing.assert_array_equal(loaded.view_descriptors(), vlad_map.view_descriptors())
+            with topoloc.Localizer(loaded, mode="single_frame", image_backend="vlad-orb") as loc:
+                after = [loc.process(image=q, timestamp=0.0) for q in queries]
+        assert after == before
+
+
+# ---------------------------------------------------------------------------------------------
+# Maps from image files
+# ---------------------------------------------------------------------------------------------
+
+
+def test_build_from_a_folder_and_a_list_of_files(tmp_path, images):
+    folder = tmp_path / "run"
+    folder.mkdir()
+    for i, img in enumerate(images[:6]):
+        write_pgm(folder / f"img{5 - i:02d}.pgm", img)  # names sort in reverse order of images
+    (folder / "notes.txt").write_text("not an image")
+    (folder / "sub.png").mkdir()  # a folder, not an image
+    names = [f"img{k:02d}.pgm" for k in range(6)]
+
+    with topoloc.Map.build_from_image_files(folder, backend="vlad-orb") as m:
+        assert m.place_count == 6
+        assert [Path(m.view_image(v)).name for v in range(6)] == names
+        assert [m.view_info(v).keyframe_id for v in range(6)] == list(range(6))
+        from_folder = m.view_descriptors()
+    files = [str(folder / n) for n in names]
+    with topoloc.Map.build_from_image_files(files, backend="vlad-orb") as m:
+        assert [m.view_image(v) for v in range(6)] == files
+        np.testing.assert_array_equal(m.view_descriptors(), from_folder)
+    # The same pixels in memory (files sorted by name = images reversed) give the same map.
+    with topoloc.Map.build_from_images(images[:6][::-1], backend="vlad-orb") as m:
+        np.testing.assert_array_equal(m.view_descriptors(), from_folder)
+
+
+def test_colour_files_and_mixed_sizes(tmp_path, images):
+    write_ppm(tmp_path / "a.ppm", colour(images[0], 0))
+    write_pgm(tmp_path / "b.pgm", place_image(5, w=200, h=150))
+    write_ppm(tmp_path / "c.ppm", colour(images[2], 2))
+    with topoloc.Map.build_from_image_files(tmp_path, backend="vlad-orb") as m, \
+            topoloc.Localizer(m, mode="single_frame") as loc:
+        assert m.place_count == 3
+        # A PPM is RGB: the same pixels from memory find their file's place.
+        assert loc.process(image=colour(images[2], 2), timestamp=0.0).place == 2
+
+
+def test_file_build_errors(tmp_path, images):
+    write_pgm(tmp_path / "a.pgm", images[0])
+    with pytest.raises(topoloc.InvalidImageError, match="missing.png"):
+        topoloc.Map.build_from_image_files([tmp_path / "a.pgm", tmp_path / "missing.png"], backend="vlad-orb")
+    (tmp_path / "broken.png").write_bytes(b"not a png")
+    with pytest.raises(topoloc.InvalidImageError, match="broken.png"):
+        topoloc.Map.build_from_image_files(tmp_path, backend="vlad-orb")
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    with pytest.raises(topoloc.InvalidArgumentError, match="no image files"):
+        topoloc.Map.build_from_image_files(empty, backend="vlad-orb")
+    with pytest.raises(topoloc.InvalidArgumentError, match="not a folder"):
+        topoloc.Map.build_from_image_files(str(tmp_path / "a.pgm"), backend="vlad-orb")
+    with pytest.raises(topoloc.InvalidArgumentError, match="at least 2 images"):
+        topoloc.Map.build_from_image_files([tmp_path / "a.pgm"], backend="vlad-orb")
+
+
+def test_build_argument_errors(images):
+    with pytest.raises(topoloc.InvalidArgumentError, match="at least 2 images"):
+        topoloc.Map.build_from_images(images[:1], backend="vlad-orb")
+    with pytest.raises(topoloc.InvalidArgumentError, match="at least 2 images"):
+        topoloc.Map.build_from_images([], backend="vlad-orb")
+    with pytest.raises(topoloc.InvalidArgumentError, match="views_per_place"):
+        topoloc.Map.build_from_images(images[:4], backend="vlad-orb", views_per_place=0)
+    for backend in ("none", "auto", "cuda", topoloc._lib.BACKEND_NONE):
+        with pytest.raises(topoloc.InvalidArgumentError, match="backend"):
+            topoloc.Map.build_from_images(images[:4], backend=backend)
+    with pytest.raises(topoloc.InvalidImageError, match=r"images\[1\]"):
+        topoloc.Map.build_from_images([images[0], images[1][:, :, None, None]], backend="vlad-orb")
+    with pytest.raises(TypeError, match=r"images\[2\].*float32"):
+        topoloc.Map.build_from_images([images[0], images[1], images[2].astype(np.float32)], backend="vlad-orb")
+    with pytest.raises(topoloc.InvalidImageError, match="8192"):  # checked by the library
+        topoloc.Map.build_from_images([images[0], np.zeros((9000, 10), np.uint8)], backend="vlad-orb")
+    with pytest.raises(topoloc.InvalidImageError, match="pixel_format"):
+        topoloc.Map.build_from_images(images[:3], backend="vlad-orb", pixel_format="rgb")
+
+
+# ---------------------------------------------------------------------------------------------
+# Bad images: typed errors, state unchanged
+# ---------------------------------------------------------------------------------------------
+
+BAD_IMAGES = [
+    # (name, image factory, pixel_format, expected exception); checked in Python or by the library
+    ("float", lambda g: g.astype(np.float32), None, TypeError),
+    ("int16", lambda g: g.astype(np.int16), None, TypeError),
+    ("bool", lambda g: g > 128, None, TypeError),
+    ("list", lambda g: g[:4, :4].tolist(), None, TypeError),
+    ("path", lambda g: "frame.png", None, TypeError),
+    ("1-D", lambda g: g.ravel(), None, topoloc.InvalidImageError),
+    ("0-D", lambda g: np.uint8(7), None, topoloc.InvalidImageError),
+    ("2 channels", lambda g: np.stack([g, g], -1), None, topoloc.InvalidImageError),
+    ("4-D", lambda g: g[None, :, :, None], None, topoloc.InvalidImageError),
+    ("zero width", lambda g: g[:, :0], None, topoloc.InvalidImageError),
+    ("zero height", lambda g: g[:0], None, topoloc.InvalidImageError),
+    ("format of other channels", lambda g: g, "rgb", topoloc.InvalidImageError),
+    ("unknown format", lambda g: np.stack([g] * 3, -1), "yuv", topoloc.InvalidImageError),
+    ("constant", lambda g: np.full_like(g, 90), None, topoloc.UninformativeImageError),
+    ("black RGB", lambda g: np.zeros(g.shape + (3,), np.uint8), None, topoloc.UninformativeImageError),
+    ("1x1", lambda g: g[:1, :1], None, topoloc.UninformativeImageError),
+    ("10000x10000", lambda g: np.zeros((10000, 10000), np.uint8), None, topoloc.InvalidImageError),
+    ("8193 wide", lambda g: np.tile(g[:2], (1, 26))[:, :8193], None, topoloc.InvalidImageError),
+]
+
+
+@pytest.mark.parametrize("name,make,fmt,expected", BAD_IMAGES, ids=[c[0] for c in BAD_IMAGES])
+def test_bad_image_raises(vlad_map, images, name, make, fmt, expected):
+    with topoloc.Localizer(vlad_map) as loc:
+        with pytest.raises(expected) as e:
+            loc.process(image=make(images[0]), pixel_format=fmt, timestamp=0.0)
+        if isinstance(e.value, topoloc.TopolocError):
+            assert e.value.message
+
+
+def test_bad_images_leave_the_localizer_unchanged(vlad_map, images):
+    with topoloc.Localizer(vlad_map) as loc, topoloc.Localizer(vlad_map) as twin:
+        first = loc.process(image=images[0], timestamp=0.0)
+        assert twin.process(image=images[0], timestamp=0.0) == first
+        for t, (name, make, fmt, expected) in enumerate(BAD_IMAGES):
+            with pytest.raises(expected):
+                loc.process(image=make(images[0]), pixel_format=fmt, timestamp=1.0 + t)
+        a = loc.process(image=images[1], timestamp=50.0)
+        b = twin.process(image=images[1], timestamp=50.0)
+        assert a == b
+        assert a.frame_index == first.frame_index + 1
+
+
+def test_frame_argument_errors(vlad_map, images):
+    with topoloc.Localizer(vlad_map) as loc:
+        with pytest.raises(TypeError, match="descriptor or an image"):
+            loc.process(timestamp=0.0)
+        with pytest.raises(TypeError, match="not both"):
+            loc.process(vlad_map.view_descriptor(0), 0.0, image=images[0])
+        with pytest.raises(TypeError, match="timestamp"):
+            loc.process(image=images[0])
+        with pytest.raises(TypeError, match="pixel_format"):
+            loc.process(vlad_map.view_descriptor(0), 0.0, pixel_format="rgb")
+        assert loc.process(image=images[0], timestamp=0.0).frame_index == 0
+
+
+def test_errors_of_image_frames_keep_the_filter_contract(vlad_map, images):
+    with topoloc.Localizer(vlad_map) as loc:
+        loc.process(image=images[0], timestamp=5.0)
+        with pytest.raises(topoloc.TimestampError):
+            loc.process(image=images[1], timestamp=4.0)
+        with pytest.raises(topoloc.InvalidArgumentError):
+            loc.process(image=images[1], timestamp=6.0, odometry=np.full((4, 4), 2.0))
+        assert loc.process(image=images[1], timestamp=6.0, odometry=np.eye(4)).frame_index == 1
+
+
+# ---------------------------------------------------------------------------------------------
+# Strided and non-contiguous arrays
+# ---------------------------------------------------------------------------------------------
+
+
+def test_arrays_with_contiguous_rows_are_read_in_place():
+    big = place_image(77, w=400, h=300)
+    crop = big[30:270, 40:360]
+    c_image, keep = _core._image(crop, None, "image")
+    assert np.shares_memory(keep, big)  # no copy
+    assert c_image.stride == 400 and (c_image.width, c_image.height) == (320, 240)
+    assert c_image.data_len == 400 * 239 + 320
+    rgb = np.zeros((300, 400, 4), np.uint8)[10:20, 5:9, :3]  # crop of the colour channels of RGBA
+    c_image, keep = _core._image(rgb, "bgr", "image")
+    assert not np.shares_memory(keep, rgb)  # pixels are 4 bytes apart: copied
+    c_image, keep = _core._image(np.zeros((300, 400, 3), np.uint8)[10:20, 5:9], "bgr", "image")
+    assert c_image.stride == 1200 and c_image.format == topoloc._lib.PIXEL_BGR8
+    for strided in (big[:, ::2], big[::-1], np.asfortranarray(big), big.T):
+        c_image, keep = _core._image(strided, None, "image")
+        assert keep.flags.c_contiguous and not np.shares_memory(keep, big)
+        assert c_image.stride == strided.shape[1]
+    one_row = big[5:6, :]
+    c_image, _ = _core._image(one_row, None, "image")
+    assert c_image.stride == 400 and c_image.data_len == 400
+
+
+def test_non_contiguous_arrays_give_the_answers_of_contiguous_copies(vlad_map, images):
+    q = revisit(images[6], 1)
+    padded = np.zeros((H + 40, W + 60), np.uint8)
+    padded[20 : 20 + H, 30 : 30 + W] = q
+    doubled = np.repeat(q, 2, axis=1)  # every column twice
+    c = colour(q, 1)
+    cases = [
+        padded[20 : 20 + H, 30 : 30 + W],  # crop: row stride 380, read in place
+        doubled[:, ::2],  # column step: copied
+        np.asfortranarray(q),  # column-major: copied
+        q[::-1][::-1],  # negative strides twice: positive again
+        np.ascontiguousarray(q[::-1])[::-1],  # negative row stride: copied
+        np.lib.stride_tricks.as_strided(padded[20:, 30:], shape=q.shape, strides=padded.strides),
+    ]
+    colour_cases = [
+        np.ascontiguousarray(np.moveaxis(np.moveaxis(c, 2, 0), 0, 2)),  # contiguous reference
+        np.moveaxis(np.ascontiguousarray(np.moveaxis(c, 2, 0)), 0, 2),  # planar: copied
+        np.concatenate([c, c], axis=1)[:, W:],  # crop of a wider image
+    ]
+    with topoloc.Localizer(vlad_map, mode="single_frame") as loc:
+        expected = loc.process(image=np.ascontiguousarray(q), timestamp=0.0)
+        assert expected.place == 6
+        for i, arr in enumerate(cases):
+            np.testing.assert_array_equal(arr, q)
+            assert answer(loc.process(image=arr, timestamp=0.0)) == answer(expected), i
+        expected_colour = loc.process(image=np.ascontiguousarray(c), timestamp=0.0)
+        for i, arr in enumerate(colour_cases):
+            np.testing.assert_array_equal(arr, c)
+            assert answer(loc.process(image=arr, timestamp=0.0)) == answer(expected_colour), i
+    # Building from crops and from copies gives the same map.
+    crops = []
+    for img in images[:5]:
+        p = np.zeros((H + 2, W + 7), np.uint8)
+        p[1 : 1 + H, 4 : 4 + W] = img
+        crops.append(p[1 : 1 + H, 4 : 4 + W])
+    with topoloc.Map.build_from_images(crops, backend="vlad-orb") as a, \
+            topoloc.Map.build_from_images([np.ascontiguousarray(x) for x in crops], backend="vlad-orb") as b:
+        np.testing.assert_array_equal(a.view_descriptors(), b.view_descriptors())
+
+
+def test_read_only_arrays_are_accepted(vlad_map, images):
+    q = images[4].copy()
+    q.flags.writeable = False
+    with topoloc.Localizer(vlad_map, mode="single_frame") as loc:
+        assert loc.process(image=q, timestamp=0.0).place == 4
+
+
+# ---------------------------------------------------------------------------------------------
+# Describer selection: image_backend
+# ---------------------------------------------------------------------------------------------
+
+
+def test_image_backend_none_refuses_image_frames(vlad_map, images):
+    with topoloc.Localizer(vlad_map, image_backend="none") as loc:
+        assert loc.options["image_backend"] == "none"
+        with pytest.raises(topoloc.NoDescriberError):
+            loc.process(image=images[0], timestamp=0.0)
+        # Descriptor frames still work, and the failed frame changed nothing.
+        r = loc.process(vlad_map.view_descriptor(3), 0.0)
+        assert r.place == 3 and r.frame_index == 0
+
+
+def test_maps_without_describer(corridor, images):
+    with topoloc.Localizer(corridor.map) as loc:  # "auto": no describer to load
+        with pytest.raises(topoloc.NoDescriberError):
+            loc.process(image=images[0], timestamp=0.0)
+        assert loc.process(corridor.query(2), 0.0).frame_index == 0
+    for backend in ("vlad-orb", "vlad-sift", "onnx"):
+        with pytest.raises(topoloc.NoDescriberError):
+            topoloc.Localizer(corridor.map, image_backend=backend)
+    topoloc.Localizer(corridor.map, image_backend="none").close()
+
+
+def test_onnx_backend_on_a_vlad_map_is_a_mismatch(vlad_map):
+    with pytest.raises(topoloc.DescriptorMismatchError, match="onnx"):
+        topoloc.Localizer(vlad_map, image_backend="onnx")
+    loc = topoloc.Localizer(vlad_map, image_backend="vlad-orb")
+    assert loc.options["image_backend"] == "vlad-orb"
+    loc.close()
+
+
+def test_vlad_sift_backend_on_a_vlad_orb_map_is_a_mismatch(vlad_map):
+    with pytest.raises(topoloc.DescriptorMismatchError):
+        topoloc.Localizer(vlad_map, image_backend="vlad-sift")
+
+
+def test_image_backend_option_values(vlad_map):
+    with pytest.raises(topoloc.InvalidOptionError, match="image_backend"):
+        topoloc.Localizer(vlad_map, image_backend="cuda")
+    with pytest.raises(topoloc.InvalidOptionError, match="image_backend"):
+        topoloc.Localizer(vlad_map, image_backend=-1)
+    with pytest.raises(topoloc.TopolocError):  # unknown code: refused by the library
+        topoloc.Localizer(vlad_map, image_backend=99)
+    with topoloc.Localizer(vlad_map, image_backend=topoloc._lib.BACKEND_VLAD_ORB) as loc:
+        assert loc.options["image_backend"] == "vlad-orb"
+    # ONNX paths are recorded (and unused by a VLAD map).
+    with topoloc.Localizer(vlad_map, onnx_model_path=Path("/nonexistent/m.onnx"), onnx_runtime_path="/x/ort.so") as loc:
+        assert loc.options["onnx_model_path"] == "/nonexistent/m.onnx"
+        assert loc.options["onnx_runtime_path"] == "/x/ort.so"
+    d = topoloc.localizer_options_default()
+    assert (d["image_backend"], d["onnx_model_path"], d["onnx_runtime_path"]) == ("auto", None, None)
+
+
+def test_localizer_outlives_the_map_for_image_frames(images):
+    m = topoloc.Map.build_from_images(images[:5], backend="vlad-orb")
+    loc = topoloc.Localizer(m, mode="single_frame")
+    m.close()
+    assert loc.process(image=images[3], timestamp=0.0).place == 3
+    loc.close()
+
+
+# ---------------------------------------------------------------------------------------------
+# ONNX (when the model is installed)
+# ---------------------------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def onnx_map(images):
+    if not ONNX_MODEL.is_file():
+        pytest.skip(f"no ONNX model at {ONNX_MODEL}")
+    try:
+        m = topoloc.Map.build_from_images(images[:6], backend="onnx", threads=2)
+    except topoloc.BackendUnavailableError as e:
+        pytest.skip(f"ONNX Runtime unavailable: {e}")
+    yield m
+    m.close()
+
+
+@needs_onnx
+def test_onnx_map_localizes_revisits_and_survives_save(onnx_map, images, tmp_path):
+    assert onnx_map.descriptor_kind == "onnx-mlf"
+    assert onnx_map.place_count == 6 and onnx_map.dim == 5
+    queries = [revisit(img, 400 + p) for p, img in enumerate(images[:6])]
+    with topoloc.Localizer(onnx_map, mode="single_frame") as loc:
+        before = [loc.process(image=q, timestamp=0.0) for q in queries]
+    assert sum(r.place == p for p, r in enumerate(before)) >= 5
+    path = tmp_path / "onnx.topomap"
+    onnx_map.save(path)
+    with topoloc.Map.load(path, expected_kind="onnx-mlf") as m, \
+            topoloc.Localizer(m, mode="single_frame", image_backend="onnx", onnx_model_path=ONNX_MODEL) as loc:
+        assert [loc.process(image=q, timestamp=0.0) for q in queries] == before
+
+
+@needs_onnx
+def test_onnx_colour_frames(onnx_map, images):
+    with topoloc.Localizer(onnx_map, mode="single_frame") as loc:
+        rgb = np.repeat(images[2][:, :, None], 3, axis=2)
+        a = loc.process(image=rgb, timestamp=0.0)
+        assert a.place == 2
+        b = loc.process(image=np.ascontiguousarray(rgb[:, :, ::-1]), pixel_format="bgr", timestamp=0.0)
+        assert answer(b) == answer(a)
+
+
+@needs_onnx
+def test_onnx_describer_mismatches_and_missing_files(onnx_map, tmp_path, images):
+    with pytest.raises(topoloc.DescriptorMismatchError):
+        topoloc.Localizer(onnx_map, image_backend="vlad-orb")
+    missing = tmp_path / "missing.onnx"
+    with pytest.raises(topoloc.BackendUnavailableError, match="missing.onnx"):
+        topoloc.Map.build_from_images(images[:3], backend="onnx", onnx_model_path=missing)
+    with pytest.raises((topoloc.BackendUnavailableError, topoloc.DescriptorMismatchError)):
+        topoloc.Localizer(onnx_map, onnx_model_path=missing)
+    corrupt = tmp_path / "corrupt.onnx"
+    corrupt.write_bytes(b"this is not an ONNX model")
+    with pytest.raises(topoloc.ModelError, match="corrupt.onnx"):
+        topoloc.Map.build_from_images(images[:3], backend="onnx", onnx_model_path=corrupt)
+    with pytest.raises((topoloc.DescriptorMismatchError, topoloc.ModelError)):
+        topoloc.Localizer(onnx_map, onnx_model_path=corrupt)
+    # Descriptor-only use of an ONNX map never loads the runtime.
+    with topoloc.Localizer(onnx_map, image_backend="none", onnx_runtime_path=tmp_path / "none.so") as loc:
+        assert loc.process(onnx_map.view_descriptor(1), 0.0).place == 1
+
+
+@needs_onnx
+def test_onnx_build_from_files_with_progress(tmp_path, images):
+    for i, img in enumerate(images[:4]):
+        write_ppm(tmp_path / f"{i}.ppm", colour(img, i))
+    seen = []
+    with topoloc.Map.build_from_image_files(tmp_path, backend="onnx", dim=3,
+                                            progress=lambda *a: seen.append(a)) as m:
+        assert (m.place_count, m.dim) == (4, 3)
+    assert ("describing", 4, 4) in seen and seen[-1] == ("fitting", 1, 1)
