@@ -394,6 +394,10 @@ typedef struct topoloc_image_map_options {
    */
   uint32_t vlad_clusters;
   /**
+   * VLAD keypoints on a dense grid (true, default) or detected by ORB/SIFT (false).
+   */
+  bool vlad_dense;
+  /**
    * TUM trajectory with one pose per image (same order); NULL or "" = none (a sequence map).
    */
   const char *poses_tum_path;

@@ -380,6 +380,7 @@ def _image_map_options(
     vlad_clusters: Optional[int],
     poses_tum_path: Optional[PathLike],
     place_spacing_m: Optional[float],
+    vlad_dense: Optional[bool] = None,
 ) -> _lib.topoloc_image_map_options:
     o = _lib.defaults(_lib.topoloc_image_map_options, lib.topoloc_image_map_options_init)
     o.backend = _backend_code(backend, _BUILD_BACKENDS, "backend", InvalidArgumentError)
@@ -400,6 +401,8 @@ def _image_map_options(
         o.grid_cols = _u32(grid_cols, "grid_cols")
     if vlad_clusters is not None:
         o.vlad_clusters = _u32(vlad_clusters, "vlad_clusters")
+    if vlad_dense is not None:
+        o.vlad_dense = bool(vlad_dense)
     if poses_tum_path is not None:
         o.poses_tum_path = _path(poses_tum_path, "poses_tum_path")
     if place_spacing_m is not None:
@@ -559,6 +562,7 @@ class Map(_Handle):
         grid_rows: Optional[int] = None,
         grid_cols: Optional[int] = None,
         vlad_clusters: Optional[int] = None,
+        vlad_dense: Optional[bool] = None,
         poses_tum_path: Optional[PathLike] = None,
         place_spacing_m: Optional[float] = None,
     ) -> "Map":
@@ -574,9 +578,9 @@ class Map(_Handle):
         ``"onnx"`` (a CNN run by ONNX Runtime; ``onnx_model_path`` / ``onnx_runtime_path``
         default to the cache filled by ``scripts/setup-models.sh``, ``onnx_taps`` names the
         outputs pooled on a ``grid_rows`` x ``grid_cols`` grid), ``"vlad-orb"`` or
-        ``"vlad-sift"`` (VLAD of OpenCV local features, ``vlad_clusters`` words; no learned
-        weights). A PCA to ``dim`` dimensions (at most the number of images minus one) is
-        fitted on all of them. Without ``poses_tum_path``, every ``views_per_place``
+        ``"vlad-sift"`` (VLAD of OpenCV local features, ``vlad_clusters`` words, on a dense
+        keypoint grid unless ``vlad_dense=False``; no learned weights). A PCA to ``dim``
+        dimensions (at most the number of images minus one) is fitted on all of them. Without ``poses_tum_path``, every ``views_per_place``
         consecutive images form a place and places are chained in order; with a TUM trajectory
         (one pose per image, same order), places are made by ``place_spacing_m`` and hold at
         most ``views_per_place`` views. View ``v`` records its image index as keyframe id.
@@ -600,7 +604,7 @@ class Map(_Handle):
             array[i] = img
         options = _image_map_options(
             backend, dim, views_per_place, threads, onnx_model_path, onnx_runtime_path, onnx_taps,
-            grid_rows, grid_cols, vlad_clusters, poses_tum_path, place_spacing_m,
+            grid_rows, grid_cols, vlad_clusters, poses_tum_path, place_spacing_m, vlad_dense,
         )
         reporter = _Progress(progress)
         out = _lib.MapPtr()
@@ -625,6 +629,7 @@ class Map(_Handle):
         grid_rows: Optional[int] = None,
         grid_cols: Optional[int] = None,
         vlad_clusters: Optional[int] = None,
+        vlad_dense: Optional[bool] = None,
         poses_tum_path: Optional[PathLike] = None,
         place_spacing_m: Optional[float] = None,
     ) -> "Map":
@@ -643,7 +648,7 @@ class Map(_Handle):
         array = (c_char_p * max(n, 1))(*encoded)
         options = _image_map_options(
             backend, dim, views_per_place, threads, onnx_model_path, onnx_runtime_path, onnx_taps,
-            grid_rows, grid_cols, vlad_clusters, poses_tum_path, place_spacing_m,
+            grid_rows, grid_cols, vlad_clusters, poses_tum_path, place_spacing_m, vlad_dense,
         )
         reporter = _Progress(progress)
         out = _lib.MapPtr()

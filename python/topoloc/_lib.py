@@ -161,6 +161,7 @@ class topoloc_image_map_options(Structure):
         ("grid_rows", c_uint32),
         ("grid_cols", c_uint32),
         ("vlad_clusters", c_uint32),
+        ("vlad_dense", c_bool),
         ("poses_tum_path", c_char_p),
         ("place_spacing_m", c_double),
     ]

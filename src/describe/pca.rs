@@ -2,7 +2,8 @@
 //! samples, faer), then used to project every descriptor to D dimensions.
 
 use super::DescribeError;
-use faer::Mat;
+use faer::linalg::matmul::matmul;
+use faer::{Accum, Mat, MatMut, MatRef, Par};
 
 /// A fitted projection: `y = W (x - mean)`, optionally whitened, then L2-normalised.
 #[derive(Clone, Debug, PartialEq)]
@@ -82,11 +83,16 @@ impl Pca {
             )));
         }
         let centred: Vec<f32> = x.iter().zip(&self.mean).map(|(a, m)| a - m).collect();
-        let mut y: Vec<f32> = self
-            .components
-            .chunks_exact(self.input_dim)
-            .map(|w| w.iter().zip(&centred).map(|(a, b)| a * b).sum())
-            .collect();
+        // One faer matrix-vector product (D x F by F), single-threaded.
+        let mut y = vec![0.0f32; self.output_dim];
+        matmul(
+            MatMut::from_column_major_slice_mut(&mut y, self.output_dim, 1),
+            Accum::Replace,
+            MatRef::from_row_major_slice(&self.components, self.output_dim, self.input_dim),
+            MatRef::from_column_major_slice(&centred, self.input_dim, 1),
+            1.0f32,
+            Par::Seq,
+        );
         super::mlf::l2_normalize(&mut y);
         Ok(y)
     }

@@ -154,6 +154,8 @@ pub struct topoloc_image_map_options {
     pub grid_cols: u32,
     /// VLAD codebook size. Default 64.
     pub vlad_clusters: u32,
+    /// VLAD keypoints on a dense grid (true, default) or detected by ORB/SIFT (false).
+    pub vlad_dense: bool,
     /// TUM trajectory with one pose per image (same order); NULL or "" = none (a sequence map).
     pub poses_tum_path: *const c_char,
     /// Place spacing in metres when poses are given. Default 2.0.
@@ -179,6 +181,7 @@ impl Default for topoloc_image_map_options {
             grid_rows: onnx.grid.0 as u32,
             grid_cols: onnx.grid.1 as u32,
             vlad_clusters: VladOptions::default().clusters as u32,
+            vlad_dense: VladOptions::default().dense,
             poses_tum_path: std::ptr::null(),
             place_spacing_m: 2.0,
         }
@@ -253,6 +256,7 @@ fn image_map_options(
                 LocalFeature::Sift
             },
             clusters: o.vlad_clusters as usize,
+            dense: o.vlad_dense,
             ..VladOptions::default()
         }),
         other => {
