@@ -10,7 +10,20 @@ import re
 import shutil
 import subprocess
 import sys
-from ctypes import POINTER, c_bool, c_char, c_char_p, c_double, c_float, c_size_t, c_uint8, c_uint32, c_uint64
+from ctypes import (
+    CFUNCTYPE,
+    POINTER,
+    c_bool,
+    c_char,
+    c_char_p,
+    c_double,
+    c_float,
+    c_size_t,
+    c_uint8,
+    c_uint32,
+    c_uint64,
+    c_void_p,
+)
 from pathlib import Path
 
 import pytest
@@ -56,6 +69,32 @@ def test_abi_and_mode_constants_match_header():
     assert int(defines["TOPOLOC_MODE_SINGLE_FRAME"]) == topoloc.MODE_SINGLE_FRAME == 1
 
 
+IMAGE_CONSTANTS = {
+    "PIXEL": ["PIXEL_NONE", "PIXEL_GRAY8", "PIXEL_RGB8", "PIXEL_BGR8", "PIXEL_RGBA8", "PIXEL_BGRA8"],
+    "BACKEND": ["BACKEND_AUTO", "BACKEND_NONE", "BACKEND_ONNX", "BACKEND_VLAD_ORB", "BACKEND_VLAD_SIFT"],
+    "STAGE": ["STAGE_DESCRIBING", "STAGE_FITTING"],
+}
+
+
+@needs_header
+@pytest.mark.parametrize("group", sorted(IMAGE_CONSTANTS))
+def test_image_constants_match_header(group):
+    text = HEADER.read_text()
+    defines = {n: int(v) for n, v in re.findall(rf"#define TOPOLOC_({group}_\w+) (\d+)\b", text)}
+    shim = {n: v for n, v in vars(_lib).items() if n.startswith(group + "_")}
+    assert set(defines) == set(shim), f"TOPOLOC_{group}_* added to or removed from the header or the shim"
+    assert set(defines) >= set(IMAGE_CONSTANTS[group])
+    for name, value in defines.items():
+        assert type(shim[name]) is int and shim[name] == value, name
+    assert len(set(defines.values())) == len(defines), f"duplicate TOPOLOC_{group}_* values"
+
+
+def test_zero_constants_are_the_defaults():
+    # An all-zero topoloc_image is "no image"; a zeroed backend field is "auto".
+    assert _lib.PIXEL_NONE == 0
+    assert _lib.BACKEND_AUTO == 0
+
+
 def test_library_path_is_the_loaded_file():
     assert Path(topoloc.library_path).is_file()
     if "TOPOLOC_LIBRARY" not in os.environ and REPO_ROOT is not None:
@@ -75,7 +114,12 @@ DEFAULT_FUNCTIONS = {
     "topoloc_frame": "topoloc_frame_init",
     "topoloc_result": "topoloc_result_init",
     "topoloc_map_load_options": "topoloc_map_load_options_init",
+    "topoloc_image_map_options": "topoloc_image_map_options_init",
 }
+
+#: Structs the library never fills with defaults: plain data the caller writes (array elements,
+#: or ``topoloc_image``, embedded in ``topoloc_frame`` and zero for "no image").
+NO_DEFAULT_FUNCTION = {"topoloc_keyframe", "topoloc_candidate", "topoloc_image"}
 
 
 @pytest.mark.parametrize("struct_name", sorted(DEFAULT_FUNCTIONS))
@@ -121,20 +165,59 @@ def test_defaults_are_the_library_defaults():
     assert kf["max_views_per_place"] == raw_kf.max_views_per_place >= 1
 
 
+def _filled_by_init(cls, init):
+    """A ``cls`` whose bytes are all 0xAB before the library's ``_init`` fills it."""
+    out = cls()
+    ctypes.memset(ctypes.byref(out), 0xAB, ctypes.sizeof(cls))
+    _lib.check(init(ctypes.byref(out), ctypes.sizeof(cls)))
+    return out
+
+
+def test_image_fields_of_the_library_defaults():
+    frame = _filled_by_init(_lib.topoloc_frame, _lib.lib.topoloc_frame_init)
+    assert frame.struct_size == ctypes.sizeof(_lib.topoloc_frame)
+    img = frame.image
+    assert (img.format, img.width, img.height, img.stride, img.data_len) == (_lib.PIXEL_NONE, 0, 0, 0, 0)
+    assert not img.data
+    opts = _filled_by_init(_lib.topoloc_localizer_options, _lib.lib.topoloc_localizer_options_init)
+    assert opts.image_backend == _lib.BACKEND_AUTO
+    assert opts.onnx_model_path is None and opts.onnx_runtime_path is None
+    io = _filled_by_init(_lib.topoloc_image_map_options, _lib.lib.topoloc_image_map_options_init)
+    assert io.struct_size == ctypes.sizeof(_lib.topoloc_image_map_options)
+    assert io.backend in (_lib.BACKEND_AUTO, _lib.BACKEND_ONNX)
+    for name in ("onnx_model_path", "onnx_runtime_path", "onnx_taps", "poses_tum_path"):
+        assert getattr(io, name) is None, name
+    assert io.dim >= 1 and io.views_per_place >= 1 and io.grid_rows >= 1 and io.grid_cols >= 1
+    assert io.vlad_clusters >= 1 and 0 < io.place_spacing_m < 1e6
+
+
 def _strip_comments(text: str) -> str:
     text = re.sub(r"/\*.*?\*/", "", text, flags=re.S)
     return re.sub(r"//[^\n]*", "", text)
 
 
 def _ctype_for(c_type: str):
-    """ctypes type the shim must use for a C type written in the header."""
-    t = c_type.strip()
-    const = t.startswith("const ")
-    t = t.replace("const ", "").replace("struct ", "").strip()
-    stars = t.count("*")
-    base = t.replace("*", "").strip()
-    if base == "char" and stars == 1:
-        return c_char_p if const else POINTER(c_char)
+    """ctypes type the shim must use for a C type written in the header.
+
+    ``const char *`` is ``c_char_p`` (a string in), ``char *`` is ``POINTER(c_char)`` (a buffer
+    out), ``void *`` is ``c_void_p``; every further ``*`` wraps a ``POINTER``, so
+    ``const char *const *`` (an array of strings) is ``POINTER(c_char_p)``. A ``const`` after a
+    ``*`` qualifies the pointer itself and does not change the ctypes type."""
+    t = c_type.strip().replace("struct ", "")
+    m = re.fullmatch(r"(const\s+)?(\w+)\s*((?:\*\s*(?:const\b\s*)?)*)", t)
+    assert m, f"unparsed C type {c_type!r}"
+    const, base, pointers = bool(m.group(1)), m.group(2), m.group(3)
+    stars = pointers.count("*")
+    if base == "char" and stars >= 1:
+        ty = c_char_p if const else POINTER(c_char)
+        for _ in range(stars - 1):
+            ty = POINTER(ty)
+        return ty
+    if base == "void" and stars >= 1:
+        ty = c_void_p
+        for _ in range(stars - 1):
+            ty = POINTER(ty)
+        return ty
     table = {
         "size_t": c_size_t,
         "bool": c_bool,
@@ -144,6 +227,7 @@ def _ctype_for(c_type: str):
         "float": c_float,
         "double": c_double,
         "topoloc_status": c_uint32,
+        "topoloc_progress_fn": _lib.topoloc_progress_fn,
         "void": None,
     }
     table.update(_lib.STRUCTS)
@@ -215,6 +299,132 @@ def test_every_header_function_is_declared():
         assert list(fn.argtypes) == argtypes, f"{name}: argtypes differ from the header"
 
 
+@pytest.mark.parametrize(
+    "c_type, expected",
+    [
+        ("const char *", c_char_p),
+        ("char *", POINTER(c_char)),
+        ("const char *const *", POINTER(c_char_p)),
+        ("char *const *", POINTER(POINTER(c_char))),
+        ("void *", c_void_p),
+        ("void", None),
+        ("const struct topoloc_image *", POINTER(_lib.topoloc_image)),
+        ("struct topoloc_image", _lib.topoloc_image),
+        ("struct topoloc_map **", POINTER(_lib.MapPtr)),
+        ("const double *", POINTER(c_double)),
+        ("topoloc_progress_fn", _lib.topoloc_progress_fn),
+        ("topoloc_status", c_uint32),
+    ],
+)
+def test_c_type_mapping_of_the_checks(c_type, expected):
+    # The drift checks above are only as good as this mapping.
+    assert _ctype_for(c_type) is expected
+
+
+#: Fields of the extended structs as first released (ABI 1): later versions only append.
+ABI1_FIELDS = {
+    "topoloc_localizer_options": [
+        "struct_size", "mode", "temperature", "stay_probability", "jump_probability",
+        "off_map_probability", "off_map_similarity", "off_map_margin", "top_k",
+        "expected_descriptor_kind", "expected_descriptor_model",
+    ],
+    "topoloc_frame": ["struct_size", "timestamp", "descriptor", "descriptor_len", "odometry"],
+}
+
+#: Fields appended to them for images.
+IMAGE_FIELDS = {
+    "topoloc_localizer_options": [
+        ("image_backend", c_uint32), ("onnx_model_path", c_char_p), ("onnx_runtime_path", c_char_p),
+    ],
+    "topoloc_frame": [("image", _lib.topoloc_image)],  # embedded by value, not a pointer
+}
+
+
+@needs_header
+def test_image_structs_are_in_the_layout_checks():
+    structs = _header_structs()
+    for name in ("topoloc_image", "topoloc_image_map_options"):
+        assert name in structs and name in _lib.STRUCTS, name
+        assert len(structs[name]) >= 6, f"{name}: header parse found {structs[name]}"
+    image = dict(structs["topoloc_image"])
+    assert image["data"] is POINTER(c_uint8) and image["format"] is c_uint32
+    assert dict(structs["topoloc_image_map_options"])["struct_size"] is c_size_t
+    assert structs["topoloc_image_map_options"][0][0] == "struct_size"  # versioned by its size
+    for name, old in ABI1_FIELDS.items():
+        fields = structs[name]
+        assert [f for f, _ in fields[: len(old)]] == old, f"{name}: an ABI 1 field moved"
+        assert fields[len(old):] == IMAGE_FIELDS[name], f"{name}: image fields not appended as expected"
+
+
+@needs_header
+def test_every_default_macro_is_checked():
+    text = HEADER.read_text()
+    macros = dict(re.findall(r"#define (topoloc_\w+)_default\(p\) (topoloc_\w+_init)\(\(p\), sizeof \*\(p\)\)", text))
+    assert "topoloc_image_map_options" in macros
+    assert macros == DEFAULT_FUNCTIONS
+    assert not NO_DEFAULT_FUNCTION & set(DEFAULT_FUNCTIONS)
+    assert NO_DEFAULT_FUNCTION | set(DEFAULT_FUNCTIONS) == set(_lib.STRUCTS)
+
+
+@needs_header
+def test_image_build_functions_match_header():
+    functions = _header_functions()
+    options, progress = POINTER(_lib.topoloc_image_map_options), _lib.topoloc_progress_fn
+    tail = [c_size_t, options, progress, c_void_p, POINTER(_lib.MapPtr)]
+    expected = {
+        "topoloc_map_build_from_image_files": (c_uint32, [POINTER(c_char_p)] + tail),
+        "topoloc_map_build_from_images": (c_uint32, [POINTER(_lib.topoloc_image)] + tail),
+        "topoloc_image_map_options_init": (c_uint32, [options, c_size_t]),
+    }
+    for name, (restype, argtypes) in expected.items():
+        assert functions[name] == (restype, argtypes), name
+        fn = getattr(_lib.lib, name)
+        assert fn.restype is restype and list(fn.argtypes) == argtypes, name
+
+
+def _header_callbacks():
+    """Function-pointer typedefs of the header: name -> (return type, [parameter types])."""
+    text = _strip_comments(HEADER.read_text())
+    out = {}
+    for ret, name, params in re.findall(r"typedef\s+([\w \*]+?)\s*\(\s*\*\s*(\w+)\s*\)\s*\(([^)]*)\);", text):
+        out[name] = (_ctype_for(ret), [_ctype_for(_split_decl(p)[0]) for p in params.split(",")])
+    return out
+
+
+@needs_header
+def test_progress_fn_typedef_matches_ctypes():
+    callbacks = _header_callbacks()
+    assert set(callbacks) == {"topoloc_progress_fn"}, "callback typedefs added to or removed from the header"
+    restype, argtypes = callbacks["topoloc_progress_fn"]
+    assert (restype, argtypes) == (c_bool, [c_void_p, c_uint32, c_size_t, c_size_t])
+    fn = _lib.topoloc_progress_fn
+    assert fn._restype_ is restype
+    assert list(fn._argtypes_) == argtypes
+    assert fn._flags_ == CFUNCTYPE(c_bool)._flags_  # C calling convention, errno not swapped
+
+
+@needs_header
+def test_progress_fn_signature_compiles_against_header(tmp_path):
+    cc = shutil.which("cc") or shutil.which("gcc") or shutil.which("clang")
+    if cc is None:
+        pytest.skip("no C compiler")
+    c_names = {c_bool: "bool", c_void_p: "void *", c_uint32: "uint32_t", c_size_t: "size_t"}
+    fn = _lib.topoloc_progress_fn
+    params = ", ".join(f"{c_names[t]} a{i}" for i, t in enumerate(fn._argtypes_))
+    src = tmp_path / "progress.c"
+    src.write_text(
+        '#include "topoloc.h"\n'
+        f"static {c_names[fn._restype_]} cb({params}) {{ return 1; }}\n"
+        "topoloc_progress_fn f = cb;\n"
+    )
+    proc = subprocess.run(
+        [cc, "-std=c11", "-Werror", "-Wall", "-Wno-unused-parameter", "-c", "-I", str(HEADER.parent),
+         str(src), "-o", str(tmp_path / "progress.o")],
+        capture_output=True, text=True,
+    )
+    assert proc.returncode == 0, proc.stderr
+
+
 def test_every_signature_is_applied_to_the_library():
     for name, (restype, argtypes) in _lib.SIGNATURES.items():
         fn = getattr(_lib.lib, name)
@@ -282,8 +492,21 @@ EXPECTED_CLASSES = {
     202: "ZeroDescriptorError",
     203: "TimestampError",
     204: "InvalidOptionError",
+    300: "InvalidImageError",
+    301: "UninformativeImageError",
+    302: "BackendUnavailableError",
+    303: "ModelError",
+    304: "NoDescriberError",
+    305: "CancelledError",
     900: "PanicError",
 }
+
+
+def test_every_status_has_an_expected_class():
+    assert set(EXPECTED_CLASSES) == set(_errors.STATUS_NAMES) - {0}
+    assert sorted(EXPECTED_CLASSES.values()) == sorted(
+        n for n in _errors.__all__ if n.endswith("Error") and n != "TopolocError"
+    )
 
 
 @pytest.mark.parametrize("status", sorted(EXPECTED_CLASSES))
@@ -314,6 +537,19 @@ def test_python_exception_hierarchy():
     assert issubclass(topoloc.UnknownPlaceError, IndexError)
     assert issubclass(topoloc.UnknownViewError, IndexError)
     assert not issubclass(topoloc.MapIOError, OSError)
+    # Image errors: a bad or blank image is a bad argument value.
+    assert topoloc.InvalidImageError.__bases__ == (topoloc.TopolocError, ValueError)
+    assert topoloc.UninformativeImageError.__bases__ == (topoloc.TopolocError, ValueError)
+    # Backend, model, describer and cancellation errors are not argument errors.
+    for cls in (topoloc.BackendUnavailableError, topoloc.ModelError, topoloc.NoDescriberError, topoloc.CancelledError):
+        assert cls.__bases__ == (topoloc.TopolocError,), cls
+        assert not issubclass(cls, (ValueError, OSError, ImportError)), cls
+    # topoloc.CancelledError is an ordinary Exception, unrelated to asyncio's BaseException.
+    import asyncio
+
+    assert issubclass(topoloc.CancelledError, Exception)
+    assert not issubclass(topoloc.CancelledError, asyncio.CancelledError)
+    assert topoloc.CancelledError is not asyncio.CancelledError
 
 
 def test_error_message_is_read_from_the_library(tmp_path):
