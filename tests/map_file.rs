@@ -192,3 +192,62 @@ fn save_is_atomic_and_leaves_no_temporary_files() {
         .unwrap_err();
     assert!(matches!(err, MapError::Io { .. }), "{err:?}");
 }
+
+/// Rewrites a map's file bytes as format 1.0 wrote them: the metadata serialised in its struct
+/// field order (format, version, descriptor, creator, counts), checksummed in that form.
+fn as_version_1_0(bytes: &[u8]) -> Vec<u8> {
+    use safetensors::SafeTensors;
+    let st = SafeTensors::deserialize(bytes).unwrap();
+    let (_, metadata) = SafeTensors::read_metadata(bytes).unwrap();
+    let meta: serde_json::Value =
+        serde_json::from_str(&metadata.metadata().as_ref().unwrap()["topoloc"]).unwrap();
+    let d = &meta["descriptor"];
+    let legacy = format!(
+        r#"{{"format":"topoloc-map","version":"1.0","descriptor":{{"kind":{},"model":{},"dim":{}}},"creator":{},"places":{},"views":{},"edges":{}}}"#,
+        d["kind"],
+        d["model"],
+        d["dim"],
+        meta["creator"],
+        meta["places"],
+        meta["views"],
+        meta["edges"]
+    );
+    let mut names = st.names();
+    names.sort_unstable();
+    let mut hasher = crc32fast::Hasher::new();
+    hasher.update(legacy.as_bytes());
+    for name in &names {
+        hasher.update(st.tensor(name).unwrap().data());
+    }
+    let signed = format!(
+        r#"{},"crc32":"{:08x}"}}"#,
+        &legacy[..legacy.len() - 1],
+        hasher.finalize()
+    );
+    let tensors: Vec<(String, safetensors::tensor::TensorView)> = names
+        .iter()
+        .map(|n| (n.to_string(), st.tensor(n).unwrap()))
+        .collect();
+    safetensors::serialize(
+        tensors,
+        Some(std::collections::HashMap::from([(
+            "topoloc".to_string(),
+            signed,
+        )])),
+    )
+    .unwrap()
+}
+
+#[test]
+fn files_written_by_format_1_0_still_load() {
+    let map = chain_map(4, 2, 8);
+    let old = as_version_1_0(&map.to_bytes().unwrap());
+    let loaded = load_bytes(&old).expect("a 1.0 file loads");
+    assert_eq!(loaded.descriptors(), map.descriptors());
+    assert_eq!(loaded.edges(), map.edges());
+    // The legacy checksum still protects it.
+    let mut flipped = old.clone();
+    let last = flipped.len() - 1;
+    flipped[last] ^= 1;
+    assert!(matches!(load_bytes(&flipped), Err(MapError::Corrupt(_))));
+}
