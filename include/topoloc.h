@@ -357,7 +357,8 @@ typedef struct topoloc_image_map_options {
    */
   uint32_t backend;
   /**
-   * Descriptor dimension D (at most the number of images minus one). Default 512.
+   * Descriptor dimension D; with fewer than D + 1 images it becomes the number of images
+   * minus one (`topoloc_map_dim` tells). Default 512.
    */
   uint32_t dim;
   /**
@@ -366,7 +367,8 @@ typedef struct topoloc_image_map_options {
    */
   uint32_t views_per_place;
   /**
-   * Describing threads; 0 = one per core. Default 0.
+   * Describing threads; 0 = one per core, at most 256 (more: `TOPOLOC_ERR_INVALID_ARGUMENT`).
+   * They are joined before the build returns. Default 0.
    */
   uint32_t threads;
   /**

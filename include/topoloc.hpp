@@ -21,8 +21,19 @@
  * may leave a "buffer too small" text as the thread's `topoloc_last_error_message` even though
  * the method succeeds. Errors thrown by this layer always carry the right message.
  *
+ * Images: `Image` is a borrowed view of pixels (the C `topoloc_image`; make one with
+ * `image_view`). `Map::build_from_images` / `Map::build_from_image_files` build maps that store
+ * their describer, with an optional progress callback; `Localizer::localize` takes image frames
+ * (`Localizer::process` takes descriptors). The image statuses throw subclasses of `Error`
+ * (`InvalidImageError`, `UninformativeImageError`, `BackendUnavailableError`, `ModelError`,
+ * `NoDescriberError`, `CancelledError`), so a stream can skip frames with
+ * `catch (const topoloc::UninformativeImageError &)`.
+ *
  * OpenCV: when OpenCV's core header is included *before* this one (so that `CV_VERSION` is
- * defined), `Localizer::process` and `MapBuilder::add_view` gain `cv::Mat` overloads.
+ * defined), `Localizer::process` and `MapBuilder::add_view` gain `cv::Mat` descriptor
+ * overloads, and `image_view(const cv::Mat &)`, `Localizer::localize(const cv::Mat &, ...)` and
+ * `Map::build_from_images(const std::vector<cv::Mat> &, ...)` take 8-bit images (CV_8UC1 grey,
+ * CV_8UC3 BGR, CV_8UC4 BGRA; any row step, so ROIs work).
  */
 
 #ifndef TOPOLOC_HPP
@@ -34,6 +45,9 @@
 #include <cstddef>
 #include <cstdint>
 #include <cstring>
+#include <exception>
+#include <functional>
+#include <limits>
 #include <memory>
 #include <optional>
 #include <stdexcept>
@@ -111,11 +125,72 @@ private:
   std::string message_;
 };
 
-/// Throws `Error::from_last(status)` unless `status` is `TOPOLOC_OK`. Use it right after a C
-/// call, before any other topoloc call on this thread.
+/// `TOPOLOC_ERR_INVALID_IMAGE`: an image buffer is unusable (size, stride, length, format), or
+/// an image file cannot be read (the message names it).
+class InvalidImageError : public Error {
+public:
+  using Error::Error;
+};
+
+/// `TOPOLOC_ERR_UNINFORMATIVE_IMAGE`: the image carries no place information (blank, constant,
+/// featureless). The frame was not localized and the localizer is unchanged: skip the frame.
+class UninformativeImageError : public Error {
+public:
+  using Error::Error;
+};
+
+/// `TOPOLOC_ERR_BACKEND_UNAVAILABLE`: ONNX Runtime or the model file is missing or cannot be
+/// loaded; the message names every path tried.
+class BackendUnavailableError : public Error {
+public:
+  using Error::Error;
+};
+
+/// `TOPOLOC_ERR_MODEL`: the model file loaded but does not work.
+class ModelError : public Error {
+public:
+  using Error::Error;
+};
+
+/// `TOPOLOC_ERR_NO_DESCRIBER`: an image frame reached a localizer that cannot describe images
+/// (a map built from descriptors, or `image_backend = TOPOLOC_BACKEND_NONE`).
+class NoDescriberError : public Error {
+public:
+  using Error::Error;
+};
+
+/// `TOPOLOC_ERR_CANCELLED`: the progress callback returned false.
+class CancelledError : public Error {
+public:
+  using Error::Error;
+};
+
+/// Throws the exception for `status` with `message`: the subclass of `Error` for the image
+/// statuses above, `Error` itself for every other status.
+[[noreturn]] inline void throw_error(topoloc_status status, std::string message) {
+  switch (status) {
+  case TOPOLOC_ERR_INVALID_IMAGE:
+    throw InvalidImageError(status, std::move(message));
+  case TOPOLOC_ERR_UNINFORMATIVE_IMAGE:
+    throw UninformativeImageError(status, std::move(message));
+  case TOPOLOC_ERR_BACKEND_UNAVAILABLE:
+    throw BackendUnavailableError(status, std::move(message));
+  case TOPOLOC_ERR_MODEL:
+    throw ModelError(status, std::move(message));
+  case TOPOLOC_ERR_NO_DESCRIBER:
+    throw NoDescriberError(status, std::move(message));
+  case TOPOLOC_ERR_CANCELLED:
+    throw CancelledError(status, std::move(message));
+  default:
+    throw Error(status, std::move(message));
+  }
+}
+
+/// Throws (see `throw_error`) with the thread's last error message unless `status` is
+/// `TOPOLOC_OK`. Use it right after a C call, before any other topoloc call on this thread.
 inline void check(topoloc_status status) {
   if (status != TOPOLOC_OK) {
-    throw Error::from_last(status);
+    throw_error(status, last_error_message());
   }
 }
 
@@ -158,6 +233,12 @@ using LocalizerOptions = topoloc_localizer_options;
 /// Parameters of `map_from_keyframes` (the C struct). Start from `default_keyframe_options()`.
 using KeyframeOptions = topoloc_keyframe_options;
 
+/// How `Map::build_from_images` / `build_from_image_files` build a map (the C struct). Start
+/// from `default_image_map_options()` (backend `TOPOLOC_BACKEND_AUTO` = ONNX; set `backend` to
+/// `TOPOLOC_BACKEND_VLAD_ORB` or `_VLAD_SIFT` for VLAD, and `dim` to at most the number of
+/// images minus one). The string fields are borrowed for the duration of the call.
+using ImageMapOptions = topoloc_image_map_options;
+
 /// Load options that accept any map (`topoloc_map_load_options_default`). Throws `Error`
 /// (`TOPOLOC_ERR_STRUCT_SIZE`) only on a header/library layout mismatch.
 inline LoadOptions default_load_options() {
@@ -179,6 +260,14 @@ inline LocalizerOptions default_localizer_options() {
 inline KeyframeOptions default_keyframe_options() {
   KeyframeOptions options;
   check(topoloc_keyframe_options_default(&options));
+  return options;
+}
+
+/// Default image map options (`topoloc_image_map_options_default`). Throws `Error`
+/// (`TOPOLOC_ERR_STRUCT_SIZE`) only on a header/library layout mismatch.
+inline ImageMapOptions default_image_map_options() {
+  ImageMapOptions options;
+  check(topoloc_image_map_options_default(&options));
   return options;
 }
 
@@ -235,6 +324,90 @@ struct Result {
   std::vector<Candidate> candidates;  ///< Top candidates, best first; `candidates[0].place == place`.
 };
 
+// ---------------------------------------------------------------------------------------------
+// Images
+// ---------------------------------------------------------------------------------------------
+
+/// A borrowed image (the C struct): `height` rows of `stride` bytes at `data`, each starting
+/// with `width` pixels of `format` (a `TOPOLOC_PIXEL_*` value); `data_len` bytes are readable.
+/// The pixels are read only during the call the image is passed to. Make one with
+/// `image_view`; a value-initialised `Image{}` means "no image" (`TOPOLOC_PIXEL_NONE`).
+using Image = topoloc_image;
+
+/// Bytes per pixel of a `TOPOLOC_PIXEL_*` format; 0 for `TOPOLOC_PIXEL_NONE` and unknown values.
+constexpr std::size_t pixel_bytes(uint32_t format) noexcept {
+  return format == TOPOLOC_PIXEL_GRAY8                                    ? 1
+         : format == TOPOLOC_PIXEL_RGB8 || format == TOPOLOC_PIXEL_BGR8   ? 3
+         : format == TOPOLOC_PIXEL_RGBA8 || format == TOPOLOC_PIXEL_BGRA8 ? 4
+                                                                          : 0;
+}
+
+/// A view of `data_len` bytes holding `width` x `height` pixels of `format` in rows `stride`
+/// bytes apart (all checked by the library when the image is used).
+inline Image image_view(const void *data, std::size_t data_len, uint32_t width, uint32_t height,
+                        uint32_t format, std::size_t stride) noexcept {
+  Image image{};
+  image.data = static_cast<const uint8_t *>(data);
+  image.data_len = data_len;
+  image.width = width;
+  image.height = height;
+  image.stride = stride;
+  image.format = format;
+  return image;
+}
+
+/// A view of `width` x `height` pixels of `format` at `data`, rows `stride` bytes apart
+/// (0 = packed rows of `width * pixel_bytes(format)`). The caller promises that
+/// `stride * (height - 1) + width * pixel_bytes(format)` bytes are readable at `data`, which
+/// becomes `data_len`. Throws `InvalidImageError` for an unknown format or a size whose byte
+/// count overflows; everything else (zero sizes, a stride shorter than a row, sizes above the
+/// library's limit) is judged by the library when the image is used.
+inline Image image_view(const void *data, uint32_t width, uint32_t height, uint32_t format,
+                        std::size_t stride = 0) {
+  const std::size_t bytes = pixel_bytes(format);
+  if (bytes == 0) {
+    throw InvalidImageError(TOPOLOC_ERR_INVALID_IMAGE,
+                            "image format " + std::to_string(format) +
+                                " is not a TOPOLOC_PIXEL_* format with pixels");
+  }
+  const std::size_t row = static_cast<std::size_t>(width) * bytes;
+  if (stride == 0) {
+    stride = row;
+  }
+  std::size_t len = 0;
+  if (width != 0 && height != 0) {
+    const std::size_t max = std::numeric_limits<std::size_t>::max();
+    if (height - 1 > 0 && stride > (max - row) / (height - 1)) {
+      throw InvalidImageError(TOPOLOC_ERR_INVALID_IMAGE,
+                              "image of " + std::to_string(height) + " rows of stride " +
+                                  std::to_string(stride) + " bytes is larger than memory");
+    }
+    len = stride * (height - 1) + row;
+  }
+  return image_view(data, len, width, height, format, stride);
+}
+
+/// One camera frame for `Localizer::process(const Frame &)`: a descriptor (used when given) or
+/// an image (described with the map's backend when `descriptor_len` is 0). Borrows everything.
+struct Frame {
+  double timestamp = 0.0;             ///< Seconds; must not decrease in filter mode.
+  const float *descriptor = nullptr;  ///< Global descriptor (`descriptor_len` floats) or null.
+  std::size_t descriptor_len = 0;     ///< The map's D, or 0 to describe `image`.
+  const double *odometry = nullptr;   ///< `previous_T_current`, 16 doubles row-major, or null.
+  Image image{};                      ///< The camera image (`TOPOLOC_PIXEL_NONE` = none).
+};
+
+/// Stage of a map build reported to a `Progress` callback.
+enum class Stage : uint32_t {
+  Describing = TOPOLOC_STAGE_DESCRIBING,  ///< Describing images: `done` of `total` images.
+  Fitting = TOPOLOC_STAGE_FITTING,        ///< Fitting the describer and assembling: 0 or 1 of 1.
+};
+
+/// Progress of a map build, called on the building thread about ten times a second: return
+/// true to go on, false to cancel (`CancelledError`). An exception thrown by the callback
+/// cancels the build and is rethrown, unchanged, by the building function.
+using Progress = std::function<bool(Stage stage, std::size_t done, std::size_t total)>;
+
 namespace detail {
 
 struct MapFree {
@@ -267,7 +440,7 @@ template <typename Call> std::string read_string(Call call) {
       return text;
     }
     if (status != TOPOLOC_ERR_BUFFER_TOO_SMALL) {
-      throw Error::from_last(status);
+      check(status);
     }
     text.assign(needed, '\0');
   }
@@ -283,12 +456,51 @@ template <typename Call> std::vector<uint32_t> read_ids(Call call) {
     return ids;  // empty
   }
   if (status != TOPOLOC_ERR_BUFFER_TOO_SMALL) {
-    throw Error::from_last(status);
+    check(status);
   }
   ids.resize(count);
   check(call(ids.data(), ids.size(), &count));
   ids.resize(count);
   return ids;
+}
+
+/// What the progress trampoline carries through the C `user_data`.
+struct ProgressContext {
+  const Progress *progress = nullptr;
+  std::exception_ptr error;  // thrown by the callback; rethrown after the C call
+};
+
+/// The C progress callback: calls the `Progress` in `user_data`. Exceptions never cross the C
+/// boundary: the first one is stored, the build is cancelled, and the callback is not called
+/// again.
+inline bool progress_trampoline(void *user_data, uint32_t stage, std::size_t done,
+                                std::size_t total) noexcept {
+  auto *context = static_cast<ProgressContext *>(user_data);
+  if (context->error) {
+    return false;
+  }
+  try {
+    return (*context->progress)(static_cast<Stage>(stage), done, total);
+  } catch (...) {
+    context->error = std::current_exception();
+    return false;
+  }
+}
+
+/// Runs a C building call `call(progress_fn, user_data, &raw)` with `progress` (may be empty),
+/// and returns the map; rethrows an exception of the callback, else throws for the status.
+template <typename Call> topoloc_map *build_with_progress(const Progress &progress, Call call) {
+  ProgressContext context;
+  context.progress = &progress;
+  topoloc_map *raw = nullptr;
+  const topoloc_status status = progress ? call(&progress_trampoline, &context, &raw)
+                                         : call(nullptr, nullptr, &raw);
+  if (context.error) {
+    topoloc_map_free(raw);  // null unless the library ignored the cancellation
+    std::rethrow_exception(context.error);
+  }
+  check(status);
+  return raw;
 }
 
 #ifdef CV_VERSION
@@ -304,6 +516,40 @@ inline std::pair<const float *, std::size_t> mat_descriptor(const cv::Mat &mat) 
 #endif
 
 }  // namespace detail
+
+#ifdef CV_VERSION
+/// A view of an 8-bit OpenCV image: CV_8UC1 (grey), CV_8UC3 (BGR, OpenCV's order) or CV_8UC4
+/// (BGRA), two-dimensional and non-empty; any row step (so ROIs of larger images work without
+/// a copy). The Mat must outlive the view's use. Other types throw `InvalidImageError`.
+inline Image image_view(const cv::Mat &mat) {
+  uint32_t format = TOPOLOC_PIXEL_NONE;
+  switch (mat.type()) {
+  case CV_8UC1:
+    format = TOPOLOC_PIXEL_GRAY8;
+    break;
+  case CV_8UC3:
+    format = TOPOLOC_PIXEL_BGR8;
+    break;
+  case CV_8UC4:
+    format = TOPOLOC_PIXEL_BGRA8;
+    break;
+  default:
+    break;
+  }
+  if (format == TOPOLOC_PIXEL_NONE || mat.dims != 2 || mat.empty()) {
+    throw InvalidImageError(
+        TOPOLOC_ERR_INVALID_IMAGE,
+        "image cv::Mat must be a non-empty 2-D CV_8UC1 (grey), CV_8UC3 (BGR) or CV_8UC4 (BGRA) "
+        "matrix, got type " + std::to_string(mat.type()) + " with " + std::to_string(mat.dims) +
+            " dimensions");
+  }
+  const std::size_t step = mat.step[0];
+  const std::size_t row = static_cast<std::size_t>(mat.cols) * mat.elemSize();
+  return image_view(mat.data, step * static_cast<std::size_t>(mat.rows - 1) + row,
+                    static_cast<uint32_t>(mat.cols), static_cast<uint32_t>(mat.rows), format,
+                    step);
+}
+#endif
 
 // ---------------------------------------------------------------------------------------------
 // Map
@@ -355,6 +601,65 @@ public:
   static Map from_memory(const std::vector<uint8_t> &bytes,
                          const LoadOptions &options = default_load_options()) {
     return from_memory(bytes.data(), bytes.size(), options);
+  }
+
+  /// Builds a map from `count` images in memory (`topoloc_map_build_from_images`): every image
+  /// is described (in parallel), the describer is fitted on all of them and stored in the map,
+  /// so localizers on it accept image frames (`Localizer::localize`). Without poses the map is
+  /// a sequence: `options.views_per_place` consecutive images per place, places chained in
+  /// order; view `i` has keyframe id `i`. `progress` (may be empty) is called on this thread;
+  /// returning false throws `CancelledError`, and an exception it throws cancels the build and
+  /// is rethrown here. The pixels are read only during the call.
+  /// Throws `InvalidImageError` (a bad buffer; the message names `images[i]`),
+  /// `BackendUnavailableError`, `ModelError`, `CancelledError`, `Error` (`_INVALID_ARGUMENT`:
+  /// fewer than 2 images or bad options; `_IO`: poses file; `_STRUCT_SIZE`).
+  static Map build_from_images(const Image *images, std::size_t count,
+                               const ImageMapOptions &options = default_image_map_options(),
+                               const Progress &progress = Progress()) {
+    return Map(detail::build_with_progress(
+        progress, [&](topoloc_progress_fn fn, void *user_data, topoloc_map **out) {
+          return topoloc_map_build_from_images(images, count, &options, fn, user_data, out);
+        }));
+  }
+
+  /// `build_from_images` over a vector of image views.
+  static Map build_from_images(const std::vector<Image> &images,
+                               const ImageMapOptions &options = default_image_map_options(),
+                               const Progress &progress = Progress()) {
+    return build_from_images(images.data(), images.size(), options, progress);
+  }
+
+#ifdef CV_VERSION
+  /// `build_from_images` over 8-bit OpenCV images (see `image_view(const cv::Mat &)`; another
+  /// type throws `InvalidImageError`).
+  static Map build_from_images(const std::vector<cv::Mat> &images,
+                               const ImageMapOptions &options = default_image_map_options(),
+                               const Progress &progress = Progress()) {
+    std::vector<Image> views;
+    views.reserve(images.size());
+    for (const cv::Mat &mat : images) {
+      views.push_back(image_view(mat));
+    }
+    return build_from_images(views.data(), views.size(), options, progress);
+  }
+#endif
+
+  /// Builds a map from image files (any format OpenCV reads), like `build_from_images`; views
+  /// also record their file's path (`view_image`). Throws `InvalidImageError` for a missing or
+  /// unreadable file (the message names it), and the errors of `build_from_images`.
+  static Map build_from_image_files(const std::vector<std::string> &paths,
+                                    const ImageMapOptions &options = default_image_map_options(),
+                                    const Progress &progress = Progress()) {
+    std::vector<const char *> c_paths;
+    c_paths.reserve(paths.size());
+    for (const std::string &path : paths) {
+      c_paths.push_back(path.c_str());
+    }
+    return Map(detail::build_with_progress(
+        progress, [&](topoloc_progress_fn fn, void *user_data, topoloc_map **out) {
+          return topoloc_map_build_from_image_files(c_paths.data(), c_paths.size(), &options, fn,
+                                                    user_data, out);
+        }));
   }
 
   /// Saves the map to `path` atomically (temporary file, fsync, rename). Throws `Error`
@@ -647,8 +952,14 @@ public:
   Localizer() noexcept = default;
 
   /// Creates a localizer on `map`. The candidate buffer holds min(options.top_k, places)
-  /// entries. Throws `Error` (`TOPOLOC_ERR_INVALID_OPTION`, `_DESCRIPTOR_MISMATCH`,
-  /// `_STRUCT_SIZE`, `_NULL_ARGUMENT` for an empty map).
+  /// entries. With `options.image_backend` `TOPOLOC_BACKEND_AUTO` (the default) and a map built
+  /// from images, the map's describer is loaded now, so that `localize` accepts images (for
+  /// ONNX: the runtime and model, from `options.onnx_runtime_path` / `onnx_model_path` or the
+  /// defaults); `TOPOLOC_BACKEND_NONE` never loads one (descriptor frames only).
+  /// Throws `Error` (`TOPOLOC_ERR_INVALID_OPTION`, `_DESCRIPTOR_MISMATCH` also for another
+  /// backend or model than the map's, `_STRUCT_SIZE`, `_NULL_ARGUMENT` for an empty map),
+  /// `BackendUnavailableError` (paths tried in the message), `ModelError`, `NoDescriberError`
+  /// (a backend was required but the map stores none).
   explicit Localizer(const Map &map,
                      const LocalizerOptions &options = default_localizer_options()) {
     topoloc_localizer *raw = nullptr;
@@ -700,11 +1011,23 @@ public:
   /// Cost: one pass over the map's descriptors plus O(places + edges); no allocation.
   const Result &process(const float *descriptor, std::size_t len, double timestamp,
                         const double *odometry = nullptr) {
-    topoloc_frame frame = frame_template_;
+    Frame frame;
     frame.timestamp = timestamp;
     frame.descriptor = descriptor;
     frame.descriptor_len = len;
     frame.odometry = odometry;
+    return process(frame);
+  }
+
+  /// Localizes one frame, of a descriptor or of an image (see `Frame`): the general form of
+  /// `process` and `localize`, with the same result lifetime and errors as both.
+  const Result &process(const Frame &input) {
+    topoloc_frame frame = frame_template_;
+    frame.timestamp = input.timestamp;
+    frame.descriptor = input.descriptor;
+    frame.descriptor_len = input.descriptor_len;
+    frame.odometry = input.odometry;
+    frame.image = input.image;
     topoloc_result raw = result_template_;
     raw.candidates = buffer_.empty() ? nullptr : buffer_.data();
     raw.candidates_capacity = buffer_.size();
@@ -741,6 +1064,37 @@ public:
                         const double *odometry = nullptr) {
     const auto d = detail::mat_descriptor(descriptor);
     return process(d.first, d.second, timestamp, odometry);
+  }
+#endif
+
+  /// Localizes one camera image (see `image_view`), described with the map's own backend; the
+  /// localizer needs a describer (see the constructor). Same result lifetime as `process`.
+  /// Throws `UninformativeImageError` for a blank, constant or featureless image (the frame is
+  /// skipped: state, frame count and last result unchanged, so just go on with the next
+  /// frame), `InvalidImageError` for an unusable buffer, `NoDescriberError`, `ModelError`, and
+  /// the `Error`s of `process` (`_TIMESTAMP`, `_INVALID_ARGUMENT` for non-rigid odometry, ...).
+  /// Cost: describing the image, then as `process`.
+  const Result &localize(const Image &image, double timestamp,
+                         const double *odometry = nullptr) {
+    Frame frame;
+    frame.timestamp = timestamp;
+    frame.odometry = odometry;
+    frame.image = image;
+    return process(frame);
+  }
+
+  /// `localize` with odometry as a `Pose` (`previous_T_current`).
+  const Result &localize(const Image &image, double timestamp, const Pose &odometry) {
+    return localize(image, timestamp, odometry.data());
+  }
+
+#ifdef CV_VERSION
+  /// `localize` of an 8-bit OpenCV image: CV_8UC1 grey, CV_8UC3 BGR or CV_8UC4 BGRA, any row
+  /// step (ROIs work without a copy); other types throw `InvalidImageError`. (`process` with a
+  /// cv::Mat takes a CV_32F descriptor instead.)
+  const Result &localize(const cv::Mat &image, double timestamp,
+                         const double *odometry = nullptr) {
+    return localize(image_view(image), timestamp, odometry);
   }
 #endif
 

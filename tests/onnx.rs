@@ -25,13 +25,58 @@ fn a_missing_model_names_the_path_tried() {
     }
 }
 
-#[test]
-fn the_default_model_gives_per_level_normalised_deterministic_vectors() {
-    if !cache_dir().join(DEFAULT_MODEL_FILE).is_file() {
+/// The default model from the cache, or `None` (and a note) when set-up has not run.
+fn cached_model() -> Option<std::path::PathBuf> {
+    let path = cache_dir().join(DEFAULT_MODEL_FILE);
+    if path.is_file() {
+        Some(path)
+    } else {
         eprintln!(
             "skipped: no model in {} (run scripts/setup-models.sh)",
             cache_dir().display()
         );
+        None
+    }
+}
+
+fn expect_runtime_unavailable(options: OnnxOptions, path: &str, hint_has: &str) {
+    match OnnxMlf::new(options) {
+        Err(DescribeError::BackendUnavailable { what, tried, hint }) => {
+            assert_eq!(what, "ONNX Runtime");
+            assert_eq!(tried, vec![std::path::PathBuf::from(path)]);
+            assert!(hint.contains(hint_has), "{hint}");
+        }
+        Err(other) => panic!("expected BackendUnavailable, got {other}"),
+        Ok(_) => panic!("expected BackendUnavailable, got a backend"),
+    }
+}
+
+#[test]
+fn an_explicit_runtime_path_is_the_only_one_tried() {
+    let Some(model) = cached_model() else { return };
+    // A missing explicit library is an error, never a silent fall-back to the cached one.
+    let missing = "/nonexistent/libonnxruntime.so";
+    let options = |runtime: &str| OnnxOptions {
+        model: Some(model.clone()),
+        runtime: Some(runtime.into()),
+        ..Default::default()
+    };
+    expect_runtime_unavailable(options(missing), missing, "does not exist");
+    // Once the runtime is loaded (from the cache), another library cannot be loaded as well.
+    OnnxMlf::new(OnnxOptions {
+        model: Some(model.clone()),
+        ..Default::default()
+    })
+    .expect("runtime from the cache");
+    let other = model.to_str().unwrap();
+    expect_runtime_unavailable(options(other), other, "only once per process");
+    // The missing path still fails the same way after the load.
+    expect_runtime_unavailable(options(missing), missing, "does not exist");
+}
+
+#[test]
+fn the_default_model_gives_per_level_normalised_deterministic_vectors() {
+    if cached_model().is_none() {
         return;
     }
     let mut backend =

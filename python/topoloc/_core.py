@@ -574,14 +574,16 @@ class Map(_Handle):
         ``"rgb"`` for 3 channels and ``"rgba"`` for 4. Arrays with contiguous rows are read in
         place (crops included), others are copied. The pixels are only read during the call.
 
-        Every image is described with ``backend`` in parallel (``threads``, 0 = one per core):
+        Every image is described with ``backend`` in parallel (``threads``, 0 = one per core,
+        at most 256; the threads end before the call returns):
         ``"onnx"`` (a CNN run by ONNX Runtime; ``onnx_model_path`` / ``onnx_runtime_path``
         default to the cache filled by ``scripts/setup-models.sh``, ``onnx_taps`` names the
         outputs pooled on a ``grid_rows`` x ``grid_cols`` grid), ``"vlad-orb"`` or
         ``"vlad-sift"`` (VLAD of OpenCV local features, ``vlad_clusters`` words, on a dense
         keypoint grid unless ``vlad_dense=False``; no learned weights). A PCA to ``dim``
-        dimensions (at most the number of images minus one) is fitted on all of them. Without ``poses_tum_path``, every ``views_per_place``
-        consecutive images form a place and places are chained in order; with a TUM trajectory
+        dimensions is fitted on all of them; with fewer than ``dim + 1`` images, ``dim`` becomes
+        the number of images minus one (``Map.dim`` tells). Without ``poses_tum_path``, every
+        ``views_per_place`` consecutive images form a place and places are chained in order; with a TUM trajectory
         (one pose per image, same order), places are made by ``place_spacing_m`` and hold at
         most ``views_per_place`` views. View ``v`` records its image index as keyframe id.
         Options left as ``None`` take the library defaults.

@@ -84,7 +84,16 @@ impl<'a> ImageView<'a> {
                 self.stride, self.width
             ));
         }
-        let needed = self.stride * (self.height as usize - 1) + row;
+        let Some(needed) = self
+            .stride
+            .checked_mul(self.height as usize - 1)
+            .and_then(|rows| rows.checked_add(row))
+        else {
+            return bad(format!(
+                "stride {} times {} rows overflows the address space",
+                self.stride, self.height
+            ));
+        };
         if self.data.len() < needed {
             return bad(format!(
                 "buffer holds {} bytes, a {}x{} image with stride {} needs {needed}",

@@ -10,7 +10,7 @@ use ort::session::Session;
 use ort::value::TensorRef;
 use sha2::{Digest, Sha256};
 use std::path::{Path, PathBuf};
-use std::sync::OnceLock;
+use std::sync::{Mutex, OnceLock};
 
 /// ImageNet normalisation of the default backbone (torchvision MobileNetV2), RGB order.
 const MEAN: [f32; 3] = [0.485, 0.456, 0.406];
@@ -60,13 +60,13 @@ pub fn cache_dir() -> PathBuf {
         })
 }
 
-/// Candidate paths of the ONNX Runtime library, in the order they are tried.
+/// Candidate paths of the ONNX Runtime library, in the order they are tried. A configured path
+/// (the option, else `TOPOLOC_ORT_LIBRARY`, else `ORT_DYLIB_PATH`) is the only candidate: asking
+/// for a library and silently getting another would hide a set-up mistake. Without one, the
+/// libraries `scripts/setup-models.sh` put in the cache are tried.
 fn runtime_candidates(explicit: Option<&Path>) -> Vec<PathBuf> {
-    let mut out: Vec<PathBuf> = explicit.map(Path::to_path_buf).into_iter().collect();
-    for var in ["TOPOLOC_ORT_LIBRARY", "ORT_DYLIB_PATH"] {
-        if let Some(p) = std::env::var_os(var) {
-            out.push(PathBuf::from(p));
-        }
+    if let Some(path) = configured_runtime(explicit) {
+        return vec![path];
     }
     let dir = cache_dir().join("onnxruntime");
     let mut cached: Vec<PathBuf> = std::fs::read_dir(&dir)
@@ -83,41 +83,83 @@ fn runtime_candidates(explicit: Option<&Path>) -> Vec<PathBuf> {
     if cached.is_empty() {
         cached.push(dir.join("libonnxruntime.so.<version>"));
     }
-    out.extend(cached);
-    out
+    cached
 }
 
-/// The process-wide ONNX Runtime environment: the runtime library can be loaded once per process.
+/// The runtime library the caller configured: the option, else `TOPOLOC_ORT_LIBRARY`, else
+/// `ORT_DYLIB_PATH`; `None` when none is set.
+fn configured_runtime(explicit: Option<&Path>) -> Option<PathBuf> {
+    explicit.map(Path::to_path_buf).or_else(|| {
+        ["TOPOLOC_ORT_LIBRARY", "ORT_DYLIB_PATH"]
+            .iter()
+            .find_map(|var| std::env::var_os(var).filter(|v| !v.is_empty()))
+            .map(PathBuf::from)
+    })
+}
+
+/// The ONNX Runtime loaded in this process, and from where.
+struct LoadedRuntime {
+    path: PathBuf,
+    environment: ort::environment::Environment,
+}
+
+/// The process-wide ONNX Runtime environment. The runtime library can be loaded once per
+/// process: a later request for a different configured library fails rather than silently
+/// using the first. Failed loads are not remembered, so a corrected path works on retry.
 fn environment(
     explicit: Option<&Path>,
 ) -> Result<&'static ort::environment::Environment, DescribeError> {
-    static ENVIRONMENT: OnceLock<Result<ort::environment::Environment, String>> = OnceLock::new();
+    static RUNTIME: OnceLock<LoadedRuntime> = OnceLock::new();
+    static LOADING: Mutex<()> = Mutex::new(());
+    let configured = configured_runtime(explicit);
     let tried = runtime_candidates(explicit);
-    let result = ENVIRONMENT.get_or_init(|| {
-        let Some(path) = tried.iter().find(|p| p.is_file()) else {
-            return Err(String::new());
-        };
-        ort::init_from(path)
-            .map_err(|e| format!("loading {}: {e}", path.display()))?
-            .build()
-            .map_err(|e| {
-                format!(
-                    "creating the ONNX Runtime environment from {}: {e}",
-                    path.display()
-                )
+    let unavailable = |hint: String| DescribeError::BackendUnavailable {
+        what: "ONNX Runtime".into(),
+        tried: tried.clone(),
+        hint,
+    };
+    let Some(path) = tried.iter().find(|p| p.is_file()) else {
+        return Err(unavailable(if configured.is_some() {
+            "the configured ONNX Runtime library does not exist (option, TOPOLOC_ORT_LIBRARY or \
+             ORT_DYLIB_PATH, in that order)"
+                .into()
+        } else {
+            "run scripts/setup-models.sh, or pass the library path (option or TOPOLOC_ORT_LIBRARY)"
+                .into()
+        }));
+    };
+    let _serialised = LOADING
+        .lock()
+        .unwrap_or_else(|poisoned| poisoned.into_inner());
+    let loaded = match RUNTIME.get() {
+        Some(loaded) => loaded,
+        None => {
+            let environment = ort::init_from(path)
+                .map_err(|e| unavailable(format!("loading {}: {e}", path.display())))?
+                .build()
+                .map_err(|e| {
+                    unavailable(format!(
+                        "creating the ONNX Runtime environment from {}: {e}",
+                        path.display()
+                    ))
+                })?;
+            RUNTIME.get_or_init(|| LoadedRuntime {
+                path: path.clone(),
+                environment,
             })
-    });
-    match result {
-        Ok(env) => Ok(env),
-        Err(reason) => Err(DescribeError::BackendUnavailable {
-            what: "ONNX Runtime".into(),
-            tried,
-            hint: if reason.is_empty() {
-                "run scripts/setup-models.sh, or pass the library path (option or TOPOLOC_ORT_LIBRARY)".into()
-            } else {
-                reason.clone()
-            },
-        }),
+        }
+    };
+    let same_library =
+        || std::fs::canonicalize(path).ok() == std::fs::canonicalize(&loaded.path).ok();
+    if configured.is_none() || same_library() {
+        Ok(&loaded.environment)
+    } else {
+        Err(unavailable(format!(
+            "this process already loaded ONNX Runtime from {}; it can be loaded only once per \
+             process, so {} cannot be used",
+            loaded.path.display(),
+            path.display()
+        )))
     }
 }
 

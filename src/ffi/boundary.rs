@@ -400,47 +400,70 @@ pub(crate) fn write_array<T: Copy>(
 /// Structs passed across the ABI whose first field is `struct_size`, so that fields can be
 /// appended in later versions.
 pub(crate) trait Versioned: Copy {
-    /// Size of the first published layout: callers must pass at least this much.
-    const MIN_SIZE: usize;
+    /// Sizes of the published layouts, oldest first; the last is `size_of::<Self>()`.
+    const LAYOUTS: &'static [usize];
 }
 
-/// Reads a versioned struct written by the caller: `struct_size` must be at least the first
-/// published size; fields beyond the caller's `struct_size` keep their values from `defaults`.
+/// How many bytes of a caller's struct of `size` bytes this library reads or writes: the size of
+/// the newest layout it knows when the caller's is that or larger (a newer caller), else the
+/// caller's size, which must then be a published layout. Sizes below the first layout, or
+/// between two layouts (they would cut a field in two), are refused with
+/// `TOPOLOC_ERR_STRUCT_SIZE`.
+fn layout_bytes<T: Versioned>(size: usize, name: &str) -> Result<usize, FfiError> {
+    let newest = std::mem::size_of::<T>();
+    if size >= newest {
+        return Ok(newest);
+    }
+    if T::LAYOUTS.contains(&size) {
+        return Ok(size);
+    }
+    let reason = if size < T::LAYOUTS[0] {
+        format!("at least {} expected", T::LAYOUTS[0])
+    } else {
+        format!("not a published layout ({:?} or more)", T::LAYOUTS)
+    };
+    Err(FfiError::new(
+        TOPOLOC_ERR_STRUCT_SIZE,
+        format!(
+            "'{name}'.struct_size is {size}, {reason}; initialise it with its _default() function"
+        ),
+    ))
+}
+
+/// Reads a versioned struct written by the caller: `struct_size` must be a published layout
+/// size or larger ([`layout_bytes`]); fields beyond the caller's layout keep their values from
+/// `defaults`.
 pub(crate) fn read_versioned<T: Versioned>(
     ptr: *const T,
     defaults: T,
     name: &str,
 ) -> Result<T, FfiError> {
-    let size = struct_size_of(ptr, name)?;
+    let copy = struct_size_of(ptr, name)?;
     let mut value = defaults;
-    let copy = size.min(std::mem::size_of::<T>());
-    // SAFETY: the caller's struct is at least `copy` bytes long (it says so in struct_size),
-    // and `value` is a T, so the first `copy` bytes of both are valid to copy.
+    // SAFETY: the caller's struct is at least `copy` bytes long (its struct_size says so), `copy`
+    // ends on a field boundary of T, and `value` is a T, so the first `copy` bytes of both are
+    // valid to copy.
     unsafe {
         std::ptr::copy_nonoverlapping(ptr.cast::<u8>(), (&mut value as *mut T).cast::<u8>(), copy)
     };
     Ok(value)
 }
 
-/// Reads and checks the leading `struct_size` field of a caller's versioned struct.
+/// Reads the leading `struct_size` field of a caller's versioned struct and returns how many of
+/// its bytes this library uses ([`layout_bytes`]).
 pub(crate) fn struct_size_of<T: Versioned>(ptr: *const T, name: &str) -> Result<usize, FfiError> {
     if ptr.is_null() {
         return Err(FfiError::null(name));
     }
     // SAFETY: every versioned struct starts with a `size_t struct_size`.
     let size = unsafe { ptr.cast::<usize>().read_unaligned() };
-    if size < T::MIN_SIZE {
-        return Err(FfiError::new(
-            TOPOLOC_ERR_STRUCT_SIZE,
-            format!("'{name}'.struct_size is {size}, at least {} expected; initialise it with its _default() function", T::MIN_SIZE),
-        ));
-    }
-    Ok(size)
+    layout_bytes::<T>(size, name)
 }
 
 /// Body of the `*_init(ptr, size)` functions behind the header's `*_default(ptr)` macros:
-/// writes the first `min(size, sizeof(T))` bytes of `T::default()` and sets `struct_size` to that
-/// count, so that a library newer than the caller's header never writes past the caller's struct.
+/// writes `T::default()` up to the layout `size` allows ([`layout_bytes`]) and sets
+/// `struct_size` to that count, so that a library newer than the caller's header never writes
+/// past the caller's struct.
 pub(crate) fn init_versioned<T: Versioned + Default>(
     ptr: *mut T,
     size: usize,
@@ -448,16 +471,7 @@ pub(crate) fn init_versioned<T: Versioned + Default>(
 ) -> topoloc_status {
     run(|| {
         check_out(ptr, name)?;
-        if size < T::MIN_SIZE {
-            return Err(FfiError::new(
-                TOPOLOC_ERR_STRUCT_SIZE,
-                format!(
-                    "size {size} is below the smallest published layout ({} bytes)",
-                    T::MIN_SIZE
-                ),
-            ));
-        }
-        let written = size.min(std::mem::size_of::<T>());
+        let written = layout_bytes::<T>(size, name)?;
         let value = T::default();
         // SAFETY: the caller provides `size >= written` writable bytes at `ptr`; `value` is a T of
         // at least `written` bytes; every versioned struct starts with a `size_t struct_size`.
@@ -473,15 +487,20 @@ pub(crate) fn init_versioned<T: Versioned + Default>(
     })
 }
 
-/// Writes an output struct into the caller's storage, at most the caller's `struct_size` bytes
-/// (checked to be at least the first published size) and keeping that `struct_size`.
+/// Writes an output struct into the caller's storage, up to the caller's layout
+/// ([`layout_bytes`]) and keeping the caller's `struct_size`.
 pub(crate) fn write_versioned<T: Versioned>(
     ptr: *mut T,
     value: T,
     name: &str,
 ) -> Result<(), FfiError> {
-    let size = struct_size_of(ptr as *const T, name)?;
-    let written = size.min(std::mem::size_of::<T>());
+    // SAFETY: every versioned struct starts with a `size_t struct_size`.
+    let size = if ptr.is_null() {
+        0
+    } else {
+        unsafe { ptr.cast::<usize>().read_unaligned() }
+    };
+    let written = struct_size_of(ptr as *const T, name)?;
     // SAFETY: the caller's struct is `size >= written` bytes long (its struct_size says so).
     unsafe {
         std::ptr::copy_nonoverlapping((&value as *const T).cast::<u8>(), ptr.cast::<u8>(), written);

@@ -98,7 +98,7 @@ pub struct topoloc_view_attributes {
 }
 
 impl Versioned for topoloc_view_attributes {
-    const MIN_SIZE: usize = std::mem::size_of::<Self>();
+    const LAYOUTS: &'static [usize] = &[std::mem::size_of::<Self>()];
 }
 
 impl Default for topoloc_view_attributes {
@@ -218,7 +218,7 @@ pub struct topoloc_keyframe_options {
 }
 
 impl Versioned for topoloc_keyframe_options {
-    const MIN_SIZE: usize = std::mem::size_of::<Self>();
+    const LAYOUTS: &'static [usize] = &[std::mem::size_of::<Self>()];
 }
 
 impl Default for topoloc_keyframe_options {

@@ -135,12 +135,14 @@ pub struct topoloc_image_map_options {
     pub struct_size: usize,
     /// `TOPOLOC_BACKEND_ONNX` (also for `_AUTO`, the default), `_VLAD_ORB` or `_VLAD_SIFT`.
     pub backend: u32,
-    /// Descriptor dimension D (at most the number of images minus one). Default 512.
+    /// Descriptor dimension D; with fewer than D + 1 images it becomes the number of images
+    /// minus one (`topoloc_map_dim` tells). Default 512.
     pub dim: u32,
     /// Without poses: consecutive images per place (1, or 4 for yaw views); with poses: most
     /// views per place. Default 1.
     pub views_per_place: u32,
-    /// Describing threads; 0 = one per core. Default 0.
+    /// Describing threads; 0 = one per core, at most 256 (more: `TOPOLOC_ERR_INVALID_ARGUMENT`).
+    /// They are joined before the build returns. Default 0.
     pub threads: u32,
     /// ONNX model file; NULL or "" = the cache's default (scripts/setup-models.sh).
     pub onnx_model_path: *const c_char,
@@ -163,7 +165,7 @@ pub struct topoloc_image_map_options {
 }
 
 impl Versioned for topoloc_image_map_options {
-    const MIN_SIZE: usize = std::mem::size_of::<Self>();
+    const LAYOUTS: &'static [usize] = &[std::mem::size_of::<Self>()];
 }
 
 impl Default for topoloc_image_map_options {

@@ -68,8 +68,11 @@ pub struct topoloc_localizer_options {
 }
 
 impl Versioned for topoloc_localizer_options {
-    /// The ABI 1.0 layout ended before `image_backend`.
-    const MIN_SIZE: usize = std::mem::offset_of!(Self, image_backend);
+    /// ABI 1.0 ended before `image_backend`; 1.1 added the image fields.
+    const LAYOUTS: &'static [usize] = &[
+        std::mem::offset_of!(Self, image_backend),
+        std::mem::size_of::<Self>(),
+    ];
 }
 
 impl Default for topoloc_localizer_options {
@@ -233,8 +236,11 @@ pub struct topoloc_frame {
 }
 
 impl Versioned for topoloc_frame {
-    /// The ABI 1.0 layout ended before `image`.
-    const MIN_SIZE: usize = std::mem::offset_of!(Self, image);
+    /// ABI 1.0 ended before `image`; 1.1 added it.
+    const LAYOUTS: &'static [usize] = &[
+        std::mem::offset_of!(Self, image),
+        std::mem::size_of::<Self>(),
+    ];
 }
 
 impl Default for topoloc_frame {
@@ -303,7 +309,7 @@ pub struct topoloc_result {
 }
 
 impl Versioned for topoloc_result {
-    const MIN_SIZE: usize = std::mem::size_of::<Self>();
+    const LAYOUTS: &'static [usize] = &[std::mem::size_of::<Self>()];
 }
 
 impl Default for topoloc_result {

@@ -40,7 +40,7 @@ pub struct topoloc_map_load_options {
 }
 
 impl Versioned for topoloc_map_load_options {
-    const MIN_SIZE: usize = std::mem::size_of::<Self>();
+    const LAYOUTS: &'static [usize] = &[std::mem::size_of::<Self>()];
 }
 
 impl Default for topoloc_map_load_options {
@@ -317,7 +317,7 @@ pub struct topoloc_view_info {
 }
 
 impl Versioned for topoloc_view_info {
-    const MIN_SIZE: usize = std::mem::size_of::<Self>();
+    const LAYOUTS: &'static [usize] = &[std::mem::size_of::<Self>()];
 }
 
 impl Default for topoloc_view_info {

@@ -149,6 +149,67 @@ fn struct_size_is_checked_and_defaults_fill_it() {
 }
 
 #[test]
+fn a_struct_size_between_published_layouts_is_refused() {
+    // ABI 1.0 frames ended before `image`; a size inside `image` would cut its fields in two.
+    let v1_0 = std::mem::offset_of!(topoloc_frame, image);
+    let v1_1 = std::mem::size_of::<topoloc_frame>();
+    let mut frame = topoloc_frame::default();
+    for (size, expected, written) in [
+        (v1_0 - 1, TOPOLOC_ERR_STRUCT_SIZE, None),
+        (v1_0, TOPOLOC_OK, Some(v1_0)),
+        (v1_0 + 8, TOPOLOC_ERR_STRUCT_SIZE, None),
+        (v1_1 - 1, TOPOLOC_ERR_STRUCT_SIZE, None),
+        (v1_1, TOPOLOC_OK, Some(v1_1)),
+        (v1_1 + 64, TOPOLOC_OK, Some(v1_1)), // a newer caller: the known layout is filled
+    ] {
+        frame.struct_size = 12345;
+        // The struct is large enough for every size below v1_1; larger sizes are only written up
+        // to v1_1 by the library, which is what this checks.
+        assert_eq!(
+            topoloc_frame_init(&mut frame, size),
+            expected,
+            "size {size}"
+        );
+        let after = written.unwrap_or(12345);
+        assert_eq!(frame.struct_size, after, "size {size}");
+    }
+    // Reading follows the same rule: a cut layout is refused before any field is used.
+    let map = small_map();
+    let mut localizer = null_mut();
+    assert_eq!(
+        topoloc_localizer_new(map, null(), &mut localizer),
+        TOPOLOC_OK
+    );
+    let mut result = topoloc_result::default();
+    let descriptor = [1.0f32, 0.0, 0.0, 0.0];
+    let frame = topoloc_frame {
+        struct_size: v1_0 + 8,
+        descriptor: descriptor.as_ptr(),
+        descriptor_len: 4,
+        ..Default::default()
+    };
+    assert_eq!(
+        topoloc_localizer_process(localizer, &frame, &mut result),
+        TOPOLOC_ERR_STRUCT_SIZE
+    );
+    assert!(
+        last_error().contains("not a published layout"),
+        "{}",
+        last_error()
+    );
+    let frame = topoloc_frame {
+        struct_size: v1_0,
+        ..frame
+    };
+    assert_eq!(
+        topoloc_localizer_process(localizer, &frame, &mut result),
+        TOPOLOC_OK
+    );
+    topoloc_localizer_free(localizer);
+    topoloc_map_free(map);
+}
+
+#[test]
 fn process_leaves_result_untouched_on_error_and_fills_candidates() {
     let map = small_map();
     let mut localizer = null_mut();

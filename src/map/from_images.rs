@@ -29,7 +29,8 @@ pub struct ImageMapOptions {
     pub views_per_place: usize,
     /// Place spacing and merging when poses are given.
     pub keyframes: KeyframeOptions,
-    /// Worker threads describing images; 0 means one per core.
+    /// Worker threads describing images; 0 means one per core, at most
+    /// [`MAX_BUILD_THREADS`]. They are joined before the build returns.
     pub threads: usize,
 }
 
@@ -44,6 +45,9 @@ impl Default for ImageMapOptions {
         }
     }
 }
+
+/// The most describing threads a build accepts ([`ImageMapOptions::threads`]).
+pub const MAX_BUILD_THREADS: usize = 256;
 
 /// Where an image comes from.
 #[derive(Clone, Copy, Debug)]
@@ -127,6 +131,13 @@ pub fn build_from_images(
             ))
             .into());
         }
+    }
+    if options.threads > MAX_BUILD_THREADS {
+        return Err(MapError::InvalidArgument(format!(
+            "threads is {}, must lie in 0..={MAX_BUILD_THREADS} (0 = one per core)",
+            options.threads
+        ))
+        .into());
     }
     if !(1..=64).contains(&options.views_per_place) {
         return Err(MapError::InvalidArgument(format!(
@@ -234,12 +245,8 @@ fn describe_in_parallel(
     let total = images.len();
     let done = AtomicUsize::new(0);
     let cancelled = AtomicBool::new(false);
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(options.threads)
-        .build()
-        .map_err(|e| DescribeError::InvalidArgument(format!("thread pool: {e}")))?;
     let spare = std::sync::Mutex::new(Some(first));
-    let work = || {
+    let work = |pool: &rayon::ThreadPool| {
         pool.install(|| {
             images
                 .par_iter()
@@ -272,12 +279,21 @@ fn describe_in_parallel(
                 .collect::<Result<Vec<_>, _>>()
         })
     };
+    // The pool is scoped: its workers are joined before `build_scoped` returns, so no thread of
+    // ours outlives the build (a C host may unload the library right after it).
+    let run_pool = || {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(options.threads)
+            .build_scoped(|thread| thread.run(), work)
+            .map_err(|e| DescribeError::InvalidArgument(format!("thread pool: {e}")))?
+    };
     std::thread::scope(|scope| {
-        let handle = scope.spawn(work);
+        let handle = scope.spawn(run_pool);
         let mut last = usize::MAX;
         while !handle.is_finished() {
             let now = done.load(Ordering::Relaxed);
-            if now != last {
+            // After the callback asked to stop, it is not called again.
+            if now != last && !cancelled.load(Ordering::Relaxed) {
                 last = now;
                 if !progress(BuildStage::Describing, now, total) {
                     cancelled.store(true, Ordering::Relaxed);

@@ -11,6 +11,11 @@
  * each, DIM-dimensional descriptors from a fixed-seed generator. Views of one place are close to
  * each other, views of different places nearly orthogonal, and frames are noisy copies of views,
  * so the right answer is known for every frame.
+ *
+ * Images (the last section): maps built with the VLAD backend from small synthetic grey images
+ * in memory and in PGM files, image frames of "revisits", bad and uninformative images, progress
+ * and cancellation. The ONNX checks that need the model run only when scripts/setup-models.sh
+ * has installed it, and not under valgrind.
  */
 #define _POSIX_C_SOURCE 200809L
 
@@ -24,6 +29,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <time.h>
 #include <unistd.h>
 
 /* ------------------------------------------------------------------------------------------ */
@@ -114,6 +120,22 @@ static void check_null_impl(topoloc_status got, const char *name, const char *ex
 
 /* Checks that a failed call left a non-empty message. */
 #define CHECK_HAS_MESSAGE() CHECK(last_error()[0] != '\0')
+
+/* Checks a map's place, view and edge counts (each a check of its own). */
+static void check_counts_impl(const topoloc_map *map, size_t places, size_t views, size_t edges,
+                              const char *file, int line)
+{
+    size_t n = 0;
+    check_status_impl(topoloc_map_place_count(map, &n), TOPOLOC_OK, "place_count", file, line);
+    check_impl(n == places, "place count", file, line);
+    check_status_impl(topoloc_map_view_count(map, &n), TOPOLOC_OK, "view_count", file, line);
+    check_impl(n == views, "view count", file, line);
+    check_status_impl(topoloc_map_edge_count(map, &n), TOPOLOC_OK, "edge_count", file, line);
+    check_impl(n == edges, "edge count", file, line);
+}
+
+#define CHECK_COUNTS(map, places, views, edges)                                                    \
+    check_counts_impl((map), (places), (views), (edges), __FILE__, __LINE__)
 
 static void section(const char *name)
 {
@@ -380,9 +402,16 @@ static void test_status_str(void)
         TOPOLOC_ERR_ZERO_DESCRIPTOR,
         TOPOLOC_ERR_TIMESTAMP,
         TOPOLOC_ERR_INVALID_OPTION,
+        TOPOLOC_ERR_INVALID_IMAGE,
+        TOPOLOC_ERR_UNINFORMATIVE_IMAGE,
+        TOPOLOC_ERR_BACKEND_UNAVAILABLE,
+        TOPOLOC_ERR_MODEL,
+        TOPOLOC_ERR_NO_DESCRIBER,
+        TOPOLOC_ERR_CANCELLED,
         TOPOLOC_ERR_PANIC,
     };
-    static const uint32_t unknown[] = {6u, 99u, 110u, 199u, 205u, 899u, 901u, 65536u, 0xFFFFFFFFu};
+    static const uint32_t unknown[] = {6u,   99u,  110u, 199u, 205u,   299u,
+                                       306u, 899u, 901u, 65536u, 0xFFFFFFFFu};
     const size_t n_known = sizeof known / sizeof known[0];
     size_t i, j;
     section("topoloc_status_str");
@@ -413,12 +442,7 @@ static void check_world_accessors(const topoloc_map *map)
     char text[128];
     size_t n_neighbours[PLACES] = {0};
 
-    CHECK_OK(topoloc_map_place_count(map, &count));
-    CHECK(count == PLACES);
-    CHECK_OK(topoloc_map_view_count(map, &count));
-    CHECK(count == VIEWS);
-    CHECK_OK(topoloc_map_edge_count(map, &count));
-    CHECK(count == EDGES);
+    CHECK_COUNTS(map, PLACES, VIEWS, EDGES);
     CHECK_OK(topoloc_map_descriptor_dim(map, &dim));
     CHECK(dim == DIM);
 
@@ -819,12 +843,7 @@ static void test_from_keyframes(void)
     options.neighbour_radius_m = 2.5; /* below the 3 m spot spacing: only consecutive edges */
     CHECK_OK(topoloc_map_from_keyframes("kf-desc", NULL, DIM, keyframes, KEYFRAMES, &options, &map));
     if (map != NULL) {
-        CHECK_OK(topoloc_map_place_count(map, &count));
-        CHECK(count == SPOTS);
-        CHECK_OK(topoloc_map_view_count(map, &count));
-        CHECK(count == KEYFRAMES);
-        CHECK_OK(topoloc_map_edge_count(map, &count));
-        CHECK(count == SPOTS - 1);
+        CHECK_COUNTS(map, SPOTS, KEYFRAMES, SPOTS - 1);
         CHECK_OK(topoloc_map_descriptor_kind(map, kind, sizeof kind, NULL));
         CHECK(strcmp(kind, "kf-desc") == 0);
         CHECK_OK(topoloc_map_descriptor_model(map, kind, sizeof kind, &count));
@@ -879,12 +898,7 @@ static void test_from_keyframes(void)
         }
         CHECK_OK(topoloc_map_from_keyframes("kf-desc", "m", DIM, plain, 6, NULL, &map));
         if (map != NULL) {
-            CHECK_OK(topoloc_map_place_count(map, &count));
-            CHECK(count == 3);
-            CHECK_OK(topoloc_map_view_count(map, &count));
-            CHECK(count == 3);
-            CHECK_OK(topoloc_map_edge_count(map, &count));
-            CHECK(count == 2);
+            CHECK_COUNTS(map, 3, 3, 2);
             CHECK_OK(topoloc_map_place_position(map, 0, xyz, &has_position));
             CHECK(!has_position);
             CHECK(xyz[0] == 0.0 && xyz[1] == 0.0 && xyz[2] == 0.0);
@@ -1305,6 +1319,22 @@ static void test_unknown_ids(const topoloc_map *map)
 }
 
 /* Every field of two results is identical (fields, not bytes: padding may be uninitialised). */
+/* Two localizers with default options on `map`, one to see bad input and one not; false (and
+ * neither) when either could not be made. */
+static bool new_twin_localizers(const topoloc_map *map, topoloc_localizer **a,
+                                topoloc_localizer **b)
+{
+    CHECK_OK(topoloc_localizer_new(map, NULL, a));
+    CHECK_OK(topoloc_localizer_new(map, NULL, b));
+    if (*a == NULL || *b == NULL) {
+        topoloc_localizer_free(*a);
+        topoloc_localizer_free(*b);
+        *a = *b = NULL;
+        return false;
+    }
+    return true;
+}
+
 static bool identical_result(const topoloc_result *a, const topoloc_result *b)
 {
     return a->struct_size == b->struct_size && a->frame_index == b->frame_index &&
@@ -1362,11 +1392,7 @@ static void test_bad_frames(const topoloc_map *map)
 
     section("bad frames leave the localizer and the result unchanged");
     nan = make_nan();
-    CHECK_OK(topoloc_localizer_new(map, NULL, &a));
-    CHECK_OK(topoloc_localizer_new(map, NULL, &b));
-    if (a == NULL || b == NULL) {
-        topoloc_localizer_free(a);
-        topoloc_localizer_free(b);
+    if (!new_twin_localizers(map, &a, &b)) {
         return;
     }
     memset(ca, 0, sizeof ca);
@@ -1473,8 +1499,10 @@ static void test_options_errors(const topoloc_map *map)
     options.struct_size = 0;
     CHECK_STATUS(topoloc_localizer_new(map, &options, &loc), TOPOLOC_ERR_STRUCT_SIZE);
     CHECK_HAS_MESSAGE();
-    options.struct_size = sizeof options - 1;
+    /* One byte short of the first published (ABI 1.0) layout, which ends before image_backend. */
+    options.struct_size = offsetof(topoloc_localizer_options, image_backend) - 1;
     CHECK_STATUS(topoloc_localizer_new(map, &options, &loc), TOPOLOC_ERR_STRUCT_SIZE);
+    CHECK(loc == NULL);
 
     CHECK_OK(topoloc_localizer_options_default(&options));
     options.mode = 7;
@@ -1766,7 +1794,12 @@ static void test_versioned_structs(const topoloc_map *map)
     CHECK_STATUS(topoloc_frame_init(&frame, 0), TOPOLOC_ERR_STRUCT_SIZE);
     CHECK_HAS_MESSAGE();
     CHECK(all_bytes((const unsigned char *)&frame, sizeof frame, 0x5A));
-    CHECK_STATUS(topoloc_frame_init(&frame, sizeof frame - 1), TOPOLOC_ERR_STRUCT_SIZE);
+    /* The first published (ABI 1.0) frame ends before `image`. */
+    CHECK_STATUS(topoloc_frame_init(&frame, offsetof(topoloc_frame, image) - 1),
+                 TOPOLOC_ERR_STRUCT_SIZE);
+    CHECK_STATUS(topoloc_localizer_options_init(
+                     &options, offsetof(topoloc_localizer_options, image_backend) - 1),
+                 TOPOLOC_ERR_STRUCT_SIZE);
     CHECK_STATUS(topoloc_result_init(&result, sizeof(size_t)), TOPOLOC_ERR_STRUCT_SIZE);
     CHECK_STATUS(topoloc_localizer_options_init(&options, 1), TOPOLOC_ERR_STRUCT_SIZE);
     CHECK_STATUS(topoloc_keyframe_options_init(&kf_options, 0), TOPOLOC_ERR_STRUCT_SIZE);
@@ -1935,6 +1968,1045 @@ static void test_threads(const topoloc_map *map)
     }
 }
 
+/* ------------------------------------------------------------------------------------------ */
+/* Images                                                                                      */
+/* ------------------------------------------------------------------------------------------ */
+
+/*
+ * The image world: IMG_PLACES small grey "places" (a horizontal ramp under random rectangles,
+ * the C twin of tests/images.rs) and "revisits" of them (shifted by two pixels, 10% brighter,
+ * with noise). Maps are built with VLAD (no model needed), a small codebook and one describing
+ * thread, so that the whole section stays fast under valgrind.
+ */
+#define IMG_W 160u
+#define IMG_H 120u
+#define IMG_PIXELS (IMG_W * IMG_H)
+#define IMG_PLACES 8u
+#define IMG_CLUSTERS 16u
+#define IMG_FILES 4u
+
+static uint8_t g_place_px[IMG_PLACES][IMG_PIXELS];
+
+/* True under valgrind (its preload libraries are in LD_PRELOAD). */
+static bool under_valgrind(void)
+{
+    const char *preload = getenv("LD_PRELOAD");
+    return preload != NULL && strstr(preload, "vgpreload") != NULL;
+}
+
+static uint64_t lcg_next(uint64_t *state)
+{
+    *state = *state * 6364136223846793005u + 1442695040888963407u;
+    return *state;
+}
+
+static uint32_t lcg_below(uint64_t *state, uint32_t m)
+{
+    return (uint32_t)((lcg_next(state) >> 33) % m);
+}
+
+/* A deterministic place: a grey ramp under 80 rectangles of random shades. */
+static void make_place_image(uint64_t seed, uint8_t *px)
+{
+    uint64_t state = seed * 0x9E3779B97F4A7C15u + 7u;
+    uint32_t i, k, x, y;
+    for (i = 0; i < IMG_PIXELS; i++) {
+        px[i] = (uint8_t)((i % IMG_W) * 255u / IMG_W / 2u + 40u);
+    }
+    for (k = 0; k < 80; k++) {
+        uint32_t x0 = lcg_below(&state, IMG_W), y0 = lcg_below(&state, IMG_H);
+        uint32_t w = 4 + lcg_below(&state, 30), h = 4 + lcg_below(&state, 30);
+        uint8_t shade = (uint8_t)lcg_below(&state, 256);
+        for (y = y0; y < y0 + h && y < IMG_H; y++) {
+            for (x = x0; x < x0 + w && x < IMG_W; x++) {
+                px[y * IMG_W + x] = shade;
+            }
+        }
+    }
+}
+
+/* The same place seen again: shifted by 2 pixels, brighter, with noise. */
+static void make_revisit(const uint8_t *in, uint64_t seed, uint8_t *out)
+{
+    uint64_t state = seed;
+    uint32_t x, y;
+    for (y = 0; y < IMG_H; y++) {
+        for (x = 0; x < IMG_W; x++) {
+            uint32_t sx = x + 2 < IMG_W ? x + 2 : IMG_W - 1;
+            int noise = (int)(lcg_next(&state) >> 60) - 8;
+            int v = in[y * IMG_W + sx] * 11 / 10 + 10 + noise;
+            out[y * IMG_W + x] = (uint8_t)(v < 0 ? 0 : v > 255 ? 255 : v);
+        }
+    }
+}
+
+static void init_image_world(void)
+{
+    uint32_t p;
+    for (p = 0; p < IMG_PLACES; p++) {
+        make_place_image(p, g_place_px[p]);
+    }
+}
+
+static topoloc_image gray_image(const uint8_t *px)
+{
+    topoloc_image image;
+    memset(&image, 0, sizeof image);
+    image.data = px;
+    image.data_len = IMG_PIXELS;
+    image.width = IMG_W;
+    image.height = IMG_H;
+    image.stride = IMG_W;
+    image.format = TOPOLOC_PIXEL_GRAY8;
+    return image;
+}
+
+/* A grey image repacked as `channels` channels (alpha 255) in rows of `stride` bytes (padding
+ * filled with 0xAB); malloc'd into *buffer. */
+static topoloc_image repack(const uint8_t *px, uint32_t format, uint32_t channels, size_t stride,
+                            uint8_t **buffer)
+{
+    topoloc_image image = gray_image(px);
+    size_t len = stride * (IMG_H - 1) + (size_t)IMG_W * channels;
+    uint32_t x, y, c;
+    *buffer = malloc(len);
+    if (*buffer == NULL) {
+        image.data = NULL;
+        return image;
+    }
+    memset(*buffer, 0xAB, len);
+    for (y = 0; y < IMG_H; y++) {
+        for (x = 0; x < IMG_W; x++) {
+            for (c = 0; c < channels; c++) {
+                (*buffer)[y * stride + x * channels + c] = c == 3 ? 255 : px[y * IMG_W + x];
+            }
+        }
+    }
+    image.data = *buffer;
+    image.data_len = len;
+    image.stride = stride;
+    image.format = format;
+    return image;
+}
+
+static void vlad_options(topoloc_image_map_options *options, uint32_t images)
+{
+    CHECK_OK(topoloc_image_map_options_default(options));
+    options->backend = TOPOLOC_BACKEND_VLAD_ORB;
+    options->dim = images - 1;
+    options->threads = 1;
+    options->vlad_clusters = IMG_CLUSTERS;
+}
+
+static bool contains_text(const char *haystack, const char *needle)
+{
+    return strstr(haystack, needle) != NULL;
+}
+
+/* CHECK that the last error message contains `text`, showing the message when it does not. */
+#define CHECK_MESSAGE_HAS(text)                                                                    \
+    do {                                                                                           \
+        const char *check_msg_ = last_error();                                                     \
+        if (!contains_text(check_msg_, (text))) {                                                  \
+            fprintf(stderr, "    message \"%s\" does not contain \"%s\"\n", check_msg_, (text));    \
+        }                                                                                          \
+        CHECK(contains_text(check_msg_, (text)));                                                  \
+    } while (0)
+
+/* Progress callback log. */
+struct progress_log {
+    pthread_t caller;
+    int cancel_stage;  /* stage at which to return false; -1 = never */
+    size_t expected_total;
+    unsigned calls;
+    unsigned calls_after_cancel;
+    bool cancelled;
+    bool first_is_describing;
+    bool saw_describing_all; /* DESCRIBING with done == total == expected_total */
+    bool saw_fitting;
+    bool saw_fitting_done;   /* FITTING 1 of 1 */
+    bool last_is_fitting_done;
+    bool bad_values;         /* unknown stage, done > total, wrong total, or going back */
+    bool other_thread;
+    uint32_t last_stage;
+    size_t last_done;
+};
+
+static void progress_log_init(struct progress_log *log, int cancel_stage, size_t expected_total)
+{
+    memset(log, 0, sizeof *log);
+    log->caller = pthread_self();
+    log->cancel_stage = cancel_stage;
+    log->expected_total = expected_total;
+}
+
+static bool record_progress(void *user_data, uint32_t stage, size_t done, size_t total)
+{
+    struct progress_log *log = user_data;
+    if (log->calls == 0) {
+        log->first_is_describing = stage == TOPOLOC_STAGE_DESCRIBING;
+    } else if (stage < log->last_stage || (stage == log->last_stage && done < log->last_done)) {
+        log->bad_values = true; /* progress goes forward only */
+    }
+    log->calls++;
+    if (!pthread_equal(pthread_self(), log->caller)) {
+        log->other_thread = true;
+    }
+    if (done > total || (stage == TOPOLOC_STAGE_DESCRIBING && total != log->expected_total) ||
+        (stage == TOPOLOC_STAGE_FITTING && total != 1) || stage > TOPOLOC_STAGE_FITTING) {
+        log->bad_values = true;
+    }
+    if (stage == TOPOLOC_STAGE_DESCRIBING && done == total && total == log->expected_total) {
+        log->saw_describing_all = true;
+    }
+    if (stage == TOPOLOC_STAGE_FITTING) {
+        log->saw_fitting = true;
+        log->saw_fitting_done = log->saw_fitting_done || (done == 1 && total == 1);
+    }
+    log->last_is_fitting_done = stage == TOPOLOC_STAGE_FITTING && done == 1 && total == 1;
+    log->last_stage = stage;
+    log->last_done = done;
+    if (log->cancelled) {
+        log->calls_after_cancel++;
+        return false;
+    }
+    if ((int)stage == log->cancel_stage) {
+        log->cancelled = true;
+        return false;
+    }
+    return true;
+}
+
+/* A value no library writes: shows that an out-parameter was left alone. */
+static topoloc_map *untouched_map(void)
+{
+    static char marker;
+    return (topoloc_map *)(void *)&marker;
+}
+
+static void test_image_defaults(void)
+{
+    topoloc_image_map_options options;
+    topoloc_localizer_options lo;
+    topoloc_frame frame;
+    topoloc_image zero;
+
+    section("images: constants and defaults of the image structs");
+    /* Values are part of the ABI. */
+    CHECK(TOPOLOC_PIXEL_NONE == 0 && TOPOLOC_PIXEL_GRAY8 == 1 && TOPOLOC_PIXEL_RGB8 == 2 &&
+          TOPOLOC_PIXEL_BGR8 == 3 && TOPOLOC_PIXEL_RGBA8 == 4 && TOPOLOC_PIXEL_BGRA8 == 5);
+    CHECK(TOPOLOC_BACKEND_AUTO == 0 && TOPOLOC_BACKEND_NONE == 1 && TOPOLOC_BACKEND_ONNX == 2 &&
+          TOPOLOC_BACKEND_VLAD_ORB == 3 && TOPOLOC_BACKEND_VLAD_SIFT == 4);
+    CHECK(TOPOLOC_STAGE_DESCRIBING == 0 && TOPOLOC_STAGE_FITTING == 1);
+    CHECK(TOPOLOC_ERR_INVALID_IMAGE == 300 && TOPOLOC_ERR_UNINFORMATIVE_IMAGE == 301 &&
+          TOPOLOC_ERR_BACKEND_UNAVAILABLE == 302 && TOPOLOC_ERR_MODEL == 303 &&
+          TOPOLOC_ERR_NO_DESCRIBER == 304 && TOPOLOC_ERR_CANCELLED == 305);
+    /* The frame's image is appended after the ABI 1.0 fields. */
+    CHECK(offsetof(topoloc_frame, image) > offsetof(topoloc_frame, odometry));
+    CHECK(offsetof(topoloc_localizer_options, image_backend) >
+          offsetof(topoloc_localizer_options, expected_descriptor_model));
+
+    memset(&frame, 0x5A, sizeof frame);
+    CHECK_OK(topoloc_frame_default(&frame));
+    memset(&zero, 0, sizeof zero);
+    CHECK(frame.image.data == NULL && frame.image.data_len == 0 && frame.image.width == 0 &&
+          frame.image.height == 0 && frame.image.stride == 0 &&
+          frame.image.format == TOPOLOC_PIXEL_NONE);
+
+    memset(&lo, 0x5A, sizeof lo);
+    CHECK_OK(topoloc_localizer_options_default(&lo));
+    CHECK(lo.image_backend == TOPOLOC_BACKEND_AUTO);
+    CHECK(lo.onnx_model_path == NULL && lo.onnx_runtime_path == NULL);
+
+    memset(&options, 0x5A, sizeof options);
+    CHECK_OK(topoloc_image_map_options_default(&options));
+    CHECK(options.struct_size == sizeof options);
+    CHECK(options.backend == TOPOLOC_BACKEND_AUTO);
+    CHECK(options.dim == 512 && options.views_per_place == 1 && options.threads == 0);
+    CHECK(options.grid_rows == 4 && options.grid_cols == 4 && options.vlad_clusters == 64);
+    CHECK(options.onnx_model_path == NULL && options.onnx_runtime_path == NULL &&
+          options.onnx_taps == NULL && options.poses_tum_path == NULL);
+    CHECK(options.place_spacing_m == 2.0);
+    CHECK_STATUS(topoloc_image_map_options_init(&options, 0), TOPOLOC_ERR_STRUCT_SIZE);
+    CHECK_HAS_MESSAGE();
+    CHECK_STATUS(topoloc_image_map_options_init(&options, sizeof options - 1),
+                 TOPOLOC_ERR_STRUCT_SIZE);
+    CHECK_NULL(topoloc_image_map_options_init(NULL, sizeof options), "options");
+}
+
+/* Builds the image map (progress recorded), checks cancellation, saves and reloads the map:
+ * returns the reloaded map, or NULL. */
+static topoloc_map *test_image_map_build(void)
+{
+    topoloc_image images[IMG_PLACES];
+    topoloc_image_map_options options;
+    struct progress_log log;
+    topoloc_map *built = NULL, *loaded = NULL, *out;
+    char path[4200], kind[64], model[512], kind2[64], model2[512];
+    size_t n = 0;
+    uint32_t i, dim = 0;
+
+    section("images: map from in-memory images, progress, cancel, save and load");
+    for (i = 0; i < IMG_PLACES; i++) {
+        images[i] = gray_image(g_place_px[i]);
+    }
+    vlad_options(&options, IMG_PLACES);
+
+    /* Cancelled while describing: no map. */
+    progress_log_init(&log, TOPOLOC_STAGE_DESCRIBING, IMG_PLACES);
+    out = untouched_map();
+    CHECK_STATUS(topoloc_map_build_from_images(images, IMG_PLACES, &options, record_progress, &log,
+                                               &out),
+                 TOPOLOC_ERR_CANCELLED);
+    CHECK_HAS_MESSAGE();
+    CHECK(out == untouched_map());
+    CHECK(log.cancelled && log.calls >= 1 && !log.other_thread);
+    CHECK(!log.saw_fitting); /* nothing after the describing stage */
+
+    /* Cancelled when fitting starts (every image described): no map either. */
+    progress_log_init(&log, TOPOLOC_STAGE_FITTING, IMG_PLACES);
+    CHECK_STATUS(topoloc_map_build_from_images(images, IMG_PLACES, &options, record_progress, &log,
+                                               &out),
+                 TOPOLOC_ERR_CANCELLED);
+    CHECK(out == untouched_map());
+    CHECK(log.cancelled && log.saw_describing_all && log.saw_fitting && !log.saw_fitting_done);
+
+    /* The real build, with progress. */
+    progress_log_init(&log, -1, IMG_PLACES);
+    CHECK_OK(topoloc_map_build_from_images(images, IMG_PLACES, &options, record_progress, &log,
+                                           &built));
+    if (built == NULL) {
+        return NULL;
+    }
+    CHECK(log.calls >= 3);
+    CHECK(log.first_is_describing);
+    CHECK(log.saw_describing_all);
+    CHECK(log.saw_fitting && log.saw_fitting_done && log.last_is_fitting_done);
+    CHECK(!log.bad_values);
+    CHECK(!log.other_thread); /* called on the caller's thread */
+    CHECK(log.calls_after_cancel == 0);
+
+    /* A sequence map: one place per image, chained, views know their image's index. */
+    CHECK_COUNTS(built, IMG_PLACES, IMG_PLACES, IMG_PLACES - 1);
+    CHECK_OK(topoloc_map_descriptor_dim(built, &dim));
+    CHECK(dim == IMG_PLACES - 1);
+    CHECK_OK(topoloc_map_descriptor_kind(built, kind, sizeof kind, NULL));
+    CHECK(strcmp(kind, "vlad-orb") == 0);
+    CHECK_OK(topoloc_map_descriptor_model(built, model, sizeof model, NULL));
+    CHECK(model[0] != '\0');
+    for (i = 0; i < IMG_PLACES; i++) {
+        topoloc_view_info info;
+        char image[16];
+        CHECK_OK(topoloc_view_info_default(&info));
+        CHECK_OK(topoloc_map_view_info(built, i, &info));
+        CHECK(info.place == i && info.has_keyframe_id && info.keyframe_id == i && !info.has_pose);
+        CHECK_OK(topoloc_map_view_image(built, i, image, sizeof image, NULL));
+        CHECK(image[0] == '\0'); /* pixels have no path */
+    }
+
+    /* Without a progress callback (NULL) and with two threads: the same map. */
+    options.threads = 2;
+    CHECK_OK(topoloc_map_build_from_images(images, IMG_PLACES, &options, NULL, NULL, &loaded));
+    if (loaded != NULL) {
+        float a[IMG_PLACES], b[IMG_PLACES];
+        CHECK_OK(topoloc_map_view_descriptor(built, 3, a, IMG_PLACES));
+        CHECK_OK(topoloc_map_view_descriptor(loaded, 3, b, IMG_PLACES));
+        CHECK(memcmp(a, b, sizeof(float) * (IMG_PLACES - 1)) == 0); /* deterministic */
+        CHECK_OK(topoloc_map_descriptor_model(loaded, model2, sizeof model2, NULL));
+        CHECK(strcmp(model, model2) == 0);
+        topoloc_map_free(loaded);
+        loaded = NULL;
+    }
+    options.threads = 1;
+
+    /* The describer survives the file. */
+    tmp_path(path, sizeof path, "images.topoloc");
+    CHECK_OK(topoloc_map_save(built, path));
+    CHECK_OK(topoloc_map_load(path, NULL, &loaded));
+    if (loaded != NULL) {
+        CHECK_OK(topoloc_map_descriptor_kind(loaded, kind2, sizeof kind2, NULL));
+        CHECK_OK(topoloc_map_descriptor_model(loaded, model2, sizeof model2, NULL));
+        CHECK(strcmp(kind, kind2) == 0 && strcmp(model, model2) == 0);
+        CHECK_OK(topoloc_map_place_count(loaded, &n));
+        CHECK(n == IMG_PLACES);
+    }
+    /* The map is memory-mapped: unlinking the file keeps it readable (POSIX). */
+    CHECK(unlink(path) == 0);
+    topoloc_map_free(built);
+    return loaded;
+}
+
+/* Localizes the revisit of `place` with `loc` at time `t`; returns the status. */
+static topoloc_status localize_image(topoloc_localizer *loc, const topoloc_image *image, double t,
+                                     topoloc_result *result)
+{
+    topoloc_frame frame;
+    topoloc_frame_default(&frame);
+    frame.timestamp = t;
+    frame.image = *image;
+    return topoloc_localizer_process(loc, &frame, result);
+}
+
+/* A localizer made with `options` localizes one image of `place` there (one check per step). */
+static void check_new_localizer_finds(const topoloc_map *map,
+                                      const topoloc_localizer_options *options,
+                                      const uint8_t *px, uint32_t place)
+{
+    topoloc_localizer *loc = NULL;
+    topoloc_image image = gray_image(px);
+    topoloc_result r;
+    topoloc_result_default(&r);
+    CHECK_OK(topoloc_localizer_new(map, options, &loc));
+    if (loc != NULL) {
+        CHECK_OK(localize_image(loc, &image, 0.0, &r));
+        CHECK(r.place == place);
+    }
+    topoloc_localizer_free(loc);
+}
+
+static void test_image_localize(const topoloc_map *map, const topoloc_map *world)
+{
+    static uint8_t revisit[IMG_PLACES][IMG_PIXELS];
+    topoloc_localizer_options options;
+    topoloc_localizer *single = NULL, *filter = NULL, *loc = NULL;
+    topoloc_result r, snapshot;
+    topoloc_candidate candidates[3];
+    topoloc_frame frame;
+    topoloc_image image;
+    float view5[IMG_PLACES];
+    unsigned correct_single = 0, correct_filter = 0;
+    uint32_t p;
+
+    section("images: localizing image frames (AUTO, explicit backends, NONE, formats)");
+    for (p = 0; p < IMG_PLACES; p++) {
+        make_revisit(g_place_px[p], 100u + p, revisit[p]);
+    }
+    CHECK_OK(topoloc_result_default(&r));
+    r.candidates = candidates;
+    r.candidates_capacity = 3;
+
+    /* AUTO loads the map's describer: revisits find their place. */
+    CHECK_OK(topoloc_localizer_options_default(&options));
+    options.mode = TOPOLOC_MODE_SINGLE_FRAME;
+    CHECK_OK(topoloc_localizer_new(map, &options, &single));
+    CHECK_OK(topoloc_localizer_new(map, NULL, &filter)); /* NULL options: AUTO, filter mode */
+    if (single == NULL || filter == NULL) {
+        topoloc_localizer_free(single);
+        topoloc_localizer_free(filter);
+        return;
+    }
+    for (p = 0; p < IMG_PLACES; p++) {
+        image = gray_image(revisit[p]);
+        CHECK_OK(localize_image(single, &image, (double)p, &r));
+        correct_single += r.place == p;
+        CHECK(r.frame_index == p && r.candidates_len == 3 && r.candidates[0].place == r.place);
+        CHECK(r.similarity > 0.0f && r.similarity <= 1.0001f);
+        CHECK_OK(localize_image(filter, &image, (double)p, &r));
+        correct_filter += r.place == p;
+    }
+    printf("   revisits localized: %u/%u single-frame, %u/%u filter\n", correct_single,
+           IMG_PLACES, correct_filter, IMG_PLACES);
+    CHECK(correct_single >= IMG_PLACES - 1);
+    CHECK(correct_filter >= IMG_PLACES - 1);
+
+    /* Every pixel format, with padded rows, describes like the grey original. */
+    {
+        static const uint32_t formats[4] = {TOPOLOC_PIXEL_RGB8, TOPOLOC_PIXEL_BGR8,
+                                            TOPOLOC_PIXEL_RGBA8, TOPOLOC_PIXEL_BGRA8};
+        static const uint32_t channels[4] = {3, 3, 4, 4};
+        topoloc_result reference;
+        size_t k;
+        CHECK_OK(topoloc_localizer_reset(single));
+        image = gray_image(revisit[4]);
+        CHECK_OK(topoloc_result_default(&reference));
+        CHECK_OK(localize_image(single, &image, 0.0, &reference));
+        /* A grey view into a larger buffer (stride > width, like a cv::Mat ROI). */
+        {
+            uint8_t *padded = NULL;
+            topoloc_image roi = repack(revisit[4], TOPOLOC_PIXEL_GRAY8, 1, IMG_W + 40, &padded);
+            CHECK(roi.data != NULL);
+            if (roi.data != NULL) {
+                CHECK_OK(localize_image(single, &roi, 0.0, &r));
+                CHECK(r.place == reference.place);
+                CHECK_NEAR(r.similarity, reference.similarity, 1e-4f);
+            }
+            free(padded);
+        }
+        for (k = 0; k < 4; k++) {
+            uint8_t *buffer = NULL;
+            topoloc_image colour =
+                repack(revisit[4], formats[k], channels[k], IMG_W * channels[k] + 13, &buffer);
+            CHECK(colour.data != NULL);
+            if (colour.data != NULL) {
+                CHECK_OK(localize_image(single, &colour, 0.0, &r));
+                CHECK(r.place == reference.place);
+                CHECK_NEAR(r.similarity, reference.similarity, 1e-3f);
+                /* The exact minimum length (no padding after the last row) is accepted. */
+                colour.data_len = colour.stride * (IMG_H - 1) + (size_t)IMG_W * channels[k];
+                CHECK_OK(localize_image(single, &colour, 0.0, &r));
+                colour.data_len -= 1;
+                CHECK_STATUS(localize_image(single, &colour, 0.0, &r), TOPOLOC_ERR_INVALID_IMAGE);
+            }
+            free(buffer);
+        }
+    }
+
+    /* A frame with both a descriptor and an image: the descriptor is used. */
+    CHECK_OK(topoloc_map_view_descriptor(map, 5, view5, IMG_PLACES - 1));
+    CHECK_OK(topoloc_frame_default(&frame));
+    frame.timestamp = 0.0;
+    frame.descriptor = view5;
+    frame.descriptor_len = IMG_PLACES - 1;
+    frame.image = gray_image(revisit[2]);
+    CHECK_OK(topoloc_localizer_process(single, &frame, &r));
+    CHECK(r.place == 5 && r.view == 5);
+    topoloc_localizer_free(single);
+    topoloc_localizer_free(filter);
+
+    /* Asking for the map's own backend works; another backend is a mismatch. */
+    CHECK_OK(topoloc_localizer_options_default(&options));
+    options.image_backend = TOPOLOC_BACKEND_VLAD_ORB;
+    check_new_localizer_finds(map, &options, revisit[6], 6);
+    options.image_backend = TOPOLOC_BACKEND_ONNX;
+    CHECK_STATUS(topoloc_localizer_new(map, &options, &loc), TOPOLOC_ERR_DESCRIPTOR_MISMATCH);
+    CHECK_MESSAGE_HAS("onnx");
+    CHECK(loc == NULL);
+    options.image_backend = TOPOLOC_BACKEND_VLAD_SIFT;
+    CHECK_STATUS(topoloc_localizer_new(map, &options, &loc), TOPOLOC_ERR_DESCRIPTOR_MISMATCH);
+    CHECK_MESSAGE_HAS("sift");
+    options.image_backend = 42;
+    CHECK_STATUS(topoloc_localizer_new(map, &options, &loc), TOPOLOC_ERR_INVALID_OPTION);
+    CHECK_MESSAGE_HAS("42");
+    CHECK(loc == NULL);
+
+    /* ABI 1.0 options (no image fields) on an image map: AUTO, so image frames work. */
+    CHECK_OK(topoloc_localizer_options_default(&options));
+    options.struct_size = offsetof(topoloc_localizer_options, image_backend);
+    options.image_backend = TOPOLOC_BACKEND_NONE; /* beyond struct_size: not read */
+    check_new_localizer_finds(map, &options, revisit[1], 1);
+
+    /* BACKEND_NONE: descriptor frames only; an image frame is refused, state unchanged. */
+    CHECK_OK(topoloc_localizer_options_default(&options));
+    options.image_backend = TOPOLOC_BACKEND_NONE;
+    CHECK_OK(topoloc_localizer_new(map, &options, &loc));
+    if (loc != NULL) {
+        frame.image = gray_image(g_place_px[0]); /* with the descriptor of view 5: fine */
+        CHECK_OK(topoloc_localizer_process(loc, &frame, &r));
+        CHECK(r.place == 5 && r.frame_index == 0);
+        snapshot = r;
+        image = gray_image(revisit[3]);
+        CHECK_STATUS(localize_image(loc, &image, 1.0, &r), TOPOLOC_ERR_NO_DESCRIBER);
+        CHECK_HAS_MESSAGE();
+        CHECK(identical_result(&snapshot, &r));
+        frame.timestamp = 1.0;
+        CHECK_OK(topoloc_localizer_process(loc, &frame, &r));
+        CHECK(r.frame_index == 1);
+    }
+    topoloc_localizer_free(loc);
+    loc = NULL;
+
+    /* A map built from descriptors has no describer. */
+    CHECK_OK(topoloc_localizer_new(world, NULL, &loc)); /* AUTO: fine, descriptors only */
+    if (loc != NULL) {
+        image = gray_image(revisit[0]);
+        CHECK_STATUS(localize_image(loc, &image, 0.0, &r), TOPOLOC_ERR_NO_DESCRIBER);
+        CHECK_HAS_MESSAGE();
+    }
+    topoloc_localizer_free(loc);
+    loc = NULL;
+    CHECK_OK(topoloc_localizer_options_default(&options));
+    options.image_backend = TOPOLOC_BACKEND_VLAD_ORB;
+    CHECK_STATUS(topoloc_localizer_new(world, &options, &loc), TOPOLOC_ERR_NO_DESCRIBER);
+    CHECK_HAS_MESSAGE();
+    CHECK(loc == NULL);
+}
+
+static void test_bad_images(const topoloc_map *map)
+{
+    enum { BAD = 13 };
+    static uint8_t constant[IMG_PIXELS];
+    static uint8_t black_rgb[IMG_PIXELS * 3];
+    static const uint8_t one_pixel[1] = {128};
+    static const uint32_t expected[BAD] = {
+        TOPOLOC_ERR_INVALID_IMAGE,        /* 0: width 0 */
+        TOPOLOC_ERR_INVALID_IMAGE,        /* 1: height 0 */
+        TOPOLOC_ERR_INVALID_IMAGE,        /* 2: 10000 x 10000 */
+        TOPOLOC_ERR_INVALID_IMAGE,        /* 3: stride smaller than a row */
+        TOPOLOC_ERR_INVALID_IMAGE,        /* 4: data_len one byte short */
+        TOPOLOC_ERR_INVALID_IMAGE,        /* 5: format 99 */
+        TOPOLOC_ERR_INVALID_IMAGE,        /* 6: data_len 0 */
+        TOPOLOC_ERR_NULL_ARGUMENT,        /* 7: data NULL */
+        TOPOLOC_ERR_UNINFORMATIVE_IMAGE,  /* 8: constant grey */
+        TOPOLOC_ERR_UNINFORMATIVE_IMAGE,  /* 9: 1 x 1 */
+        TOPOLOC_ERR_UNINFORMATIVE_IMAGE,  /* 10: all-black RGB */
+        TOPOLOC_ERR_INVALID_IMAGE,        /* 11: RGB8 format over a grey buffer (too short) */
+        TOPOLOC_ERR_INVALID_IMAGE,        /* 12: stride * (height - 1) overflows size_t */
+    };
+    topoloc_localizer *a = NULL, *b = NULL;
+    topoloc_result ra, rb, snapshot;
+    topoloc_image image, good;
+    topoloc_image_map_options options;
+    topoloc_image images[3];
+    topoloc_map *out;
+    struct progress_log log;
+    size_t k;
+
+    section("images: bad and uninformative images leave the localizer unchanged");
+    memset(constant, 90, sizeof constant);
+    memset(black_rgb, 0, sizeof black_rgb);
+    if (!new_twin_localizers(map, &a, &b)) {
+        return;
+    }
+    CHECK_OK(topoloc_result_default(&ra));
+    CHECK_OK(topoloc_result_default(&rb));
+    good = gray_image(g_place_px[0]);
+    CHECK_OK(localize_image(a, &good, 1.0, &ra));
+    CHECK_OK(localize_image(b, &good, 1.0, &rb));
+    CHECK(ra.frame_index == 0 && same_result(&ra, &rb));
+
+    for (k = 0; k < BAD; k++) {
+        topoloc_status st;
+        image = gray_image(g_place_px[1]);
+        switch (k) {
+        case 0: image.width = 0; break;
+        case 1: image.height = 0; break;
+        case 2:
+            image.width = 10000;
+            image.height = 10000;
+            image.stride = 10000;
+            break;
+        case 3: image.stride = IMG_W - 1; break;
+        case 4: image.data_len = IMG_PIXELS - 1; break;
+        case 5: image.format = 99; break;
+        case 6: image.data_len = 0; break;
+        case 7: image.data = NULL; break;
+        case 8: image = gray_image(constant); break;
+        case 9:
+            image.data = one_pixel;
+            image.data_len = 1;
+            image.width = image.height = 1;
+            image.stride = 1;
+            break;
+        case 10:
+            image.data = black_rgb;
+            image.data_len = sizeof black_rgb;
+            image.stride = IMG_W * 3;
+            image.format = TOPOLOC_PIXEL_RGB8;
+            break;
+        case 11: image.format = TOPOLOC_PIXEL_RGB8; break;
+        case 12:
+            /* 2^63 * 2 wraps to 0: the needed length must be computed with overflow checks, or
+             * rows 2^63 bytes apart would be read (SIGSEGV). */
+            image.height = 3;
+            image.stride = (SIZE_MAX >> 1) + 1;
+            image.data_len = IMG_W;
+            break;
+        default: break;
+        }
+        snapshot = ra;
+        /* A later timestamp than the good frame that follows: it must not be remembered. */
+        st = localize_image(a, &image, 100.0 + (double)k, &ra);
+        check_status_impl(st, expected[k], "process(bad image)", __FILE__, __LINE__);
+        if (st != expected[k]) {
+            fprintf(stderr, "    (bad image kind %zu)\n", k);
+        }
+        CHECK_HAS_MESSAGE();
+        if (expected[k] == TOPOLOC_ERR_INVALID_IMAGE || expected[k] == TOPOLOC_ERR_NULL_ARGUMENT) {
+            CHECK_MESSAGE_HAS("frame.image");
+        }
+        CHECK(identical_result(&snapshot, &ra));
+    }
+    /* As if the bad frames never happened: an earlier timestamp than theirs is accepted, the
+     * frame index continues, and the twin that never saw them agrees exactly. */
+    good = gray_image(g_place_px[2]);
+    CHECK_OK(localize_image(a, &good, 2.0, &ra));
+    CHECK_OK(localize_image(b, &good, 2.0, &rb));
+    CHECK(ra.frame_index == 1);
+    CHECK(same_result(&ra, &rb));
+    CHECK(ra.place == 2);
+    topoloc_localizer_free(a);
+    topoloc_localizer_free(b);
+
+    /* Bad input to a build: refused before any describing (the callback is never called). */
+    vlad_options(&options, 3);
+    images[0] = gray_image(g_place_px[0]);
+    images[1] = gray_image(g_place_px[1]);
+    images[2] = gray_image(g_place_px[2]);
+    images[1].stride = 3;
+    progress_log_init(&log, -1, 3);
+    out = untouched_map();
+    CHECK_STATUS(topoloc_map_build_from_images(images, 3, &options, record_progress, &log, &out),
+                 TOPOLOC_ERR_INVALID_IMAGE);
+    CHECK_MESSAGE_HAS("images[1]");
+    CHECK(log.calls == 0 && out == untouched_map());
+    images[1] = gray_image(g_place_px[1]);
+    images[2].format = TOPOLOC_PIXEL_NONE;
+    CHECK_STATUS(topoloc_map_build_from_images(images, 3, &options, record_progress, &log, &out),
+                 TOPOLOC_ERR_INVALID_IMAGE);
+    CHECK_MESSAGE_HAS("images[2]");
+    images[2] = gray_image(g_place_px[2]);
+    CHECK_STATUS(topoloc_map_build_from_images(images, 1, &options, NULL, NULL, &out),
+                 TOPOLOC_ERR_INVALID_ARGUMENT); /* fewer than 2 images */
+    CHECK_HAS_MESSAGE();
+    options.backend = 77;
+    CHECK_STATUS(topoloc_map_build_from_images(images, 3, &options, NULL, NULL, &out),
+                 TOPOLOC_ERR_INVALID_ARGUMENT);
+    CHECK_MESSAGE_HAS("77");
+    options.backend = TOPOLOC_BACKEND_NONE; /* a localizer-only choice */
+    CHECK_STATUS(topoloc_map_build_from_images(images, 3, &options, NULL, NULL, &out),
+                 TOPOLOC_ERR_INVALID_ARGUMENT);
+    vlad_options(&options, 3);
+    options.views_per_place = 0;
+    CHECK_STATUS(topoloc_map_build_from_images(images, 3, &options, NULL, NULL, &out),
+                 TOPOLOC_ERR_INVALID_ARGUMENT);
+    vlad_options(&options, 3);
+    options.threads = 100000; /* more than 256: refused, not a hang */
+    CHECK_STATUS(topoloc_map_build_from_images(images, 3, &options, NULL, NULL, &out),
+                 TOPOLOC_ERR_INVALID_ARGUMENT);
+    CHECK_MESSAGE_HAS("threads");
+    vlad_options(&options, 3);
+    options.vlad_clusters = 1;
+    CHECK_STATUS(topoloc_map_build_from_images(images, 3, &options, NULL, NULL, &out),
+                 TOPOLOC_ERR_INVALID_ARGUMENT);
+    vlad_options(&options, 3);
+    options.struct_size = 0;
+    CHECK_STATUS(topoloc_map_build_from_images(images, 3, &options, NULL, NULL, &out),
+                 TOPOLOC_ERR_STRUCT_SIZE);
+    CHECK(out == untouched_map());
+    vlad_options(&options, 3);
+    CHECK_NULL(topoloc_map_build_from_images(NULL, 3, &options, NULL, NULL, &out), "images");
+    CHECK_NULL(topoloc_map_build_from_images(images, 3, &options, NULL, NULL, NULL), "out");
+    CHECK(out == untouched_map());
+}
+
+/* Writes a binary PGM (P5) file. */
+static bool write_pgm(const char *path, const uint8_t *px, uint32_t width, uint32_t height)
+{
+    FILE *f = fopen(path, "wb");
+    bool ok;
+    if (f == NULL) {
+        return false;
+    }
+    ok = fprintf(f, "P5\n%u %u\n255\n", (unsigned)width, (unsigned)height) > 0 &&
+         fwrite(px, 1, (size_t)width * height, f) == (size_t)width * height;
+    return fclose(f) == 0 && ok;
+}
+
+static void test_image_files(void)
+{
+    static uint8_t revisit[IMG_PIXELS];
+    char paths[IMG_FILES][4200], missing[4200], text[4200], tum[4200], short_tum[4200];
+    const char *list[IMG_FILES];
+    topoloc_image_map_options options;
+    struct progress_log log;
+    topoloc_map *map = NULL, *out;
+    topoloc_localizer *loc = NULL;
+    topoloc_localizer_options lo;
+    topoloc_result r;
+    topoloc_image image;
+    size_t n = 0;
+    uint32_t i;
+    bool written = true;
+    FILE *f;
+
+    section("images: maps from image files (PGM), poses, missing and unreadable files");
+    for (i = 0; i < IMG_FILES; i++) {
+        char name[32];
+        snprintf(name, sizeof name, "place_%u.pgm", (unsigned)i);
+        tmp_path(paths[i], sizeof paths[i], name);
+        written = write_pgm(paths[i], g_place_px[i], IMG_W, IMG_H) && written;
+        list[i] = paths[i];
+    }
+    CHECK(written);
+    vlad_options(&options, IMG_FILES);
+    progress_log_init(&log, -1, IMG_FILES);
+    CHECK_OK(topoloc_map_build_from_image_files(list, IMG_FILES, &options, record_progress, &log,
+                                                &map));
+    CHECK(log.saw_describing_all && log.saw_fitting_done && !log.bad_values);
+    if (map != NULL) {
+        CHECK_OK(topoloc_map_place_count(map, &n));
+        CHECK(n == IMG_FILES);
+        for (i = 0; i < IMG_FILES; i++) {
+            char image_ref[4200];
+            topoloc_view_info info;
+            CHECK_OK(topoloc_map_view_image(map, i, image_ref, sizeof image_ref, NULL));
+            CHECK(strcmp(image_ref, paths[i]) == 0); /* views record their file */
+            CHECK_OK(topoloc_view_info_default(&info));
+            CHECK_OK(topoloc_map_view_info(map, i, &info));
+            CHECK(info.has_keyframe_id && info.keyframe_id == i);
+        }
+        /* Files read by OpenCV (as colour) and grey pixels in memory describe alike. */
+        CHECK_OK(topoloc_localizer_options_default(&lo));
+        lo.mode = TOPOLOC_MODE_SINGLE_FRAME;
+        CHECK_OK(topoloc_localizer_new(map, &lo, &loc));
+        CHECK_OK(topoloc_result_default(&r));
+        if (loc != NULL) {
+            make_revisit(g_place_px[2], 7, revisit);
+            image = gray_image(revisit);
+            CHECK_OK(localize_image(loc, &image, 0.0, &r));
+            CHECK(r.place == 2);
+        }
+        topoloc_localizer_free(loc);
+        topoloc_map_free(map);
+        map = NULL;
+    }
+
+    /* With one pose per image (TUM), places come from the poses and carry positions. */
+    tmp_path(tum, sizeof tum, "poses.tum");
+    f = fopen(tum, "w");
+    CHECK(f != NULL);
+    if (f != NULL) {
+        fprintf(f, "# timestamp tx ty tz qx qy qz qw\n");
+        for (i = 0; i < IMG_FILES; i++) {
+            fprintf(f, "%u.0 %u.0 0 0 0 0 0 1\n", (unsigned)i, (unsigned)(5 * i));
+        }
+        CHECK(fclose(f) == 0);
+    }
+    options.poses_tum_path = tum;
+    CHECK_OK(topoloc_map_build_from_image_files(list, IMG_FILES, &options, NULL, NULL, &map));
+    if (map != NULL) {
+        double xyz[3] = {0, 0, 0};
+        bool has = false;
+        CHECK_OK(topoloc_map_place_count(map, &n));
+        CHECK(n == IMG_FILES);
+        CHECK_OK(topoloc_map_place_position(map, 2, xyz, &has));
+        CHECK(has && xyz[0] == 10.0);
+        topoloc_map_free(map);
+        map = NULL;
+    }
+    /* Fewer poses than images, a missing poses file. */
+    tmp_path(short_tum, sizeof short_tum, "short.tum");
+    CHECK(write_file(short_tum, (const unsigned char *)"0 0 0 0 0 0 0 1\n", 16));
+    options.poses_tum_path = short_tum;
+    out = untouched_map();
+    CHECK_STATUS(topoloc_map_build_from_image_files(list, IMG_FILES, &options, NULL, NULL, &out),
+                 TOPOLOC_ERR_INVALID_ARGUMENT);
+    CHECK_HAS_MESSAGE();
+    tmp_path(missing, sizeof missing, "no-such-poses.tum");
+    options.poses_tum_path = missing;
+    CHECK_STATUS(topoloc_map_build_from_image_files(list, IMG_FILES, &options, NULL, NULL, &out),
+                 TOPOLOC_ERR_IO);
+    CHECK_MESSAGE_HAS(missing);
+    options.poses_tum_path = NULL;
+
+    /* A missing file and a file that is no image: INVALID_IMAGE naming the path. */
+    tmp_path(missing, sizeof missing, "no-such-image.pgm");
+    list[2] = missing;
+    CHECK_STATUS(topoloc_map_build_from_image_files(list, IMG_FILES, &options, NULL, NULL, &out),
+                 TOPOLOC_ERR_INVALID_IMAGE);
+    CHECK_MESSAGE_HAS(missing);
+    tmp_path(text, sizeof text, "not-an-image.pgm");
+    CHECK(write_file(text, (const unsigned char *)"hello\n", 6));
+    list[2] = text;
+    CHECK_STATUS(topoloc_map_build_from_image_files(list, IMG_FILES, &options, NULL, NULL, &out),
+                 TOPOLOC_ERR_INVALID_IMAGE);
+    CHECK_MESSAGE_HAS(text);
+    list[2] = NULL;
+    CHECK_NULL(topoloc_map_build_from_image_files(list, IMG_FILES, &options, NULL, NULL, &out),
+               "paths[2]");
+    list[2] = "\xff\xfe.pgm";
+    CHECK_STATUS(topoloc_map_build_from_image_files(list, IMG_FILES, &options, NULL, NULL, &out),
+                 TOPOLOC_ERR_INVALID_UTF8);
+    CHECK_NULL(topoloc_map_build_from_image_files(NULL, IMG_FILES, &options, NULL, NULL, &out),
+               "paths");
+    CHECK(out == untouched_map());
+
+    CHECK(unlink(text) == 0 && unlink(tum) == 0 && unlink(short_tum) == 0);
+    for (i = 0; i < IMG_FILES; i++) {
+        CHECK(unlink(paths[i]) == 0);
+    }
+}
+
+/* The default ONNX model file (scripts/setup-models.sh): $TOPOLOC_CACHE or ~/.cache/topoloc. */
+static bool onnx_model_file(char *path, size_t len)
+{
+    const char *cache = getenv("TOPOLOC_CACHE");
+    const char *home = getenv("HOME");
+    if (cache != NULL && cache[0] != '\0') {
+        snprintf(path, len, "%s/models/mobilenetv2-mlf.onnx", cache);
+    } else {
+        snprintf(path, len, "%s/.cache/topoloc/models/mobilenetv2-mlf.onnx",
+                 home != NULL ? home : "");
+    }
+    return access(path, R_OK) == 0;
+}
+
+static void test_onnx(void)
+{
+    enum { ONNX_IMAGES = 6 };
+    topoloc_image images[ONNX_IMAGES];
+    topoloc_image_map_options options;
+    topoloc_localizer_options lo;
+    topoloc_localizer *loc = NULL;
+    topoloc_map *map = NULL, *out = untouched_map();
+    topoloc_result r;
+    topoloc_image image;
+    char missing[4200], model_path[4200], garbage[4200], kind[64];
+    static uint8_t revisit[IMG_PIXELS];
+    unsigned correct = 0;
+    uint32_t i;
+
+    section("images: ONNX backend (missing model always; the model itself when installed)");
+    for (i = 0; i < ONNX_IMAGES; i++) {
+        images[i] = gray_image(g_place_px[i]);
+    }
+    /* A model path that does not exist: BACKEND_UNAVAILABLE naming it, for ONNX and AUTO. */
+    tmp_path(missing, sizeof missing, "no-such-model.onnx");
+    CHECK_OK(topoloc_image_map_options_default(&options));
+    options.dim = ONNX_IMAGES - 1;
+    options.threads = 1;
+    options.onnx_model_path = missing;
+    options.backend = TOPOLOC_BACKEND_ONNX;
+    CHECK_STATUS(topoloc_map_build_from_images(images, ONNX_IMAGES, &options, NULL, NULL, &out),
+                 TOPOLOC_ERR_BACKEND_UNAVAILABLE);
+    CHECK_MESSAGE_HAS(missing);
+    options.backend = TOPOLOC_BACKEND_AUTO;
+    CHECK_STATUS(topoloc_map_build_from_images(images, ONNX_IMAGES, &options, NULL, NULL, &out),
+                 TOPOLOC_ERR_BACKEND_UNAVAILABLE);
+    CHECK_MESSAGE_HAS(missing);
+    CHECK(out == untouched_map());
+
+    if (!onnx_model_file(model_path, sizeof model_path)) {
+        printf("   ONNX map checks skipped: no model at %s (run scripts/setup-models.sh)\n",
+               model_path);
+        return;
+    }
+    if (under_valgrind()) {
+        /* ONNX Runtime takes minutes there, and its own code is not ours to check. */
+        printf("   ONNX map checks skipped under valgrind (ONNX Runtime is not ours to check)\n");
+        return;
+    }
+    options.onnx_model_path = NULL; /* the cache's model */
+    CHECK_OK(topoloc_map_build_from_images(images, ONNX_IMAGES, &options, NULL, NULL, &map));
+    if (map == NULL) {
+        return;
+    }
+    CHECK_OK(topoloc_map_descriptor_kind(map, kind, sizeof kind, NULL));
+    CHECK(strcmp(kind, "onnx-mlf") == 0);
+
+    /* AUTO loads the runtime and the map's model. */
+    CHECK_OK(topoloc_localizer_options_default(&lo));
+    lo.mode = TOPOLOC_MODE_SINGLE_FRAME;
+    CHECK_OK(topoloc_localizer_new(map, &lo, &loc));
+    CHECK_OK(topoloc_result_default(&r));
+    if (loc != NULL) {
+        for (i = 0; i < ONNX_IMAGES; i++) {
+            make_revisit(g_place_px[i], 200u + i, revisit);
+            image = gray_image(revisit);
+            CHECK_OK(localize_image(loc, &image, (double)i, &r));
+            correct += r.place == i;
+        }
+        printf("   ONNX revisits localized: %u/%u\n", correct, (unsigned)ONNX_IMAGES);
+        CHECK(correct >= ONNX_IMAGES - 1);
+        /* Uninformative images are refused for ONNX too. */
+        memset(revisit, 77, sizeof revisit);
+        image = gray_image(revisit);
+        CHECK_STATUS(localize_image(loc, &image, 10.0, &r), TOPOLOC_ERR_UNINFORMATIVE_IMAGE);
+    }
+    topoloc_localizer_free(loc);
+    loc = NULL;
+
+    /* The same model named explicitly works; another backend, a missing or a broken model
+     * file do not. */
+    lo.image_backend = TOPOLOC_BACKEND_ONNX;
+    lo.onnx_model_path = model_path;
+    CHECK_OK(topoloc_localizer_new(map, &lo, &loc));
+    topoloc_localizer_free(loc);
+    loc = NULL;
+    lo.onnx_model_path = missing;
+    CHECK_STATUS(topoloc_localizer_new(map, &lo, &loc), TOPOLOC_ERR_BACKEND_UNAVAILABLE);
+    CHECK_MESSAGE_HAS(missing);
+    tmp_path(garbage, sizeof garbage, "garbage.onnx");
+    CHECK(write_file(garbage, (const unsigned char *)"this is not an ONNX model", 25));
+    lo.onnx_model_path = garbage;
+    {
+        /* Not the map's model: refused either by its hash or as a broken model. */
+        topoloc_status st = topoloc_localizer_new(map, &lo, &loc);
+        CHECK(st == TOPOLOC_ERR_DESCRIPTOR_MISMATCH || st == TOPOLOC_ERR_MODEL);
+        CHECK(loc == NULL);
+    }
+    CHECK(unlink(garbage) == 0);
+    lo.onnx_model_path = NULL;
+    lo.image_backend = TOPOLOC_BACKEND_VLAD_ORB;
+    CHECK_STATUS(topoloc_localizer_new(map, &lo, &loc), TOPOLOC_ERR_DESCRIPTOR_MISMATCH);
+    /* NONE needs no runtime: descriptor frames only. */
+    lo.image_backend = TOPOLOC_BACKEND_NONE;
+    CHECK_OK(topoloc_localizer_new(map, &lo, &loc));
+    if (loc != NULL) {
+        image = gray_image(g_place_px[0]);
+        CHECK_STATUS(localize_image(loc, &image, 0.0, &r), TOPOLOC_ERR_NO_DESCRIBER);
+    }
+    topoloc_localizer_free(loc);
+    topoloc_map_free(map);
+}
+
+/* ABI 1.0 callers: a frame without the image field still works. */
+static void test_abi_1_0_frame(const topoloc_map *world)
+{
+    /* The ABI 1.0 layout of topoloc_frame, followed by bytes that are not an image. */
+    struct frame_1_0 {
+        size_t struct_size;
+        double timestamp;
+        const float *descriptor;
+        size_t descriptor_len;
+        const double *odometry;
+    };
+    union {
+        struct frame_1_0 f;
+        unsigned char bytes[sizeof(topoloc_frame) + 16];
+    } old;
+    topoloc_localizer *loc = NULL;
+    topoloc_result r;
+    float desc[DIM];
+
+    section("images: an ABI 1.0-sized frame (no image field) still localizes descriptors");
+    CHECK(sizeof(struct frame_1_0) == offsetof(topoloc_frame, image));
+    memset(&old, 0xEE, sizeof old);
+    CHECK_OK(topoloc_frame_init((topoloc_frame *)(void *)&old.f, sizeof old.f));
+    CHECK(old.f.struct_size == sizeof old.f);
+    CHECK(all_bytes(old.bytes + sizeof old.f, sizeof old.bytes - sizeof old.f, 0xEE));
+    CHECK_STATUS(topoloc_frame_init((topoloc_frame *)(void *)&old.f, sizeof old.f - 1),
+                 TOPOLOC_ERR_STRUCT_SIZE);
+    CHECK_OK(topoloc_localizer_new(world, NULL, &loc));
+    if (loc == NULL) {
+        return;
+    }
+    CHECK_OK(topoloc_result_default(&r));
+    noisy_copy(desc, 9, 0.05f);
+    old.f.timestamp = 1.0;
+    old.f.descriptor = desc;
+    old.f.descriptor_len = DIM;
+    old.f.odometry = NULL;
+    /* The 0xEE bytes after the 1.0 layout would be an invalid image if they were read. */
+    CHECK_OK(topoloc_localizer_process(loc, (const topoloc_frame *)(const void *)&old.f, &r));
+    CHECK(r.place == 2 && r.frame_index == 0);
+    old.f.struct_size = sizeof old.f - 1;
+    CHECK_STATUS(topoloc_localizer_process(loc, (const topoloc_frame *)(const void *)&old.f, &r),
+                 TOPOLOC_ERR_STRUCT_SIZE);
+    old.f.struct_size = sizeof old.f;
+    old.f.timestamp = 2.0;
+    CHECK_OK(topoloc_localizer_process(loc, (const topoloc_frame *)(const void *)&old.f, &r));
+    CHECK(r.frame_index == 1);
+    topoloc_localizer_free(loc);
+}
+
+static void test_images(const topoloc_map *world)
+{
+    topoloc_map *map;
+    init_image_world();
+    test_image_defaults();
+    test_abi_1_0_frame(world);
+    map = test_image_map_build();
+    CHECK(map != NULL);
+    if (map != NULL) {
+        test_image_localize(map, world);
+        test_bad_images(map);
+    }
+    topoloc_map_free(map);
+    test_image_files();
+    test_onnx();
+}
+
 static bool make_tmpdir(void)
 {
     const char *base = getenv("TMPDIR");
@@ -1980,6 +3052,7 @@ int main(void)
         test_options_errors(map);
         test_versioned_structs(map);
         test_threads(map);
+        test_images(map);
     }
     topoloc_map_free(map);
 

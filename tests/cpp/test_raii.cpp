@@ -1,6 +1,8 @@
 // Tests of the C++ RAII layer (include/topoloc.hpp): ownership and moves, exceptions carrying
 // the C status and message, the full builder -> save -> load -> localize flow, a localizer that
-// outlives its Map owner, and the ABI check. Built and run by tests/cpp/run.sh, normally and
+// outlives its Map owner, the ABI check, and images: maps built from images and image files
+// with progress callbacks (cancel, exceptions thrown by the callback), image frames, the
+// exception subclasses of the image statuses, and (with OpenCV) cv::Mat images and ROIs. Built and run by tests/cpp/run.sh, normally and
 // under ASan+UBSan (which is what turns a double free or a leak into a failure).
 
 #include "topoloc.hpp"
@@ -16,9 +18,11 @@
 #include <fstream>
 #include <functional>
 #include <iterator>
+#include <limits>
 #include <optional>
 #include <string>
 #include <thread>
+#include <tuple>
 #include <type_traits>
 #include <utility>
 #include <vector>
@@ -582,6 +586,384 @@ TEST(threads_share_one_map) {
   }
 }
 
+// ---------------------------------------------------------------------------------------------
+// Images: small synthetic grey "places" (as tests/images.rs and tests/c), VLAD maps (no model)
+// ---------------------------------------------------------------------------------------------
+
+constexpr uint32_t kImgW = 160;
+constexpr uint32_t kImgH = 120;
+constexpr uint32_t kImgPlaces = 8;
+
+uint64_t lcg(uint64_t &state) {
+  state = state * 6364136223846793005ull + 1442695040888963407ull;
+  return state;
+}
+
+// A place: a grey ramp under 80 rectangles of random shades.
+std::vector<uint8_t> place_pixels(uint64_t seed) {
+  uint64_t state = seed * 0x9E3779B97F4A7C15ull + 7;
+  auto below = [&state](uint32_t m) { return static_cast<uint32_t>((lcg(state) >> 33) % m); };
+  std::vector<uint8_t> px(kImgW * kImgH);
+  for (uint32_t i = 0; i < px.size(); ++i) px[i] = uint8_t((i % kImgW) * 255 / kImgW / 2 + 40);
+  for (int k = 0; k < 80; ++k) {
+    const uint32_t x0 = below(kImgW), y0 = below(kImgH), w = 4 + below(30), h = 4 + below(30);
+    const uint8_t shade = uint8_t(below(256));
+    for (uint32_t y = y0; y < std::min(y0 + h, kImgH); ++y)
+      for (uint32_t x = x0; x < std::min(x0 + w, kImgW); ++x) px[y * kImgW + x] = shade;
+  }
+  return px;
+}
+
+// The place seen again: shifted by 2 pixels, brighter, noisy.
+std::vector<uint8_t> revisit_pixels(const std::vector<uint8_t> &in, uint64_t seed) {
+  std::vector<uint8_t> out(in.size());
+  uint64_t state = seed;
+  for (uint32_t y = 0; y < kImgH; ++y)
+    for (uint32_t x = 0; x < kImgW; ++x) {
+      const uint32_t sx = std::min(x + 2, kImgW - 1);
+      const int noise = int(lcg(state) >> 60) - 8;
+      out[y * kImgW + x] = uint8_t(std::clamp(in[y * kImgW + sx] * 11 / 10 + 10 + noise, 0, 255));
+    }
+  return out;
+}
+
+const std::vector<std::vector<uint8_t>> &places_pixels() {
+  static const std::vector<std::vector<uint8_t>> all = [] {
+    std::vector<std::vector<uint8_t>> v;
+    for (uint32_t p = 0; p < kImgPlaces; ++p) v.push_back(place_pixels(p));
+    return v;
+  }();
+  return all;
+}
+
+topoloc::Image gray(const std::vector<uint8_t> &px) {
+  return topoloc::image_view(px.data(), kImgW, kImgH, TOPOLOC_PIXEL_GRAY8);
+}
+
+topoloc::ImageMapOptions vlad_options(uint32_t images) {
+  topoloc::ImageMapOptions options = topoloc::default_image_map_options();
+  options.backend = TOPOLOC_BACKEND_VLAD_ORB;
+  options.dim = images - 1;
+  options.threads = 1;
+  options.vlad_clusters = 16;
+  return options;
+}
+
+std::vector<topoloc::Image> place_images(uint32_t count = kImgPlaces) {
+  std::vector<topoloc::Image> images;
+  for (uint32_t p = 0; p < count; ++p) images.push_back(gray(places_pixels()[p]));
+  return images;
+}
+
+const topoloc::Map &image_map() {
+  static const topoloc::Map map =
+      topoloc::Map::build_from_images(place_images(), vlad_options(kImgPlaces));
+  return map;
+}
+
+struct CallbackFailure : std::exception {
+  const char *what() const noexcept override { return "callback failure"; }
+};
+
+TEST(error_subclasses_for_image_statuses) {
+  const std::pair<topoloc_status, const char *> cases[] = {
+      {TOPOLOC_ERR_INVALID_IMAGE, "invalid"},   {TOPOLOC_ERR_UNINFORMATIVE_IMAGE, "uninf"},
+      {TOPOLOC_ERR_BACKEND_UNAVAILABLE, "be"},  {TOPOLOC_ERR_MODEL, "model"},
+      {TOPOLOC_ERR_NO_DESCRIBER, "nodesc"},     {TOPOLOC_ERR_CANCELLED, "cancel"},
+  };
+  for (const auto &c : cases) {
+    try {
+      topoloc::throw_error(c.first, c.second);
+    } catch (const topoloc::InvalidImageError &e) {
+      CHECK(c.first == TOPOLOC_ERR_INVALID_IMAGE && e.message() == c.second);
+    } catch (const topoloc::UninformativeImageError &e) {
+      CHECK(c.first == TOPOLOC_ERR_UNINFORMATIVE_IMAGE && e.message() == c.second);
+    } catch (const topoloc::BackendUnavailableError &e) {
+      CHECK(c.first == TOPOLOC_ERR_BACKEND_UNAVAILABLE && e.message() == c.second);
+    } catch (const topoloc::ModelError &e) {
+      CHECK(c.first == TOPOLOC_ERR_MODEL && e.message() == c.second);
+    } catch (const topoloc::NoDescriberError &e) {
+      CHECK(c.first == TOPOLOC_ERR_NO_DESCRIBER && e.message() == c.second);
+    } catch (const topoloc::CancelledError &e) {
+      CHECK(c.first == TOPOLOC_ERR_CANCELLED && e.message() == c.second);
+    } catch (const topoloc::Error &e) {
+      report_failure(__FILE__, __LINE__, std::string("base Error for ") + e.what());
+    }
+  }
+  // Every subclass is an Error with the status; other statuses stay plain Errors.
+  CHECK_THROWS_STATUS(topoloc::throw_error(TOPOLOC_ERR_CANCELLED, "x"), TOPOLOC_ERR_CANCELLED);
+  try {
+    topoloc::check(TOPOLOC_ERR_IO);
+  } catch (const topoloc::CancelledError &) {
+    report_failure(__FILE__, __LINE__, "IO became a CancelledError");
+  } catch (const topoloc::Error &e) {
+    CHECK(e.status() == TOPOLOC_ERR_IO);
+  }
+  static_assert(std::is_base_of_v<topoloc::Error, topoloc::UninformativeImageError>);
+  CHECK(std::string(topoloc::status_string(TOPOLOC_ERR_CANCELLED)) != "unknown status code");
+}
+
+TEST(image_view_helper) {
+  const std::vector<uint8_t> px(100 * 3 * 10);
+  const topoloc::Image packed = topoloc::image_view(px.data(), 100, 10, TOPOLOC_PIXEL_BGR8);
+  CHECK_EQ(packed.stride, std::size_t{300});
+  CHECK_EQ(packed.data_len, std::size_t{3000});
+  CHECK(packed.format == TOPOLOC_PIXEL_BGR8 && packed.width == 100 && packed.height == 10);
+  const topoloc::Image strided = topoloc::image_view(px.data(), 90, 10, TOPOLOC_PIXEL_GRAY8, 300);
+  CHECK_EQ(strided.data_len, std::size_t{300 * 9 + 90});  // no padding needed after the last row
+  CHECK_EQ(topoloc::image_view(px.data(), 0, 10, TOPOLOC_PIXEL_GRAY8).data_len, std::size_t{0});
+  CHECK_EQ(topoloc::pixel_bytes(TOPOLOC_PIXEL_RGBA8), std::size_t{4});
+  CHECK_EQ(topoloc::pixel_bytes(TOPOLOC_PIXEL_NONE), std::size_t{0});
+  CHECK_THROWS_STATUS(topoloc::image_view(px.data(), 10, 10, 99), TOPOLOC_ERR_INVALID_IMAGE);
+  CHECK_THROWS_STATUS(topoloc::image_view(px.data(), 10, 10, TOPOLOC_PIXEL_NONE),
+                      TOPOLOC_ERR_INVALID_IMAGE);
+  // A size whose byte count overflows is refused here, before any C call.
+  CHECK_THROWS_STATUS(topoloc::image_view(px.data(), 10, 3, TOPOLOC_PIXEL_GRAY8,
+                                          (std::numeric_limits<std::size_t>::max() >> 1) + 1),
+                      TOPOLOC_ERR_INVALID_IMAGE);
+  const topoloc::Frame frame;
+  CHECK(frame.image.format == TOPOLOC_PIXEL_NONE && frame.image.data == nullptr);
+}
+
+TEST(image_map_progress_and_cancel) {
+  const std::vector<topoloc::Image> images = place_images();
+  std::vector<std::tuple<topoloc::Stage, std::size_t, std::size_t>> seen;
+  const std::thread::id caller = std::this_thread::get_id();
+  bool other_thread = false;
+  const topoloc::Map map = topoloc::Map::build_from_images(
+      images, vlad_options(kImgPlaces), [&](topoloc::Stage stage, std::size_t done, std::size_t total) {
+        seen.emplace_back(stage, done, total);
+        other_thread = other_thread || std::this_thread::get_id() != caller;
+        return true;
+      });
+  CHECK(!other_thread);
+  CHECK(!seen.empty());
+  if (!seen.empty()) {
+    CHECK(std::get<0>(seen.front()) == topoloc::Stage::Describing);
+    CHECK((seen.back() == std::make_tuple(topoloc::Stage::Fitting, std::size_t{1}, std::size_t{1})));
+  }
+  CHECK(std::find(seen.begin(), seen.end(),
+                  std::make_tuple(topoloc::Stage::Describing, std::size_t{kImgPlaces},
+                                  std::size_t{kImgPlaces})) != seen.end());
+  CHECK_EQ(map.place_count(), std::size_t{kImgPlaces});
+  CHECK_EQ(map.dim(), kImgPlaces - 1);
+  CHECK(map.descriptor_kind() == "vlad-orb");
+  CHECK(map.view_info(3).keyframe_id == std::optional<uint64_t>(3));
+
+  // Returning false cancels.
+  int calls = 0;
+  const std::string message = CHECK_THROWS_STATUS(
+      topoloc::Map::build_from_images(images, vlad_options(kImgPlaces),
+                                      [&](topoloc::Stage, std::size_t, std::size_t) {
+                                        ++calls;
+                                        return false;
+                                      }),
+      TOPOLOC_ERR_CANCELLED);
+  CHECK(!message.empty());
+  CHECK(calls >= 1);
+  try {
+    topoloc::Map::build_from_images(images, vlad_options(kImgPlaces),
+                                    [](topoloc::Stage, std::size_t, std::size_t) { return false; });
+    report_failure(__FILE__, __LINE__, "a cancelled build returned a map");
+  } catch (const topoloc::CancelledError &) {
+    CHECK(true);
+  }
+
+  // An exception thrown by the callback is rethrown unchanged after the C call, which it
+  // cancels; the callback is not called again after throwing.
+  for (const topoloc::Stage throw_at : {topoloc::Stage::Describing, topoloc::Stage::Fitting}) {
+    int calls_after = 0;
+    bool thrown = false;
+    try {
+      topoloc::Map::build_from_images(
+          images, vlad_options(kImgPlaces), [&](topoloc::Stage stage, std::size_t, std::size_t) {
+            if (thrown) ++calls_after;
+            if (stage == throw_at) {
+              thrown = true;
+              throw CallbackFailure();
+            }
+            return true;
+          });
+      report_failure(__FILE__, __LINE__, "the callback's exception was swallowed");
+    } catch (const CallbackFailure &) {
+      CHECK(thrown);
+    } catch (const std::exception &e) {
+      report_failure(__FILE__, __LINE__, std::string("wrong exception: ") + e.what());
+    }
+    CHECK_EQ(calls_after, 0);
+  }
+  // Not only std::exceptions.
+  bool caught_int = false;
+  try {
+    topoloc::Map::build_from_images(images, vlad_options(kImgPlaces),
+                                    [](topoloc::Stage, std::size_t, std::size_t) -> bool {
+                                      throw 42;
+                                    });
+  } catch (int value) {
+    caught_int = value == 42;
+  }
+  CHECK(caught_int);
+
+  // Bad input: typed errors, the callback never called.
+  std::vector<topoloc::Image> bad = images;
+  bad[2].stride = 5;
+  int bad_calls = 0;
+  const std::string bad_message = CHECK_THROWS_STATUS(
+      topoloc::Map::build_from_images(bad, vlad_options(kImgPlaces),
+                                      [&](topoloc::Stage, std::size_t, std::size_t) {
+                                        ++bad_calls;
+                                        return true;
+                                      }),
+      TOPOLOC_ERR_INVALID_IMAGE);
+  CHECK(bad_message.find("images[2]") != std::string::npos);
+  CHECK_EQ(bad_calls, 0);
+  CHECK_THROWS_STATUS(topoloc::Map::build_from_images(std::vector<topoloc::Image>(images.begin(),
+                                                                                 images.begin() + 1),
+                                                      vlad_options(2)),
+                      TOPOLOC_ERR_INVALID_ARGUMENT);
+  topoloc::ImageMapOptions unset{};
+  CHECK_THROWS_STATUS(topoloc::Map::build_from_images(images, unset), TOPOLOC_ERR_STRUCT_SIZE);
+}
+
+TEST(image_localizer) {
+  TempDir dir;
+  const std::string path = (dir.path / "images.topoloc").string();
+  image_map().save(path);
+  const topoloc::Map map = topoloc::Map::load(path);  // the describer survives the file
+
+  topoloc::LocalizerOptions options = topoloc::default_localizer_options();
+  CHECK(options.image_backend == TOPOLOC_BACKEND_AUTO);
+  options.mode = TOPOLOC_MODE_SINGLE_FRAME;
+  topoloc::Localizer localizer(map, options);
+  int correct = 0;
+  for (uint32_t p = 0; p < kImgPlaces; ++p) {
+    const std::vector<uint8_t> revisit = revisit_pixels(places_pixels()[p], 100 + p);
+    const topoloc::Result &r = localizer.localize(gray(revisit), double(p));
+    CHECK_EQ(r.frame_index, uint64_t{p});
+    if (r.place == p) ++correct;
+  }
+  CHECK(correct >= int(kImgPlaces) - 1);
+
+  // The general Frame: an image, or a descriptor (which wins over an image).
+  const std::vector<uint8_t> revisit = revisit_pixels(places_pixels()[5], 7);
+  topoloc::Frame frame;
+  frame.image = gray(revisit);
+  frame.timestamp = 10.0;
+  CHECK_EQ(localizer.process(frame).place, uint32_t{5});
+  const std::vector<float> view2 = map.view_descriptor(2);
+  frame.descriptor = view2.data();
+  frame.descriptor_len = view2.size();
+  CHECK_EQ(localizer.process(frame).place, uint32_t{2});
+
+  // Filter mode with odometry given as a Pose.
+  topoloc::Localizer filter(map);
+  const topoloc::Pose still = pose_at(0.0, 0.0);
+  CHECK_EQ(filter.localize(gray(places_pixels()[3]), 0.0).place, uint32_t{3});
+  CHECK_EQ(filter.localize(gray(revisit_pixels(places_pixels()[3], 9)), 0.1, still).place,
+           uint32_t{3});
+
+  // Bad and uninformative images: typed exceptions, localizer unchanged.
+  const uint64_t before = filter.last_result().frame_index;
+  const std::vector<uint8_t> constant(kImgW * kImgH, 90);
+  CHECK_THROWS_STATUS(filter.localize(gray(constant), 5.0), TOPOLOC_ERR_UNINFORMATIVE_IMAGE);
+  const uint8_t one = 128;
+  CHECK_THROWS_STATUS(filter.localize(topoloc::image_view(&one, 1, 1, TOPOLOC_PIXEL_GRAY8), 5.0),
+                      TOPOLOC_ERR_UNINFORMATIVE_IMAGE);
+  topoloc::Image short_buffer = gray(places_pixels()[0]);
+  short_buffer.data_len -= 1;
+  const std::string short_message =
+      CHECK_THROWS_STATUS(filter.localize(short_buffer, 5.0), TOPOLOC_ERR_INVALID_IMAGE);
+  CHECK(short_message.find("frame.image") != std::string::npos);
+  CHECK_THROWS_STATUS(
+      filter.localize(topoloc::image_view(&one, 10000, 10000, TOPOLOC_PIXEL_GRAY8), 5.0),
+      TOPOLOC_ERR_INVALID_IMAGE);
+  bool skipped = false;
+  try {
+    filter.localize(gray(constant), 6.0);
+  } catch (const topoloc::UninformativeImageError &) {
+    skipped = true;  // what a stream does: skip the frame
+  }
+  CHECK(skipped);
+  CHECK_EQ(filter.last_result().frame_index, before);
+  // An earlier timestamp than the skipped frames': they were never counted.
+  CHECK_EQ(filter.localize(gray(places_pixels()[4]), 0.2).frame_index, before + 1);
+
+  // Backends: the map's own works; another is a mismatch; NONE has no describer.
+  options = topoloc::default_localizer_options();
+  options.image_backend = TOPOLOC_BACKEND_VLAD_ORB;
+  CHECK_EQ(topoloc::Localizer(map, options).localize(gray(places_pixels()[6]), 0.0).place,
+           uint32_t{6});
+  options.image_backend = TOPOLOC_BACKEND_ONNX;
+  CHECK_THROWS_STATUS((void)topoloc::Localizer(map, options), TOPOLOC_ERR_DESCRIPTOR_MISMATCH);
+  options.image_backend = TOPOLOC_BACKEND_NONE;
+  topoloc::Localizer descriptors_only(map, options);
+  try {
+    descriptors_only.localize(gray(places_pixels()[0]), 0.0);
+    report_failure(__FILE__, __LINE__, "NONE localizer described an image");
+  } catch (const topoloc::NoDescriberError &e) {
+    CHECK(e.status() == TOPOLOC_ERR_NO_DESCRIBER && !e.message().empty());
+  }
+  CHECK_EQ(descriptors_only.process(view2, 0.0).place, uint32_t{2});
+  // A map built from descriptors has no describer.
+  topoloc::Localizer plain(chain_map());
+  CHECK_THROWS_STATUS(plain.localize(gray(places_pixels()[0]), 0.0), TOPOLOC_ERR_NO_DESCRIBER);
+  options.image_backend = TOPOLOC_BACKEND_VLAD_ORB;
+  CHECK_THROWS_STATUS((void)topoloc::Localizer(chain_map(), options), TOPOLOC_ERR_NO_DESCRIBER);
+}
+
+void write_pgm(const std::string &path, const std::vector<uint8_t> &px) {
+  std::ofstream out(path, std::ios::binary);
+  out << "P5\n" << kImgW << " " << kImgH << "\n255\n";
+  out.write(reinterpret_cast<const char *>(px.data()), static_cast<std::streamsize>(px.size()));
+}
+
+TEST(image_files) {
+  TempDir dir;
+  std::vector<std::string> paths;
+  for (uint32_t p = 0; p < 4; ++p) {
+    paths.push_back((dir.path / ("place " + std::to_string(p) + ".pgm")).string());
+    write_pgm(paths.back(), places_pixels()[p]);
+  }
+  int calls = 0;
+  const topoloc::Map map = topoloc::Map::build_from_image_files(
+      paths, vlad_options(4), [&](topoloc::Stage, std::size_t, std::size_t total) {
+        ++calls;
+        return total > 0;
+      });
+  CHECK(calls >= 2);
+  CHECK_EQ(map.place_count(), std::size_t{4});
+  for (uint32_t v = 0; v < 4; ++v) CHECK(map.view_image(v) == paths[v]);
+  topoloc::Localizer localizer(map);
+  CHECK_EQ(localizer.localize(gray(revisit_pixels(places_pixels()[1], 3)), 0.0).place,
+           uint32_t{1});
+
+  // No progress callback.
+  CHECK_EQ(topoloc::Map::build_from_image_files(paths, vlad_options(4)).view_count(),
+           std::size_t{4});
+
+  std::vector<std::string> missing = paths;
+  missing[3] = (dir.path / "no-such-image.png").string();
+  const std::string message =
+      CHECK_THROWS_STATUS(topoloc::Map::build_from_image_files(missing, vlad_options(4)),
+                          TOPOLOC_ERR_INVALID_IMAGE);
+  CHECK(message.find(missing[3]) != std::string::npos);
+  try {
+    topoloc::Map::build_from_image_files(missing, vlad_options(4));
+  } catch (const topoloc::InvalidImageError &) {
+    CHECK(true);
+  }
+
+  // ONNX with a model file that does not exist: the path is named.
+  topoloc::ImageMapOptions onnx = topoloc::default_image_map_options();
+  CHECK(onnx.backend == TOPOLOC_BACKEND_AUTO);  // = ONNX for building
+  const std::string model = (dir.path / "no-such-model.onnx").string();
+  onnx.onnx_model_path = model.c_str();
+  onnx.dim = 3;
+  const std::string onnx_message = CHECK_THROWS_STATUS(
+      topoloc::Map::build_from_image_files(paths, onnx), TOPOLOC_ERR_BACKEND_UNAVAILABLE);
+  CHECK(onnx_message.find(model) != std::string::npos);
+}
+
 #ifdef CV_VERSION
 TEST(opencv_overloads) {
   const topoloc::Map map = chain_map();
@@ -600,6 +982,93 @@ TEST(opencv_overloads) {
   CHECK_THROWS_STATUS(localizer.process(wide.col(0), 0.2), TOPOLOC_ERR_INVALID_ARGUMENT);
   topoloc::MapBuilder builder("test", "", kDim);
   CHECK_EQ(builder.add_view(builder.add_place(), row), uint32_t{0});
+}
+
+TEST(opencv_images) {
+  topoloc::LocalizerOptions options = topoloc::default_localizer_options();
+  options.mode = TOPOLOC_MODE_SINGLE_FRAME;
+  topoloc::Localizer localizer(image_map(), options);
+  std::vector<uint8_t> revisit = revisit_pixels(places_pixels()[4], 11);
+  const topoloc::Result reference = localizer.localize(gray(revisit), 0.0);  // a copy
+  CHECK_EQ(reference.place, uint32_t{4});
+  auto same_as_reference = [&](const topoloc::Result &r) {
+    return r.place == reference.place && std::abs(r.similarity - reference.similarity) < 1e-4f;
+  };
+
+  // CV_8UC1, continuous.
+  const cv::Mat grey(int(kImgH), int(kImgW), CV_8UC1, revisit.data());
+  CHECK(same_as_reference(localizer.localize(grey, 0.0)));
+
+  // A non-continuous ROI of a larger grey image: its step is honoured, nothing is copied.
+  cv::Mat big(int(kImgH) + 20, int(kImgW) + 30, CV_8UC1, cv::Scalar(0));
+  const cv::Rect rect(10, 5, int(kImgW), int(kImgH));
+  grey.copyTo(big(rect));
+  const cv::Mat roi = big(rect);
+  CHECK(!roi.isContinuous());
+  CHECK(roi.step[0] != std::size_t(roi.cols) * roi.elemSize());
+  const topoloc::Image view = topoloc::image_view(roi);
+  CHECK(view.data == roi.data && view.format == TOPOLOC_PIXEL_GRAY8);
+  CHECK_EQ(view.stride, std::size_t{kImgW + 30});
+  CHECK_EQ(view.data_len, std::size_t{(kImgW + 30) * (kImgH - 1) + kImgW});
+  CHECK(same_as_reference(localizer.localize(roi, 0.0)));
+
+  // CV_8UC3 (BGR) and CV_8UC4 (BGRA), also as ROIs.
+  cv::Mat bgr, bgra;
+  cv::merge(std::vector<cv::Mat>{grey, grey, grey}, bgr);
+  cv::merge(std::vector<cv::Mat>{grey, grey, grey, cv::Mat(grey.size(), CV_8UC1, cv::Scalar(255))},
+            bgra);
+  CHECK(topoloc::image_view(bgr).format == TOPOLOC_PIXEL_BGR8);
+  CHECK(topoloc::image_view(bgra).format == TOPOLOC_PIXEL_BGRA8);
+  CHECK(same_as_reference(localizer.localize(bgr, 0.0)));
+  CHECK(same_as_reference(localizer.localize(bgra, 0.0)));
+  cv::Mat big_bgr(int(kImgH) + 4, int(kImgW) + 8, CV_8UC3, cv::Scalar(1, 2, 3));
+  bgr.copyTo(big_bgr(cv::Rect(7, 3, int(kImgW), int(kImgH))));
+  const cv::Mat roi_bgr = big_bgr(cv::Rect(7, 3, int(kImgW), int(kImgH)));
+  CHECK(!roi_bgr.isContinuous());
+  CHECK_EQ(topoloc::image_view(roi_bgr).stride, std::size_t{(kImgW + 8) * 3});
+  CHECK(same_as_reference(localizer.localize(roi_bgr, 0.0)));
+
+  // Other types are refused before the library sees them; the localizer is unchanged.
+  const uint64_t frames = localizer.last_result().frame_index;
+  CHECK_THROWS_STATUS(localizer.localize(cv::Mat(10, 10, CV_16UC1, cv::Scalar(0)), 1.0),
+                      TOPOLOC_ERR_INVALID_IMAGE);
+  CHECK_THROWS_STATUS(localizer.localize(cv::Mat(10, 10, CV_32FC3, cv::Scalar(0)), 1.0),
+                      TOPOLOC_ERR_INVALID_IMAGE);
+  CHECK_THROWS_STATUS(localizer.localize(cv::Mat(10, 10, CV_8UC2, cv::Scalar(0)), 1.0),
+                      TOPOLOC_ERR_INVALID_IMAGE);
+  CHECK_THROWS_STATUS(localizer.localize(cv::Mat(), 1.0), TOPOLOC_ERR_INVALID_IMAGE);
+  const int sizes[3] = {4, 4, 4};
+  CHECK_THROWS_STATUS(localizer.localize(cv::Mat(3, sizes, CV_8UC1, cv::Scalar(0)), 1.0),
+                      TOPOLOC_ERR_INVALID_IMAGE);
+  try {
+    (void)topoloc::image_view(cv::Mat(2, 2, CV_64F));
+  } catch (const topoloc::InvalidImageError &e) {
+    CHECK(e.message().find("CV_8UC1") != std::string::npos);
+  }
+  // A constant Mat is a valid image without content.
+  CHECK_THROWS_STATUS(localizer.localize(cv::Mat(int(kImgH), int(kImgW), CV_8UC3,
+                                                 cv::Scalar(40, 40, 40)),
+                                         1.0),
+                      TOPOLOC_ERR_UNINFORMATIVE_IMAGE);
+  CHECK_EQ(localizer.last_result().frame_index, frames);
+
+  // Maps from Mats (ROIs included) equal maps from the same pixels as plain views.
+  std::vector<cv::Mat> mats;
+  std::vector<cv::Mat> owners;
+  for (uint32_t p = 0; p < 4; ++p) {
+    cv::Mat parent(int(kImgH) + 2, int(kImgW) + 2, CV_8UC1, cv::Scalar(0));
+    cv::Mat(int(kImgH), int(kImgW), CV_8UC1, const_cast<uint8_t *>(places_pixels()[p].data()))
+        .copyTo(parent(cv::Rect(1, 1, int(kImgW), int(kImgH))));
+    owners.push_back(parent);
+    mats.push_back(parent(cv::Rect(1, 1, int(kImgW), int(kImgH))));
+  }
+  const topoloc::Map from_mats = topoloc::Map::build_from_images(mats, vlad_options(4));
+  const topoloc::Map from_views = topoloc::Map::build_from_images(place_images(4), vlad_options(4));
+  CHECK(from_mats.descriptor_model() == from_views.descriptor_model());
+  CHECK(from_mats.view_descriptor(2) == from_views.view_descriptor(2));
+  mats.push_back(cv::Mat(8, 8, CV_16UC1));
+  CHECK_THROWS_STATUS(topoloc::Map::build_from_images(mats, vlad_options(5)),
+                      TOPOLOC_ERR_INVALID_IMAGE);
 }
 #endif
 

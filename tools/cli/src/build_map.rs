@@ -30,7 +30,7 @@ pub struct BuildMapArgs {
     /// Place spacing in metres (with poses).
     #[arg(long, default_value_t = 2.0)]
     pub place_spacing: f64,
-    /// Descriptor dimension D (at most the number of images minus one).
+    /// Descriptor dimension D; with fewer than D + 1 images, the number of images minus one.
     #[arg(long, default_value_t = 512)]
     pub dim: usize,
     /// Most images the PCA is fitted on (evenly spaced).
