@@ -14,6 +14,7 @@ mod error;
 mod file;
 mod from_images;
 mod keyframes;
+mod occupancy;
 mod tum;
 
 pub use builder::{MapBuilder, ViewAttributes};
@@ -23,6 +24,7 @@ pub use from_images::{
     build_from_images, BuildStage, ImageMapError, ImageMapOptions, ImageMapReport, ImageSource,
 };
 pub use keyframes::{from_keyframes, Keyframe, KeyframeOptions};
+pub use occupancy::{OccupancyGrid, Voxel, MAX_VOXELS};
 pub use tum::{parse_tum, read_tum, TimedPose};
 
 use crate::describe::DescriberModel;
