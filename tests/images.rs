@@ -3,6 +3,7 @@
 //! errors and leave the localizer unchanged. VLAD runs everywhere; the ONNX cases run when
 //! scripts/setup-models.sh has filled the cache (CI does) and are skipped otherwise.
 
+use nalgebra::{Isometry3, Point3, Vector3};
 use std::sync::Arc;
 use topoloc::describe::image::{ImageView, PixelFormat};
 use topoloc::describe::onnx::{cache_dir, OnnxOptions, DEFAULT_MODEL_FILE};
@@ -10,7 +11,10 @@ use topoloc::describe::vlad::VladOptions;
 use topoloc::describe::{
     BackendConfig, BackendKind, BackendSpec, DescribeError, Describer, DescriberOptions,
 };
-use topoloc::map::{build_from_images, BuildStage, ImageMapError, ImageMapOptions, ImageSource};
+use topoloc::map::{
+    build_from_images, BuildStage, ImageLayout, ImageMapError, ImageMapOptions, ImageSource,
+    MapError, PlaceLayout,
+};
 use topoloc::{Frame, LoadOptions, LocalizeError, Localizer, LocalizerOptions, Map, Mode};
 
 const W: usize = 320;
@@ -76,7 +80,8 @@ fn build(images: &[Vec<u8>], backend: BackendConfig) -> Result<Map, ImageMapErro
         threads: 2,
         ..ImageMapOptions::default()
     };
-    build_from_images(&sources, None, &options, &mut no_progress).map(|(map, _)| map)
+    build_from_images(&sources, ImageLayout::Sequence, &options, &mut no_progress)
+        .map(|(map, _)| map)
 }
 
 fn image_frame(data: &[u8], t: f64) -> Frame<'_> {
@@ -302,13 +307,99 @@ fn progress_is_reported_and_can_cancel() {
         backend: BackendConfig::Vlad(VladOptions::default()),
         ..ImageMapOptions::default()
     };
-    build_from_images(&sources, None, &options, &mut record).unwrap();
+    build_from_images(&sources, ImageLayout::Sequence, &options, &mut record).unwrap();
     assert_eq!(seen.first().map(|s| s.0), Some(BuildStage::Describing));
     assert!(seen.contains(&(BuildStage::Describing, 8, 8)));
     assert_eq!(seen.last(), Some(&(BuildStage::Fitting, 1, 1)));
     let mut cancel = |_: BuildStage, _: usize, _: usize| false;
     assert!(matches!(
-        build_from_images(&sources, None, &options, &mut cancel),
+        build_from_images(&sources, ImageLayout::Sequence, &options, &mut cancel),
         Err(ImageMapError::Cancelled)
+    ));
+}
+
+#[test]
+fn a_known_place_graph_lays_out_the_views() {
+    // Three places on a line, two views each (yaw 0 and pi), edges 0-1 and 1-2.
+    let images: Vec<Vec<u8>> = (0..6).map(|i| place_image(500 + i)).collect();
+    let sources: Vec<ImageSource> = images
+        .iter()
+        .map(|d| ImageSource::Pixels(gray(d)))
+        .collect();
+    let positions: Vec<Point3<f64>> = (0..3)
+        .map(|p| Point3::new(2.0 * p as f64, 0.0, 1.2))
+        .collect();
+    let views: Vec<(u32, Isometry3<f64>)> = (0..6)
+        .map(|i| {
+            let place = (i / 2) as u32;
+            let yaw = if i % 2 == 0 {
+                0.0
+            } else {
+                std::f64::consts::PI
+            };
+            let pose = Isometry3::new(positions[place as usize].coords, Vector3::z() * yaw);
+            (place, pose)
+        })
+        .collect();
+    let layout = PlaceLayout {
+        positions: positions.clone(),
+        edges: vec![(0, 1), (1, 2)],
+        views: views.clone(),
+    };
+    let options = ImageMapOptions {
+        backend: BackendConfig::Vlad(VladOptions::default()),
+        threads: 1,
+        ..ImageMapOptions::default()
+    };
+    let (map, _) = build_from_images(
+        &sources,
+        ImageLayout::Graph(&layout),
+        &options,
+        &mut no_progress,
+    )
+    .unwrap();
+    assert_eq!(
+        (map.place_count(), map.view_count(), map.edge_count()),
+        (3, 6, 2)
+    );
+    for (p, position) in positions.iter().enumerate() {
+        assert_eq!(map.place_position(p as u32).unwrap(), Some(*position));
+        assert_eq!(
+            map.place_views(p as u32).unwrap(),
+            &[2 * p as u32, 2 * p as u32 + 1]
+        );
+    }
+    for (i, (_, pose)) in views.iter().enumerate() {
+        let view = map.view(i as u32).unwrap();
+        assert_eq!(view.keyframe_id, Some(i as u64));
+        assert_eq!(view.world_t_camera, Some(*pose));
+    }
+    assert_eq!(map.neighbours(1).unwrap().0, &[0, 2]);
+    // One layout view per image, places that exist.
+    let short = PlaceLayout {
+        views: views[..5].to_vec(),
+        ..layout.clone()
+    };
+    let err = build_from_images(
+        &sources,
+        ImageLayout::Graph(&short),
+        &options,
+        &mut no_progress,
+    )
+    .unwrap_err();
+    assert!(
+        err.to_string().contains("5 layout views for 6 images"),
+        "{err}"
+    );
+    let mut unknown = layout.clone();
+    unknown.edges.push((1, 7));
+    assert!(matches!(
+        build_from_images(
+            &sources,
+            ImageLayout::Graph(&unknown),
+            &options,
+            &mut no_progress
+        ),
+        Err(ImageMapError::Map(MapError::UnknownPlace { place: 7, .. }))
     ));
 }

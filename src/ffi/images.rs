@@ -11,7 +11,9 @@ use crate::describe::image::{ImageView, PixelFormat};
 use crate::describe::onnx::OnnxOptions;
 use crate::describe::vlad::{LocalFeature, VladOptions};
 use crate::describe::{BackendConfig, BackendKind, FitOptions};
-use crate::map::{build_from_images, read_tum, BuildStage, ImageMapOptions, ImageSource};
+use crate::map::{
+    build_from_images, read_tum, BuildStage, ImageLayout, ImageMapOptions, ImageSource,
+};
 use std::ffi::{c_char, c_void};
 use std::path::Path;
 
@@ -317,7 +319,14 @@ fn build(
         },
         None => true,
     };
-    let (map, _) = build_from_images(sources, poses.as_deref(), &options, &mut report)?;
+    let (map, _) = build_from_images(
+        sources,
+        poses
+            .as_deref()
+            .map_or(ImageLayout::Sequence, ImageLayout::Keyframes),
+        &options,
+        &mut report,
+    )?;
     super::boundary::write_out(out, topoloc_map::into_raw(map));
     Ok(())
 }

@@ -1,17 +1,20 @@
 //! Maps built from images: every image is described in parallel (rayon), the describer model
 //! (PCA, VLAD codebook) is fitted on all of them, and the map is assembled either as a sequence
-//! (consecutive groups of `views_per_place` images form a place, places chained in order) or,
-//! with camera poses, by [`from_keyframes`] (places by spacing, revisits merged).
+//! (consecutive groups of `views_per_place` images form a place, places chained in order), with
+//! camera poses by [`from_keyframes`] (places by spacing, revisits merged), or on a known place
+//! graph ([`ImageLayout`]).
 //!
 //! The map stores its describer, so localizers created with `Localizer::with_describer`
 //! describe query images exactly as the map's images were. Each view records the index of its
 //! source image as its keyframe id and the image's path (when built from files).
 
-use super::{from_keyframes, Keyframe, KeyframeOptions, Map, MapBuilder, MapError, ViewAttributes};
+use super::{
+    from_keyframes, Keyframe, KeyframeOptions, Map, MapBuilder, MapError, PlaceId, ViewAttributes,
+};
 use crate::describe::describer::{fit, BackendConfig, Extractor, FitOptions, RawFeatures};
 use crate::describe::image::{read_rgb, ImageView, PixelFormat};
 use crate::describe::DescribeError;
-use nalgebra::Isometry3;
+use nalgebra::{Isometry3, Point3};
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::Arc;
@@ -105,13 +108,38 @@ pub enum ImageMapError {
     Cancelled,
 }
 
+/// How the described images become places and edges.
+#[derive(Clone, Copy, Debug)]
+pub enum ImageLayout<'a> {
+    /// Consecutive groups of [`ImageMapOptions::views_per_place`] images form places, chained in
+    /// order.
+    Sequence,
+    /// One `world_T_camera` per image: places by spacing and revisits merged
+    /// ([`from_keyframes`] with [`ImageMapOptions::keyframes`]).
+    Keyframes(&'a [Isometry3<f64>]),
+    /// A known place graph (e.g. from skeleton map building): image `i` is a view of place
+    /// `views[i].0` taken from pose `views[i].1`.
+    Graph(&'a PlaceLayout),
+}
+
+/// A known place graph for [`ImageLayout::Graph`].
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct PlaceLayout {
+    /// Position of each place, world metres.
+    pub positions: Vec<Point3<f64>>,
+    /// Undirected edges between places (each pair once).
+    pub edges: Vec<(PlaceId, PlaceId)>,
+    /// For each image, in order: its place and its `world_T_camera`.
+    pub views: Vec<(PlaceId, Isometry3<f64>)>,
+}
+
 /// Describes `images` with the chosen backend, fits the describer and builds the map (see the
-/// module documentation). `poses`, when given, holds one `world_T_camera` per image.
+/// module documentation) with `layout`.
 /// `progress(stage, done, total)` is called on the calling thread about ten times a second and
 /// at each stage change; returning `false` cancels the build ([`ImageMapError::Cancelled`]).
 pub fn build_from_images(
     images: &[ImageSource<'_>],
-    poses: Option<&[Isometry3<f64>]>,
+    layout: ImageLayout<'_>,
     options: &ImageMapOptions,
     progress: &mut dyn FnMut(BuildStage, usize, usize) -> bool,
 ) -> Result<(Map, ImageMapReport), ImageMapError> {
@@ -122,15 +150,17 @@ pub fn build_from_images(
         ))
         .into());
     }
-    if let Some(p) = poses {
-        if p.len() != images.len() {
-            return Err(MapError::InvalidArgument(format!(
-                "{} poses for {} images: give one pose per image",
-                p.len(),
-                images.len()
-            ))
-            .into());
-        }
+    let per_image = match layout {
+        ImageLayout::Sequence => None,
+        ImageLayout::Keyframes(poses) => Some((poses.len(), "poses")),
+        ImageLayout::Graph(graph) => Some((graph.views.len(), "layout views")),
+    };
+    if let Some((count, what)) = per_image.filter(|(count, _)| *count != images.len()) {
+        return Err(MapError::InvalidArgument(format!(
+            "{count} {what} for {} images: give one per image",
+            images.len()
+        ))
+        .into());
     }
     if options.threads > MAX_BUILD_THREADS {
         return Err(MapError::InvalidArgument(format!(
@@ -173,8 +203,8 @@ pub fn build_from_images(
             ImageSource::Pixels(_) => None,
         })
         .collect();
-    let map = match poses {
-        Some(poses) => {
+    let map = match layout {
+        ImageLayout::Keyframes(poses) => {
             let keyframes: Vec<Keyframe> = descriptors
                 .iter()
                 .zip(poses)
@@ -191,7 +221,10 @@ pub fn build_from_images(
             };
             from_keyframes(identity, &keyframes, &keyframe_options)?
         }
-        None => sequence_map(identity, &descriptors, &sources, options.views_per_place)?,
+        ImageLayout::Sequence => {
+            sequence_map(identity, &descriptors, &sources, options.views_per_place)?
+        }
+        ImageLayout::Graph(graph) => graph_map(identity, &descriptors, &sources, graph)?,
     };
     let map = map.with_describer(Arc::new(model))?;
     if !progress(BuildStage::Fitting, 1, 1) {
@@ -231,6 +264,34 @@ fn sequence_map(
         if place > 0 {
             builder.add_edge(place - 1, place, 1.0)?;
         }
+    }
+    builder.build()
+}
+
+/// The places and edges of `graph`, each image a view of its place.
+fn graph_map(
+    identity: crate::map::DescriptorIdentity,
+    descriptors: &[Vec<f32>],
+    sources: &[Option<String>],
+    graph: &PlaceLayout,
+) -> Result<Map, MapError> {
+    let mut builder = MapBuilder::new(identity);
+    for position in &graph.positions {
+        builder.add_place(Some(*position))?;
+    }
+    for (index, ((place, pose), d)) in graph.views.iter().zip(descriptors).enumerate() {
+        builder.add_view(
+            *place,
+            d,
+            ViewAttributes {
+                keyframe_id: Some(index as u64),
+                world_t_camera: Some(*pose),
+                image: sources[index].clone(),
+            },
+        )?;
+    }
+    for &(a, b) in &graph.edges {
+        builder.add_edge(a, b, 1.0)?;
     }
     builder.build()
 }

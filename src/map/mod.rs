@@ -21,7 +21,8 @@ pub use builder::{MapBuilder, ViewAttributes};
 pub use error::MapError;
 pub use file::{LoadOptions, FORMAT_NAME, FORMAT_VERSION_MAJOR, FORMAT_VERSION_MINOR};
 pub use from_images::{
-    build_from_images, BuildStage, ImageMapError, ImageMapOptions, ImageMapReport, ImageSource,
+    build_from_images, BuildStage, ImageLayout, ImageMapError, ImageMapOptions, ImageMapReport,
+    ImageSource, PlaceLayout,
 };
 pub use keyframes::{from_keyframes, Keyframe, KeyframeOptions};
 pub use occupancy::{OccupancyGrid, Voxel, MAX_VOXELS};

@@ -8,7 +8,8 @@ use serde_json::json;
 use std::path::PathBuf;
 use topoloc::describe::FitOptions;
 use topoloc::map::{
-    build_from_images, read_tum, BuildStage, ImageMapOptions, ImageSource, KeyframeOptions,
+    build_from_images, read_tum, BuildStage, ImageLayout, ImageMapOptions, ImageSource,
+    KeyframeOptions,
 };
 
 /// Options of `build-map`.
@@ -99,8 +100,14 @@ pub fn run(args: &BuildMapArgs) -> Result<()> {
         }
         true
     };
-    let (map, report) =
-        build_from_images(&sources, poses.as_deref(), &options, &mut report_progress)?;
+    let (map, report) = build_from_images(
+        &sources,
+        poses
+            .as_deref()
+            .map_or(ImageLayout::Sequence, ImageLayout::Keyframes),
+        &options,
+        &mut report_progress,
+    )?;
     bar.finish_and_clear();
     map.save(&args.out)?;
     let summary = json!({
