@@ -66,7 +66,9 @@ impl Intrinsics {
         }
         for (name, f) in [("fx", self.fx), ("fy", self.fy)] {
             if !(f.is_finite() && f > 0.0) {
-                return Err(format!("intrinsics.{name} is {f}, must be finite and positive"));
+                return Err(format!(
+                    "intrinsics.{name} is {f}, must be finite and positive"
+                ));
             }
         }
         for (name, c) in [("cx", self.cx), ("cy", self.cy)] {
