@@ -35,6 +35,7 @@
 #define topoloc_result_default(p) topoloc_result_init((p), sizeof *(p))
 #define topoloc_view_info_default(p) topoloc_view_info_init((p), sizeof *(p))
 #define topoloc_image_map_options_default(p) topoloc_image_map_options_init((p), sizeof *(p))
+#define topoloc_skeleton_options_default(p) topoloc_skeleton_options_init((p), sizeof *(p))
 
 
 /**
@@ -112,6 +113,26 @@
  * Single-frame mode: every frame judged on its own.
  */
 #define TOPOLOC_MODE_SINGLE_FRAME 1
+
+/**
+ * Place kind: a dead end of the skeleton.
+ */
+#define TOPOLOC_NODE_END 0
+
+/**
+ * Place kind: a bend of the skeleton.
+ */
+#define TOPOLOC_NODE_CORNER 1
+
+/**
+ * Place kind: a junction of three or more skeleton branches.
+ */
+#define TOPOLOC_NODE_BRANCH 2
+
+/**
+ * Place kind: inserted on a skeleton path to keep edges straight, obstacle-free and short.
+ */
+#define TOPOLOC_NODE_INTERMEDIATE 3
 
 /**
  * ABI version: bumped only when an existing C signature or struct layout changes
@@ -246,6 +267,14 @@ enum topoloc_status
 #ifndef __cplusplus
 typedef uint32_t topoloc_status;
 #endif // __cplusplus
+
+/**
+ * A topological graph built from an occupancy grid: places (position, kind) and undirected
+ * edges (place pairs with their length), plus the skeleton it was built on. Created by
+ * `topoloc_graph_from_occupancy`, released by `topoloc_graph_free`. Immutable: a
+ * `const topoloc_graph*` may be used from many threads at once.
+ */
+typedef struct topoloc_graph topoloc_graph;
 
 /**
  * Follows one camera through a map. Created by `topoloc_localizer_new`, released by
@@ -671,6 +700,54 @@ typedef struct topoloc_view_info {
   double world_T_camera[16];
 } topoloc_view_info;
 
+/**
+ * Parameters of `topoloc_graph_from_occupancy`. Initialise with
+ * `topoloc_skeleton_options_default`. Lengths are metres.
+ */
+typedef struct topoloc_skeleton_options {
+  /**
+   * `sizeof(topoloc_skeleton_options)`, set by the `_default` function.
+   */
+  size_t struct_size;
+  /**
+   * Whether to use only the height band `[z_min_m, z_max_m]` (voxel centres, world z).
+   * Default false (the whole grid).
+   */
+  bool use_z_band;
+  /**
+   * Lower bound of the height band. Default 0.
+   */
+  double z_min_m;
+  /**
+   * Upper bound of the height band (>= z_min_m). Default 0.
+   */
+  double z_max_m;
+  /**
+   * Free voxels closer than this to an obstacle count as occupied (>= 0). Default 0.
+   */
+  double min_clearance_m;
+  /**
+   * Nodes closer than this along the skeleton become one place (>= 0). Default 1.0.
+   */
+  double merge_radius_m;
+  /**
+   * Longest edge (at least two voxels); longer paths get intermediate places. Default 3.0.
+   */
+  double max_edge_m;
+  /**
+   * Smallest bend (degrees, in (0, 180)) that makes a corner. Default 40.
+   */
+  double corner_angle_deg;
+  /**
+   * Distance along the skeleton over which bends are measured (> 0). Default 0.5.
+   */
+  double corner_scale_m;
+  /**
+   * Dead-end branches shorter than this are removed (>= 0). Default 1.0.
+   */
+  double min_spur_m;
+} topoloc_skeleton_options;
+
 #ifdef __cplusplus
 extern "C" {
 #endif // __cplusplus
@@ -921,6 +998,73 @@ topoloc_status topoloc_map_view_image(const struct topoloc_map *map, uint32_t vi
  * Errors: `_UNKNOWN_VIEW`, `_BUFFER_TOO_SMALL` when `len < D`.
  */
 topoloc_status topoloc_map_view_descriptor(const struct topoloc_map *map, uint32_t view, float *buf, size_t len);
+
+/**
+ * Fills the first `size` bytes of `*options` with defaults and sets `struct_size`; call it
+ * through the header macro `topoloc_skeleton_options_default(options)`, which passes
+ * `sizeof *(options)`. Thread-safe. Errors: `_NULL_ARGUMENT`, `_STRUCT_SIZE` (size below the
+ * first published layout).
+ */
+topoloc_status topoloc_skeleton_options_init(struct topoloc_skeleton_options *options, size_t size);
+
+/**
+ * Builds the topological graph of the free space of an occupancy voxel grid: the free space
+ * (optionally limited to a height band, minus a clearance) is thinned to a one-voxel-thin 3D
+ * skeleton, whose ends, corners and junctions become places (merged when close), joined where
+ * the skeleton links them by an obstacle-free straight segment (intermediate places are
+ * inserted where it is not, and to keep edges under `max_edge_m`).
+ *
+ * The grid: `dims` (3 values: voxels along x, y, z), `voxel_size` (metres, > 0), `origin`
+ * (3 doubles: world position of the outer corner of voxel (0, 0, 0); z is up), and `cells_len`
+ * bytes at `cells`, x fastest (`cells[x + nx * (y + ny * z)]`), non-zero = occupied. The
+ * inputs are read during the call only. `options` may be NULL (defaults).
+ *
+ * On success `*out` owns a new graph (free it with `topoloc_graph_free`); the same inputs give
+ * the same graph. Thread-safe (no shared state); single-threaded, about 2 s for a
+ * 40 m x 30 m x 3 m world at 0.1 m. Errors: `_NULL_ARGUMENT`, `_STRUCT_SIZE`,
+ * `_INVALID_ARGUMENT` (the message names the field: `dims`, `voxel_size`, `origin`,
+ * `cells_len`, `cells` when every voxel is occupied, `z_band` when the band holds no free
+ * voxel, `min_clearance_m` when the clearance leaves none, or another option out of range).
+ */
+topoloc_status topoloc_graph_from_occupancy(const size_t *dims, double voxel_size, const double *origin, const uint8_t *cells, size_t cells_len, const struct topoloc_skeleton_options *options, struct topoloc_graph **out);
+
+/**
+ * Releases a graph. `NULL` is a no-op.
+ */
+void topoloc_graph_free(struct topoloc_graph *graph);
+
+/**
+ * Number of places (`*out`). Errors: `_NULL_ARGUMENT`.
+ */
+topoloc_status topoloc_graph_place_count(const struct topoloc_graph *graph, size_t *out);
+
+/**
+ * Number of undirected edges (`*out`). Errors: `_NULL_ARGUMENT`.
+ */
+topoloc_status topoloc_graph_edge_count(const struct topoloc_graph *graph, size_t *out);
+
+/**
+ * Place `place` (0..place_count): `xyz` (3 doubles) receives its world position in metres (the
+ * centre of its skeleton voxel), `*kind` its `TOPOLOC_NODE_*` kind. Places come in this order:
+ * branches, ends, corners, then intermediate places. Errors: `_NULL_ARGUMENT`,
+ * `_UNKNOWN_PLACE`.
+ */
+topoloc_status topoloc_graph_place(const struct topoloc_graph *graph, uint32_t place, double *xyz, uint32_t *kind);
+
+/**
+ * Edge number `index` (0..edge_count, sorted by (a, b)): places `*a < *b` and the straight
+ * distance between them, `*length_m`. Errors: `_NULL_ARGUMENT`, `_INVALID_ARGUMENT` (index out
+ * of range).
+ */
+topoloc_status topoloc_graph_edge(const struct topoloc_graph *graph, size_t index, uint32_t *a, uint32_t *b, double *length_m);
+
+/**
+ * Copies the skeleton the graph was built on, as voxel indices `x0, y0, z0, x1, y1, z1, ...`
+ * in grid order, into `xyz` of capacity `len` values. `*count` (if not NULL) receives the
+ * number of values (3 per voxel), also on `TOPOLOC_ERR_BUFFER_TOO_SMALL`; call with `len` 0
+ * to ask. Errors: `_NULL_ARGUMENT`, `_BUFFER_TOO_SMALL`.
+ */
+topoloc_status topoloc_graph_skeleton(const struct topoloc_graph *graph, uint32_t *xyz, size_t len, size_t *count);
 
 /**
  * Library version "MAJOR.MINOR.PATCH" as a static NUL-terminated string (never free it).

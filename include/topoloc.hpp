@@ -8,7 +8,7 @@
  * API does not have; the C header documents the semantics of each call.
  *
  * Thread safety (the C rules, restated):
- *  - `Map`: immutable. Its const methods may be called from many threads at once.
+ *  - `Map`, `Graph`: immutable. Their const methods may be called from many threads at once.
  *  - `MapBuilder`, `Localizer`: single-threaded state. Use each from one thread at a time (they
  *    may move between threads).
  *  - Error messages are per thread, so an `Error` always describes the failure of the call that
@@ -239,6 +239,10 @@ using KeyframeOptions = topoloc_keyframe_options;
 /// images minus one). The string fields are borrowed for the duration of the call.
 using ImageMapOptions = topoloc_image_map_options;
 
+/// Parameters of `Graph::from_occupancy` (the C struct). Start from
+/// `default_skeleton_options()`; see topoloc.h for each field's meaning and default.
+using SkeletonOptions = topoloc_skeleton_options;
+
 /// Load options that accept any map (`topoloc_map_load_options_default`). Throws `Error`
 /// (`TOPOLOC_ERR_STRUCT_SIZE`) only on a header/library layout mismatch.
 inline LoadOptions default_load_options() {
@@ -268,6 +272,14 @@ inline KeyframeOptions default_keyframe_options() {
 inline ImageMapOptions default_image_map_options() {
   ImageMapOptions options;
   check(topoloc_image_map_options_default(&options));
+  return options;
+}
+
+/// Default skeleton options (`topoloc_skeleton_options_default`). Throws `Error`
+/// (`TOPOLOC_ERR_STRUCT_SIZE`) only on a header/library layout mismatch.
+inline SkeletonOptions default_skeleton_options() {
+  SkeletonOptions options;
+  check(topoloc_skeleton_options_default(&options));
   return options;
 }
 
@@ -422,6 +434,9 @@ struct LocalizerFree {
   void operator()(topoloc_localizer *localizer) const noexcept {
     topoloc_localizer_free(localizer);
   }
+};
+struct GraphFree {
+  void operator()(topoloc_graph *graph) const noexcept { topoloc_graph_free(graph); }
 };
 
 /// Optional string argument: "" becomes NULL (the C API treats both as "not given").
@@ -1150,6 +1165,138 @@ private:
   topoloc_result result_template_{};  // filled once by topoloc_result_default
   std::vector<Candidate> buffer_;  // handed to the C call as the candidate array
   Result last_;                    // returned by reference from process()
+};
+
+// ---------------------------------------------------------------------------------------------
+// Graph (skeleton map building)
+// ---------------------------------------------------------------------------------------------
+
+/// One place of a skeleton graph: its position in metres and its `TOPOLOC_NODE_*` kind.
+struct GraphPlace {
+  Position position{};  ///< Centre of the place's skeleton voxel, world metres.
+  uint32_t kind = 0;    ///< `TOPOLOC_NODE_END`, `_CORNER`, `_BRANCH` or `_INTERMEDIATE`.
+};
+
+/// One undirected edge of a skeleton graph: places `a < b` and their straight distance.
+struct GraphEdge {
+  uint32_t a = 0;         ///< Smaller place index.
+  uint32_t b = 0;         ///< Larger place index.
+  double length_m = 0.0;  ///< Straight-line distance between the places, metres.
+};
+
+/// Owner of a topological graph built from an occupancy voxel grid (`topoloc_graph*`, made by
+/// `topoloc_graph_from_occupancy`). Move-only; the destructor calls `topoloc_graph_free`.
+///
+/// Thread safety: immutable; const methods may be called from many threads at once.
+/// Errors: every method that calls the library throws `Error` on failure.
+class Graph {
+public:
+  /// An empty owner (`!graph`).
+  Graph() noexcept = default;
+
+  /// Takes ownership of `raw` (from `topoloc_graph_from_occupancy`); null gives an empty owner.
+  explicit Graph(topoloc_graph *raw) noexcept : ptr_(raw) {}
+
+  Graph(const Graph &) = delete;
+  Graph &operator=(const Graph &) = delete;
+  /// Moves ownership; `other` is left empty.
+  Graph(Graph &&other) noexcept = default;
+  /// Frees the current graph (if any) and takes `other`'s; `other` is left empty.
+  Graph &operator=(Graph &&other) noexcept = default;
+  /// Frees the graph (`topoloc_graph_free`).
+  ~Graph() = default;
+
+  /// Builds the graph of the free space of an occupancy grid of `dims` voxels (x, y, z) of
+  /// `voxel_size` metres whose voxel (0, 0, 0) starts at `origin`; `cells` holds one byte per
+  /// voxel, x fastest (`cells[x + nx * (y + ny * z)]`), non-zero = occupied. Read during the
+  /// call only. Throws `Error` (`TOPOLOC_ERR_INVALID_ARGUMENT` naming the field: `dims`,
+  /// `voxel_size`, `origin`, `cells_len`, `cells` when every voxel is occupied, `z_band`,
+  /// `min_clearance_m` or another option; `_STRUCT_SIZE`).
+  static Graph from_occupancy(const std::array<std::size_t, 3> &dims, double voxel_size,
+                              const Position &origin, const uint8_t *cells, std::size_t cells_len,
+                              const SkeletonOptions &options = default_skeleton_options()) {
+    topoloc_graph *raw = nullptr;
+    check(topoloc_graph_from_occupancy(dims.data(), voxel_size, origin.data(), cells, cells_len,
+                                       &options, &raw));
+    return Graph(raw);
+  }
+
+  /// `from_occupancy` over a byte vector.
+  static Graph from_occupancy(const std::array<std::size_t, 3> &dims, double voxel_size,
+                              const Position &origin, const std::vector<uint8_t> &cells,
+                              const SkeletonOptions &options = default_skeleton_options()) {
+    return from_occupancy(dims, voxel_size, origin, cells.data(), cells.size(), options);
+  }
+
+  /// Number of places.
+  std::size_t place_count() const {
+    std::size_t n = 0;
+    check(topoloc_graph_place_count(ptr_.get(), &n));
+    return n;
+  }
+
+  /// Number of undirected edges.
+  std::size_t edge_count() const {
+    std::size_t n = 0;
+    check(topoloc_graph_edge_count(ptr_.get(), &n));
+    return n;
+  }
+
+  /// Place `index` (branches first, then ends, corners, intermediate places). Throws `Error`
+  /// (`TOPOLOC_ERR_UNKNOWN_PLACE`).
+  GraphPlace place(uint32_t index) const {
+    GraphPlace p;
+    check(topoloc_graph_place(ptr_.get(), index, p.position.data(), &p.kind));
+    return p;
+  }
+
+  /// All places.
+  std::vector<GraphPlace> places() const {
+    std::vector<GraphPlace> all(place_count());
+    for (std::size_t i = 0; i < all.size(); ++i) {
+      all[i] = place(static_cast<uint32_t>(i));
+    }
+    return all;
+  }
+
+  /// Edge number `index` (0..edge_count(), sorted by (a, b)). Throws `Error`
+  /// (`TOPOLOC_ERR_INVALID_ARGUMENT` when out of range).
+  GraphEdge edge(std::size_t index) const {
+    GraphEdge e;
+    check(topoloc_graph_edge(ptr_.get(), index, &e.a, &e.b, &e.length_m));
+    return e;
+  }
+
+  /// All edges, sorted by (a, b).
+  std::vector<GraphEdge> edges() const {
+    std::vector<GraphEdge> all(edge_count());
+    for (std::size_t i = 0; i < all.size(); ++i) {
+      all[i] = edge(i);
+    }
+    return all;
+  }
+
+  /// The skeleton the graph was built on: voxel indices x0, y0, z0, x1, y1, z1, ... in grid order.
+  std::vector<uint32_t> skeleton() const {
+    return detail::read_ids([this](uint32_t *buf, std::size_t len, std::size_t *count) {
+      return topoloc_graph_skeleton(ptr_.get(), buf, len, count);
+    });
+  }
+
+  /// The raw handle, still owned by this object (null when empty).
+  const topoloc_graph *capi() const noexcept { return ptr_.get(); }
+  /// The raw handle, still owned by this object (null when empty).
+  topoloc_graph *capi() noexcept { return ptr_.get(); }
+
+  /// Gives up ownership: returns the handle (free it with `topoloc_graph_free`) and leaves this
+  /// object empty.
+  topoloc_graph *release() noexcept { return ptr_.release(); }
+
+  /// True when this object owns a graph.
+  explicit operator bool() const noexcept { return static_cast<bool>(ptr_); }
+
+private:
+  std::unique_ptr<topoloc_graph, detail::GraphFree> ptr_;
 };
 
 }  // namespace topoloc

@@ -69,24 +69,30 @@ def test_abi_and_mode_constants_match_header():
     assert int(defines["TOPOLOC_MODE_SINGLE_FRAME"]) == topoloc.MODE_SINGLE_FRAME == 1
 
 
-IMAGE_CONSTANTS = {
+CONSTANT_GROUPS = {
     "PIXEL": ["PIXEL_NONE", "PIXEL_GRAY8", "PIXEL_RGB8", "PIXEL_BGR8", "PIXEL_RGBA8", "PIXEL_BGRA8"],
     "BACKEND": ["BACKEND_AUTO", "BACKEND_NONE", "BACKEND_ONNX", "BACKEND_VLAD_ORB", "BACKEND_VLAD_SIFT"],
     "STAGE": ["STAGE_DESCRIBING", "STAGE_FITTING"],
+    "NODE": ["NODE_END", "NODE_CORNER", "NODE_BRANCH", "NODE_INTERMEDIATE"],
 }
 
 
 @needs_header
-@pytest.mark.parametrize("group", sorted(IMAGE_CONSTANTS))
-def test_image_constants_match_header(group):
+@pytest.mark.parametrize("group", sorted(CONSTANT_GROUPS))
+def test_constant_groups_match_header(group):
     text = HEADER.read_text()
     defines = {n: int(v) for n, v in re.findall(rf"#define TOPOLOC_({group}_\w+) (\d+)\b", text)}
     shim = {n: v for n, v in vars(_lib).items() if n.startswith(group + "_")}
     assert set(defines) == set(shim), f"TOPOLOC_{group}_* added to or removed from the header or the shim"
-    assert set(defines) >= set(IMAGE_CONSTANTS[group])
+    assert set(defines) >= set(CONSTANT_GROUPS[group])
     for name, value in defines.items():
         assert type(shim[name]) is int and shim[name] == value, name
     assert len(set(defines.values())) == len(defines), f"duplicate TOPOLOC_{group}_* values"
+
+
+def test_node_kinds_are_exported_in_code_order():
+    assert [topoloc.NODE_END, topoloc.NODE_CORNER, topoloc.NODE_BRANCH, topoloc.NODE_INTERMEDIATE] == [0, 1, 2, 3]
+    assert [getattr(topoloc, f"NODE_{k.upper()}") for k in topoloc._core.NODE_KINDS] == [0, 1, 2, 3]
 
 
 def test_zero_constants_are_the_defaults():
@@ -115,6 +121,7 @@ DEFAULT_FUNCTIONS = {
     "topoloc_result": "topoloc_result_init",
     "topoloc_map_load_options": "topoloc_map_load_options_init",
     "topoloc_image_map_options": "topoloc_image_map_options_init",
+    "topoloc_skeleton_options": "topoloc_skeleton_options_init",
 }
 
 #: Structs the library never fills with defaults: plain data the caller writes (array elements,

@@ -20,6 +20,10 @@ Quick start::
         r = loc.process(np.array([0.1, 0.9, 0, 0]), timestamp=0.0)
         print(r.place, r.confidence, r.candidates)
 
+A topological graph of places can be built from an occupancy voxel grid of your own mapping
+stack (``topoloc.skeleton_graph(occupied, voxel_size, origin)``, ``occupied`` indexed
+``[x, y, z]``): its places and edges can then be given to a :class:`MapBuilder` with their views.
+
 Maps can also be built from camera images (``Map.build_from_images`` with uint8 numpy arrays,
 ``Map.build_from_image_files`` with files or a folder); such maps store their describer, and
 a localizer on them accepts images: ``loc.process(image=frame, timestamp=t)``.
@@ -67,12 +71,17 @@ from ._lib import (
     ABI_VERSION,
     MODE_FILTER,
     MODE_SINGLE_FRAME,
+    NODE_BRANCH,
+    NODE_CORNER,
+    NODE_END,
+    NODE_INTERMEDIATE,
     AbiVersionError,
     LibraryNotFoundError,
     library_path,
 )
 from ._core import (
     Candidate,
+    Graph,
     Localizer,
     Map,
     MapBuilder,
@@ -82,6 +91,8 @@ from ._core import (
     keyframe_options_default,
     localizer_options_default,
     map_from_keyframes,
+    skeleton_graph,
+    skeleton_options_default,
     status_str,
     version,
 )
@@ -96,6 +107,14 @@ __all__ = [
     "map_from_keyframes",
     "keyframe_options_default",
     "ViewInfo",
+    # skeleton graphs from occupancy grids
+    "skeleton_graph",
+    "skeleton_options_default",
+    "Graph",
+    "NODE_END",
+    "NODE_CORNER",
+    "NODE_BRANCH",
+    "NODE_INTERMEDIATE",
     # localization
     "Localizer",
     "localizer_options_default",

@@ -72,6 +72,12 @@ BACKEND_VLAD_SIFT = 4
 STAGE_DESCRIBING = 0
 STAGE_FITTING = 1
 
+#: ``TOPOLOC_NODE_*``: kinds of the places of a skeleton graph.
+NODE_END = 0
+NODE_CORNER = 1
+NODE_BRANCH = 2
+NODE_INTERMEDIATE = 3
+
 TOPOLOC_OK = 0
 TOPOLOC_ERR_BUFFER_TOO_SMALL = 3
 
@@ -116,7 +122,12 @@ class topoloc_localizer(Structure):
 
 MapPtr = POINTER(topoloc_map)
 BuilderPtr = POINTER(topoloc_map_builder)
+class topoloc_graph(Structure):
+    """Opaque ``topoloc_graph``."""
+
+
 LocalizerPtr = POINTER(topoloc_localizer)
+GraphPtr = POINTER(topoloc_graph)
 
 
 class topoloc_view_attributes(Structure):
@@ -257,6 +268,21 @@ class topoloc_view_info(Structure):
     ]
 
 
+class topoloc_skeleton_options(Structure):
+    _fields_ = [
+        ("struct_size", c_size_t),
+        ("use_z_band", c_bool),
+        ("z_min_m", c_double),
+        ("z_max_m", c_double),
+        ("min_clearance_m", c_double),
+        ("merge_radius_m", c_double),
+        ("max_edge_m", c_double),
+        ("corner_angle_deg", c_double),
+        ("corner_scale_m", c_double),
+        ("min_spur_m", c_double),
+    ]
+
+
 #: Every struct of the header, by C name.
 STRUCTS = {
     cls.__name__: cls
@@ -272,11 +298,14 @@ STRUCTS = {
         topoloc_result,
         topoloc_map_load_options,
         topoloc_view_info,
+        topoloc_skeleton_options,
     )
 }
 
 #: Opaque handle types, by C name.
-HANDLES = {cls.__name__: cls for cls in (topoloc_map, topoloc_map_builder, topoloc_localizer)}
+HANDLES = {
+    cls.__name__: cls for cls in (topoloc_map, topoloc_map_builder, topoloc_localizer, topoloc_graph)
+}
 
 # --------------------------------------------------------------------------------------------
 # Function signatures: name -> (restype, argtypes), in header order
@@ -350,6 +379,17 @@ SIGNATURES = {
     "topoloc_map_view_info": (status_t, [MapPtr, c_uint32, _p(topoloc_view_info)]),
     "topoloc_map_view_image": (status_t, [MapPtr, c_uint32, _p(c_char), c_size_t, _p(c_size_t)]),
     "topoloc_map_view_descriptor": (status_t, [MapPtr, c_uint32, _p(c_float), c_size_t]),
+    "topoloc_skeleton_options_init": (status_t, [_p(topoloc_skeleton_options), c_size_t]),
+    "topoloc_graph_from_occupancy": (
+        status_t,
+        [_p(c_size_t), c_double, _p(c_double), _p(c_uint8), c_size_t, _p(topoloc_skeleton_options), _p(GraphPtr)],
+    ),
+    "topoloc_graph_free": (None, [GraphPtr]),
+    "topoloc_graph_place_count": (status_t, [GraphPtr, _p(c_size_t)]),
+    "topoloc_graph_edge_count": (status_t, [GraphPtr, _p(c_size_t)]),
+    "topoloc_graph_place": (status_t, [GraphPtr, c_uint32, _p(c_double), _p(c_uint32)]),
+    "topoloc_graph_edge": (status_t, [GraphPtr, c_size_t, _p(c_uint32), _p(c_uint32), _p(c_double)]),
+    "topoloc_graph_skeleton": (status_t, [GraphPtr, _p(c_uint32), c_size_t, _p(c_size_t)]),
     "topoloc_version": (c_char_p, []),
     "topoloc_abi_version": (c_uint32, []),
     "topoloc_status_str": (c_char_p, [c_uint32]),

@@ -8,8 +8,9 @@
 //! documented `needed`/`count` sizes); options structs start with `struct_size` and are filled by
 //! `*_default()`; no panic crosses the boundary (`TOPOLOC_ERR_PANIC`).
 //!
-//! Thread safety: `const topoloc_map*` may be used from many threads at once; builders and
-//! localizers are single-threaded state (one thread at a time; they may move between threads).
+//! Thread safety: `const topoloc_map*` and `const topoloc_graph*` may be used from many threads
+//! at once; builders and localizers are single-threaded state (one thread at a time; they may
+//! move between threads).
 
 #![deny(missing_docs)]
 #![allow(non_camel_case_types)]
@@ -24,6 +25,7 @@ mod convert;
 mod images;
 mod localizer;
 mod map;
+mod skeleton;
 mod version;
 
 pub use boundary::topoloc_status;
@@ -31,6 +33,7 @@ pub use builder::*;
 pub use images::*;
 pub use localizer::*;
 pub use map::*;
+pub use skeleton::*;
 pub use version::*;
 
 #[cfg(test)]

@@ -15,6 +15,7 @@ mod file;
 mod from_images;
 mod keyframes;
 mod occupancy;
+mod skeleton;
 mod tum;
 
 pub use builder::{MapBuilder, ViewAttributes};
@@ -26,6 +27,9 @@ pub use from_images::{
 };
 pub use keyframes::{from_keyframes, Keyframe, KeyframeOptions};
 pub use occupancy::{OccupancyGrid, Voxel, MAX_VOXELS};
+pub use skeleton::{
+    skeleton_graph, skeletonize, GraphEdge, GraphPlace, NodeKind, SkeletonOptions, TopoGraph,
+};
 pub use tum::{parse_tum, read_tum, TimedPose};
 
 use crate::describe::DescriberModel;

@@ -12,6 +12,9 @@
  * each other, views of different places nearly orthogonal, and frames are noisy copies of views,
  * so the right answer is known for every frame.
  *
+ * Skeleton graphs (their own section): topological graphs built from small hand-made occupancy
+ * grids (a T junction, a ring) through topoloc_graph_from_occupancy, their accessors and errors.
+ *
  * Images (the last section): maps built with the VLAD backend from small synthetic grey images
  * in memory and in PGM files, image frames of "revisits", bad and uninformative images, progress
  * and cancellation. The ONNX checks that need the model run only when scripts/setup-models.sh
@@ -3007,6 +3010,269 @@ static void test_images(const topoloc_map *world)
     test_onnx();
 }
 
+/* ------------------------------------------------------------------------------------------ */
+/* Skeleton graphs from occupancy grids                                                        */
+/* ------------------------------------------------------------------------------------------ */
+
+#define SK_VOXEL 0.2
+#define SK_NX 45u
+#define SK_NY 35u
+#define SK_NZ 10u
+#define SK_CELLS (SK_NX * SK_NY * SK_NZ)
+
+/* An occupancy grid of SK_NX x SK_NY x SK_NZ voxels of SK_VOXEL m (2 m high), occupied except
+ * for the `count` rectangles {x0, y0, x1, y1} (voxels, half-open) carved over the full height. */
+static void sk_carve(uint8_t *cells, const unsigned (*rects)[4], size_t count)
+{
+    size_t x, y, z, r;
+    memset(cells, 1, SK_CELLS);
+    for (z = 0; z < SK_NZ; z++) {
+        for (y = 0; y < SK_NY; y++) {
+            for (x = 0; x < SK_NX; x++) {
+                for (r = 0; r < count; r++) {
+                    if (x >= rects[r][0] && x < rects[r][2] && y >= rects[r][1] && y < rects[r][3]) {
+                        cells[x + SK_NX * (y + SK_NY * z)] = 0;
+                    }
+                }
+            }
+        }
+    }
+}
+
+/* A T junction: a 7 m corridor along x and a 5 m stem along y, 1.2 m wide. */
+static const unsigned g_sk_t[2][4] = {{5, 5, 40, 11}, {19, 5, 25, 30}};
+/* A ring corridor 7 m x 5 m around a solid block. */
+static const unsigned g_sk_ring[4][4] = {{5, 5, 40, 11}, {5, 24, 40, 30}, {5, 5, 11, 30}, {34, 5, 40, 30}};
+
+static const size_t g_sk_dims[3] = {SK_NX, SK_NY, SK_NZ};
+static const double g_sk_origin[3] = {0.0, 0.0, 0.0};
+
+/* Counts the places of each TOPOLOC_NODE_* kind and the degree of each place (<= 64 places). */
+static bool sk_summary(const topoloc_graph *g, size_t kinds[4], size_t degree[64], size_t *places,
+                       size_t *edges)
+{
+    size_t i;
+    uint32_t a, b, kind;
+    double xyz[3], length;
+    memset(kinds, 0, 4 * sizeof kinds[0]);
+    memset(degree, 0, 64 * sizeof degree[0]);
+    if (topoloc_graph_place_count(g, places) != TOPOLOC_OK ||
+        topoloc_graph_edge_count(g, edges) != TOPOLOC_OK || *places > 64) {
+        return false;
+    }
+    for (i = 0; i < *places; i++) {
+        if (topoloc_graph_place(g, (uint32_t)i, xyz, &kind) != TOPOLOC_OK || kind > 3) {
+            return false;
+        }
+        kinds[kind]++;
+    }
+    for (i = 0; i < *edges; i++) {
+        if (topoloc_graph_edge(g, i, &a, &b, &length) != TOPOLOC_OK || a >= b || b >= *places) {
+            return false;
+        }
+        degree[a]++;
+        degree[b]++;
+    }
+    return true;
+}
+
+static void test_skeleton_graphs(void)
+{
+    static uint8_t cells[SK_CELLS];
+    topoloc_skeleton_options opts;
+    topoloc_graph *g = NULL, *again = NULL;
+    topoloc_graph *const sentinel = (topoloc_graph *)(void *)&opts;
+    size_t kinds[4], degree[64], places = 0, edges = 0, i, n = 0, count = 0;
+    uint32_t a = 0, b = 0, kind = 0, *voxels;
+    double xyz[3], xyz2[3], length = 0.0, length2 = 0.0;
+    bool all_free = true, same = true;
+
+    section("skeleton graphs: options, T junction, ring, skeleton voxels, errors");
+    CHECK_OK(topoloc_skeleton_options_default(&opts));
+    CHECK(opts.struct_size == sizeof opts && !opts.use_z_band);
+    CHECK(opts.merge_radius_m == 1.0 && opts.max_edge_m == 3.0 && opts.min_clearance_m == 0.0);
+    CHECK(opts.corner_angle_deg == 40.0 && opts.corner_scale_m == 0.5 && opts.min_spur_m == 1.0);
+    CHECK_STATUS(topoloc_skeleton_options_init(&opts, sizeof(size_t)), TOPOLOC_ERR_STRUCT_SIZE);
+    CHECK_NULL(topoloc_skeleton_options_init(NULL, sizeof opts), "NULL");
+    CHECK_OK(topoloc_skeleton_options_default(&opts));
+
+    /* T junction: one branch, three ends, a tree; the branch has three neighbours. */
+    sk_carve(cells, g_sk_t, 2);
+    CHECK_OK(topoloc_graph_from_occupancy(g_sk_dims, SK_VOXEL, g_sk_origin, cells, SK_CELLS, &opts,
+                                          &g));
+    if (g == NULL) {
+        return;
+    }
+    CHECK(sk_summary(g, kinds, degree, &places, &edges));
+    CHECK(kinds[TOPOLOC_NODE_BRANCH] == 1 && kinds[TOPOLOC_NODE_END] == 3);
+    CHECK(kinds[TOPOLOC_NODE_CORNER] == 0 && kinds[TOPOLOC_NODE_INTERMEDIATE] >= 1);
+    CHECK(edges + 1 == places);
+    /* Places come branches first. */
+    CHECK_OK(topoloc_graph_place(g, 0, xyz, &kind));
+    CHECK(kind == TOPOLOC_NODE_BRANCH && degree[0] == 3);
+    CHECK_NEAR(xyz[0], 4.5, 0.5);
+    CHECK_NEAR(xyz[1], 1.6, 0.5);
+    CHECK(xyz[2] > 0.0 && xyz[2] < 2.0);
+    /* Edges: a < b, sorted, their straight length, at most max_edge_m. */
+    for (i = 0; i < edges; i++) {
+        uint32_t pa = a, pb = b;
+        CHECK_OK(topoloc_graph_edge(g, i, &a, &b, &length));
+        CHECK(i == 0 || pa < a || (pa == a && pb < b));
+        CHECK_OK(topoloc_graph_place(g, a, xyz, &kind));
+        CHECK_OK(topoloc_graph_place(g, b, xyz2, &kind));
+        CHECK_NEAR(length * length,
+                   (xyz[0] - xyz2[0]) * (xyz[0] - xyz2[0]) + (xyz[1] - xyz2[1]) * (xyz[1] - xyz2[1]) +
+                       (xyz[2] - xyz2[2]) * (xyz[2] - xyz2[2]),
+                   1e-9);
+        CHECK(length > 0.0 && length <= opts.max_edge_m);
+    }
+
+    /* The skeleton: ask for the size, then copy; every voxel is free. */
+    CHECK_STATUS(topoloc_graph_skeleton(g, NULL, 0, &count), TOPOLOC_ERR_BUFFER_TOO_SMALL);
+    CHECK(count > 0 && count % 3 == 0);
+    voxels = malloc(count * sizeof *voxels);
+    CHECK(voxels != NULL);
+    if (voxels != NULL) {
+        CHECK_STATUS(topoloc_graph_skeleton(g, voxels, count - 1, &n), TOPOLOC_ERR_BUFFER_TOO_SMALL);
+        CHECK(n == count);
+        CHECK_OK(topoloc_graph_skeleton(g, voxels, count, &n));
+        for (i = 0; i + 2 < count; i += 3) {
+            all_free = all_free && voxels[i] < SK_NX && voxels[i + 1] < SK_NY &&
+                       voxels[i + 2] < SK_NZ &&
+                       cells[voxels[i] + SK_NX * (voxels[i + 1] + SK_NY * voxels[i + 2])] == 0;
+        }
+        CHECK(all_free);
+        free(voxels);
+    }
+
+    /* The same grid gives the same graph (NULL options: the defaults). */
+    CHECK_OK(topoloc_graph_from_occupancy(g_sk_dims, SK_VOXEL, g_sk_origin, cells, SK_CELLS, NULL,
+                                          &again));
+    if (again != NULL) {
+        CHECK_OK(topoloc_graph_place_count(again, &n));
+        same = n == places;
+        for (i = 0; same && i < places; i++) {
+            uint32_t k2 = 0;
+            CHECK_OK(topoloc_graph_place(g, (uint32_t)i, xyz, &kind));
+            CHECK_OK(topoloc_graph_place(again, (uint32_t)i, xyz2, &k2));
+            same = memcmp(xyz, xyz2, sizeof xyz) == 0 && kind == k2;
+        }
+        for (i = 0; same && i < edges; i++) {
+            uint32_t a2 = 0, b2 = 0;
+            CHECK_OK(topoloc_graph_edge(g, i, &a, &b, &length));
+            CHECK_OK(topoloc_graph_edge(again, i, &a2, &b2, &length2));
+            same = a == a2 && b == b2 && memcmp(&length, &length2, sizeof length) == 0;
+        }
+        CHECK(same);
+    }
+    topoloc_graph_free(again);
+
+    /* Out of range: UNKNOWN_PLACE for a place, INVALID_ARGUMENT for an edge; outputs untouched. */
+    kind = 77;
+    CHECK_STATUS(topoloc_graph_place(g, (uint32_t)places, xyz, &kind), TOPOLOC_ERR_UNKNOWN_PLACE);
+    CHECK(kind == 77);
+    CHECK_HAS_MESSAGE();
+    a = 77;
+    CHECK_STATUS(topoloc_graph_edge(g, edges, &a, &b, &length), TOPOLOC_ERR_INVALID_ARGUMENT);
+    CHECK(a == 77);
+    /* NULL arguments. */
+    CHECK_NULL(topoloc_graph_place_count(NULL, &n), "graph");
+    CHECK_NULL(topoloc_graph_edge_count(g, NULL), "out");
+    CHECK_NULL(topoloc_graph_place(g, 0, NULL, &kind), "xyz");
+    CHECK_NULL(topoloc_graph_place(g, 0, xyz, NULL), "kind");
+    CHECK_NULL(topoloc_graph_edge(g, 0, &a, &b, NULL), "length_m");
+    CHECK_NULL(topoloc_graph_skeleton(NULL, NULL, 0, &n), "graph");
+    topoloc_graph_free(g);
+    topoloc_graph_free(NULL);
+
+    /* A height band: every place in it. */
+    opts.use_z_band = true;
+    opts.z_min_m = 0.5;
+    opts.z_max_m = 0.9;
+    g = NULL;
+    CHECK_OK(topoloc_graph_from_occupancy(g_sk_dims, SK_VOXEL, g_sk_origin, cells, SK_CELLS, &opts,
+                                          &g));
+    if (g != NULL) {
+        CHECK_OK(topoloc_graph_place_count(g, &places));
+        for (i = 0; i < places; i++) {
+            CHECK_OK(topoloc_graph_place(g, (uint32_t)i, xyz, &kind));
+            CHECK(xyz[2] >= 0.5 && xyz[2] <= 0.9);
+        }
+    }
+    topoloc_graph_free(g);
+    CHECK_OK(topoloc_skeleton_options_default(&opts));
+
+    /* A ring: a cycle (every place has two neighbours) with four corners. */
+    sk_carve(cells, g_sk_ring, 4);
+    g = NULL;
+    CHECK_OK(topoloc_graph_from_occupancy(g_sk_dims, SK_VOXEL, g_sk_origin, cells, SK_CELLS, &opts,
+                                          &g));
+    if (g != NULL) {
+        bool two = true;
+        CHECK(sk_summary(g, kinds, degree, &places, &edges));
+        CHECK(edges == places && places >= 4);
+        for (i = 0; i < places; i++) {
+            two = two && degree[i] == 2;
+        }
+        CHECK(two);
+        CHECK(kinds[TOPOLOC_NODE_CORNER] == 4 && kinds[TOPOLOC_NODE_END] == 0 &&
+              kinds[TOPOLOC_NODE_BRANCH] == 0);
+    }
+    topoloc_graph_free(g);
+
+    /* Errors: NULLs, sizes, a full grid and options out of range, each named; out untouched. */
+    g = sentinel;
+    CHECK_NULL(topoloc_graph_from_occupancy(NULL, SK_VOXEL, g_sk_origin, cells, SK_CELLS, &opts, &g),
+               "dims");
+    CHECK_NULL(topoloc_graph_from_occupancy(g_sk_dims, SK_VOXEL, NULL, cells, SK_CELLS, &opts, &g),
+               "origin");
+    CHECK_NULL(topoloc_graph_from_occupancy(g_sk_dims, SK_VOXEL, g_sk_origin, NULL, SK_CELLS, &opts,
+                                            &g),
+               "cells");
+    CHECK_NULL(topoloc_graph_from_occupancy(g_sk_dims, SK_VOXEL, g_sk_origin, cells, SK_CELLS, &opts,
+                                            NULL),
+               "out");
+    CHECK_STATUS(topoloc_graph_from_occupancy(g_sk_dims, SK_VOXEL, g_sk_origin, cells, SK_CELLS - 1,
+                                              &opts, &g),
+                 TOPOLOC_ERR_INVALID_ARGUMENT);
+    CHECK(strstr(last_error(), "cells_len") != NULL);
+    CHECK_STATUS(topoloc_graph_from_occupancy(g_sk_dims, 0.0, g_sk_origin, cells, SK_CELLS, &opts,
+                                              &g),
+                 TOPOLOC_ERR_INVALID_ARGUMENT);
+    CHECK(strstr(last_error(), "voxel_size") != NULL);
+    opts.merge_radius_m = -1.0;
+    CHECK_STATUS(topoloc_graph_from_occupancy(g_sk_dims, SK_VOXEL, g_sk_origin, cells, SK_CELLS,
+                                              &opts, &g),
+                 TOPOLOC_ERR_INVALID_ARGUMENT);
+    CHECK(strstr(last_error(), "merge_radius_m") != NULL);
+    CHECK_OK(topoloc_skeleton_options_default(&opts));
+    opts.max_edge_m = 0.3; /* under two voxels */
+    CHECK_STATUS(topoloc_graph_from_occupancy(g_sk_dims, SK_VOXEL, g_sk_origin, cells, SK_CELLS,
+                                              &opts, &g),
+                 TOPOLOC_ERR_INVALID_ARGUMENT);
+    CHECK(strstr(last_error(), "max_edge_m") != NULL);
+    CHECK_OK(topoloc_skeleton_options_default(&opts));
+    opts.use_z_band = true;
+    opts.z_min_m = 5.0;
+    opts.z_max_m = 6.0;
+    CHECK_STATUS(topoloc_graph_from_occupancy(g_sk_dims, SK_VOXEL, g_sk_origin, cells, SK_CELLS,
+                                              &opts, &g),
+                 TOPOLOC_ERR_INVALID_ARGUMENT);
+    CHECK(strstr(last_error(), "z_band") != NULL);
+    CHECK_OK(topoloc_skeleton_options_default(&opts));
+    opts.struct_size = 3;
+    CHECK_STATUS(topoloc_graph_from_occupancy(g_sk_dims, SK_VOXEL, g_sk_origin, cells, SK_CELLS,
+                                              &opts, &g),
+                 TOPOLOC_ERR_STRUCT_SIZE);
+    CHECK_OK(topoloc_skeleton_options_default(&opts));
+    memset(cells, 1, SK_CELLS);
+    CHECK_STATUS(topoloc_graph_from_occupancy(g_sk_dims, SK_VOXEL, g_sk_origin, cells, SK_CELLS,
+                                              &opts, &g),
+                 TOPOLOC_ERR_INVALID_ARGUMENT);
+    CHECK(strstr(last_error(), "cells") != NULL);
+    CHECK(g == sentinel);
+}
+
 static bool make_tmpdir(void)
 {
     const char *base = getenv("TMPDIR");
@@ -3041,6 +3307,7 @@ int main(void)
     test_from_keyframes();
     test_builder_errors();
     test_files();
+    test_skeleton_graphs();
 
     map = build_world_map();
     CHECK(map != NULL);

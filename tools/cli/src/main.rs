@@ -1,5 +1,5 @@
-//! The `topoloc` command: the demo (the README's main job), maps from images, evaluation, and
-//! benchmark helpers.
+//! The `topoloc` command: the demo (the README's main job), maps from images, simulated
+//! datasets, evaluation, and benchmark helpers.
 
 mod backend_args;
 mod build_map;
@@ -8,7 +8,10 @@ mod eval;
 mod memory;
 mod plot;
 mod process;
+mod progress;
+mod simulate;
 mod sweep;
+mod top_view;
 
 use anyhow::Result;
 use clap::{Parser, Subcommand};
@@ -27,21 +30,9 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
-    /// Generate a world and a camera stream, localize every frame, print metrics and latency.
-    Demo {
-        /// World and sequence seed.
-        #[arg(long, default_value_t = 0)]
-        seed: u64,
-        /// Places in the generated world (4 views each).
-        #[arg(long, default_value_t = 120)]
-        places: usize,
-        /// Frames in the query sequence (10 Hz).
-        #[arg(long, default_value_t = 1500)]
-        frames: usize,
-        /// Print one JSON object with the final figures instead of the table.
-        #[arg(long)]
-        json: bool,
-    },
+    /// Generate an indoor world, build its graph and map, fly a query trajectory under other
+    /// light, localize every frame; print MNA/OHA/R@N, latency and memory; write a top view.
+    Demo(demo::DemoArgs),
     /// Measure map file size, load time and resident memory of a loaded map plus localizer.
     BenchMemory {
         /// Views in the generated map (4 per place).
@@ -71,9 +62,13 @@ enum Command {
     },
     /// Build a map from an image folder; the describer (backend, PCA, codebook) is stored in it.
     BuildMap(build_map::BuildMapArgs),
-    /// Localize a query image folder against a map built from images and report R@N, R@100P,
-    /// latency (and MNA/OHA with ground-truth nodes), single-frame and filtered.
+    /// Localize a query image folder (or a dataset written by `simulate`) against a map built
+    /// from images and report R@N, R@100P, latency (and MNA/OHA with ground-truth nodes or a
+    /// dataset), single-frame and filtered.
     Eval(eval::EvalArgs),
+    /// Generate world K of a split, build its graph and map (saved as OUT/map.topoloc) and write
+    /// query trajectories as dataset folders OUT/traj-00i for `eval --dataset`.
+    Simulate(simulate::SimulateArgs),
     /// (internal) Child process of bench-memory: load MAP and report its figures as JSON.
     #[command(hide = true)]
     MeasureMap { map: PathBuf },
@@ -81,17 +76,7 @@ enum Command {
 
 fn main() -> Result<()> {
     match Cli::parse().command {
-        Command::Demo {
-            seed,
-            places,
-            frames,
-            json,
-        } => demo::run(&demo::DemoArgs {
-            seed,
-            places,
-            frames,
-            json,
-        }),
+        Command::Demo(args) => demo::run(&args),
         Command::BenchMemory { views, dim, json } => memory::run(views, dim, json),
         Command::Sweep {
             worlds,
@@ -101,6 +86,7 @@ fn main() -> Result<()> {
         } => sweep::run(worlds, frames, &temperatures, &margins),
         Command::BuildMap(args) => build_map::run(&args),
         Command::Eval(args) => eval::run(&args),
+        Command::Simulate(args) => simulate::run(&args),
         Command::MeasureMap { map } => memory::measure(&map),
     }
 }

@@ -32,7 +32,7 @@ const LEFT_PANEL_WIDTH: u32 = 920;
 /// Width of the colour bar strip at the right of the left panel, in pixels.
 const COLORBAR_WIDTH: u32 = 100;
 /// Font family name the font is registered under (plotters' `FontFamily::SansSerif`).
-const FONT_FAMILY: &str = "sans-serif";
+pub(crate) const FONT_FAMILY: &str = "sans-serif";
 
 /// Colours of the series, in order (cycled when there are more series).
 const SERIES_COLORS: [RGBColor; 6] = [
@@ -172,7 +172,7 @@ fn check_indices(
 
 /// Registers [`FONT_PATH`] with plotters once per process; errors (naming the Debian package)
 /// when the file is missing or unreadable.
-fn ensure_font() -> Result<()> {
+pub(crate) fn ensure_font() -> Result<()> {
     static REGISTERED: Mutex<bool> = Mutex::new(false);
     let mut registered = REGISTERED.lock().unwrap_or_else(|e| e.into_inner());
     if *registered {

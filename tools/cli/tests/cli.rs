@@ -197,3 +197,227 @@ fn failures_name_what_is_wrong() {
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(stderr.contains("not-a-map.topoloc"), "{stderr}");
 }
+
+#[test]
+fn demo_runs_the_whole_pipeline_and_reports_the_contract_keys() {
+    // A small world and two legs keep this fast; the default demo is measured in BENCHMARKS.md.
+    let dir = tempfile::tempdir().unwrap();
+    let plot = dir.path().join("demo.png");
+    let out = topoloc(&[
+        "demo",
+        "--json",
+        "--backend",
+        "vlad",
+        "--rooms",
+        "2",
+        "--legs",
+        "2",
+        "--plot",
+        plot.to_str().unwrap(),
+    ]);
+    let report = json(&out);
+    for key in [
+        "mna",
+        "oha",
+        "r_at_1",
+        "r_at_5",
+        "ms_per_frame_median",
+        "peak_rss_mb",
+    ] {
+        assert!(report[key].is_number(), "{key} missing: {report}");
+    }
+    for config in ["single-frame", "filter", "filter+odometry"] {
+        let c = &report["configurations"][config];
+        for key in ["mna", "oha", "r_at_1", "r_at_5"] {
+            let v = c[key].as_f64().unwrap_or(-1.0);
+            assert!((0.0..=1.0).contains(&v), "{config}.{key} = {v}");
+        }
+        // MNA counts the exact place, OHA also its neighbours: never fewer.
+        assert!(c["oha"].as_f64() >= c["mna"].as_f64(), "{config}: {c}");
+    }
+    assert!(report["places"].as_u64().unwrap() >= 4, "{report}");
+    assert_eq!(
+        report["views"].as_u64(),
+        report["places"].as_u64().map(|p| 4 * p)
+    );
+    assert!(report["frames"].as_u64().unwrap() >= 20, "{report}");
+    assert!(
+        report["backend"].as_str().unwrap().starts_with("vlad"),
+        "{report}"
+    );
+    let png = std::fs::read(&plot).unwrap();
+    assert_eq!(&png[1..4], b"PNG");
+    // Bad input names the option.
+    let out = topoloc(&["demo", "--condition", "foggy"]);
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--condition foggy"));
+}
+
+#[test]
+fn simulate_writes_a_dataset_that_eval_reads() {
+    // A tiny world (one storey, two rooms), two legs at 4 Hz keep this fast.
+    let dir = tempfile::tempdir().unwrap();
+    let s = |p: &Path| p.to_str().unwrap().to_string();
+    let out = dir.path().join("sim");
+    let summary = json(&topoloc(&[
+        "simulate",
+        "--backend",
+        "vlad",
+        "--rooms",
+        "2",
+        "--floors",
+        "1",
+        "--legs",
+        "2",
+        "--rate-hz",
+        "4",
+        "--trajectories",
+        "1",
+        "--out",
+        &s(&out),
+        "--json",
+    ]));
+    let places = summary["places"].as_u64().unwrap();
+    assert!(places >= 4, "{summary}");
+    assert_eq!(summary["views"].as_u64(), Some(4 * places));
+    assert_eq!(summary["split"], "train");
+    assert_eq!(summary["condition"], "dim");
+    let frames = summary["trajectories"][0]["frames"].as_u64().unwrap() as usize;
+    assert!(frames >= 10, "{summary}");
+
+    // The folder layout of the dataset format.
+    let map = out.join("map.topoloc");
+    let traj = out.join("traj-000");
+    assert!(map.is_file());
+    for file in [
+        "manifest.json",
+        "intrinsics.json",
+        "graph.json",
+        "groundtruth.txt",
+        "odometry.txt",
+        "nodes.csv",
+    ] {
+        assert!(traj.join(file).is_file(), "{file} missing");
+    }
+    let pngs = std::fs::read_dir(traj.join("images")).unwrap().count();
+    assert_eq!(pngs, frames);
+    assert!(traj.join("images/000000.png").is_file());
+    let nodes = std::fs::read_to_string(traj.join("nodes.csv")).unwrap();
+    assert_eq!(nodes.lines().next(), Some("frame,place,view,visible"));
+    assert_eq!(nodes.lines().count(), frames + 1);
+    let poses = std::fs::read_to_string(traj.join("groundtruth.txt")).unwrap();
+    let poses = poses.lines().filter(|l| !l.starts_with('#')).count();
+    assert_eq!(poses, frames);
+    let manifest: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(traj.join("manifest.json")).unwrap())
+            .unwrap();
+    assert_eq!(manifest["frame_count"].as_u64(), Some(frames as u64));
+    assert_eq!(manifest["style"], "office");
+
+    // eval reads it: the seed's graph metrics, single-frame, filter, filter with odometry.
+    let predictions = dir.path().join("predictions.csv");
+    let report = json(&topoloc(&[
+        "eval",
+        "--map",
+        &s(&map),
+        "--dataset",
+        &s(&traj),
+        "--odometry",
+        "--predictions",
+        &s(&predictions),
+        "--json",
+    ]));
+    for key in [
+        "mna",
+        "oha",
+        "r_at_1",
+        "r_at_5",
+        "r_at_10",
+        "frames",
+        "ms_per_frame_median",
+    ] {
+        assert!(report[key].is_number(), "{key} missing: {report}");
+    }
+    assert_eq!(report["frames"].as_u64(), Some(frames as u64));
+    assert_eq!(report["mode"], "filter");
+    assert_eq!(report["mna"], report["filter"]["mna"]);
+    for config in ["single_frame", "filter", "filter_odometry"] {
+        let c = &report[config];
+        let v = |key: &str| c[key].as_f64().unwrap_or(-1.0);
+        for n in 1..=10 {
+            let key = format!("r_at_{n}");
+            assert!((0.0..=1.0).contains(&v(&key)), "{config}.{key}: {c}");
+        }
+        for key in ["mna", "oha"] {
+            assert!((0.0..=1.0).contains(&v(key)), "{config}.{key}: {c}");
+        }
+        // MNA counts the exact place, OHA also its neighbours; deeper lists never recall less.
+        assert!(v("oha") >= v("mna"), "{config}: {c}");
+        assert!(
+            v("r_at_10") >= v("r_at_5") && v("r_at_5") >= v("r_at_1"),
+            "{config}: {c}"
+        );
+    }
+    let csv = std::fs::read_to_string(&predictions).unwrap();
+    assert!(csv.starts_with("frame,predicted_place,confidence"), "{csv}");
+    let rows: Vec<&str> = csv.lines().skip(1).collect();
+    assert_eq!(rows.len(), frames);
+    for (i, row) in rows.iter().enumerate() {
+        let fields: Vec<&str> = row.split(',').collect();
+        assert_eq!(fields[0], i.to_string());
+        assert!(fields[1].parse::<u64>().unwrap() < places, "{row}");
+        for candidate in &fields[3..] {
+            let (place, _) = candidate.split_once(':').expect("place:probability");
+            assert!(place.parse::<u64>().unwrap() < places, "{row}");
+        }
+    }
+
+    // Failures name what is wrong. A non-empty output folder:
+    let failed = topoloc(&["simulate", "--backend", "vlad", "--out", &s(&out)]);
+    assert!(!failed.status.success());
+    let stderr = String::from_utf8_lossy(&failed.stderr);
+    assert!(stderr.contains("not empty"), "{stderr}");
+    // A map of another world (here: of eight images) has another graph:
+    let images = dir.path().join("images");
+    std::fs::create_dir_all(&images).unwrap();
+    for i in 0..8 {
+        write_pgm(&images.join(format!("{i:03}.pgm")), &place(i));
+    }
+    let other = dir.path().join("other.topoloc");
+    json(&topoloc(&[
+        "build-map",
+        "--images",
+        &s(&images),
+        "--backend",
+        "vlad",
+        "--out",
+        &s(&other),
+        "--json",
+    ]));
+    let eval = |map: &Path, dataset: &Path| {
+        let out = topoloc(&["eval", "--map", &s(map), "--dataset", &s(dataset), "--json"]);
+        assert!(!out.status.success());
+        String::from_utf8_lossy(&out.stderr).into_owned()
+    };
+    let stderr = eval(&other, &traj);
+    assert!(
+        stderr.contains("graph.json")
+            && stderr.contains(&format!("8 places, the dataset's graph {places}")),
+        "{stderr}"
+    );
+    // The same place count, but a place moved:
+    let graph_path = traj.join("graph.json");
+    let mut graph: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&graph_path).unwrap()).unwrap();
+    let x = graph["places"][0]["position"][0].as_f64().unwrap();
+    graph["places"][0]["position"][0] = serde_json::json!(x + 1.0);
+    std::fs::write(&graph_path, graph.to_string()).unwrap();
+    let stderr = eval(&map, &traj);
+    assert!(stderr.contains("place 0 is at"), "{stderr}");
+    // A file of the dataset missing, and no dataset at all:
+    std::fs::remove_file(traj.join("nodes.csv")).unwrap();
+    let stderr = eval(&map, &traj);
+    assert!(stderr.contains("nodes.csv"), "{stderr}");
+    let stderr = eval(&map, &dir.path().join("no-such-dataset"));
+    assert!(stderr.contains("no-such-dataset"), "{stderr}");
+}

@@ -47,6 +47,7 @@ const DEFAULT_MACROS: &str = "
 #define topoloc_result_default(p) topoloc_result_init((p), sizeof *(p))
 #define topoloc_view_info_default(p) topoloc_view_info_init((p), sizeof *(p))
 #define topoloc_image_map_options_default(p) topoloc_image_map_options_init((p), sizeof *(p))
+#define topoloc_skeleton_options_default(p) topoloc_skeleton_options_init((p), sizeof *(p))
 ";
 
 fn generate(root: &Path) -> Result<Vec<u8>, String> {

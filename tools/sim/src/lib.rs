@@ -11,3 +11,13 @@
 //! x, image right = body -y, image down = body -z).
 
 pub mod camera;
+pub mod capture;
+pub mod dataset;
+pub mod ground_truth;
+pub mod odometry;
+pub mod render;
+pub mod scenario;
+pub mod style;
+pub mod texture;
+pub mod trajectory;
+pub mod world;
