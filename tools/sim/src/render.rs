@@ -25,12 +25,12 @@
 //!   noise of `noise_sigma` grey levels drawn from the frame's seed.
 //!
 //! A render is single-threaded and deterministic given the world, pose, intrinsics, condition
-//! and seed; callers parallelise across frames (the renderer is `Sync`). At 320x240 it takes
-//! about 5-10 ms per frame on one core of the development machine (`cargo bench -p topoloc-sim
-//! --bench render`).
+//! and seed; callers parallelise across frames (the renderer is `Sync`). At 320x240 a typical
+//! frame takes a median 9-15 ms on one core of the 2-core development machine (66-106 frames/s;
+//! `cargo bench -p topoloc-sim --bench render`): about half traversal, half shading.
 
 use crate::camera::{Intrinsics, Pose};
-use crate::texture::{face_uv, Material, Texture, TextureFamily};
+use crate::texture::{face_uv, fetch, Material, Texture, TextureFamily};
 use crate::world::{RegionKind, SimRng, World, NO_REGION};
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
@@ -151,15 +151,15 @@ impl Image {
 pub enum ConditionKind {
     /// Lamps on, well exposed, little noise.
     Bright,
-    /// Lamps at a quarter, weak ambient light, more noise.
+    /// Lamps at 30 %, weak ambient light, gain 2 (auto exposure), more noise.
     Dim,
-    /// Lamps off, a head light cone from the camera, noise.
+    /// Lamps off, a 40-degree head light cone from the camera, noise.
     Night,
     /// Bright, with a warm white balance (tungsten-like).
     ColourShift,
     /// Bright, with strong sensor noise.
     Noise,
-    /// Bright, with horizontal motion blur over 9 pixels.
+    /// Bright, with horizontal motion blur over 3 pixels.
     MotionBlur,
 }
 
@@ -304,10 +304,16 @@ impl Condition {
     }
 }
 
+/// What makes two materials' textures identical: family, colours, seed.
+type TextureKey = (TextureFamily, [u8; 3], [u8; 3], u64);
+
 /// How a material is drawn.
 #[derive(Clone, Copy, Debug)]
 struct Look {
-    texture: u32,
+    /// Start of its texture in the renderer's texel buffer.
+    base: u32,
+    side_log2: u32,
+    level_count: u32,
     /// Texels per metre along u and v.
     density: [f32; 2],
     /// Placement origin (u, v), metres; zero for tiled materials.
@@ -337,12 +343,14 @@ struct Hit {
 /// it once per world (about 0.2 s at 0.1 m) and share it across threads.
 pub struct Renderer {
     dims: [i32; 3],
+    /// Index steps along y and z (x is 1).
+    stride: [usize; 3],
     voxel_size: f32,
     origin: [f32; 3],
     distance: Vec<u8>,
     materials: Vec<u16>,
     looks: Vec<Look>,
-    textures: Vec<Texture>,
+    texels: Vec<u32>,
     storey_of_z: Vec<u8>,
     floor_z: Vec<f64>,
     region_map: Vec<u16>,
@@ -359,33 +367,37 @@ impl Renderer {
         let vs = grid.voxel_size();
         let o = grid.origin();
 
-        let mut textures = Vec::new();
-        let mut cache: HashMap<(TextureFamily, [u8; 3], [u8; 3], u64), u32> = HashMap::new();
+        // Every texture's levels in one buffer; materials differing only in placement share.
+        let mut texels = Vec::new();
+        // (family, colour, accent, seed) -> (start, side_log2, level_count)
+        let mut cache: HashMap<TextureKey, (u32, u32, u32)> = HashMap::new();
         let looks = world
             .material_table()
             .iter()
             .map(|m: &Material| {
                 let key = (m.family, m.colour, m.accent, m.seed);
-                let texture = *cache.entry(key).or_insert_with(|| {
-                    textures.push(Texture::generate(m));
-                    (textures.len() - 1) as u32
+                let (base, side_log2, level_count) = *cache.entry(key).or_insert_with(|| {
+                    let texture = Texture::generate(m);
+                    let base = texels.len() as u32;
+                    texels.extend_from_slice(texture.texels());
+                    (base, texture.side_log2(), texture.level_count() as u32)
                 });
-                let side = m.family.tile_side() as f32;
-                match m.placement {
-                    Some(p) => Look {
-                        texture,
-                        density: [side / p.size[0] as f32, side / p.size[1] as f32],
-                        origin: [p.origin[0] as f32, p.origin[1] as f32],
-                        placed: true,
-                        emissive: m.is_emissive(),
-                    },
-                    None => Look {
-                        texture,
-                        density: [m.texels_per_metre as f32; 2],
-                        origin: [0.0; 2],
-                        placed: false,
-                        emissive: m.is_emissive(),
-                    },
+                let side = (1u32 << side_log2) as f32;
+                let (density, origin) = match m.placement {
+                    Some(p) => (
+                        [side / p.size[0] as f32, side / p.size[1] as f32],
+                        [p.origin[0] as f32, p.origin[1] as f32],
+                    ),
+                    None => ([m.texels_per_metre as f32; 2], [0.0; 2]),
+                };
+                Look {
+                    base,
+                    side_log2,
+                    level_count,
+                    density,
+                    origin,
+                    placed: m.placement.is_some(),
+                    emissive: m.is_emissive(),
                 }
             })
             .collect();
@@ -440,12 +452,13 @@ impl Renderer {
 
         Self {
             dims: [nx as i32, ny as i32, nz as i32],
+            stride: [1, nx, nx * ny],
             voxel_size: vs as f32,
             origin: [o.x as f32, o.y as f32, o.z as f32],
             distance: chebyshev_distance(grid.cells(), [nx, ny, nz]),
             materials: world.materials().to_vec(),
             looks,
-            textures,
+            texels,
             storey_of_z,
             floor_z,
             region_map,
@@ -502,7 +515,6 @@ impl Renderer {
             cone: [cone_outer, cone_inner],
             focal: k.fx as f32,
         };
-        let noshade = std::env::var_os("NOSHADE").is_some();
         let mut dirs = [[0.0f32; 3]; PACKET];
         let mut hits: [Option<Hit>; PACKET] = Default::default();
         for row in 0..h {
@@ -511,14 +523,18 @@ impl Renderer {
                 for (lane, dir) in dirs.iter_mut().enumerate() {
                     // Lanes past the right edge repeat the last pixel; their result is dropped.
                     let du = (c0 + lane).min(w - 1) as f32 + 0.5 - k.cx as f32;
-                    let d = [0, 1, 2].map(|i| axis_x[i] + du * step_u[i] + dv * step_v[i]);
-                    let norm = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
-                    *dir = d.map(|x| x / norm);
+                    let d = [
+                        axis_x[0] + du * step_u[0] + dv * step_v[0],
+                        axis_x[1] + du * step_u[1] + dv * step_v[1],
+                        axis_x[2] + du * step_u[2] + dv * step_v[2],
+                    ];
+                    let inv_norm = 1.0 / (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+                    *dir = [d[0] * inv_norm, d[1] * inv_norm, d[2] * inv_norm];
                 }
                 self.trace_packet(start, &dirs, &mut hits);
                 for (lane, hit) in hits.iter().enumerate().take(w - c0) {
                     if let Some(hit) = hit {
-                        linear[row * w + c0 + lane] = if noshade { [hit.t * 0.01; 3] } else { shade.at(start, dirs[lane], hit) };
+                        linear[row * w + c0 + lane] = shade.at(start, dirs[lane], hit);
                     }
                 }
             }
@@ -531,16 +547,16 @@ impl Renderer {
         let mut rng = SimRng::new(seed);
         let gains = condition.white_balance.map(|c| c * condition.gain);
         let sigma = condition.noise_sigma;
+        let mut noise = [0.0f32; 3];
         for (p, out) in linear.iter().zip(image.rgb.chunks_exact_mut(3)) {
+            if sigma > 0.0 {
+                let [a, b, c] = rng.normal_triple();
+                noise = [a * sigma, b * sigma, c * sigma];
+            }
             for ch in 0..3 {
                 let x = (p[ch] * gains[ch]).clamp(0.0, 1.0);
-                let level = self.gamma[(x * 4095.0) as usize] as i32;
-                let noise = if sigma > 0.0 {
-                    floor_i32(sigma * rng.normal() + 0.5)
-                } else {
-                    0
-                };
-                out[ch] = (level + noise).clamp(0, 255) as u8;
+                let level = self.gamma[(x * 4095.0) as usize] as f32 + noise[ch];
+                out[ch] = (level.clamp(0.0, 255.0) + 0.5) as u8;
             }
         }
         Ok(image)
@@ -557,7 +573,10 @@ impl Renderer {
         dirs: &[[f32; 3]; PACKET],
         hits: &mut [Option<Hit>; PACKET],
     ) {
-        let mut rays = dirs.map(|d| Ray::new(self, o, d));
+        let mut rays = [Ray::new(self, o, dirs[0]); PACKET];
+        for (ray, &d) in rays.iter_mut().zip(dirs).skip(1) {
+            *ray = Ray::new(self, o, d);
+        }
         for _ in 0..MAX_STEPS {
             let mut running = false;
             for ray in rays.iter_mut() {
@@ -596,7 +615,11 @@ enum RayState {
 struct Ray {
     d: [f32; 3],
     inv: [f32; 3],
-    positive: [bool; 3],
+    /// +1 or -1: the direction of travel along each axis.
+    sign: [i32; 3],
+    /// 0 when travelling towards +, 1 towards - (the exit face of a cube `v +- (r - 1)` is at
+    /// `v + sign * r + back`).
+    back: [i32; 3],
     v: [i32; 3],
     index: usize,
     axis: usize,
@@ -607,29 +630,35 @@ struct Ray {
 impl Ray {
     #[inline(always)]
     fn new(rd: &Renderer, o: [f32; 3], d: [f32; 3]) -> Self {
-        let v = o.map(floor_i32);
-        let inv = d.map(|c| {
-            let c = if c.abs() < 1e-12 {
+        let v = [floor_i32(o[0]), floor_i32(o[1]), floor_i32(o[2])];
+        let inv_of = |c: f32| {
+            1.0 / if c.abs() < 1e-12 {
                 1e-12f32.copysign(c)
             } else {
                 c
-            };
-            1.0 / c
-        });
-        let axis = if d[0].abs() >= d[1].abs() && d[0].abs() >= d[2].abs() {
+            }
+        };
+        let (ax, ay, az) = (d[0].abs(), d[1].abs(), d[2].abs());
+        let axis = if ax >= ay && ax >= az {
             0
-        } else if d[1].abs() >= d[2].abs() {
+        } else if ay >= az {
             1
         } else {
             2
         };
-        let inside = rd.contains(&v);
+        let sign_of = |c: f32| if c > 0.0 { 1 } else { -1 };
+        let inside = rd.contains(v);
         Self {
             d,
-            inv,
-            positive: d.map(|c| c > 0.0),
+            inv: [inv_of(d[0]), inv_of(d[1]), inv_of(d[2])],
+            sign: [sign_of(d[0]), sign_of(d[1]), sign_of(d[2])],
+            back: [
+                i32::from(d[0] <= 0.0),
+                i32::from(d[1] <= 0.0),
+                i32::from(d[2] <= 0.0),
+            ],
             v,
-            index: if inside { rd.index(&v) } else { 0 },
+            index: if inside { rd.index(v) } else { 0 },
             axis,
             t: 0.0,
             state: if inside {
@@ -649,42 +678,42 @@ impl Ray {
             self.state = RayState::Hit;
             return;
         }
-        let v = self.v;
-        let bound = |k: usize| {
-            if self.positive[k] {
-                v[k] + r
-            } else {
-                v[k] - r + 1
-            }
-        };
-        let tk = [0, 1, 2].map(|k| (bound(k) as f32 - o[k]) * self.inv[k]);
-        let k = if tk[0] <= tk[1] && tk[0] <= tk[2] {
-            0
-        } else if tk[1] <= tk[2] {
-            1
+        let [vx, vy, vz] = self.v;
+        let [sx, sy, sz] = self.sign;
+        let tx = ((vx + sx * r + self.back[0]) as f32 - o[0]) * self.inv[0];
+        let ty = ((vy + sy * r + self.back[1]) as f32 - o[1]) * self.inv[1];
+        let tz = ((vz + sz * r + self.back[2]) as f32 - o[2]) * self.inv[2];
+        // The other coordinates at the exit, kept inside the cube (inside the grid they are
+        // non-negative, so truncation is floor; a rounding error below 0 is clamped away).
+        let within = |c: f32, v: i32| (c as i32).clamp(v - r + 1, v + r - 1);
+        let [dx, dy, dz] = self.d;
+        let (next, t, axis) = if tx <= ty && tx <= tz {
+            let next = [
+                vx + sx * r,
+                within(o[1] + tx * dy, vy),
+                within(o[2] + tx * dz, vz),
+            ];
+            (next, tx, 0)
+        } else if ty <= tz {
+            let next = [
+                within(o[0] + ty * dx, vx),
+                vy + sy * r,
+                within(o[2] + ty * dz, vz),
+            ];
+            (next, ty, 1)
         } else {
-            2
+            let next = [
+                within(o[0] + tz * dx, vx),
+                within(o[1] + tz * dy, vy),
+                vz + sz * r,
+            ];
+            (next, tz, 2)
         };
-        let t = tk[k];
-        let mut next = v;
-        for j in 0..3 {
-            next[j] = if j == k {
-                if self.positive[j] {
-                    v[j] + r
-                } else {
-                    v[j] - r
-                }
-            } else {
-                // Inside the grid coordinates are non-negative: truncation is floor (and a
-                // value a rounding error below 0 is clamped into the free cube anyway).
-                ((o[j] + t * self.d[j]) as i32).clamp(v[j] - r + 1, v[j] + r - 1)
-            };
-        }
         self.v = next;
         self.t = t;
-        self.axis = k;
-        if rd.contains(&next) {
-            self.index = rd.index(&next);
+        self.axis = axis;
+        if rd.contains(next) {
+            self.index = rd.index(next);
         } else {
             self.state = RayState::Missed;
         }
@@ -693,14 +722,15 @@ impl Ray {
 
 impl Renderer {
     #[inline(always)]
-    fn contains(&self, v: &[i32; 3]) -> bool {
-        (0..3).all(|k| (v[k] as u32) < self.dims[k] as u32)
+    fn contains(&self, v: [i32; 3]) -> bool {
+        (v[0] as u32) < self.dims[0] as u32
+            && (v[1] as u32) < self.dims[1] as u32
+            && (v[2] as u32) < self.dims[2] as u32
     }
 
     #[inline(always)]
-    fn index(&self, v: &[i32; 3]) -> usize {
-        let [nx, ny, _] = self.dims.map(|n| n as usize);
-        v[0] as usize + nx * (v[1] as usize + ny * v[2] as usize)
+    fn index(&self, v: [i32; 3]) -> usize {
+        v[0] as usize + self.stride[1] * v[1] as usize + self.stride[2] * v[2] as usize
     }
 }
 
@@ -722,18 +752,20 @@ impl Shade<'_> {
         let vs = rd.voxel_size;
         let k = hit.axis;
         let normal_positive = d[k] < 0.0;
-        let p = [0, 1, 2].map(|i| rd.origin[i] + (o[i] + hit.t * d[i]) * vs);
+        let at = |i: usize| rd.origin[i] + (o[i] + hit.t * d[i]) * vs;
+        let p = [at(0), at(1), at(2)];
         // The free voxel in front of the face: its storey and region.
         let mut front = hit.voxel;
         front[k] += if normal_positive { 1 } else { -1 };
         let fz = front[2].clamp(0, rd.dims[2] - 1) as usize;
         let storey = rd.storey_of_z[fz] as usize;
         let look = rd.looks[rd.materials[hit.index] as usize];
-        let uv = face_uv(k, normal_positive, p.map(|c| c as f64), rd.floor_z[storey]);
+        let p64 = [p[0] as f64, p[1] as f64, p[2] as f64];
+        let uv = face_uv(k, normal_positive, p64, rd.floor_z[storey]);
         let s = (uv[0] as f32 - look.origin[0]) * look.density[0];
         let tv = (uv[1] as f32 - look.origin[1]) * look.density[1];
         let row = if look.placed {
-            let side = rd.textures[look.texture as usize].side() as f32;
+            let side = (1u32 << look.side_log2) as f32;
             side - 1.0 - tv
         } else {
             -tv
@@ -748,7 +780,14 @@ impl Shade<'_> {
         } else {
             0
         };
-        let texel = rd.textures[look.texture as usize].fetch(level, floor_i32(s), floor_i32(row));
+        let texel = fetch(
+            &rd.texels[look.base as usize..],
+            look.side_log2,
+            look.level_count,
+            level as u32,
+            floor_i32(s),
+            floor_i32(row),
+        );
         let albedo = [
             (texel & 0xff) as f32 / 255.0,
             ((texel >> 8) & 0xff) as f32 / 255.0,
@@ -780,7 +819,11 @@ impl Shade<'_> {
                     );
                     let mut sum = 0.0;
                     for lamp in &rd.lights[a..b] {
-                        let l = [0, 1, 2].map(|i| lamp.position[i] - p[i]);
+                        let l = [
+                            lamp.position[0] - p[0],
+                            lamp.position[1] - p[1],
+                            lamp.position[2] - p[2],
+                        ];
                         let ndotl = sign * l[k];
                         let d2 = l[0] * l[0] + l[1] * l[1] + l[2] * l[2];
                         if ndotl > 0.0 && d2 < range2 {
@@ -928,33 +971,40 @@ mod tests {
             assert!(Condition::preset(kind).validate().is_ok());
             assert_eq!(ConditionKind::from_name(kind.name()), Some(kind));
         }
-        let bad = Condition {
-            noise_sigma: -1.0,
-            ..Condition::default()
-        };
-        assert!(bad
-            .validate()
-            .unwrap_err()
-            .to_string()
-            .contains("noise_sigma"));
-        let bad = Condition {
-            motion_blur_px: 1000,
-            ..Condition::default()
-        };
-        assert!(bad
-            .validate()
-            .unwrap_err()
-            .to_string()
-            .contains("motion_blur_px"));
-        let bad = Condition {
-            white_balance: [1.0, f32::NAN, 1.0],
-            ..Condition::default()
-        };
-        assert!(bad
-            .validate()
-            .unwrap_err()
-            .to_string()
-            .contains("white_balance"));
+        let base = Condition::default();
+        for (bad, field) in [
+            (
+                Condition {
+                    noise_sigma: -1.0,
+                    ..base.clone()
+                },
+                "noise_sigma",
+            ),
+            (
+                Condition {
+                    motion_blur_px: 1000,
+                    ..base.clone()
+                },
+                "motion_blur_px",
+            ),
+            (
+                Condition {
+                    white_balance: [1.0, f32::NAN, 1.0],
+                    ..base.clone()
+                },
+                "white_balance",
+            ),
+            (
+                Condition {
+                    headlight_half_angle_deg: 0.0,
+                    ..base
+                },
+                "headlight_half_angle_deg",
+            ),
+        ] {
+            let message = bad.validate().unwrap_err().to_string();
+            assert!(message.contains(field), "{message}");
+        }
     }
 
     #[test]

@@ -353,7 +353,7 @@ pub struct World {
 
 impl World {
     /// Generates the world of `params` (validated first; errors name the bad field). Takes
-    /// about 0.1 s for a two-storey office at 0.1 m in a release build.
+    /// well under 10 ms for an office at 0.1 m in a release build.
     pub fn generate(params: &WorldParams) -> Result<Self, WorldError> {
         params.validate()?;
         build::generate(params)
@@ -508,69 +508,56 @@ impl World {
     }
 
     /// A plan of storey `floor` at the middle of its flight band, one pixel per voxel column,
-    /// north (+y) up: walls dark, rooms light with a hue per wall material, corridors grey,
-    /// furniture brown, landmarks red, doors green, shafts blue.
+    /// north (+y) up: walls dark, rooms light with a tint per wall material, corridors grey,
+    /// furniture brown, landmarks red, doorways green, shaft openings (above and below) blue.
     pub fn top_view(&self, floor: usize) -> Image {
+        use crate::texture::TextureFamily as F;
         let [nx, ny, _] = self.grid.dims();
+        let vs = self.grid.voxel_size();
         let [lo, hi] = self.flight_band(floor);
-        let height = 0.5 * (lo + hi);
-        let z_index = ((height - self.grid.origin().z) / self.grid.voxel_size()) as usize;
+        let z = ((0.5 * (lo + hi) - self.grid.origin().z) / vs) as usize;
+        let furniture: Vec<u16> = self.furniture.iter().map(|f| f.material).collect();
         let map = self.region_map(floor);
         let mut image = Image::new(nx as u32, ny as u32);
+        let mut put = |x: usize, y: usize, c| image.set_pixel(x as u32, (ny - 1 - y) as u32, c);
         for y in 0..ny {
             for x in 0..nx {
-                let v = [x, y, z_index];
-                let colour = if self.grid.is_occupied(v) {
-                    match self
-                        .material_at(v)
-                        .map(|m| self.material_table[m as usize].family)
-                    {
-                        Some(
-                            crate::texture::TextureFamily::Poster
-                            | crate::texture::TextureFamily::Sign,
-                        ) => [220, 30, 30],
-                        _ if self.is_furniture(v) => [140, 90, 40],
+                let m = self.materials[x + nx * (y + ny * z)];
+                let colour = if m != 0 {
+                    match self.material_table[m as usize].family {
+                        F::Poster | F::Sign => [220, 30, 30],
+                        _ if furniture.contains(&m) => [140, 90, 40],
                         _ => [40, 40, 40],
                     }
                 } else {
-                    let id = map[x + nx * y];
-                    match self.regions.get(id as usize) {
+                    match self.regions.get(map[x + nx * y] as usize) {
                         Some(r) if r.kind == RegionKind::Room => {
-                            let hue = r.wall_material as u32 * 67;
+                            let tint = r.wall_material as u32 * 67;
                             [
-                                (180 + hue % 60) as u8,
-                                (180 + (hue / 3) % 60) as u8,
-                                (200 + (hue / 7) % 50) as u8,
+                                (180 + tint % 60) as u8,
+                                (180 + (tint / 3) % 60) as u8,
+                                (200 + (tint / 7) % 50) as u8,
                             ]
                         }
                         Some(_) => [160, 160, 160],
                         None => [60, 170, 60],
                     }
                 };
-                image.set_pixel(x as u32, (ny - 1 - y) as u32, colour);
+                put(x, y, colour);
             }
         }
-        for r in self
+        let shafts = self
             .regions
             .iter()
-            .filter(|r| r.kind == RegionKind::Shaft && r.floor <= floor)
-        {
-            if r.floor + 1 < floor {
-                continue;
-            }
-            let vs = self.grid.voxel_size();
-            for y in (r.min[1] / vs) as usize..(r.max[1] / vs) as usize {
-                for x in (r.min[0] / vs) as usize..(r.max[0] / vs) as usize {
-                    image.set_pixel(x as u32, (ny - 1 - y) as u32, [60, 90, 220]);
+            .filter(|r| r.kind == RegionKind::Shaft && (r.floor == floor || r.floor + 1 == floor));
+        for r in shafts {
+            for y in (r.min[1] / vs).round() as usize..(r.max[1] / vs).round() as usize {
+                for x in (r.min[0] / vs).round() as usize..(r.max[0] / vs).round() as usize {
+                    put(x, y, [60, 90, 220]);
                 }
             }
         }
         image
-    }
-
-    fn is_furniture(&self, v: Voxel) -> bool {
-        let m = self.material_at(v).unwrap_or(0);
-        self.furniture.iter().any(|f| f.material == m)
     }
 }
 

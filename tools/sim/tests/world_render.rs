@@ -380,18 +380,6 @@ fn frames_carry_texture_for_orb() {
                     kind.name()
                 );
                 counts.push(orb_count(&image));
-                if std::env::var("DUMP").is_ok() {
-                    image
-                        .write_png(
-                            format!(
-                                "/tmp/simprev/{split}_{}_{i}_{}.png",
-                                kind.name(),
-                                counts[counts.len() - 1]
-                            )
-                            .as_ref(),
-                        )
-                        .unwrap();
-                }
             }
             let m = median(counts.clone());
             eprintln!(

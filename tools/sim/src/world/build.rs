@@ -530,15 +530,16 @@ impl Builder<'_> {
                 } else {
                     [y[0] - tw, y[0]]
                 };
-                if let Some(a) = self.door_position(rng, [xa, xb]) {
-                    self.cut_door(f, [a, a + self.plan.dw], wall, 1, [room, corridor]);
+                if let Some(along) = self.door_span(rng, [xa, xb]) {
+                    self.cut_door(f, along, wall, 1, [room, corridor]);
                 }
                 // A door to the previous room of the band, sometimes.
                 if let Some(prev) = previous.filter(|_| rng.chance(0.3)) {
                     let pb = self.boxes[prev];
                     let overlap = [pb.lo[1].max(b.lo[1]), pb.hi[1].min(b.hi[1])];
-                    if let Some(a) = self.door_position(rng, overlap) {
-                        self.cut_door(f, [a, a + self.plan.dw], [pb.hi[0], xa], 0, [room, prev]);
+                    let span = self.door_span(rng, overlap);
+                    if let Some(along) = span.filter(|s| s[1] - s[0] == self.plan.dw) {
+                        self.cut_door(f, along, [pb.hi[0], xa], 0, [room, prev]);
                     }
                 }
                 previous = Some(room);
@@ -546,12 +547,18 @@ impl Builder<'_> {
         }
     }
 
-    /// Where a door may start along a wall spanning `span`, keeping 0.3 m of wall each side.
-    fn door_position(&self, rng: &mut SimRng, span: [usize; 2]) -> Option<usize> {
-        let margin = ((0.3 / self.vs).round() as usize).max(1);
-        let lo = span[0] + margin;
-        let hi = span[1].checked_sub(margin + self.plan.dw)?;
-        (hi >= lo).then(|| rng.between(lo, hi))
+    /// Where a door may open along a wall spanning `span`: `door_width` wide with 0.3 m of wall
+    /// each side, narrower on a wall too short for that (keeping one voxel of wall each side);
+    /// `None` only when the wall is under three voxels long.
+    fn door_span(&self, rng: &mut SimRng, span: [usize; 2]) -> Option<[usize; 2]> {
+        let len = span[1].checked_sub(span[0])?;
+        let width = self.plan.dw.min(len.checked_sub(2)?);
+        if width == 0 {
+            return None;
+        }
+        let margin = vox(0.3, self.vs).min((len - width) / 2);
+        let a = rng.between(span[0] + margin, span[1] - margin - width);
+        Some([a, a + width])
     }
 
     /// Opens a door `along` (on the axis other than `through`) across the wall `wall` (on axis
@@ -577,7 +584,7 @@ impl Builder<'_> {
             let row = f * nx * ny + yy * nx;
             self.region_map[row + x[0]..row + x[1]].fill(joins[0] as u16);
         }
-        let clearance = b.grow_xy((1.0 / self.vs).round() as usize);
+        let clearance = b.grow_xy(vox(1.0, self.vs));
         for r in joins {
             self.reserved[r].push(clearance);
         }

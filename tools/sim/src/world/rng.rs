@@ -70,7 +70,7 @@ impl SimRng {
         if n == 0 {
             0
         } else {
-            ((self.next_u64() >> 32) * n as u64 >> 32) as usize
+            (((self.next_u64() >> 32) * n as u64) >> 32) as usize
         }
     }
 
@@ -96,12 +96,25 @@ impl SimRng {
         }
     }
 
-    /// Approximately standard normal: the sum of four uniforms, rescaled (Irwin-Hall); cheap
-    /// enough for per-pixel sensor noise, bounded by +-3.46.
+    /// Approximately standard normal: the sum of four 16-bit uniforms, rescaled (Irwin-Hall);
+    /// bounded by +-3.46.
     pub fn normal(&mut self) -> f32 {
         let bits = self.next_u64();
         let sum: u32 = (0..4).map(|i| ((bits >> (16 * i)) & 0xffff) as u32).sum();
         (sum as f32 / 65536.0 - 2.0) * 3f32.sqrt()
+    }
+
+    /// Three approximately standard normals from one draw, each the sum of three 7-bit
+    /// uniforms (Irwin-Hall, piecewise quadratic), rescaled; bounded by +-3. Cheap enough for
+    /// per-pixel, per-channel sensor noise.
+    pub fn normal_triple(&mut self) -> [f32; 3] {
+        let bits = self.next_u64();
+        let one = |h: u64| {
+            let sum = (h & 0x7f) + ((h >> 7) & 0x7f) + ((h >> 14) & 0x7f);
+            // Each uniform is (k + 0.5) / 128: mean 1.5 and variance 1/4 for the sum.
+            ((sum as f32 + 1.5) / 128.0 - 1.5) * 2.0
+        };
+        [one(bits), one(bits >> 21), one(bits >> 42)]
     }
 }
 
@@ -123,6 +136,14 @@ mod tests {
         assert!((mean - 0.5).abs() < 0.01, "{mean}");
         let var: f32 = (0..n).map(|_| r.normal().powi(2)).sum::<f32>() / n as f32;
         assert!((var - 1.0).abs() < 0.05, "{var}");
+        let triples: Vec<[f32; 3]> = (0..n).map(|_| r.normal_triple()).collect();
+        let all = || triples.iter().flatten();
+        let mean: f32 = all().sum::<f32>() / (3 * n) as f32;
+        let var: f32 = all().map(|x| x * x).sum::<f32>() / (3 * n) as f32;
+        assert!(
+            mean.abs() < 0.02 && (var - 1.0).abs() < 0.05,
+            "{mean} {var}"
+        );
         assert!((0..1000).all(|_| r.below(5) < 5));
         assert_eq!(r.below(0), 0);
         assert_eq!(hash3(3, 1, 2, 3), hash3(3, 1, 2, 3));
