@@ -28,7 +28,8 @@ pub use from_images::{
 pub use keyframes::{from_keyframes, Keyframe, KeyframeOptions};
 pub use occupancy::{OccupancyGrid, Voxel, MAX_VOXELS};
 pub use skeleton::{
-    skeleton_graph, skeletonize, GraphEdge, GraphPlace, NodeKind, SkeletonOptions, TopoGraph,
+    skeleton_graph, skeletonize, squared_distance_transform, GraphEdge, GraphPlace, GridBorder,
+    NodeKind, SkeletonOptions, TopoGraph,
 };
 pub use tum::{parse_tum, read_tum, TimedPose};
 

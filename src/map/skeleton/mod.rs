@@ -30,6 +30,8 @@ mod distance;
 mod graph;
 mod thinning;
 
+pub use distance::{squared_distance_transform, GridBorder};
+
 use super::occupancy::{OccupancyGrid, Voxel};
 use super::MapError;
 use nalgebra::Point3;
@@ -282,8 +284,8 @@ fn free_space(grid: &OccupancyGrid, options: &SkeletonOptions) -> Result<FreeSpa
         )));
     }
     if options.min_clearance_m > 0.0 {
-        let d2 = distance::squared_distance_to(grid.dims(), grid.cells())
-            .ok_or_else(|| out_of_memory(grid, "distance transform"))?;
+        // The clearance is measured to occupied voxels only: the grid's border is no obstacle.
+        let d2 = squared_distance_transform(grid, GridBorder::Open)?;
         let need = (options.min_clearance_m / grid.voxel_size() + 0.5).powi(2);
         for (f, &d) in free.iter_mut().zip(&d2[z0 * layer..z1 * layer]) {
             *f = *f && d >= need;

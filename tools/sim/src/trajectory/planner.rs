@@ -1,108 +1,11 @@
-//! The clearance map (exact 3D Euclidean distance transform), connected components, 3D A* and
-//! path smoothing behind [`Planner`](super::Planner).
+//! The clearance map (the library's exact 3D Euclidean distance transform,
+//! [`squared_distance_transform`]), connected components, 3D A* and path smoothing behind
+//! [`Planner`](super::Planner).
 
 use nalgebra::{Point3, Vector3};
 use std::cmp::Ordering;
 use std::collections::BinaryHeap;
-use topoloc::map::OccupancyGrid;
-
-/// "No obstacle on this line yet" in the distance transform: finite, so that the parabola
-/// intersections below never compute `inf - inf`.
-const FAR: f64 = 1e20;
-
-/// Squared Euclidean distance, in voxels, from every voxel centre to the nearest occupied voxel
-/// centre, voxels outside the grid counting as occupied (the grid is closed, as in
-/// [`OccupancyGrid::is_occupied`]). Felzenszwalb-Huttenlocher separable transform: one exact
-/// 1D pass per axis, O(voxels).
-pub(super) fn squared_distance_transform(grid: &OccupancyGrid) -> Vec<f32> {
-    let [nx, ny, nz] = grid.dims();
-    let mut dist: Vec<f32> = grid
-        .cells()
-        .iter()
-        .map(|&occupied| if occupied { 0.0 } else { FAR as f32 })
-        .collect();
-    let longest = nx.max(ny).max(nz) + 2;
-    let mut line = LineTransform::new(longest);
-    // Along x: lines are contiguous.
-    for row in dist.chunks_mut(nx) {
-        row.copy_from_slice(line.run(row.iter().copied()));
-    }
-    // Along y then z: strided lines.
-    for (n, stride, count) in [(ny, nx, nz), (nz, nx * ny, 1)] {
-        for block in 0..count {
-            for x in 0..stride {
-                let base = block * stride * n + x;
-                let result = line.run((0..n).map(|k| dist[base + k * stride]));
-                for (k, &d) in result.iter().enumerate() {
-                    dist[base + k * stride] = d;
-                }
-            }
-        }
-    }
-    dist
-}
-
-/// Buffers of the 1D lower-envelope-of-parabolas transform, reused across lines.
-struct LineTransform {
-    f: Vec<f64>,
-    v: Vec<usize>,
-    z: Vec<f64>,
-    out: Vec<f32>,
-}
-
-impl LineTransform {
-    fn new(capacity: usize) -> Self {
-        Self {
-            f: Vec::with_capacity(capacity),
-            v: vec![0; capacity],
-            z: vec![0.0; capacity + 1],
-            out: Vec::with_capacity(capacity),
-        }
-    }
-
-    /// Transforms one line of squared distances; an obstacle site is added just outside each
-    /// end (the closed grid). Returns the transformed line.
-    fn run(&mut self, values: impl Iterator<Item = f32>) -> &[f32] {
-        self.f.clear();
-        self.f.push(0.0);
-        self.f.extend(values.map(f64::from));
-        self.f.push(0.0);
-        let (f, v, z, out) = (&self.f, &mut self.v, &mut self.z, &mut self.out);
-        out.clear();
-        let n = f.len();
-        let mut k = 0usize;
-        v[0] = 0;
-        z[0] = f64::NEG_INFINITY;
-        z[1] = f64::INFINITY;
-        for q in 1..n {
-            let fq = f[q] + (q * q) as f64;
-            let mut s;
-            loop {
-                let p = v[k];
-                s = (fq - (f[p] + (p * p) as f64)) / (2.0 * (q - p) as f64);
-                // z[0] is -inf, so this stops at k = 0.
-                if s <= z[k] {
-                    k -= 1;
-                } else {
-                    break;
-                }
-            }
-            k += 1;
-            v[k] = q;
-            z[k] = s;
-            z[k + 1] = f64::INFINITY;
-        }
-        let mut k = 0;
-        for q in 1..n - 1 {
-            while z[k + 1] < q as f64 {
-                k += 1;
-            }
-            let d = q as f64 - v[k] as f64;
-            out.push((d * d + f[v[k]]) as f32);
-        }
-        out
-    }
-}
+use topoloc::map::{squared_distance_transform, GridBorder, OccupancyGrid};
 
 /// One of the 26 moves of the voxel neighbourhood.
 struct Move {
@@ -158,13 +61,16 @@ pub(super) struct ClearSpace {
 }
 
 impl ClearSpace {
-    /// `threshold_sq`: least squared centre distance (voxels) to an occupied voxel.
+    /// `threshold_sq`: least squared centre distance (voxels) to an occupied voxel, voxels
+    /// outside the grid counting as occupied (a vehicle keeps its clearance from the grid's
+    /// border too). Panics when the memory for the distance transform cannot be reserved.
     pub fn new(grid: &OccupancyGrid, z_layers: (usize, usize), threshold_sq: f64) -> Self {
         let [nx, ny, _] = grid.dims();
         let (z0, z1) = z_layers;
-        let dist = squared_distance_transform(grid);
+        let dist = squared_distance_transform(grid, GridBorder::Closed)
+            .expect("memory for the distance transform of the grid");
         let slab = &dist[nx * ny * z0..nx * ny * (z1 + 1)];
-        let clear = slab.iter().map(|&d| f64::from(d) >= threshold_sq).collect();
+        let clear = slab.iter().map(|&d| d >= threshold_sq).collect();
         let mut space = Self {
             dims: [nx, ny, z1 + 1 - z0],
             z0,
@@ -415,39 +321,6 @@ pub(super) fn round_corners(
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    /// Brute-force squared distance to the nearest occupied voxel or outside layer.
-    fn brute(grid: &OccupancyGrid, v: [usize; 3]) -> f64 {
-        let dims = grid.dims().map(|d| d as i64);
-        let mut best = f64::INFINITY;
-        for z in -1..=dims[2] {
-            for y in -1..=dims[1] {
-                for x in -1..=dims[0] {
-                    let inside =
-                        x >= 0 && y >= 0 && z >= 0 && x < dims[0] && y < dims[1] && z < dims[2];
-                    if inside && grid.is_free([x as usize, y as usize, z as usize]) {
-                        continue;
-                    }
-                    let d = [x - v[0] as i64, y - v[1] as i64, z - v[2] as i64];
-                    best = best.min((d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) as f64);
-                }
-            }
-        }
-        best
-    }
-
-    #[test]
-    fn distance_transform_matches_brute_force() {
-        let mut grid = OccupancyGrid::empty([9, 7, 5], 0.1, Point3::origin()).unwrap();
-        for v in [[4, 3, 2], [1, 1, 1], [7, 5, 3], [8, 0, 0]] {
-            grid.set(v, true);
-        }
-        let dist = squared_distance_transform(&grid);
-        for (i, &d) in dist.iter().enumerate() {
-            let v = grid.voxel_of(i);
-            assert_eq!(f64::from(d), brute(&grid, v), "voxel {v:?}");
-        }
-    }
 
     #[test]
     fn astar_finds_the_octile_shortest_path() {
