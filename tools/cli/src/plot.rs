@@ -35,7 +35,7 @@ const COLORBAR_WIDTH: u32 = 100;
 pub(crate) const FONT_FAMILY: &str = "sans-serif";
 
 /// Colours of the series, in order (cycled when there are more series).
-const SERIES_COLORS: [RGBColor; 6] = [
+pub(crate) const SERIES_COLORS: [RGBColor; 6] = [
     RGBColor(228, 26, 28),
     RGBColor(30, 144, 255),
     RGBColor(255, 0, 255),
@@ -194,7 +194,7 @@ pub(crate) fn ensure_font() -> Result<()> {
 }
 
 /// Text style of the given size in the registered font.
-fn font(size: u32) -> TextStyle<'static> {
+pub(crate) fn font(size: u32) -> TextStyle<'static> {
     (FONT_FAMILY, size).into_font().into()
 }
 
