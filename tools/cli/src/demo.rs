@@ -9,6 +9,7 @@
 use crate::backend_args::Backend;
 use crate::process::{median_and_p90, resident_memory_mib};
 use crate::progress::StepBars;
+use crate::simulate::scenario_options;
 use crate::top_view::write_top_view;
 use anyhow::{Context, Result};
 use serde_json::json;
@@ -18,11 +19,11 @@ use std::time::Instant;
 use topoloc::describe::onnx::{cache_dir, DEFAULT_MODEL_FILE};
 use topoloc::describe::{BackendConfig, DescriberOptions};
 use topoloc::eval::{calibration, precision_recall, GraphEvaluator, HopDistances, Prediction};
-use topoloc::map::{ImageMapOptions, LoadOptions, PlaceId};
+use topoloc::map::{LoadOptions, PlaceId};
 use topoloc::synthetic::Sequence;
 use topoloc::{Frame, Localization, Localizer, LocalizerOptions, Map, Mode};
-use topoloc_sim::render::{Condition, ConditionKind};
-use topoloc_sim::scenario::{build_scene, describe_flight, fly, ScenarioOptions};
+use topoloc_sim::render::ConditionKind;
+use topoloc_sim::scenario::{build_scene, describe_flight, fly};
 use topoloc_sim::style::Style;
 use topoloc_sim::world::WorldParams;
 
@@ -114,19 +115,8 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         rooms_per_floor: args.rooms,
         ..WorldParams::from_style(args.seed, Style::office())
     };
-    let mut options = ScenarioOptions::new(
-        world,
-        ImageMapOptions {
-            backend,
-            ..ImageMapOptions::default()
-        },
-    );
-    options.query_condition = Condition::preset(condition);
+    let mut options = scenario_options(world, backend, condition, args.legs, args.rate_hz);
     options.trajectory.seed = args.seed.wrapping_add(1);
-    options.trajectory.goals = args.legs;
-    // One leg goes back to an earlier goal (a loop), when there is more than one.
-    options.trajectory.revisits = options.trajectory.revisits.min(args.legs.saturating_sub(1));
-    options.trajectory.motion.rate_hz = args.rate_hz;
 
     let bars = StepBars::new(args.json);
     let start = Instant::now();

@@ -9,7 +9,9 @@ mod memory;
 mod plot;
 mod process;
 mod progress;
+mod scaling;
 mod simulate;
+mod suite;
 mod sweep;
 mod top_view;
 
@@ -60,6 +62,10 @@ enum Command {
         #[arg(long, value_delimiter = ',', default_value = "-1,0,1")]
         margins: Vec<f32>,
     },
+    /// Time per-frame localization against map size (20 to 2,000 places by default, as the
+    /// seed's Fig. 4.11): single-frame, filter and filter with odometry on generated corridor
+    /// worlds; print a markdown table (median and p90 ms, descriptor memory) and write a PNG.
+    Scaling(scaling::ScalingArgs),
     /// Build a map from an image folder; the describer (backend, PCA, codebook) is stored in it.
     BuildMap(build_map::BuildMapArgs),
     /// Localize a query image folder (or a dataset written by `simulate`) against a map built
@@ -69,6 +75,9 @@ enum Command {
     /// Generate world K of a split, build its graph and map (saved as OUT/map.topoloc) and write
     /// query trajectories as dataset folders OUT/traj-00i for `eval --dataset`.
     Simulate(simulate::SimulateArgs),
+    /// The seed-style benchmark: MNA and OHA per split (train, tr-t, tr-a, test), mean and
+    /// std over generated worlds, for every localizer configuration.
+    Suite(suite::SuiteArgs),
     /// (internal) Child process of bench-memory: load MAP and report its figures as JSON.
     #[command(hide = true)]
     MeasureMap { map: PathBuf },
@@ -84,9 +93,11 @@ fn main() -> Result<()> {
             temperatures,
             margins,
         } => sweep::run(worlds, frames, &temperatures, &margins),
+        Command::Scaling(args) => scaling::run(&args),
         Command::BuildMap(args) => build_map::run(&args),
         Command::Eval(args) => eval::run(&args),
         Command::Simulate(args) => simulate::run(&args),
+        Command::Suite(args) => suite::run(&args),
         Command::MeasureMap { map } => memory::measure(&map),
     }
 }

@@ -64,11 +64,11 @@ pub struct SimulateArgs {
     pub json: bool,
 }
 
-fn parse_split(name: &str) -> Result<Split, String> {
+pub(crate) fn parse_split(name: &str) -> Result<Split, String> {
     name.parse()
 }
 
-fn parse_condition(name: &str) -> Result<ConditionKind, String> {
+pub(crate) fn parse_condition(name: &str) -> Result<ConditionKind, String> {
     ConditionKind::from_name(name).ok_or_else(|| {
         let names: Vec<_> = ConditionKind::ALL.iter().map(|k| k.name()).collect();
         format!("expected one of {}", names.join(", "))

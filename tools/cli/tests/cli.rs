@@ -421,3 +421,93 @@ fn simulate_writes_a_dataset_that_eval_reads() {
     let stderr = eval(&map, &dir.path().join("no-such-dataset"));
     assert!(stderr.contains("no-such-dataset"), "{stderr}");
 }
+
+#[test]
+fn scaling_reports_every_size_and_writes_the_plot() {
+    let dir = tempfile::tempdir().unwrap();
+    let plot = dir.path().join("s.png");
+    let report = json(&topoloc(&[
+        "scaling",
+        "--sizes",
+        "20,100",
+        "--frames",
+        "30",
+        "--json",
+        "--plot",
+        plot.to_str().unwrap(),
+    ]));
+    let sizes = report["sizes"].as_array().expect("sizes array");
+    let places: Vec<u64> = sizes
+        .iter()
+        .map(|s| s["places"].as_u64().unwrap())
+        .collect();
+    assert_eq!(places, [20, 100], "{report}");
+    for size in sizes {
+        assert_eq!(
+            size["views"].as_u64(),
+            size["places"].as_u64().map(|p| 4 * p)
+        );
+        assert!(size["descriptor_bytes"].as_u64().unwrap() > 0, "{size}");
+        for config in ["single_frame", "filter", "filter_odometry"] {
+            let median = size[config]["ms_median"].as_f64().unwrap_or(-1.0);
+            let p90 = size[config]["ms_p90"].as_f64().unwrap_or(-1.0);
+            assert!(median > 0.0, "{config}: {size}");
+            assert!(p90 >= median, "{config}: {size}");
+        }
+    }
+    let png = std::fs::read(&plot).unwrap();
+    assert!(!png.is_empty());
+    assert_eq!(&png[1..4], b"PNG");
+}
+
+#[test]
+fn suite_reports_mean_and_std_per_split_and_configuration() {
+    // Two splits, two tiny worlds each: enough to check the table's structure and statistics.
+    let out = topoloc(&[
+        "suite",
+        "--json",
+        "--backend",
+        "vlad",
+        "--splits",
+        "tr-a,test",
+        "--worlds",
+        "2",
+        "--rooms",
+        "2",
+        "--legs",
+        "1",
+    ]);
+    let report = json(&out);
+    for split in ["tr-a", "test"] {
+        let s = &report["splits"][split];
+        assert_eq!(s["worlds"].as_array().map(Vec::len), Some(2), "{report}");
+        for world in s["worlds"].as_array().unwrap() {
+            assert_eq!(
+                world["views"].as_u64(),
+                world["places"].as_u64().map(|p| 4 * p)
+            );
+        }
+        for config in ["single-frame", "filter", "filter+odometry"] {
+            let c = &s["configurations"][config];
+            for metric in ["mna", "oha"] {
+                let values: Vec<f64> = c[metric]
+                    .as_array()
+                    .unwrap()
+                    .iter()
+                    .map(|v| v.as_f64().unwrap())
+                    .collect();
+                assert_eq!(values.len(), 2);
+                assert!(values.iter().all(|v| (0.0..=1.0).contains(v)), "{c}");
+                let mean = (values[0] + values[1]) / 2.0;
+                let std = (values[0] - values[1]).abs() / 2.0;
+                let got_mean = c[format!("{metric}_mean")].as_f64().unwrap();
+                let got_std = c[format!("{metric}_std")].as_f64().unwrap();
+                assert!((got_mean - mean).abs() < 1e-12, "{config}.{metric}: {c}");
+                assert!((got_std - std).abs() < 1e-12, "{config}.{metric}: {c}");
+            }
+        }
+    }
+    let out = topoloc(&["suite", "--splits", "tr-x"]);
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("tr-x"));
+}

@@ -1,0 +1,241 @@
+//! `topoloc suite`: the seed-style benchmark table on generated worlds.
+//!
+//! For each split (train, tr-t, tr-a, test) and each of its first N worlds, builds the world's
+//! skeleton graph and map and flies one query trajectory (seeds `Split::trajectory_seed(K, 0)`)
+//! exactly as `topoloc demo` and `topoloc simulate` do, then localizes every frame with each
+//! localizer configuration (single-frame, filter, filter with drifting odometry). Prints MNA and
+//! OHA per split as mean ± standard deviation over the worlds, the way the seed's tables do
+//! (thesis Table 4.2), and the graph sizes they were measured on.
+
+use crate::backend_args::Backend;
+use crate::demo::{choose_backend, evaluate, ConfigResult};
+use crate::progress::StepBars;
+use crate::simulate::{parse_condition, parse_split, scenario_options};
+use anyhow::Result;
+use serde_json::json;
+use std::time::Instant;
+use topoloc::describe::DescriberOptions;
+use topoloc::eval::HopDistances;
+use topoloc::{LocalizerOptions, Mode};
+use topoloc_sim::render::ConditionKind;
+use topoloc_sim::scenario::{build_scene, describe_flight, fly};
+use topoloc_sim::style::Split;
+
+/// Options of `suite`.
+#[derive(clap::Args, Clone, Debug)]
+pub struct SuiteArgs {
+    /// Splits to run, comma-separated.
+    #[arg(long, value_delimiter = ',', default_value = "train,tr-t,tr-a,test", value_parser = parse_split)]
+    pub splits: Vec<Split>,
+    /// Worlds per split (worlds 0..N of each).
+    #[arg(long, default_value_t = 3)]
+    pub worlds: u32,
+    /// Rooms per storey (default 5, which gives graphs of about 50-300 views like the seed's;
+    /// 0 draws it from the split's style).
+    #[arg(long, default_value_t = 5)]
+    pub rooms: u32,
+    /// Storeys (default 1; 0 draws it from the split's style).
+    #[arg(long, default_value_t = 1)]
+    pub floors: u32,
+    /// Legs of each query trajectory (one revisits an earlier goal when there are two or more).
+    #[arg(long, default_value_t = 3)]
+    pub legs: usize,
+    /// Query frames per second.
+    #[arg(long, default_value_t = 10.0)]
+    pub rate_hz: f64,
+    /// Lighting of the query frames (maps are captured in bright light).
+    #[arg(long, default_value = "dim", value_parser = parse_condition)]
+    pub condition: ConditionKind,
+    /// Descriptor backend; default: ONNX when its model is set up, else VLAD.
+    #[arg(long, value_enum)]
+    pub backend: Option<Backend>,
+    /// Print one JSON object (per split and configuration: every world's figures, mean, std).
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// The localizer configurations compared: name, mode, whether odometry is given.
+const CONFIGURATIONS: [(&str, Mode, bool); 3] = [
+    ("single-frame", Mode::SingleFrame, false),
+    ("filter", Mode::Filter, false),
+    ("filter+odometry", Mode::Filter, true),
+];
+
+/// One world's run: its size and each configuration's result.
+struct WorldRun {
+    world: u32,
+    places: usize,
+    views: usize,
+    frames: usize,
+    results: Vec<ConfigResult>,
+}
+
+/// Runs the command.
+pub fn run(args: &SuiteArgs) -> Result<()> {
+    anyhow::ensure!(args.worlds >= 1, "--worlds must be at least 1");
+    anyhow::ensure!(
+        !args.splits.is_empty(),
+        "--splits must name at least one split"
+    );
+    let start = Instant::now();
+    let (backend, backend_note) = choose_backend(args.backend);
+    if !args.json {
+        eprintln!("backend: {backend_note}");
+    }
+    let bars = StepBars::new(args.json);
+    let mut runs: Vec<(Split, Vec<WorldRun>)> = Vec::new();
+    for &split in &args.splits {
+        let mut worlds = Vec::new();
+        for k in 0..args.worlds {
+            let mut world = split.world_params(k);
+            if args.rooms > 0 {
+                world.rooms_per_floor = args.rooms;
+            }
+            if args.floors > 0 {
+                world.floors = args.floors;
+            }
+            let mut options = scenario_options(
+                world,
+                backend.clone(),
+                args.condition,
+                args.legs,
+                args.rate_hz,
+            );
+            options.trajectory.seed = split.trajectory_seed(k, 0);
+            let report = |step, done, total| bars.report(step, done, total);
+            let scene = build_scene(&options, &report)?;
+            let flight = fly(&scene, &options, &options.capture.intrinsics, &report)?;
+            let (sequence, _) =
+                describe_flight(&scene, &flight, &DescriberOptions::default(), &report)?;
+            bars.finish();
+            let hops = HopDistances::from_map(&scene.map);
+            let results = CONFIGURATIONS
+                .iter()
+                .map(|&(name, mode, odometry)| {
+                    let options = LocalizerOptions {
+                        mode,
+                        ..LocalizerOptions::default()
+                    };
+                    evaluate(name, &scene.map, &sequence, &hops, options, odometry)
+                })
+                .collect::<Result<Vec<_>>>()?;
+            if !args.json {
+                let figures: Vec<String> = results
+                    .iter()
+                    .map(|r| format!("{} {:.3}/{:.3}", r.name, r.mna, r.oha))
+                    .collect();
+                eprintln!(
+                    "{split} world {k}: {} places, {} views, {} frames; MNA/OHA {}",
+                    scene.map.place_count(),
+                    scene.map.view_count(),
+                    sequence.frames.len(),
+                    figures.join(", ")
+                );
+            }
+            worlds.push(WorldRun {
+                world: k,
+                places: scene.map.place_count(),
+                views: scene.map.view_count(),
+                frames: sequence.frames.len(),
+                results,
+            });
+        }
+        runs.push((split, worlds));
+    }
+    if args.json {
+        println!("{}", summary_json(args, &backend_note, &runs, start));
+    } else {
+        print_table(&runs);
+        println!(
+            "{} worlds per split, query light '{}', {:.0} s in all",
+            args.worlds,
+            args.condition.name(),
+            start.elapsed().as_secs_f64()
+        );
+    }
+    Ok(())
+}
+
+/// Mean and (population) standard deviation.
+fn mean_std(values: &[f64]) -> (f64, f64) {
+    let n = values.len().max(1) as f64;
+    let mean = values.iter().sum::<f64>() / n;
+    let var = values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / n;
+    (mean, var.sqrt())
+}
+
+/// One configuration's values of `metric` over the worlds of a split.
+fn column(worlds: &[WorldRun], config: usize, metric: fn(&ConfigResult) -> f64) -> Vec<f64> {
+    worlds.iter().map(|w| metric(&w.results[config])).collect()
+}
+
+fn print_table(runs: &[(Split, Vec<WorldRun>)]) {
+    let mut header = String::from("| configuration |");
+    let mut rule = String::from("|---|");
+    for (split, _) in runs {
+        header.push_str(&format!(" {split} MNA | {split} OHA |"));
+        rule.push_str("---|---|");
+    }
+    println!("\n{header}\n{rule}");
+    for (c, (name, _, _)) in CONFIGURATIONS.iter().enumerate() {
+        let mut row = format!("| {name} |");
+        for (_, worlds) in runs {
+            for metric in [|r: &ConfigResult| r.mna, |r: &ConfigResult| r.oha] {
+                let (mean, std) = mean_std(&column(worlds, c, metric));
+                row.push_str(&format!(" {mean:.3} ± {std:.3} |"));
+            }
+        }
+        println!("{row}");
+    }
+    println!();
+    for (split, worlds) in runs {
+        let sizes: Vec<String> = worlds
+            .iter()
+            .map(|w| format!("{} places/{} views/{} frames", w.places, w.views, w.frames))
+            .collect();
+        println!("{split}: {}", sizes.join("; "));
+    }
+    println!("MNA: predicted place is the true place. OHA: within one graph hop. Mean ± std over worlds.");
+}
+
+fn summary_json(
+    args: &SuiteArgs,
+    backend_note: &str,
+    runs: &[(Split, Vec<WorldRun>)],
+    start: Instant,
+) -> serde_json::Value {
+    let splits: serde_json::Map<String, serde_json::Value> = runs
+        .iter()
+        .map(|(split, worlds)| {
+            let configurations: serde_json::Map<String, serde_json::Value> = CONFIGURATIONS
+                .iter()
+                .enumerate()
+                .map(|(c, (name, _, _))| {
+                    let mna = column(worlds, c, |r| r.mna);
+                    let oha = column(worlds, c, |r| r.oha);
+                    let (mna_mean, mna_std) = mean_std(&mna);
+                    let (oha_mean, oha_std) = mean_std(&oha);
+                    let value = json!({
+                        "mna": mna, "oha": oha,
+                        "mna_mean": mna_mean, "mna_std": mna_std,
+                        "oha_mean": oha_mean, "oha_std": oha_std,
+                    });
+                    (name.to_string(), value)
+                })
+                .collect();
+            let worlds_json: Vec<_> = worlds
+                .iter()
+                .map(|w| json!({"world": w.world, "places": w.places, "views": w.views, "frames": w.frames}))
+                .collect();
+            (
+                split.name().to_string(),
+                json!({"worlds": worlds_json, "configurations": configurations}),
+            )
+        })
+        .collect();
+    json!({
+        "backend": backend_note, "condition": args.condition.name(),
+        "rooms": args.rooms, "floors": args.floors, "legs": args.legs,
+        "splits": splits, "seconds": start.elapsed().as_secs_f64(),
+    })
+}
