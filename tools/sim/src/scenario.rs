@@ -51,7 +51,7 @@ impl ScenarioOptions {
     pub fn new(params: WorldParams, map: ImageMapOptions) -> Self {
         Self {
             world: params,
-            skeleton: SkeletonOptions::default(),
+            skeleton: scene_skeleton_options(),
             capture: CaptureOptions::default(),
             map,
             clearance_m: 0.3,
@@ -59,6 +59,22 @@ impl ScenarioOptions {
             query_condition: Condition::preset(ConditionKind::Dim),
             odometry: OdometryNoise::typical_vio(),
         }
+    }
+}
+
+/// Graph building for generated worlds: places at least 0.35 m from obstacles (the skeleton
+/// runs through free space, not along furniture), spurs shorter than 2.5 m pruned, nodes within
+/// 2 m merged and edges up to 5 m, which keeps room corners out of the graph and gives graphs of
+/// the seed's size (a place per room area, doors, corridor stretches). Measured with
+/// `topoloc suite` (BENCHMARKS.md): the library's finer defaults put places in room corners,
+/// facing blank walls, and halve MNA.
+pub fn scene_skeleton_options() -> SkeletonOptions {
+    SkeletonOptions {
+        min_clearance_m: 0.35,
+        min_spur_m: 2.5,
+        merge_radius_m: 2.0,
+        max_edge_m: 5.0,
+        ..SkeletonOptions::default()
     }
 }
 

@@ -106,7 +106,7 @@ pub struct LayoutRanges {
     pub door_width: f64,
     /// Furniture items per 10 m^2 of room floor.
     pub furniture_density: f64,
-    /// Probability that a room (or a 6 m stretch of corridor wall) holds a landmark.
+    /// Probability that a room wall (or a 6 m stretch of corridor wall) holds a landmark.
     pub landmark_probability: f64,
 }
 
@@ -173,7 +173,7 @@ impl Style {
                 ceiling_height: [2.7, 2.7],
                 door_width: 1.0,
                 furniture_density: 1.0,
-                landmark_probability: 0.35,
+                landmark_probability: 0.5,
             },
         }
     }
@@ -212,7 +212,7 @@ impl Style {
                 ceiling_height: [3.2, 3.2],
                 door_width: 1.4,
                 furniture_density: 0.8,
-                landmark_probability: 0.35,
+                landmark_probability: 0.5,
             },
         }
     }

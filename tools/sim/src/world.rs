@@ -34,7 +34,7 @@
 //! floors and ceilings draw from small per-world pools of materials (`style.wall_materials`
 //! walls, about half as many floors and ceilings), so many rooms look alike: perceptual
 //! aliasing, the seed's main difficulty. Landmarks break it: with `landmark_probability` a room
-//! holds a poster and a 6 m stretch of corridor wall a sign, each with a unique pattern. Door
+//! wall holds a poster and a 6 m stretch of corridor wall a sign, each with a unique pattern. Door
 //! jambs and slab edges are trim; ceiling lamps are emissive patches. Furniture (kinds from the
 //! style, `furniture_density` items per 10 m^2) stands against walls or free with clearance, kept
 //! away from doors and posters, so free space stays connected ([`World::free_components`]).
@@ -109,8 +109,8 @@ pub struct WorldParams {
     pub voxel_size: f64,
     /// Furniture items per 10 m^2 of room floor, 0..=5.
     pub furniture_density: f64,
-    /// Probability that a room holds a poster, and that a 6 m stretch of corridor wall holds a
-    /// sign, 0..=1.
+    /// Probability that a room wall holds a poster, and that a 6 m stretch of corridor wall
+    /// holds a sign, 0..=1.
     pub landmark_probability: f64,
 }
 

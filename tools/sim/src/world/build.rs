@@ -680,27 +680,28 @@ impl Builder<'_> {
         })
     }
 
-    /// Landmarks of region `r`: a poster in a room, signs along a corridor, each with
-    /// probability `landmark_probability`.
+    /// Landmarks of region `r`: a poster on each wall of a room, a sign on each 6 m stretch of
+    /// corridor, each with probability `landmark_probability`.
     fn decorate(&mut self, r: usize, rng: &mut SimRng) {
         let p = self.p.landmark_probability;
         let b = self.boxes[r];
         match self.regions[r].kind {
             RegionKind::Shaft => {}
             RegionKind::Room => {
-                if rng.chance(p) {
+                for side in Side::of(&b) {
+                    if !rng.chance(p) {
+                        continue;
+                    }
                     let w = rng.range(0.5, 0.9);
                     let h = (w * rng.range(1.2, 1.45)).min(self.p.ceiling_height - 1.4);
                     let colour = *rng.pick(&self.p.style.palette).expect("palette");
                     let bottom = rng.range(1.0, 1.2);
-                    for _ in 0..8 {
-                        let side = Side::of(&b)[rng.below(4)];
-                        let size = [w, h];
+                    for _ in 0..4 {
                         if self.place_landmark(
                             r,
                             side,
                             LandmarkKind::Poster,
-                            size,
+                            [w, h],
                             bottom,
                             colour,
                             rng,
