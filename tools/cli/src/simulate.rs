@@ -56,6 +56,9 @@ pub struct SimulateArgs {
     /// Descriptor backend of the map; default: ONNX when its model is set up, else VLAD.
     #[arg(long, value_enum)]
     pub backend: Option<Backend>,
+    /// Map views per place, evenly turned in yaw, 1..=16 (4 is the seed's micro nodes).
+    #[arg(long, default_value_t = VIEWS_PER_PLACE)]
+    pub views_per_place: usize,
     /// Output folder (new or empty): OUT/map.topoloc and OUT/traj-000, traj-001, ...
     #[arg(long)]
     pub out: PathBuf,
@@ -89,7 +92,14 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
     let mut world = args.split.world_params(args.world);
     world.rooms_per_floor = args.rooms.unwrap_or(world.rooms_per_floor);
     world.floors = args.floors.unwrap_or(world.floors);
-    let mut options = scenario_options(world, backend, args.condition, args.legs, args.rate_hz);
+    let mut options = scenario_options(
+        world,
+        backend,
+        args.views_per_place,
+        args.condition,
+        args.legs,
+        args.rate_hz,
+    );
 
     let bars = StepBars::new(args.json);
     let scene = build_scene(&options, &|step, done, total| {
@@ -167,13 +177,21 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
     Ok(())
 }
 
-/// The scenario of `demo` and `simulate`: `world` with its map captured in bright light and
-/// described with `backend`, queried under `condition` along `legs` legs (one of them back to
-/// an earlier goal, a loop, when there are two or more) at `rate_hz`; the trajectory seed is
-/// left to the caller.
+/// Views captured per place by `demo`, `simulate` and `suite` unless `--views-per-place` says
+/// otherwise. The seed's micro nodes are 4 views 90 degrees apart; 12 (30 degrees apart) was
+/// measured better on generated worlds (test world 0: filter MNA 0.26 with 4, 0.42 with 8,
+/// 0.50 with 12, 0.47 with 16; BENCHMARKS.md), since a query turned 45 degrees from every
+/// view shares only half its field of view with each.
+pub(crate) const VIEWS_PER_PLACE: usize = 12;
+
+/// The scenario of `demo`, `simulate` and `suite`: `world` with `views_per_place` views per
+/// place captured in bright light and described with `backend`, queried under `condition`
+/// along `legs` legs (one of them back to an earlier goal, a loop, when there are two or more)
+/// at `rate_hz`; the trajectory seed is left to the caller.
 pub(crate) fn scenario_options(
     world: WorldParams,
     backend: BackendConfig,
+    views_per_place: usize,
     condition: ConditionKind,
     legs: usize,
     rate_hz: f64,
@@ -185,6 +203,7 @@ pub(crate) fn scenario_options(
             ..ImageMapOptions::default()
         },
     );
+    options.capture.views_per_place = views_per_place;
     options.query_condition = Condition::preset(condition);
     options.trajectory.goals = legs;
     options.trajectory.revisits = options.trajectory.revisits.min(legs.saturating_sub(1));

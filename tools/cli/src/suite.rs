@@ -2,7 +2,8 @@
 //!
 //! For each split (train, tr-t, tr-a, test) and each of its first N worlds, builds the world's
 //! skeleton graph and map and flies one query trajectory (seeds `Split::trajectory_seed(K, 0)`)
-//! exactly as `topoloc demo` and `topoloc simulate` do, then localizes every frame with each
+//! exactly as `topoloc demo` and `topoloc simulate` do (12 views per place unless
+//! `--views-per-place` says otherwise), then localizes every frame with each
 //! localizer configuration (single-frame, filter, filter with drifting odometry). Prints MNA and
 //! OHA per split as mean ± standard deviation over the worlds, the way the seed's tables do
 //! (thesis Table 4.2), and the graph sizes they were measured on.
@@ -10,7 +11,7 @@
 use crate::backend_args::Backend;
 use crate::demo::{choose_backend, evaluate, ConfigResult};
 use crate::progress::StepBars;
-use crate::simulate::{parse_condition, parse_split, scenario_options};
+use crate::simulate::{parse_condition, parse_split, scenario_options, VIEWS_PER_PLACE};
 use anyhow::Result;
 use serde_json::json;
 use std::time::Instant;
@@ -49,6 +50,9 @@ pub struct SuiteArgs {
     /// Descriptor backend; default: ONNX when its model is set up, else VLAD.
     #[arg(long, value_enum)]
     pub backend: Option<Backend>,
+    /// Map views per place, evenly turned in yaw, 1..=16 (4 is the seed's micro nodes).
+    #[arg(long, default_value_t = VIEWS_PER_PLACE)]
+    pub views_per_place: usize,
     /// Print one JSON object (per split and configuration: every world's figures, mean, std).
     #[arg(long)]
     pub json: bool,
@@ -97,6 +101,7 @@ pub fn run(args: &SuiteArgs) -> Result<()> {
             let mut options = scenario_options(
                 world,
                 backend.clone(),
+                args.views_per_place,
                 args.condition,
                 args.legs,
                 args.rate_hz,
@@ -147,8 +152,9 @@ pub fn run(args: &SuiteArgs) -> Result<()> {
     } else {
         print_table(&runs);
         println!(
-            "{} worlds per split, query light '{}', {:.0} s in all",
+            "{} worlds per split, {} views per place, query light '{}', {:.0} s in all",
             args.worlds,
+            args.views_per_place,
             args.condition.name(),
             start.elapsed().as_secs_f64()
         );
@@ -236,6 +242,7 @@ fn summary_json(
     json!({
         "backend": backend_note, "condition": args.condition.name(),
         "rooms": args.rooms, "floors": args.floors, "legs": args.legs,
+        "views_per_place": args.views_per_place,
         "splits": splits, "seconds": start.elapsed().as_secs_f64(),
     })
 }

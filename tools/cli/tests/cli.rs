@@ -236,9 +236,11 @@ fn demo_runs_the_whole_pipeline_and_reports_the_contract_keys() {
         assert!(c["oha"].as_f64() >= c["mna"].as_f64(), "{config}: {c}");
     }
     assert!(report["places"].as_u64().unwrap() >= 4, "{report}");
+    // 12 views per place by default (30 degrees apart).
+    assert_eq!(report["views_per_place"].as_u64(), Some(12));
     assert_eq!(
         report["views"].as_u64(),
-        report["places"].as_u64().map(|p| 4 * p)
+        report["places"].as_u64().map(|p| 12 * p)
     );
     assert!(report["frames"].as_u64().unwrap() >= 20, "{report}");
     assert!(
@@ -273,6 +275,8 @@ fn simulate_writes_a_dataset_that_eval_reads() {
         "4",
         "--trajectories",
         "1",
+        "--views-per-place",
+        "4",
         "--out",
         &s(&out),
         "--json",
@@ -476,8 +480,11 @@ fn suite_reports_mean_and_std_per_split_and_configuration() {
         "2",
         "--legs",
         "1",
+        "--views-per-place",
+        "4",
     ]);
     let report = json(&out);
+    assert_eq!(report["views_per_place"].as_u64(), Some(4));
     for split in ["tr-a", "test"] {
         let s = &report["splits"][split];
         assert_eq!(s["worlds"].as_array().map(Vec::len), Some(2), "{report}");

@@ -48,13 +48,26 @@ impl PlaceGraph {
     /// Places at `positions` with the four standard views each and kind `"place"`; set
     /// [`Place::kind`] afterwards where known.
     pub fn with_four_views(positions: &[Point3<f64>], edges: &[(PlaceId, PlaceId)]) -> Self {
+        Self::with_views(positions, edges, FOUR_VIEW_YAWS.len())
+    }
+
+    /// Places at `positions` with `views_per_place` views each, at the yaws of
+    /// [`crate::capture::view_yaw`] (evenly spaced from 0), and kind `"place"`.
+    pub fn with_views(
+        positions: &[Point3<f64>],
+        edges: &[(PlaceId, PlaceId)],
+        views_per_place: usize,
+    ) -> Self {
+        let yaws: Vec<f64> = (0..views_per_place)
+            .map(|j| crate::capture::view_yaw(j, views_per_place))
+            .collect();
         Self {
             places: positions
                 .iter()
                 .map(|p| Place {
                     position: [p.x, p.y, p.z],
                     kind: "place".into(),
-                    view_yaws: FOUR_VIEW_YAWS.to_vec(),
+                    view_yaws: yaws.clone(),
                 })
                 .collect(),
             edges: edges.to_vec(),

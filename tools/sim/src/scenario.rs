@@ -177,14 +177,7 @@ pub fn build_scene(
     timings.skeleton_s = start.elapsed().as_secs_f64();
     let positions: Vec<_> = graph.places.iter().map(|p| p.position).collect();
     let edges: Vec<_> = graph.edges.iter().map(|e| (e.a, e.b)).collect();
-    let place_graph = if options.capture.views_per_place == 4 {
-        PlaceGraph::with_four_views(&positions, &edges)
-    } else {
-        return Err(ScenarioError::Other(format!(
-            "views_per_place is {}: ground truth assigns views by four yaws, use 4",
-            options.capture.views_per_place
-        )));
-    };
+    let place_graph = PlaceGraph::with_views(&positions, &edges, options.capture.views_per_place);
 
     let start = Instant::now();
     let renderer = Renderer::new(&world);
