@@ -20,6 +20,9 @@ use topoloc::{Frame, LoadOptions, LocalizeError, Localizer, LocalizerOptions, Ma
 const W: usize = 320;
 const H: usize = 240;
 
+/// A bad image: its name, the view, and the error it must get.
+type BadImageCase<'a> = (&'static str, ImageView<'a>, fn(&LocalizeError) -> bool);
+
 /// A deterministic "place": overlapping rectangles and bars of pseudo-random grey shades.
 fn place_image(seed: u64) -> Vec<u8> {
     let mut state = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15).wrapping_add(7);
@@ -167,7 +170,7 @@ fn bad_images_give_typed_errors_and_leave_the_localizer_unchanged() {
     let tiny = [128u8];
     let constant = vec![90u8; W * H];
     let black = vec![0u8; W * H * 3];
-    let cases: Vec<(&str, ImageView, fn(&LocalizeError) -> bool)> = vec![
+    let cases: Vec<BadImageCase> = vec![
         (
             "1x1",
             ImageView::packed(1, 1, PixelFormat::Gray8, &tiny),
