@@ -9,7 +9,7 @@
 use crate::backend_args::Backend;
 use crate::process::{median_and_p90, resident_memory_mib};
 use crate::progress::StepBars;
-use crate::simulate::{scenario_options, VIEWS_PER_PLACE};
+use crate::simulate::{scenario_options, CaptureArgs};
 use crate::top_view::write_top_view;
 use anyhow::{Context, Result};
 use serde_json::json;
@@ -48,9 +48,9 @@ pub struct DemoArgs {
     /// Descriptor backend; default: ONNX when its model is set up, else VLAD.
     #[arg(long, value_enum)]
     pub backend: Option<Backend>,
-    /// Map views per place, evenly turned in yaw, 1..=16 (4 is the seed's micro nodes).
-    #[arg(long, default_value_t = VIEWS_PER_PLACE)]
-    pub views_per_place: usize,
+    /// Map capture.
+    #[command(flatten)]
+    pub capture: CaptureArgs,
     /// Top view with the graph, the trajectory and predicted vs true places.
     #[arg(long, default_value = "topoloc-demo.png")]
     pub plot: PathBuf,
@@ -121,7 +121,7 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     let mut options = scenario_options(
         world,
         backend,
-        args.views_per_place,
+        &args.capture,
         condition,
         args.legs,
         args.rate_hz,
@@ -232,7 +232,7 @@ pub fn run(args: &DemoArgs) -> Result<()> {
             json!({
                 "backend": map.descriptor().to_string(), "seed": args.seed,
                 "places": map.place_count(), "views": map.view_count(), "edges": map.edge_count(),
-                "views_per_place": args.views_per_place,
+                "views_per_place": args.capture.views_per_place,
                 "frames": sequence.frames.len(), "condition": condition.name(),
                 "map_load_ms": load_ms, "map_file_kib": file_kib,
                 "seconds": {"world": t.world_s, "skeleton": t.skeleton_s, "capture": t.capture_s,

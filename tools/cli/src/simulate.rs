@@ -56,9 +56,9 @@ pub struct SimulateArgs {
     /// Descriptor backend of the map; default: ONNX when its model is set up, else VLAD.
     #[arg(long, value_enum)]
     pub backend: Option<Backend>,
-    /// Map views per place, evenly turned in yaw, 1..=16 (4 is the seed's micro nodes).
-    #[arg(long, default_value_t = VIEWS_PER_PLACE)]
-    pub views_per_place: usize,
+    /// Map capture.
+    #[command(flatten)]
+    pub capture: CaptureArgs,
     /// Output folder (new or empty): OUT/map.topoloc and OUT/traj-000, traj-001, ...
     #[arg(long)]
     pub out: PathBuf,
@@ -95,7 +95,7 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
     let mut options = scenario_options(
         world,
         backend,
-        args.views_per_place,
+        &args.capture,
         args.condition,
         args.legs,
         args.rate_hz,
@@ -184,14 +184,27 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
 /// view shares only half its field of view with each.
 pub(crate) const VIEWS_PER_PLACE: usize = 12;
 
-/// The scenario of `demo`, `simulate` and `suite`: `world` with `views_per_place` views per
-/// place captured in bright light and described with `backend`, queried under `condition`
+/// Map capture options shared by `demo`, `simulate` and `suite`.
+#[derive(clap::Args, Clone, Debug)]
+pub struct CaptureArgs {
+    /// Map views per place, evenly turned in yaw, 1..=16 (4 is the seed's micro nodes).
+    #[arg(long, default_value_t = VIEWS_PER_PLACE)]
+    pub views_per_place: usize,
+    /// Also capture those views from 4 points this far around each place (metres, 0 = off;
+    /// points kept where free, in sight of the place and nearest to it). 0.8 raised test-split
+    /// MNA/OHA by about 0.05 at 5x the views and map build time (BENCHMARKS.md).
+    #[arg(long, default_value_t = 0.0)]
+    pub ring_m: f64,
+}
+
+/// The scenario of `demo`, `simulate` and `suite`: `world` with `capture` views per place
+/// captured in bright light and described with `backend`, queried under `condition`
 /// along `legs` legs (one of them back to an earlier goal, a loop, when there are two or more)
 /// at `rate_hz`; the trajectory seed is left to the caller.
 pub(crate) fn scenario_options(
     world: WorldParams,
     backend: BackendConfig,
-    views_per_place: usize,
+    capture: &CaptureArgs,
     condition: ConditionKind,
     legs: usize,
     rate_hz: f64,
@@ -203,7 +216,8 @@ pub(crate) fn scenario_options(
             ..ImageMapOptions::default()
         },
     );
-    options.capture.views_per_place = views_per_place;
+    options.capture.views_per_place = capture.views_per_place;
+    options.capture.ring_radius_m = capture.ring_m;
     options.query_condition = Condition::preset(condition);
     options.trajectory.goals = legs;
     options.trajectory.revisits = options.trajectory.revisits.min(legs.saturating_sub(1));

@@ -11,7 +11,7 @@
 use crate::backend_args::Backend;
 use crate::demo::{choose_backend, evaluate, ConfigResult};
 use crate::progress::StepBars;
-use crate::simulate::{parse_condition, parse_split, scenario_options, VIEWS_PER_PLACE};
+use crate::simulate::{parse_condition, parse_split, scenario_options, CaptureArgs};
 use anyhow::Result;
 use serde_json::json;
 use std::time::Instant;
@@ -50,9 +50,9 @@ pub struct SuiteArgs {
     /// Descriptor backend; default: ONNX when its model is set up, else VLAD.
     #[arg(long, value_enum)]
     pub backend: Option<Backend>,
-    /// Map views per place, evenly turned in yaw, 1..=16 (4 is the seed's micro nodes).
-    #[arg(long, default_value_t = VIEWS_PER_PLACE)]
-    pub views_per_place: usize,
+    /// Map capture.
+    #[command(flatten)]
+    pub capture: CaptureArgs,
     /// Print one JSON object (per split and configuration: every world's figures, mean, std).
     #[arg(long)]
     pub json: bool,
@@ -101,7 +101,7 @@ pub fn run(args: &SuiteArgs) -> Result<()> {
             let mut options = scenario_options(
                 world,
                 backend.clone(),
-                args.views_per_place,
+                &args.capture,
                 args.condition,
                 args.legs,
                 args.rate_hz,
@@ -154,7 +154,7 @@ pub fn run(args: &SuiteArgs) -> Result<()> {
         println!(
             "{} worlds per split, {} views per place, query light '{}', {:.0} s in all",
             args.worlds,
-            args.views_per_place,
+            args.capture.views_per_place,
             args.condition.name(),
             start.elapsed().as_secs_f64()
         );
@@ -242,7 +242,7 @@ fn summary_json(
     json!({
         "backend": backend_note, "condition": args.condition.name(),
         "rooms": args.rooms, "floors": args.floors, "legs": args.legs,
-        "views_per_place": args.views_per_place,
+        "views_per_place": args.capture.views_per_place,
         "splits": splits, "seconds": start.elapsed().as_secs_f64(),
     })
 }

@@ -3,7 +3,10 @@
 //! descriptor backend.
 //!
 //! View `j` of place `i` is the map's view `views_per_place * i + j`, taken at the place's
-//! position with yaw `j * 360 / views_per_place` degrees and no pitch. Rendering runs in parallel
+//! position with yaw `j * 360 / views_per_place` degrees and no pitch. Optional ring points
+//! around each place (`ring_radius_m`) add the same yaw views from there, as a mapping run gives
+//! many keyframes per place; their views come after all the place-centre views, so the centre
+//! views keep the ids above (the ones ground truth names). Rendering runs in parallel
 //! over views (rayon); each view's noise seed is derived from the capture seed and its index, so
 //! a capture is deterministic.
 
@@ -15,7 +18,7 @@ use std::f64::consts::TAU;
 use topoloc::describe::image::{ImageView, PixelFormat};
 use topoloc::map::{
     build_from_images, BuildStage, ImageLayout, ImageMapError, ImageMapOptions, ImageMapReport,
-    ImageSource, Map, PlaceLayout, TopoGraph,
+    ImageSource, Map, OccupancyGrid, PlaceLayout, TopoGraph,
 };
 
 /// How the views of a map are captured.
@@ -29,6 +32,13 @@ pub struct CaptureOptions {
     pub condition: Condition,
     /// Seed of the sensor noise.
     pub seed: u64,
+    /// Radius of the ring of extra capture points around each place, metres, 0..=5; 0 (the
+    /// default) captures at the place only. A ring point is kept only when its voxel is free,
+    /// the place is in its line of sight and no other place is nearer to it, so it stays in
+    /// the place's own cell.
+    pub ring_radius_m: f64,
+    /// Points on the ring, evenly spaced starting 45 degrees off the x axis, 0..=16. Default 4.
+    pub ring_points: usize,
 }
 
 impl Default for CaptureOptions {
@@ -38,6 +48,8 @@ impl Default for CaptureOptions {
             intrinsics: Intrinsics::default_camera(),
             condition: Condition::default(),
             seed: 0,
+            ring_radius_m: 0.0,
+            ring_points: 4,
         }
     }
 }
@@ -74,10 +86,44 @@ pub fn view_poses(position: Point3<f64>, views_per_place: usize) -> Vec<Pose> {
         .collect()
 }
 
-/// Renders the views of every place of `graph`. Fails for invalid intrinsics or condition, or a
-/// view count outside 1..=16 (the error names the field).
+/// The extra capture points of place `i` of `positions`: `options.ring_points` points at
+/// `options.ring_radius_m` around it, kept where free, in sight of the place and nearest to it.
+fn ring_points(
+    grid: &OccupancyGrid,
+    positions: &[Point3<f64>],
+    i: usize,
+    options: &CaptureOptions,
+) -> Vec<Point3<f64>> {
+    if options.ring_radius_m <= 0.0 {
+        return Vec::new();
+    }
+    let centre = positions[i];
+    (0..options.ring_points)
+        .map(|k| {
+            let angle = TAU * (k as f64 + 0.5) / options.ring_points as f64;
+            Point3::new(
+                centre.x + options.ring_radius_m * angle.cos(),
+                centre.y + options.ring_radius_m * angle.sin(),
+                centre.z,
+            )
+        })
+        .filter(|q| {
+            let own = (q - centre).norm_squared();
+            grid.segment_is_free(&centre, q)
+                && positions
+                    .iter()
+                    .enumerate()
+                    .all(|(j, p)| j == i || (q - p).norm_squared() > own)
+        })
+        .collect()
+}
+
+/// Renders the views of every place of `graph` in `grid` (the world the renderer draws; ring
+/// points are checked against it). Fails for invalid intrinsics or condition, or a view count,
+/// ring radius or ring point count out of range (the error names the field).
 pub fn capture(
     renderer: &Renderer,
+    grid: &OccupancyGrid,
     graph: &TopoGraph,
     options: &CaptureOptions,
 ) -> Result<Capture, CaptureError> {
@@ -87,16 +133,31 @@ pub fn capture(
             options.views_per_place
         )));
     }
-    let views: Vec<(u32, Pose)> = graph
-        .places
-        .iter()
-        .enumerate()
-        .flat_map(|(i, place)| {
-            view_poses(place.position, options.views_per_place)
-                .into_iter()
-                .map(move |p| (i as u32, p))
-        })
-        .collect();
+    if !(options.ring_radius_m.is_finite() && (0.0..=5.0).contains(&options.ring_radius_m)) {
+        return Err(CaptureError::InvalidArgument(format!(
+            "ring_radius_m is {}, must lie in 0..=5",
+            options.ring_radius_m
+        )));
+    }
+    if options.ring_points > 16 {
+        return Err(CaptureError::InvalidArgument(format!(
+            "ring_points is {}, must lie in 0..=16",
+            options.ring_points
+        )));
+    }
+    let positions: Vec<Point3<f64>> = graph.places.iter().map(|p| p.position).collect();
+    let at = |i: usize, point: Point3<f64>| {
+        view_poses(point, options.views_per_place)
+            .into_iter()
+            .map(move |p| (i as u32, p))
+    };
+    let centre_views = positions.iter().enumerate().flat_map(|(i, &p)| at(i, p));
+    let ring_views = (0..positions.len()).flat_map(|i| {
+        ring_points(grid, &positions, i, options)
+            .into_iter()
+            .flat_map(move |q| at(i, q))
+    });
+    let views: Vec<(u32, Pose)> = centre_views.chain(ring_views).collect();
     let images = views
         .par_iter()
         .enumerate()
@@ -110,7 +171,7 @@ pub fn capture(
         })
         .collect::<Result<Vec<_>, _>>()?;
     let layout = PlaceLayout {
-        positions: graph.places.iter().map(|p| p.position).collect(),
+        positions,
         edges: graph.edges.iter().map(|e| (e.a, e.b)).collect(),
         views,
     };

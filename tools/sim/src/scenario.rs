@@ -181,8 +181,12 @@ pub fn build_scene(
 
     let start = Instant::now();
     let renderer = Renderer::new(&world);
-    progress(Step::Capture, 0, 4 * positions.len());
-    let captured = capture(&renderer, &graph, &options.capture)?;
+    progress(
+        Step::Capture,
+        0,
+        options.capture.views_per_place * positions.len(),
+    );
+    let captured = capture(&renderer, world.grid(), &graph, &options.capture)?;
     progress(Step::Capture, captured.images.len(), captured.images.len());
     timings.capture_s = start.elapsed().as_secs_f64();
 

@@ -26,7 +26,7 @@ fn captured_views_build_a_map_on_the_skeleton_graph_that_finds_them_again() {
     assert!(graph.places.len() >= 4, "{} places", graph.places.len());
     let renderer = Renderer::new(&world);
     let options = CaptureOptions::default();
-    let captured = capture(&renderer, &graph, &options).unwrap();
+    let captured = capture(&renderer, world.grid(), &graph, &options).unwrap();
     let views = 4 * graph.places.len();
     assert_eq!(captured.images.len(), views);
     assert_eq!(captured.layout.views.len(), views);
@@ -36,7 +36,7 @@ fn captured_views_build_a_map_on_the_skeleton_graph_that_finds_them_again() {
     assert_eq!(pose.translation.vector, graph.places[2].position.coords);
     assert!((topoloc_sim::camera::yaw_of(&pose) - std::f64::consts::FRAC_PI_2).abs() < 1e-9);
     // Deterministic.
-    let again = capture(&renderer, &graph, &options).unwrap();
+    let again = capture(&renderer, world.grid(), &graph, &options).unwrap();
     assert!(again.images == captured.images);
 
     // A small codebook keeps the test fast; the defaults are measured by the benchmarks.
@@ -63,7 +63,7 @@ fn captured_views_build_a_map_on_the_skeleton_graph_that_finds_them_again() {
         seed: 99,
         ..options
     };
-    let queries = capture(&renderer, &graph, &dim).unwrap();
+    let queries = capture(&renderer, world.grid(), &graph, &dim).unwrap();
     let map = Arc::new(map);
     let mut localizer = Localizer::with_describer(
         map,
@@ -102,11 +102,77 @@ fn bad_capture_options_name_the_field() {
         views_per_place: 0,
         ..Default::default()
     };
-    match capture(&renderer, &graph, &bad) {
-        Err(CaptureError::InvalidArgument(m)) => assert!(m.contains("views_per_place"), "{m}"),
-        other => panic!(
-            "expected InvalidArgument, got {:?}",
-            other.map(|c| c.images.len())
+    let cases = [
+        (bad, "views_per_place"),
+        (
+            CaptureOptions {
+                ring_radius_m: -0.5,
+                ..Default::default()
+            },
+            "ring_radius_m",
         ),
+        (
+            CaptureOptions {
+                ring_radius_m: f64::NAN,
+                ..Default::default()
+            },
+            "ring_radius_m",
+        ),
+        (
+            CaptureOptions {
+                ring_radius_m: 1.0,
+                ring_points: 17,
+                ..Default::default()
+            },
+            "ring_points",
+        ),
+    ];
+    for (options, field) in cases {
+        match capture(&renderer, world.grid(), &graph, &options) {
+            Err(CaptureError::InvalidArgument(m)) => assert!(m.contains(field), "{m}"),
+            other => panic!(
+                "{field}: expected InvalidArgument, got {:?}",
+                other.map(|c| c.images.len())
+            ),
+        }
     }
+}
+
+#[test]
+fn ring_views_follow_the_centre_views_and_stay_in_their_place_cell() {
+    let world = small_world();
+    let graph = skeleton_graph(world.grid(), &SkeletonOptions::default()).unwrap();
+    let renderer = Renderer::new(&world);
+    let centre_only = CaptureOptions::default();
+    let ring = CaptureOptions {
+        ring_radius_m: 0.6,
+        ..Default::default()
+    };
+    let plain = capture(&renderer, world.grid(), &graph, &centre_only).unwrap();
+    let ringed = capture(&renderer, world.grid(), &graph, &ring).unwrap();
+    let centre_views = 4 * graph.places.len();
+    // The centre views keep their ids (ground truth names them) and come first.
+    assert_eq!(plain.layout.views[..], ringed.layout.views[..centre_views]);
+    assert!(ringed.images[..centre_views] == plain.images[..]);
+    let extra = &ringed.layout.views[centre_views..];
+    assert!(!extra.is_empty(), "no ring point kept in the whole world");
+    assert_eq!(extra.len() % 4, 0, "every ring point has all four yaws");
+    assert_eq!(ringed.images.len(), ringed.layout.views.len());
+    let positions: Vec<_> = graph.places.iter().map(|p| p.position).collect();
+    for (place, pose) in extra {
+        let q = nalgebra::Point3::from(pose.translation.vector);
+        let own = positions[*place as usize];
+        assert!(((q - own).norm() - 0.6).abs() < 1e-9, "on the ring");
+        assert!(
+            world.grid().segment_is_free(&own, &q),
+            "in sight of its place"
+        );
+        let nearest = positions
+            .iter()
+            .map(|p| (q - p).norm())
+            .fold(f64::INFINITY, f64::min);
+        assert_eq!(nearest, (q - own).norm(), "nearest to its own place");
+    }
+    // Ring views are grouped by place, place-major after the centre views.
+    assert!(extra.windows(2).all(|w| w[0].0 <= w[1].0));
 }
