@@ -8,7 +8,8 @@
 //!
 //! Modules: [`map`] (graph, file format, builders), [`localize`] (per-frame localization),
 //! [`eval`] (metrics: MNA, OHA, R@N, precision-recall), [`synthetic`] (generated maps and
-//! descriptor streams for demos, tests and benchmarks). The C ABI in `ffi` is a thin layer over
+//! descriptor streams for demos, tests and benchmarks), [`verify`] (geometric verification of
+//! candidates with ORB keypoints and RANSAC). The C ABI in `ffi` is a thin layer over
 //! these and is the only place with `extern "C"` items.
 
 #![warn(missing_docs)]
@@ -19,6 +20,7 @@ pub mod ffi;
 pub mod localize;
 pub mod map;
 pub mod synthetic;
+pub mod verify;
 
 pub use localize::{
     Candidate, Frame, Localization, LocalizeError, Localizer, LocalizerOptions, Mode,

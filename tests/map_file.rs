@@ -133,7 +133,7 @@ fn foreign_files_are_not_maps() {
 #[test]
 fn newer_major_version_is_refused() {
     let bytes = chain_map(2, 1, 4).to_bytes().unwrap();
-    let pattern = br#"\"version\":\"1.1\""#;
+    let pattern = br#"\"version\":\"1.2\""#;
     let at = bytes
         .windows(pattern.len())
         .position(|w| w == pattern)
@@ -144,7 +144,7 @@ fn newer_major_version_is_refused() {
         Err(MapError::UnsupportedVersion {
             found,
             supported: 1,
-        }) => assert_eq!(found, "2.1"),
+        }) => assert_eq!(found, "2.2"),
         other => panic!("expected UnsupportedVersion, got {other:?}"),
     }
 }

@@ -27,6 +27,10 @@ pub enum LocalizeError {
     /// with `Localizer::with_describer` on a map built from images).
     #[error("cannot describe images: {0}")]
     NoDescriber(String),
+    /// Geometric verification cannot run: the map stores no keypoints, or the frame has no
+    /// image.
+    #[error("cannot verify: {0}")]
+    Verification(String),
     /// Odometry is not finite.
     #[error("bad odometry: {0}")]
     Odometry(String),

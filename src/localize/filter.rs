@@ -220,6 +220,20 @@ impl Belief {
             .iter_mut()
             .zip(place_scores)
             .for_each(|(l, &score)| *l = ((f64::from(score) - max_score) * inv_t).exp());
+        self.weigh_and_normalise(params);
+        let off = self.off_map * off_map_evidence;
+        let on = (1.0 - self.off_map) * on_map_evidence;
+        self.off_map = if off + on > 0.0 {
+            off / (off + on)
+        } else {
+            0.0
+        };
+    }
+
+    /// Multiplies every state by the likelihood of its place (held in `places`), normalises, and
+    /// leaves the place marginals in `places`. If every state underflows to zero (possible only
+    /// with zero jump probability), the motion belief restarts from the prior.
+    fn weigh_and_normalise(&mut self, params: &FilterParams) {
         let mut total = self.weigh_states();
         if !(total > 0.0 && total.is_finite()) {
             // The predicted belief had no mass where the evidence is (zero jump probability):
@@ -231,7 +245,7 @@ impl Belief {
         }
         let inv_total = 1.0 / total;
         self.places.fill(0.0);
-        for (h, states) in self.states.chunks_exact_mut(s).enumerate() {
+        for (h, states) in self.states.chunks_exact_mut(self.speeds).enumerate() {
             let mut sum = 0.0;
             for state in states {
                 *state *= inv_total;
@@ -239,13 +253,30 @@ impl Belief {
             }
             self.places[self.headings.from[h] as usize] += sum;
         }
-        let off = self.off_map * off_map_evidence;
-        let on = (1.0 - self.off_map) * on_map_evidence;
-        self.off_map = if off + on > 0.0 {
-            off / (off + on)
-        } else {
-            0.0
-        };
+    }
+
+    /// A second observation on the motion belief: multiplies every state at place p by
+    /// `factor(p)` (positive, at most 1 for numerical safety) and normalises. The off-map
+    /// probability is left as it is.
+    pub fn weigh_places(&mut self, params: &FilterParams, factor: impl Fn(usize) -> f64) {
+        for (p, l) in self.places.iter_mut().enumerate() {
+            *l = factor(p);
+        }
+        self.weigh_and_normalise(params);
+    }
+
+    /// Copies the belief into `backup` (same shape), to undo a frame that fails half-way.
+    pub fn save(&self, backup: &mut Belief) {
+        backup.states.copy_from_slice(&self.states);
+        backup.places.copy_from_slice(&self.places);
+        backup.off_map = self.off_map;
+    }
+
+    /// Restores a belief saved with [`Belief::save`].
+    pub fn restore(&mut self, backup: &Belief) {
+        self.states.copy_from_slice(&backup.states);
+        self.places.copy_from_slice(&backup.places);
+        self.off_map = backup.off_map;
     }
 
     /// Multiplies every state by the likelihood of its place (held in `places`) and returns the

@@ -1,7 +1,8 @@
 //! Per-frame localization against a map: similarity of the query descriptor to every view,
 //! place scores, and a forward filter over the graph (see [`filter`](self) docs in
 //! `filter.rs`), giving the most probable place, a confidence, top-k candidates and an
-//! off-map flag.
+//! off-map flag. Optionally the most probable places are verified geometrically against the
+//! query image ([`crate::verify`]) and their belief weighed by the inliers found.
 
 mod error;
 mod filter;
@@ -13,6 +14,7 @@ pub use error::LocalizeError;
 use crate::describe::image::ImageView;
 use crate::describe::{Describer, DescriberOptions};
 use crate::map::{normalize_descriptor_into, ExpectedDescriptor, Map, PlaceId, ViewId};
+use crate::verify::{check_pair, KeypointDetector, Keypoints, VerificationOptions};
 use filter::{Belief, FilterParams};
 use nalgebra::Isometry3;
 use std::sync::Arc;
@@ -66,6 +68,9 @@ pub struct LocalizerOptions {
     pub speed_change_probability: f32,
     /// Per-frame probability of turning to another heading at the same place. Default 0.02.
     pub turn_probability: f32,
+    /// Geometric verification of the most probable places against the query image (off by
+    /// default; needs frames with images and a map storing keypoints).
+    pub verification: VerificationOptions,
 }
 
 /// Most speed classes the motion model accepts.
@@ -87,6 +92,7 @@ impl Default for LocalizerOptions {
             speeds: vec![1.0, 0.5, 0.2, 0.05, 0.0],
             speed_change_probability: 0.05,
             turn_probability: 0.02,
+            verification: VerificationOptions::default(),
         }
     }
 }
@@ -129,6 +135,9 @@ impl LocalizerOptions {
         if self.top_k == 0 {
             return bad("top_k must be at least 1");
         }
+        self.verification
+            .validate()
+            .map_err(LocalizeError::InvalidOption)?;
         Ok(FilterParams {
             temperature: f64::from(self.temperature),
             stay_probability: f64::from(self.stay_probability),
@@ -170,6 +179,10 @@ pub struct Candidate {
     pub probability: f32,
     /// Cosine similarity of the query to `view`.
     pub similarity: f32,
+    /// Whether the place was verified geometrically in this frame.
+    pub verified: bool,
+    /// Geometric inliers between the query and `view` (0 unless `verified`).
+    pub inliers: u32,
 }
 
 /// The answer for one frame.
@@ -214,6 +227,18 @@ pub struct Localizer {
     order: Vec<u32>,
     describer: Option<Describer>,
     described: Vec<f32>,
+    verifier: Option<Verifier>,
+}
+
+/// State of geometric verification: the query detector, the per-place results of the current
+/// frame, and a copy of the belief to restore if a check fails half-way.
+struct Verifier {
+    detector: KeypointDetector,
+    query: Keypoints,
+    /// Places checked in the current frame with their best inlier count and view.
+    checked: Vec<(PlaceId, u32, ViewId)>,
+    views: Vec<ViewId>,
+    backup: Belief,
 }
 
 impl Localizer {
@@ -225,7 +250,24 @@ impl Localizer {
         let (n, m) = (map.view_count(), map.place_count());
         let mut belief = Belief::new(&map, &params);
         belief.set_initial(&params);
+        let verifier = if options.verification.enabled() {
+            if map.keypoints().is_none() {
+                return Err(LocalizeError::Verification(
+                    "verification is on but the map stores no keypoints (build it from images with keypoints > 0, or set verification.candidates to 0)".into(),
+                ));
+            }
+            Some(Verifier {
+                detector: KeypointDetector::new(options.verification.query_keypoints)?,
+                query: Keypoints::default(),
+                checked: Vec::with_capacity(options.verification.candidates),
+                views: Vec::new(),
+                backup: Belief::new(&map, &params),
+            })
+        } else {
+            None
+        };
         Ok(Self {
+            verifier,
             belief,
             params,
             initialized: false,
@@ -305,7 +347,9 @@ impl Localizer {
 
     /// Processes one frame, writing into `out` (reusing its candidate buffer). Validates the
     /// whole frame before touching any state, so an error leaves the localizer unchanged.
-    /// Cost: one pass over the descriptor matrix plus O(places + edges).
+    /// Cost: one pass over the descriptor matrix plus O(places + edges); with verification on,
+    /// also keypoint detection in the frame's image and one match + RANSAC per checked view
+    /// (these allocate). Verification needs `frame.image` even when a descriptor is given.
     pub fn process(
         &mut self,
         frame: &Frame<'_>,
@@ -355,6 +399,12 @@ impl Localizer {
             _ => frame.descriptor,
         };
         normalize_descriptor_into(descriptor, self.map.dim(), &mut self.query)?;
+        if let Some(verifier) = &mut self.verifier {
+            let image = frame.image.as_ref().ok_or_else(|| {
+                LocalizeError::Verification("verification is on but the frame has no image".into())
+            })?;
+            verifier.query = verifier.detector.detect(image)?;
+        }
 
         similarity::view_similarities(&self.map, &self.query, &mut self.view_scores);
         similarity::pool_places(
@@ -363,17 +413,87 @@ impl Localizer {
             &mut self.place_scores,
             &mut self.best_views,
         );
+        if let Some(verifier) = &mut self.verifier {
+            self.belief.save(&mut verifier.backup);
+        }
         if filtering && self.initialized {
             self.belief.predict(&self.params, travelled);
         } else {
             self.belief.set_initial(&self.params);
         }
         self.belief.update(&self.params, &self.place_scores);
+        if let Err(e) = self.verify() {
+            if let Some(verifier) = &self.verifier {
+                self.belief.restore(&verifier.backup);
+            }
+            return Err(e);
+        }
         self.initialized = true;
         self.last_timestamp = Some(frame.timestamp);
         out.frame_index = self.frames;
         self.frames += 1;
         self.write_result(out);
+        Ok(())
+    }
+
+    /// Checks the most probable places against the query keypoints and weighs the belief by
+    /// their inliers (see [`crate::verify`]); a checked place's best view becomes the one with
+    /// the most inliers. Does nothing when verification is off.
+    fn verify(&mut self) -> Result<(), LocalizeError> {
+        let Some(verifier) = &mut self.verifier else {
+            return Ok(());
+        };
+        let options = &self.options.verification;
+        let keypoints = self.map.keypoints().expect("checked at construction");
+        let m = self.map.place_count();
+        let c = options.candidates.min(m);
+        let p = &self.belief.places;
+        let by_probability =
+            |a: &u32, b: &u32| p[*b as usize].total_cmp(&p[*a as usize]).then(a.cmp(b));
+        if c < m {
+            self.order.select_nth_unstable_by(c - 1, by_probability);
+        }
+        verifier.checked.clear();
+        for &place in &self.order[..c] {
+            verifier.views.clear();
+            verifier
+                .views
+                .extend_from_slice(self.map.place_views(place)?);
+            let scores = &self.view_scores;
+            verifier
+                .views
+                .sort_unstable_by(|a, b| scores[*b as usize].total_cmp(&scores[*a as usize]));
+            let mut best = (0u32, self.best_views[place as usize]);
+            for &view in verifier.views.iter().take(options.views_per_candidate) {
+                let stored = keypoints
+                    .view(view as usize)
+                    .expect("one keypoint entry per view");
+                let check = check_pair(verifier.query.as_ref(), stored, &options.pair)?;
+                if check.inliers > best.0 {
+                    best = (check.inliers, view);
+                }
+            }
+            verifier.checked.push((place, best.0, best.1));
+        }
+        let most = verifier.checked.iter().map(|c| c.1).max().unwrap_or(0);
+        let weight = f64::from(options.inlier_weight);
+        // exp(weight * (inliers - most)) for checked places, exp(-weight * most) for the rest:
+        // the same ratios as exp(weight * inliers) with unchecked places at 0, kept at most 1.
+        let unchecked = (-weight * f64::from(most)).exp();
+        let checked = &verifier.checked;
+        self.belief.weigh_places(&self.params, |place| {
+            checked
+                .iter()
+                .find(|c| c.0 as usize == place)
+                .map_or(unchecked, |c| {
+                    (weight * (f64::from(c.1) - f64::from(most))).exp()
+                })
+        });
+        for &(place, inliers, view) in checked {
+            if inliers > 0 {
+                self.best_views[place as usize] = view;
+            }
+        }
         Ok(())
     }
 
@@ -391,11 +511,17 @@ impl Localizer {
         out.candidates.clear();
         out.candidates.extend(self.order[..k].iter().map(|&place| {
             let view = self.best_views[place as usize];
+            let check = self
+                .verifier
+                .as_ref()
+                .and_then(|v| v.checked.iter().find(|c| c.0 == place));
             Candidate {
                 place,
                 view,
                 probability: (p[place as usize] * on_map) as f32,
                 similarity: self.view_scores[view as usize],
+                verified: check.is_some(),
+                inliers: check.map_or(0, |c| c.1),
             }
         }));
         let best = out.candidates[0];

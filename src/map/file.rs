@@ -19,6 +19,9 @@
 //! | `describer_pca_mean` | F32 | F | (1.1, maps built from images) PCA mean of the raw vectors |
 //! | `describer_pca_components` | F32 | D x F | (1.1) PCA projection rows |
 //! | `describer_codebook` | F32 | K x L | (1.1, VLAD only) codebook of K centres of local descriptors |
+//! | `view_keypoint_offsets` | U64 | N+1 | (1.2, optional) ranges of each view's keypoints |
+//! | `view_keypoint_points` | F32 | T x 2 | (1.2) keypoint pixel positions x, y |
+//! | `view_keypoint_descriptors` | U8 | T x 32 | (1.2) their ORB descriptors |
 //!
 //! The only metadata key, `topoloc`, holds a JSON object with `format` (`"topoloc-map"`),
 //! `version` (`"MAJOR.MINOR"`), `descriptor` (`kind`, `model`, `dim`), `creator`, the counts, and
@@ -35,6 +38,7 @@ use super::{
 use crate::describe::describer::{BackendSpec, DescriberModel};
 use crate::describe::pca::Pca;
 use crate::describe::vlad::Codebook;
+use crate::verify::{Descriptor, ViewKeypoints, DESCRIPTOR_BYTES};
 use nalgebra::{Isometry3, Point3, Quaternion, Translation3, UnitQuaternion};
 use safetensors::{Dtype, SafeTensors, View};
 use serde::{Deserialize, Serialize};
@@ -49,7 +53,7 @@ pub const FORMAT_NAME: &str = "topoloc-map";
 /// Major format version written and read by this build.
 pub const FORMAT_VERSION_MAJOR: u32 = 1;
 /// Minor format version written by this build.
-pub const FORMAT_VERSION_MINOR: u32 = 1;
+pub const FORMAT_VERSION_MINOR: u32 = 2;
 
 const META_KEY: &str = "topoloc";
 /// Longest JSON header accepted; far above any real map's header (a few hundred bytes).
@@ -283,6 +287,32 @@ impl Map {
                 ));
             }
         }
+        if let Some(k) = self.keypoints() {
+            tensors.push((
+                "view_keypoint_descriptors",
+                OutTensor::new(
+                    Dtype::U8,
+                    vec![k.total(), DESCRIPTOR_BYTES],
+                    Cow::Borrowed(k.descriptors().as_flattened()),
+                ),
+            ));
+            tensors.push((
+                "view_keypoint_offsets",
+                OutTensor::new(
+                    Dtype::U64,
+                    vec![n + 1],
+                    le_bytes(k.offsets(), u64::to_le_bytes),
+                ),
+            ));
+            tensors.push((
+                "view_keypoint_points",
+                OutTensor::new(
+                    Dtype::F32,
+                    vec![k.total(), 2],
+                    le_bytes(k.points().as_flattened(), f32::to_le_bytes),
+                ),
+            ));
+        }
         tensors.sort_by_key(|(name, _)| *name);
 
         let meta = FileMeta {
@@ -418,6 +448,7 @@ struct ParsedMap {
     place_positions: Vec<Option<Point3<f64>>>,
     edges: Vec<Edge>,
     describer: Option<DescriberModel>,
+    keypoints: Option<ViewKeypoints>,
 }
 
 impl ParsedMap {
@@ -432,6 +463,10 @@ impl ParsedMap {
         )
         .and_then(|map| match self.describer {
             Some(model) => map.with_describer(Arc::new(model)),
+            None => Ok(map),
+        })
+        .and_then(|map| match self.keypoints {
+            Some(keypoints) => map.with_keypoints(keypoints),
             None => Ok(map),
         })
         .map_err(|e| match e {
@@ -492,6 +527,25 @@ fn read_describer(
 
 /// Decides whether a damaged header still looks like the start of a topoloc map, which tells a
 /// truncated or corrupt map apart from some other file.
+/// Reads the views' keypoints (1.2) of a map of `views` views.
+fn read_keypoints(reader: &TensorReader<'_, '_>, views: usize) -> Result<ViewKeypoints, MapError> {
+    let offsets = reader.u64s("view_keypoint_offsets", &[views + 1])?;
+    let total = offsets.last().copied().unwrap_or(0) as usize;
+    let points = reader.f32s("view_keypoint_points", &[total, 2])?;
+    let descriptors = reader.get(
+        "view_keypoint_descriptors",
+        Dtype::U8,
+        &[total, DESCRIPTOR_BYTES],
+    )?;
+    let descriptors: Vec<Descriptor> = descriptors
+        .chunks_exact(DESCRIPTOR_BYTES)
+        .map(|c| c.try_into().expect("32 bytes"))
+        .collect();
+    let points = points.chunks_exact(2).map(|p| [p[0], p[1]]).collect();
+    ViewKeypoints::from_parts(offsets, points, descriptors)
+        .map_err(|e| MapError::Corrupt(format!("view keypoints: {e}")))
+}
+
 fn starts_like_map(bytes: &[u8]) -> bool {
     let Some(header) = bytes.get(8..) else {
         return true;
@@ -689,10 +743,17 @@ fn parse(bytes: &[u8], options: &LoadOptions) -> Result<ParsedMap, MapError> {
         None => None,
     };
 
+    let keypoints = if names.contains(&"view_keypoint_offsets") {
+        Some(read_keypoints(&reader, n)?)
+    } else {
+        None
+    };
+
     Ok(ParsedMap {
         identity: meta.descriptor,
         creator: meta.creator,
         describer,
+        keypoints,
         descriptor_bytes,
         views,
         place_positions,

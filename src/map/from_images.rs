@@ -14,6 +14,7 @@ use super::{
 use crate::describe::describer::{fit, BackendConfig, Extractor, FitOptions, RawFeatures};
 use crate::describe::image::{read_rgb, ImageView, PixelFormat};
 use crate::describe::DescribeError;
+use crate::verify::{KeypointDetector, Keypoints, ViewKeypoints, DEFAULT_KEYPOINTS, MAX_KEYPOINTS};
 use nalgebra::{Isometry3, Point3};
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
@@ -35,6 +36,9 @@ pub struct ImageMapOptions {
     /// Worker threads describing images; 0 means one per core, at most
     /// [`MAX_BUILD_THREADS`]. They are joined before the build returns.
     pub threads: usize,
+    /// ORB keypoints stored per view for geometric verification (`crate::verify`), at most
+    /// [`MAX_KEYPOINTS`]; 0 stores none. Default [`DEFAULT_KEYPOINTS`] (about 20 KB per view).
+    pub keypoints: usize,
 }
 
 impl Default for ImageMapOptions {
@@ -45,6 +49,7 @@ impl Default for ImageMapOptions {
             views_per_place: 1,
             keyframes: KeyframeOptions::default(),
             threads: 0,
+            keypoints: DEFAULT_KEYPOINTS,
         }
     }
 }
@@ -176,6 +181,13 @@ pub fn build_from_images(
         ))
         .into());
     }
+    if options.keypoints > MAX_KEYPOINTS {
+        return Err(MapError::InvalidArgument(format!(
+            "keypoints is {}, must lie in 0..={MAX_KEYPOINTS} (0 = none)",
+            options.keypoints
+        ))
+        .into());
+    }
     // Load one extractor first so that a missing backend fails before any thread starts.
     let first = Extractor::new(&options.backend)?;
     let spec = first.spec().clone();
@@ -190,10 +202,12 @@ pub fn build_from_images(
     let uninformative: Vec<usize> = raws
         .iter()
         .enumerate()
-        .filter(|(_, (_, informative))| !informative)
+        .filter(|(_, described)| !described.informative)
         .map(|(i, _)| i)
         .collect();
-    let raws: Vec<RawFeatures> = raws.into_iter().map(|(r, _)| r).collect();
+    let keypoints = (options.keypoints > 0)
+        .then(|| ViewKeypoints::from_views(raws.iter().map(|d| &d.keypoints)));
+    let raws: Vec<RawFeatures> = raws.into_iter().map(|d| d.raw).collect();
     let (model, descriptors) = fit(&spec, &raws, &options.fit)?;
     let identity = model.identity();
     let sources: Vec<Option<String>> = images
@@ -227,6 +241,10 @@ pub fn build_from_images(
         ImageLayout::Graph(graph) => graph_map(identity, &descriptors, &sources, graph)?,
     };
     let map = map.with_describer(Arc::new(model))?;
+    let map = match keypoints {
+        Some(keypoints) => map.with_keypoints(keypoints)?,
+        None => map,
+    };
     if !progress(BuildStage::Fitting, 1, 1) {
         return Err(ImageMapError::Cancelled);
     }
@@ -296,50 +314,70 @@ fn graph_map(
     builder.build()
 }
 
-/// Raw features of every image, with whether it was informative; in input order.
+/// What one image gave.
+struct Described {
+    raw: RawFeatures,
+    /// False for an image without content (see [`ImageMapReport::uninformative`]).
+    informative: bool,
+    /// Its ORB keypoints (empty when the options ask for none).
+    keypoints: Keypoints,
+}
+
+/// One worker's tools: the backend's extractor and, when keypoints are stored, an ORB detector.
+type Workers = (Extractor, Option<KeypointDetector>);
+
+/// Raw features (and keypoints) of every image; in input order.
 fn describe_in_parallel(
     images: &[ImageSource<'_>],
     first: Extractor,
     options: &ImageMapOptions,
     progress: &mut dyn FnMut(BuildStage, usize, usize) -> bool,
-) -> Result<Vec<(RawFeatures, bool)>, ImageMapError> {
+) -> Result<Vec<Described>, ImageMapError> {
     let total = images.len();
     let done = AtomicUsize::new(0);
     let cancelled = AtomicBool::new(false);
     let spare = std::sync::Mutex::new(Some(first));
-    let work = |pool: &rayon::ThreadPool| {
-        pool.install(|| {
-            images
-                .par_iter()
-                .enumerate()
-                .map_init(
-                    || match spare.lock().map(|mut s| s.take()) {
-                        Ok(Some(e)) => Ok(e),
-                        _ => Extractor::new(&options.backend),
-                    },
-                    |extractor, (index, source)| {
-                        if cancelled.load(Ordering::Relaxed) {
-                            return Err(ImageMapError::Cancelled);
-                        }
-                        let extractor = extractor.as_mut().map_err(|e| {
-                            ImageMapError::Describe(DescribeError::Model(e.to_string()))
-                        })?;
-                        let result =
-                            describe_one(extractor, source).map_err(|error| ImageMapError::Image {
-                                index,
-                                source_name: match source {
-                                    ImageSource::File(p) => p.display().to_string(),
-                                    ImageSource::Pixels(_) => "pixels".into(),
-                                },
-                                error,
-                            });
-                        done.fetch_add(1, Ordering::Relaxed);
-                        result
-                    },
-                )
-                .collect::<Result<Vec<_>, _>>()
-        })
-    };
+    let work =
+        |pool: &rayon::ThreadPool| {
+            pool.install(|| {
+                images
+                    .par_iter()
+                    .enumerate()
+                    .map_init(
+                        || -> Result<Workers, DescribeError> {
+                            let extractor = match spare.lock().map(|mut s| s.take()) {
+                                Ok(Some(e)) => e,
+                                _ => Extractor::new(&options.backend)?,
+                            };
+                            let detector = match options.keypoints {
+                                0 => None,
+                                n => Some(KeypointDetector::new(n)?),
+                            };
+                            Ok((extractor, detector))
+                        },
+                        |workers, (index, source)| {
+                            if cancelled.load(Ordering::Relaxed) {
+                                return Err(ImageMapError::Cancelled);
+                            }
+                            let (extractor, detector) = workers.as_mut().map_err(|e| {
+                                ImageMapError::Describe(DescribeError::Model(e.to_string()))
+                            })?;
+                            let result = describe_one(extractor, detector.as_mut(), source)
+                                .map_err(|error| ImageMapError::Image {
+                                    index,
+                                    source_name: match source {
+                                        ImageSource::File(p) => p.display().to_string(),
+                                        ImageSource::Pixels(_) => "pixels".into(),
+                                    },
+                                    error,
+                                });
+                            done.fetch_add(1, Ordering::Relaxed);
+                            result
+                        },
+                    )
+                    .collect::<Result<Vec<_>, _>>()
+            })
+        };
     // The pool is scoped: its workers are joined before `build_scoped` returns, so no thread of
     // ours outlives the build (a C host may unload the library right after it).
     let run_pool = || {
@@ -375,12 +413,13 @@ fn describe_in_parallel(
     })
 }
 
-/// Raw features of one image; uninformative images give the backend's output anyway (a blank
-/// image's CNN features, or an empty set of local features) and `false`.
+/// Raw features and keypoints of one image; uninformative images give the backend's output
+/// anyway (a blank image's CNN features, or an empty set of local features) and `false`.
 fn describe_one(
     extractor: &mut Extractor,
+    detector: Option<&mut KeypointDetector>,
     source: &ImageSource<'_>,
-) -> Result<(RawFeatures, bool), DescribeError> {
+) -> Result<Described, DescribeError> {
     let owned;
     let view = match source {
         ImageSource::File(path) => {
@@ -389,5 +428,14 @@ fn describe_one(
         }
         ImageSource::Pixels(view) => *view,
     };
-    extractor.extract_keeping_uninformative(&view)
+    let (raw, informative) = extractor.extract_keeping_uninformative(&view)?;
+    let keypoints = match detector {
+        Some(d) => d.detect(&view)?,
+        None => Keypoints::default(),
+    };
+    Ok(Described {
+        raw,
+        informative,
+        keypoints,
+    })
 }

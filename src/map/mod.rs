@@ -34,6 +34,7 @@ pub use skeleton::{
 pub use tum::{parse_tum, read_tum, TimedPose};
 
 use crate::describe::DescriberModel;
+use crate::verify::ViewKeypoints;
 use nalgebra::{Isometry3, Point3};
 use serde::{Deserialize, Serialize};
 use std::sync::Arc;
@@ -208,6 +209,8 @@ pub struct Map {
     neighbour_weights: Vec<f32>,
     /// How to describe images for this map, when it was built from images.
     describer: Option<Arc<DescriberModel>>,
+    /// ORB keypoints of every view, for geometric verification (maps built from images).
+    keypoints: Option<ViewKeypoints>,
     /// Cached [`Map::similarity_spread`].
     spread: std::sync::OnceLock<f32>,
 }
@@ -344,6 +347,7 @@ impl Map {
             neighbour_ids,
             neighbour_weights,
             describer: None,
+            keypoints: None,
             spread: std::sync::OnceLock::new(),
         })
     }
@@ -367,6 +371,25 @@ impl Map {
         }
         self.describer = Some(model);
         Ok(self)
+    }
+
+    /// Attaches the ORB keypoints of every view (for geometric verification); fails unless the
+    /// store holds exactly one entry per view.
+    pub fn with_keypoints(mut self, keypoints: ViewKeypoints) -> Result<Self, MapError> {
+        if keypoints.view_count() != self.view_count() {
+            return Err(MapError::InvalidArgument(format!(
+                "keypoints for {} views, the map has {}",
+                keypoints.view_count(),
+                self.view_count()
+            )));
+        }
+        self.keypoints = Some(keypoints);
+        Ok(self)
+    }
+
+    /// The ORB keypoints of every view, if the map stores them (maps built from images do).
+    pub fn keypoints(&self) -> Option<&ViewKeypoints> {
+        self.keypoints.as_ref()
     }
 
     /// The typical spread of similarities in this map's descriptor space: the median, over up to

@@ -2,6 +2,8 @@
 
 #![allow(dead_code)]
 
+pub mod images;
+
 use nalgebra::{Isometry3, Point3, Vector3};
 use topoloc::map::ViewAttributes;
 use topoloc::{DescriptorIdentity, Map, MapBuilder};

@@ -43,6 +43,9 @@ pub struct BuildMapArgs {
     /// Describing threads (0: one per core).
     #[arg(long, default_value_t = 0)]
     pub threads: usize,
+    /// ORB keypoints stored per view for geometric verification (0: none).
+    #[arg(long, default_value_t = topoloc::verify::DEFAULT_KEYPOINTS)]
+    pub keypoints: usize,
     /// Output map file.
     #[arg(long)]
     pub out: PathBuf,
@@ -90,6 +93,7 @@ pub fn run(args: &BuildMapArgs) -> Result<()> {
             ..KeyframeOptions::default()
         },
         threads: args.threads,
+        keypoints: args.keypoints,
     };
     let sources: Vec<ImageSource> = files.iter().map(|f| ImageSource::File(f)).collect();
     let bar = progress_bar(files.len(), "describing");

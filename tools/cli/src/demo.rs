@@ -16,6 +16,7 @@ use serde_json::json;
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::Instant;
+use topoloc::describe::image::ImageView;
 use topoloc::describe::onnx::{cache_dir, DEFAULT_MODEL_FILE};
 use topoloc::describe::{BackendConfig, DescriberOptions};
 use topoloc::eval::{calibration, precision_recall, GraphEvaluator, HopDistances, Prediction};
@@ -200,7 +201,9 @@ pub fn run(args: &DemoArgs) -> Result<()> {
             mode,
             ..LocalizerOptions::default()
         };
-        results.push(evaluate(name, &map, &sequence, &hops, options, odometry)?);
+        results.push(evaluate(
+            name, &map, &sequence, &hops, options, odometry, None,
+        )?);
     }
     let (describe_median, _) = median_and_p90(&describe_ms);
     let (_, peak_rss) = resident_memory_mib().unwrap_or((0.0, 0.0));
@@ -284,7 +287,8 @@ fn print_table(results: &[ConfigResult]) {
     println!("ECE: expected calibration error of the confidence (10 bins). Latency: one thread, filter step only.");
 }
 
-/// Localizes every frame of `sequence` with `options` and computes the metrics.
+/// Localizes every frame of `sequence` with `options` and computes the metrics; `images` (one
+/// per frame) are given to the localizer beside the descriptors, for verification.
 pub(crate) fn evaluate(
     name: &'static str,
     map: &Arc<Map>,
@@ -292,18 +296,19 @@ pub(crate) fn evaluate(
     hops: &HopDistances,
     options: LocalizerOptions,
     use_odometry: bool,
+    images: Option<&[ImageView<'_>]>,
 ) -> Result<ConfigResult> {
     let mut localizer = Localizer::new(map.clone(), options)?;
     let mut out = Localization::default();
     let mut predictions = Vec::with_capacity(sequence.frames.len());
     let mut latencies = Vec::with_capacity(sequence.frames.len());
     let mut off_map = 0usize;
-    for f in &sequence.frames {
+    for (i, f) in sequence.frames.iter().enumerate() {
         let frame = Frame {
             timestamp: f.timestamp,
             descriptor: &f.descriptor,
             odometry: use_odometry.then_some(f.odometry),
-            image: None,
+            image: images.map(|images| images[i]),
         };
         let start = Instant::now();
         localizer.process(&frame, &mut out)?;

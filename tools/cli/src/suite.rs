@@ -4,7 +4,8 @@
 //! skeleton graph and map and flies one query trajectory (seeds `Split::trajectory_seed(K, 0)`)
 //! exactly as `topoloc demo` and `topoloc simulate` do (12 views per place unless
 //! `--views-per-place` says otherwise), then localizes every frame with each
-//! localizer configuration (single-frame, filter, filter with drifting odometry). Prints MNA and
+//! localizer configuration (single-frame, filter, filter with drifting odometry, and that with
+//! geometric verification of the most probable places unless `--verify 0`). Prints MNA and
 //! OHA per split as mean ± standard deviation over the worlds, the way the seed's tables do
 //! (thesis Table 4.2), and the graph sizes they were measured on.
 
@@ -15,9 +16,12 @@ use crate::simulate::{parse_condition, parse_split, scenario_options, CaptureArg
 use anyhow::Result;
 use serde_json::json;
 use std::time::Instant;
+use topoloc::describe::image::ImageView;
 use topoloc::describe::DescriberOptions;
 use topoloc::eval::HopDistances;
+use topoloc::verify::VerificationOptions;
 use topoloc::{LocalizerOptions, Mode};
+use topoloc_sim::capture::image_view;
 use topoloc_sim::render::ConditionKind;
 use topoloc_sim::scenario::{build_scene, describe_flight, fly};
 use topoloc_sim::style::Split;
@@ -53,17 +57,34 @@ pub struct SuiteArgs {
     /// Map capture.
     #[command(flatten)]
     pub capture: CaptureArgs,
+    /// Places verified geometrically per frame in the verification configuration (0 leaves
+    /// that configuration out).
+    #[arg(long, default_value_t = 5)]
+    pub verify: usize,
+    /// Log-likelihood of one verification inlier (see `topoloc::verify`).
+    #[arg(long, default_value_t = VerificationOptions::default().inlier_weight)]
+    pub inlier_weight: f32,
     /// Print one JSON object (per split and configuration: every world's figures, mean, std).
     #[arg(long)]
     pub json: bool,
 }
 
-/// The localizer configurations compared: name, mode, whether odometry is given.
-const CONFIGURATIONS: [(&str, Mode, bool); 3] = [
-    ("single-frame", Mode::SingleFrame, false),
-    ("filter", Mode::Filter, false),
-    ("filter+odometry", Mode::Filter, true),
+/// The localizer configurations compared: name, mode, whether odometry is given, whether the
+/// most probable places are verified geometrically.
+const CONFIGURATIONS: [(&str, Mode, bool, bool); 4] = [
+    ("single-frame", Mode::SingleFrame, false, false),
+    ("filter", Mode::Filter, false, false),
+    ("filter+odometry", Mode::Filter, true, false),
+    ("filter+odometry+verification", Mode::Filter, true, true),
 ];
+
+/// The configurations run with `args`.
+fn configurations(
+    args: &SuiteArgs,
+) -> impl Iterator<Item = &'static (&'static str, Mode, bool, bool)> {
+    let verify = args.verify > 0;
+    CONFIGURATIONS.iter().filter(move |c| verify || !c.3)
+}
 
 /// One world's run: its size and each configuration's result.
 struct WorldRun {
@@ -114,14 +135,21 @@ pub fn run(args: &SuiteArgs) -> Result<()> {
                 describe_flight(&scene, &flight, &DescriberOptions::default(), &report)?;
             bars.finish();
             let hops = HopDistances::from_map(&scene.map);
-            let results = CONFIGURATIONS
-                .iter()
-                .map(|&(name, mode, odometry)| {
+            let images: Vec<ImageView<'_>> = flight.images.iter().map(image_view).collect();
+            let results = configurations(args)
+                .map(|&(name, mode, odometry, verify)| {
+                    let verification = VerificationOptions {
+                        candidates: if verify { args.verify } else { 0 },
+                        inlier_weight: args.inlier_weight,
+                        ..VerificationOptions::default()
+                    };
                     let options = LocalizerOptions {
                         mode,
+                        verification,
                         ..LocalizerOptions::default()
                     };
-                    evaluate(name, &scene.map, &sequence, &hops, options, odometry)
+                    let given = verify.then_some(images.as_slice());
+                    evaluate(name, &scene.map, &sequence, &hops, options, odometry, given)
                 })
                 .collect::<Result<Vec<_>>>()?;
             if !args.json {
@@ -150,7 +178,7 @@ pub fn run(args: &SuiteArgs) -> Result<()> {
     if args.json {
         println!("{}", summary_json(args, &backend_note, &runs, start));
     } else {
-        print_table(&runs);
+        print_table(args, &runs);
         println!(
             "{} worlds per split, {} views per place, query light '{}', {:.0} s in all",
             args.worlds,
@@ -175,7 +203,7 @@ fn column(worlds: &[WorldRun], config: usize, metric: fn(&ConfigResult) -> f64) 
     worlds.iter().map(|w| metric(&w.results[config])).collect()
 }
 
-fn print_table(runs: &[(Split, Vec<WorldRun>)]) {
+fn print_table(args: &SuiteArgs, runs: &[(Split, Vec<WorldRun>)]) {
     let mut header = String::from("| configuration |");
     let mut rule = String::from("|---|");
     for (split, _) in runs {
@@ -183,7 +211,7 @@ fn print_table(runs: &[(Split, Vec<WorldRun>)]) {
         rule.push_str("---|---|");
     }
     println!("\n{header}\n{rule}");
-    for (c, (name, _, _)) in CONFIGURATIONS.iter().enumerate() {
+    for (c, (name, _, _, _)) in configurations(args).enumerate() {
         let mut row = format!("| {name} |");
         for (_, worlds) in runs {
             for metric in [|r: &ConfigResult| r.mna, |r: &ConfigResult| r.oha] {
@@ -213,10 +241,9 @@ fn summary_json(
     let splits: serde_json::Map<String, serde_json::Value> = runs
         .iter()
         .map(|(split, worlds)| {
-            let configurations: serde_json::Map<String, serde_json::Value> = CONFIGURATIONS
-                .iter()
+            let configurations: serde_json::Map<String, serde_json::Value> = configurations(args)
                 .enumerate()
-                .map(|(c, (name, _, _))| {
+                .map(|(c, (name, _, _, _))| {
                     let mna = column(worlds, c, |r| r.mna);
                     let oha = column(worlds, c, |r| r.oha);
                     let (mna_mean, mna_std) = mean_std(&mna);
@@ -243,6 +270,7 @@ fn summary_json(
         "backend": backend_note, "condition": args.condition.name(),
         "rooms": args.rooms, "floors": args.floors, "legs": args.legs,
         "views_per_place": args.capture.views_per_place,
+        "verify": args.verify, "inlier_weight": args.inlier_weight,
         "splits": splits, "seconds": start.elapsed().as_secs_f64(),
     })
 }

@@ -47,6 +47,7 @@ pub fn run(worlds: u64, frames: usize, temperatures: &[f32], margins: &[f32]) ->
                     &hops,
                     options.clone(),
                     true,
+                    None,
                 )?;
                 let found = off_map_rate(
                     &map,

@@ -485,6 +485,7 @@ fn suite_reports_mean_and_std_per_split_and_configuration() {
     ]);
     let report = json(&out);
     assert_eq!(report["views_per_place"].as_u64(), Some(4));
+    assert_eq!(report["verify"].as_u64(), Some(5));
     for split in ["tr-a", "test"] {
         let s = &report["splits"][split];
         assert_eq!(s["worlds"].as_array().map(Vec::len), Some(2), "{report}");
@@ -494,7 +495,12 @@ fn suite_reports_mean_and_std_per_split_and_configuration() {
                 world["places"].as_u64().map(|p| 4 * p)
             );
         }
-        for config in ["single-frame", "filter", "filter+odometry"] {
+        for config in [
+            "single-frame",
+            "filter",
+            "filter+odometry",
+            "filter+odometry+verification",
+        ] {
             let c = &s["configurations"][config];
             for metric in ["mna", "oha"] {
                 let values: Vec<f64> = c[metric]

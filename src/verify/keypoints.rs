@@ -1,0 +1,226 @@
+//! ORB keypoints of one image, and the per-view store a map keeps them in.
+
+use crate::describe::image::ImageView;
+use crate::describe::DescribeError;
+use opencv::core::{KeyPoint, Mat, Ptr, Size, Vector};
+use opencv::features2d::{ORB_ScoreType, ORB};
+use opencv::prelude::*;
+
+/// Bytes of one ORB descriptor (256 binary tests).
+pub const DESCRIPTOR_BYTES: usize = 32;
+/// Most keypoints a detector may keep per image.
+pub const MAX_KEYPOINTS: usize = 5000;
+
+/// One ORB descriptor.
+pub type Descriptor = [u8; DESCRIPTOR_BYTES];
+
+/// Keypoints of one image: pixel positions (x right, y down, in the image as given) and their
+/// ORB descriptors, in the same order.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Keypoints {
+    /// Pixel positions.
+    pub points: Vec<[f32; 2]>,
+    /// ORB descriptors, one per point.
+    pub descriptors: Vec<Descriptor>,
+}
+
+impl Keypoints {
+    /// Number of keypoints.
+    pub fn len(&self) -> usize {
+        self.points.len()
+    }
+
+    /// True without keypoints (a blank or featureless image).
+    pub fn is_empty(&self) -> bool {
+        self.points.is_empty()
+    }
+
+    /// A borrowed view of the keypoints.
+    pub fn as_ref(&self) -> KeypointsRef<'_> {
+        KeypointsRef {
+            points: &self.points,
+            descriptors: &self.descriptors,
+        }
+    }
+}
+
+/// Borrowed keypoints (of a query, or of a map view from [`ViewKeypoints::view`]).
+#[derive(Clone, Copy, Debug)]
+pub struct KeypointsRef<'a> {
+    /// Pixel positions.
+    pub points: &'a [[f32; 2]],
+    /// ORB descriptors, one per point.
+    pub descriptors: &'a [Descriptor],
+}
+
+/// Detects ORB keypoints; one per thread (OpenCV detectors are not shared).
+pub struct KeypointDetector {
+    orb: Ptr<ORB>,
+    max_keypoints: usize,
+}
+
+impl KeypointDetector {
+    /// A detector keeping at most `max_keypoints` (1..=[`MAX_KEYPOINTS`]) per image.
+    pub fn new(max_keypoints: usize) -> Result<Self, DescribeError> {
+        if !(1..=MAX_KEYPOINTS).contains(&max_keypoints) {
+            return Err(DescribeError::InvalidArgument(format!(
+                "keypoints per image is {max_keypoints}, must lie in 1..={MAX_KEYPOINTS}"
+            )));
+        }
+        // OpenCV's defaults except the count and a FAST threshold of 10 (not 20), so that dim
+        // frames still give keypoints: scale 1.2 over 8 levels, edge and patch 31 pixels,
+        // 2-point BRIEF tests (256 bits), Harris ranking.
+        let orb = ORB::create(
+            max_keypoints as i32,
+            1.2,
+            8,
+            31,
+            0,
+            2,
+            ORB_ScoreType::HARRIS_SCORE,
+            31,
+            10,
+        )?;
+        Ok(Self { orb, max_keypoints })
+    }
+
+    /// Most keypoints kept per image.
+    pub fn max_keypoints(&self) -> usize {
+        self.max_keypoints
+    }
+
+    /// Validates the image, converts it to grey at its own size, detects and describes.
+    /// A featureless image gives no keypoints, not an error.
+    pub fn detect(&mut self, image: &ImageView<'_>) -> Result<Keypoints, DescribeError> {
+        let size = Size::new(image.width as i32, image.height as i32);
+        let rgb = image.to_rgb_resized(size)?;
+        let mut grey = Mat::default();
+        opencv::imgproc::cvt_color_def(&rgb, &mut grey, opencv::imgproc::COLOR_RGB2GRAY)?;
+        let mut found = Vector::<KeyPoint>::new();
+        let mut descriptors = Mat::default();
+        self.orb.detect_and_compute(
+            &grey,
+            &opencv::core::no_array(),
+            &mut found,
+            &mut descriptors,
+            false,
+        )?;
+        if found.is_empty() || descriptors.empty() {
+            return Ok(Keypoints::default());
+        }
+        let bytes = descriptors.data_bytes()?;
+        if descriptors.cols() as usize != DESCRIPTOR_BYTES
+            || bytes.len() != found.len() * DESCRIPTOR_BYTES
+        {
+            return Err(DescribeError::Model(format!(
+                "ORB gave {} descriptors of {} bytes for {} keypoints",
+                descriptors.rows(),
+                descriptors.cols(),
+                found.len()
+            )));
+        }
+        Ok(Keypoints {
+            points: found.iter().map(|k| [k.pt().x, k.pt().y]).collect(),
+            descriptors: bytes
+                .chunks_exact(DESCRIPTOR_BYTES)
+                .map(|c| c.try_into().expect("32 bytes"))
+                .collect(),
+        })
+    }
+}
+
+/// Keypoints of every view of a map, concatenated: view `v` owns entries
+/// `offsets[v]..offsets[v + 1]`.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ViewKeypoints {
+    offsets: Vec<u64>,
+    points: Vec<[f32; 2]>,
+    descriptors: Vec<Descriptor>,
+}
+
+impl ViewKeypoints {
+    /// Concatenates the keypoints of each view, in view order.
+    pub fn from_views<'a>(views: impl IntoIterator<Item = &'a Keypoints>) -> Self {
+        let mut store = Self {
+            offsets: vec![0],
+            ..Self::default()
+        };
+        for view in views {
+            store.points.extend_from_slice(&view.points);
+            store.descriptors.extend_from_slice(&view.descriptors);
+            store.offsets.push(store.points.len() as u64);
+        }
+        store
+    }
+
+    /// Rebuilds a store from its arrays (as a map file holds them); fails unless `offsets`
+    /// starts at 0, never decreases and ends at the number of points, and points and
+    /// descriptors have the same count.
+    pub fn from_parts(
+        offsets: Vec<u64>,
+        points: Vec<[f32; 2]>,
+        descriptors: Vec<Descriptor>,
+    ) -> Result<Self, String> {
+        if points.len() != descriptors.len() {
+            return Err(format!(
+                "{} keypoints but {} descriptors",
+                points.len(),
+                descriptors.len()
+            ));
+        }
+        if offsets.first() != Some(&0) || offsets.last() != Some(&(points.len() as u64)) {
+            return Err(format!(
+                "keypoint offsets must run from 0 to {}, found {:?} .. {:?}",
+                points.len(),
+                offsets.first(),
+                offsets.last()
+            ));
+        }
+        if offsets.windows(2).any(|w| w[0] > w[1]) {
+            return Err("keypoint offsets decrease".into());
+        }
+        if !points.iter().flatten().all(|x| x.is_finite()) {
+            return Err("a keypoint position is not finite".into());
+        }
+        Ok(Self {
+            offsets,
+            points,
+            descriptors,
+        })
+    }
+
+    /// Number of views.
+    pub fn view_count(&self) -> usize {
+        self.offsets.len().saturating_sub(1)
+    }
+
+    /// Keypoints of all views together.
+    pub fn total(&self) -> usize {
+        self.points.len()
+    }
+
+    /// The keypoints of view `view`, or `None` when out of range.
+    pub fn view(&self, view: usize) -> Option<KeypointsRef<'_>> {
+        let (a, b) = (*self.offsets.get(view)?, *self.offsets.get(view + 1)?);
+        let range = a as usize..b as usize;
+        Some(KeypointsRef {
+            points: &self.points[range.clone()],
+            descriptors: &self.descriptors[range],
+        })
+    }
+
+    /// The offsets array (views + 1 entries).
+    pub fn offsets(&self) -> &[u64] {
+        &self.offsets
+    }
+
+    /// All positions, view after view.
+    pub fn points(&self) -> &[[f32; 2]] {
+        &self.points
+    }
+
+    /// All descriptors, view after view.
+    pub fn descriptors(&self) -> &[Descriptor] {
+        &self.descriptors
+    }
+}

@@ -1,0 +1,95 @@
+//! Geometric verification of place candidates (the seed's GC re-ranking, and the evidence behind
+//! a loop-closure hint).
+//!
+//! Maps built from images store ORB keypoints of every view ([`ViewKeypoints`], written to the
+//! map file since format 1.2). When verification is on, the localizer detects keypoints in the
+//! query image, checks the views most similar to it of the most probable places
+//! ([`check_pair`]: mutual nearest-neighbour matches and a RANSAC fundamental matrix), and
+//! weighs each checked place's belief by `exp(inlier_weight * inliers)`. Look-alike places
+//! (same wallpaper, another room) rarely agree with the query on one rigid scene, so their
+//! inlier counts stay low where the true place's are high.
+
+mod geometry;
+mod keypoints;
+
+pub use geometry::{check_pair, PairCheck, PairOptions, MIN_MATCHES};
+pub use keypoints::{
+    Descriptor, KeypointDetector, Keypoints, KeypointsRef, ViewKeypoints, DESCRIPTOR_BYTES,
+    MAX_KEYPOINTS,
+};
+
+/// Keypoints per view a map built from images stores by default, and a query detects.
+pub const DEFAULT_KEYPOINTS: usize = 500;
+
+/// When and how the localizer verifies candidates. Off by default (`candidates == 0`):
+/// verification needs the frame's image and a map holding keypoints, and costs about 10 ms per
+/// checked view on one core (BENCHMARKS.md).
+#[derive(Clone, Debug, PartialEq)]
+pub struct VerificationOptions {
+    /// Most probable places checked per frame; 0 turns verification off. Default 0.
+    pub candidates: usize,
+    /// Views checked per candidate place: those most similar to the query. Default 2.
+    pub views_per_candidate: usize,
+    /// Log-likelihood of one inlier: a checked place's belief is multiplied by
+    /// `exp(inlier_weight * inliers)` before normalising. Default 0.1 (BENCHMARKS.md).
+    pub inlier_weight: f32,
+    /// Keypoints detected in the query image. Default [`DEFAULT_KEYPOINTS`].
+    pub query_keypoints: usize,
+    /// Matching and RANSAC.
+    pub pair: PairOptions,
+}
+
+impl Default for VerificationOptions {
+    fn default() -> Self {
+        Self {
+            candidates: 0,
+            views_per_candidate: 2,
+            inlier_weight: 0.1,
+            query_keypoints: DEFAULT_KEYPOINTS,
+            pair: PairOptions::default(),
+        }
+    }
+}
+
+impl VerificationOptions {
+    /// Verification with `candidates` places checked per frame and the other defaults.
+    pub fn with_candidates(candidates: usize) -> Self {
+        Self {
+            candidates,
+            ..Self::default()
+        }
+    }
+
+    /// True when candidates are checked.
+    pub fn enabled(&self) -> bool {
+        self.candidates > 0
+    }
+
+    /// Fails with a message naming the field out of range.
+    pub fn validate(&self) -> Result<(), String> {
+        if self.candidates > 64 {
+            return Err(format!(
+                "verification.candidates is {}, must lie in 0..=64",
+                self.candidates
+            ));
+        }
+        if !(1..=64).contains(&self.views_per_candidate) {
+            return Err(format!(
+                "verification.views_per_candidate is {}, must lie in 1..=64",
+                self.views_per_candidate
+            ));
+        }
+        if !(self.inlier_weight.is_finite() && self.inlier_weight >= 0.0) {
+            return Err("verification.inlier_weight must be finite and >= 0".into());
+        }
+        if !(1..=MAX_KEYPOINTS).contains(&self.query_keypoints) {
+            return Err(format!(
+                "verification.query_keypoints is {}, must lie in 1..={MAX_KEYPOINTS}",
+                self.query_keypoints
+            ));
+        }
+        self.pair
+            .validate()
+            .map_err(|e| format!("verification.pair: {e}"))
+    }
+}
