@@ -540,6 +540,22 @@ typedef struct topoloc_localizer_options {
    * ONNX Runtime library; NULL or "" = `TOPOLOC_ORT_LIBRARY`, `ORT_DYLIB_PATH`, the cache.
    */
   const char *onnx_runtime_path;
+  /**
+   * Most probable places verified geometrically per frame against the frame's image, 0..=64
+   * (ORB matches + RANSAC; the result's `verified` / `inliers`). 0 = off (default). Needs a
+   * map storing keypoints (maps built from images do; else `_INVALID_OPTION`) and frames
+   * with images (else `_INVALID_IMAGE`). About 10 ms per checked view.
+   */
+  uint32_t verify_candidates;
+  /**
+   * Views checked per candidate place, those most similar to the frame, 1..=64. Default 2.
+   */
+  uint32_t verify_views_per_candidate;
+  /**
+   * Log-likelihood of one inlier: a checked place's belief is multiplied by
+   * `exp(verify_inlier_weight * inliers)` (finite, >= 0). Default 0.1.
+   */
+  float verify_inlier_weight;
 } topoloc_localizer_options;
 
 /**
@@ -645,6 +661,15 @@ typedef struct topoloc_result {
    * Number of candidates written: min(top_k, places, capacity).
    */
   size_t candidates_len;
+  /**
+   * True when `place` was verified geometrically in this frame (`verify_candidates` > 0).
+   */
+  bool verified;
+  /**
+   * RANSAC inliers between the frame and `view` (0 unless `verified`): with `place` and
+   * `view`, the evidence for a loop closure.
+   */
+  uint32_t inliers;
 } topoloc_result;
 
 /**
@@ -884,9 +909,11 @@ topoloc_status topoloc_result_init(struct topoloc_result *result, size_t size);
  * Errors: `_DIMENSION_MISMATCH`, `_NON_FINITE`, `_ZERO_DESCRIPTOR`, `_TIMESTAMP`,
  * `_INVALID_ARGUMENT` (odometry not a rigid transform), `_INVALID_IMAGE`,
  * `_UNINFORMATIVE_IMAGE` (blank or featureless image: state unchanged), `_NO_DESCRIBER`,
- * `_MODEL`, `_STRUCT_SIZE`, `_NULL_ARGUMENT`.
+ * `_MODEL`, `_STRUCT_SIZE`, `_NULL_ARGUMENT`. With verification on, the frame needs its image
+ * (`_INVALID_IMAGE`), beside its descriptor or instead of it.
  * Cost: describing the image (if any), then one pass over the map's descriptors plus
- * O(places + edges); no allocation for descriptor frames.
+ * O(places + edges); no allocation for descriptor frames without verification; verification
+ * adds keypoint detection and about 10 ms per checked view.
  */
 topoloc_status topoloc_localizer_process(struct topoloc_localizer *localizer, const struct topoloc_frame *frame, struct topoloc_result *result);
 

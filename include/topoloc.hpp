@@ -334,6 +334,8 @@ struct Result {
   float off_map_probability = 0.f;  ///< Posterior probability of the off-map state.
   bool off_map = false;             ///< True when more likely off the map than on it.
   std::vector<Candidate> candidates;  ///< Top candidates, best first; `candidates[0].place == place`.
+  bool verified = false;  ///< `place` verified geometrically this frame (`verify_candidates` > 0).
+  uint32_t inliers = 0;   ///< RANSAC inliers between the frame and `view` (0 unless verified).
 };
 
 // ---------------------------------------------------------------------------------------------
@@ -1054,6 +1056,8 @@ public:
     last_.similarity = raw.similarity;
     last_.off_map_probability = raw.off_map_probability;
     last_.off_map = raw.off_map;
+    last_.verified = raw.verified;
+    last_.inliers = raw.inliers;
     // Within the reserved capacity: no allocation.
     last_.candidates.assign(buffer_.begin(), buffer_.begin() + static_cast<std::ptrdiff_t>(
                                                                    raw.candidates_len));
@@ -1151,6 +1155,8 @@ private:
     last_.similarity = 0.f;
     last_.off_map_probability = 0.f;
     last_.off_map = false;
+    last_.verified = false;
+    last_.inliers = 0;
     last_.candidates.clear();
   }
 

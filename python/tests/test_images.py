@@ -473,6 +473,27 @@ def test_read_only_arrays_are_accepted(vlad_map, images):
 # ---------------------------------------------------------------------------------------------
 
 
+def test_geometric_verification(vlad_map, images, corridor):
+    defaults = topoloc.localizer_options_default()
+    assert defaults["verify_candidates"] == 0 and defaults["verify_views_per_candidate"] == 2
+    with topoloc.Localizer(vlad_map, mode="single_frame") as plain:
+        r = plain.process(image=revisit(images[5], 305), timestamp=0.0)
+        assert r.place == 5 and not r.verified and r.inliers == 0
+    with topoloc.Localizer(vlad_map, mode="single_frame", verify_candidates=3) as loc:
+        assert loc.options["verify_candidates"] == 3
+        r = loc.process(image=revisit(images[5], 305), timestamp=0.0)
+        assert r.place == 5 and r.verified and r.inliers >= 20, r
+        # A descriptor frame cannot be verified; the failed frame changes nothing.
+        with pytest.raises(topoloc.InvalidImageError, match="verification"):
+            loc.process(vlad_map.view_descriptor(2), timestamp=1.0)
+        assert loc.process(image=images[2], timestamp=2.0).frame_index == 1
+    # Maps built from descriptors store no keypoints.
+    with pytest.raises(topoloc.InvalidOptionError, match="keypoints"):
+        topoloc.Localizer(corridor.map, verify_candidates=3)
+    with pytest.raises(topoloc.InvalidOptionError, match="views_per_candidate"):
+        topoloc.Localizer(vlad_map, verify_candidates=3, verify_views_per_candidate=0)
+
+
 def test_image_backend_none_refuses_image_frames(vlad_map, images):
     with topoloc.Localizer(vlad_map, image_backend="none") as loc:
         assert loc.options["image_backend"] == "none"

@@ -346,6 +346,15 @@ IMAGE_FIELDS = {
     "topoloc_frame": [("image", _lib.topoloc_image)],  # embedded by value, not a pointer
 }
 
+#: Fields appended after those for geometric verification (ABI 1.2).
+VERIFICATION_FIELDS = {
+    "topoloc_localizer_options": [
+        ("verify_candidates", c_uint32), ("verify_views_per_candidate", c_uint32),
+        ("verify_inlier_weight", c_float),
+    ],
+    "topoloc_frame": [],
+}
+
 
 @needs_header
 def test_image_structs_are_in_the_layout_checks():
@@ -360,7 +369,11 @@ def test_image_structs_are_in_the_layout_checks():
     for name, old in ABI1_FIELDS.items():
         fields = structs[name]
         assert [f for f, _ in fields[: len(old)]] == old, f"{name}: an ABI 1 field moved"
-        assert fields[len(old):] == IMAGE_FIELDS[name], f"{name}: image fields not appended as expected"
+        images = len(old) + len(IMAGE_FIELDS[name])
+        assert fields[len(old):images] == IMAGE_FIELDS[name], f"{name}: image fields not appended as expected"
+        assert fields[images:] == VERIFICATION_FIELDS[name], f"{name}: verification fields not appended"
+    result = structs["topoloc_result"]
+    assert [f for f, _ in result[-3:]] == ["candidates_len", "verified", "inliers"], "result: fields not appended"
 
 
 @needs_header

@@ -1256,6 +1256,10 @@ class Result:
         off_map: whether the robot is more likely off the map than on it.
         off_map_probability: posterior probability of the off-map state.
         candidates: the top-k places, best first (``candidates[0].place == place``).
+        verified: whether ``place`` was verified geometrically in this frame (localizers made
+            with ``verify_candidates`` > 0).
+        inliers: RANSAC inliers between the frame and ``view`` (0 unless ``verified``): with
+            ``place`` and ``view``, the evidence for a loop closure.
     """
 
     frame_index: int
@@ -1266,6 +1270,8 @@ class Result:
     off_map: bool
     off_map_probability: float
     candidates: List[Candidate] = field(default_factory=list)
+    verified: bool = False
+    inliers: int = 0
 
 
 _MODES = {"filter": _lib.MODE_FILTER, "single_frame": _lib.MODE_SINGLE_FRAME}
@@ -1291,7 +1297,8 @@ def localizer_options_default() -> Dict[str, Any]:
     """The library's default localizer options (``topoloc_localizer_options_init``) as a dict
     with keys ``mode`` ("filter"/"single_frame"), the float options, ``top_k``,
     ``expected_kind``, ``expected_model``, ``image_backend`` ("auto"), ``onnx_model_path`` and
-    ``onnx_runtime_path`` (``None``: the library's search)."""
+    ``onnx_runtime_path`` (``None``: the library's search), ``verify_candidates`` (0: off),
+    ``verify_views_per_candidate`` and ``verify_inlier_weight``."""
     o = _lib.defaults(_lib.topoloc_localizer_options, lib.topoloc_localizer_options_init)
     return _options_dict(o)
 
@@ -1306,6 +1313,9 @@ def _options_dict(o: _lib.topoloc_localizer_options) -> Dict[str, Any]:
     out["image_backend"] = _backend_name(o.image_backend, _IMAGE_BACKENDS)
     out["onnx_model_path"] = os.fsdecode(o.onnx_model_path) if o.onnx_model_path else None
     out["onnx_runtime_path"] = os.fsdecode(o.onnx_runtime_path) if o.onnx_runtime_path else None
+    out["verify_candidates"] = int(o.verify_candidates)
+    out["verify_views_per_candidate"] = int(o.verify_views_per_candidate)
+    out["verify_inlier_weight"] = float(o.verify_inlier_weight)
     return out
 
 
@@ -1332,6 +1342,14 @@ class Localizer(_SingleThreaded):
     was built with) and runtime are found. Loading fails with
     :class:`BackendUnavailableError` or :class:`ModelError`.
 
+    Geometric verification (off by default): ``verify_candidates`` (0..64) most probable places
+    are checked each frame against the frame's image (ORB matches and RANSAC on each place's
+    ``verify_views_per_candidate`` most similar views; the belief of a place with n inliers is
+    multiplied by ``exp(verify_inlier_weight * n)``); the result reports ``verified`` and
+    ``inliers``. It needs a map built from images (they store keypoints; otherwise
+    :class:`InvalidOptionError`) and image frames (:class:`InvalidImageError` for a descriptor
+    frame).
+
     Ownership: owns a C ``topoloc_localizer`` handle, released by :meth:`close`, the ``with``
     statement or garbage collection. The localizer keeps its own reference to the map data, so
     the :class:`Map` may be closed while the localizer is in use.
@@ -1357,6 +1375,9 @@ class Localizer(_SingleThreaded):
         image_backend: Union[str, int] = "auto",
         onnx_model_path: Optional[PathLike] = None,
         onnx_runtime_path: Optional[PathLike] = None,
+        verify_candidates: Optional[int] = None,
+        verify_views_per_candidate: Optional[int] = None,
+        verify_inlier_weight: Optional[float] = None,
     ) -> None:
         self._init_guard()
         self._free = lib.topoloc_localizer_free
@@ -1389,6 +1410,14 @@ class Localizer(_SingleThreaded):
             options.onnx_model_path = _path(onnx_model_path, "onnx_model_path")
         if onnx_runtime_path is not None:
             options.onnx_runtime_path = _path(onnx_runtime_path, "onnx_runtime_path")
+        if verify_candidates is not None:
+            options.verify_candidates = _u32(verify_candidates, "verify_candidates", InvalidOptionError)
+        if verify_views_per_candidate is not None:
+            options.verify_views_per_candidate = _u32(
+                verify_views_per_candidate, "verify_views_per_candidate", InvalidOptionError
+            )
+        if verify_inlier_weight is not None:
+            options.verify_inlier_weight = float(verify_inlier_weight)
 
         out = _lib.LocalizerPtr()
         check(lib.topoloc_localizer_new(map._h, byref(options), byref(out)))
@@ -1496,6 +1525,8 @@ class Localizer(_SingleThreaded):
                 off_map=bool(result.off_map),
                 off_map_probability=float(result.off_map_probability),
                 candidates=candidates,
+                verified=bool(result.verified),
+                inliers=int(result.inliers),
             )
         finally:
             self._leave()

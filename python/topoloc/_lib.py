@@ -209,6 +209,9 @@ class topoloc_localizer_options(Structure):
         ("image_backend", c_uint32),
         ("onnx_model_path", c_char_p),
         ("onnx_runtime_path", c_char_p),
+        ("verify_candidates", c_uint32),
+        ("verify_views_per_candidate", c_uint32),
+        ("verify_inlier_weight", c_float),
     ]
 
 
@@ -245,6 +248,8 @@ class topoloc_result(Structure):
         ("candidates", POINTER(topoloc_candidate)),
         ("candidates_capacity", c_size_t),
         ("candidates_len", c_size_t),
+        ("verified", c_bool),
+        ("inliers", c_uint32),
     ]
 
 

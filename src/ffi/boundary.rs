@@ -192,7 +192,7 @@ impl From<LocalizeError> for FfiError {
             LocalizeError::Odometry(_) => Self::new(TOPOLOC_ERR_NON_FINITE, e.to_string()),
             LocalizeError::Describe(d) => d.into(),
             LocalizeError::NoDescriber(_) => Self::new(TOPOLOC_ERR_NO_DESCRIBER, e.to_string()),
-            // The C options cannot turn verification on yet; should they, this is the option's fault.
+            // verify_candidates > 0 on a map without keypoints.
             LocalizeError::Verification(_) => Self::new(TOPOLOC_ERR_INVALID_OPTION, e.to_string()),
         }
     }

@@ -13,6 +13,7 @@ use super::map::topoloc_map;
 use super::topoloc_status;
 use crate::describe::DescriberOptions;
 use crate::localize::{Frame, Localization, Localizer, LocalizerOptions, Mode};
+use crate::verify::VerificationOptions;
 use std::ffi::c_char;
 
 /// Filter mode: forward filter over the graph (default).
@@ -65,12 +66,24 @@ pub struct topoloc_localizer_options {
     pub onnx_model_path: *const c_char,
     /// ONNX Runtime library; NULL or "" = `TOPOLOC_ORT_LIBRARY`, `ORT_DYLIB_PATH`, the cache.
     pub onnx_runtime_path: *const c_char,
+    // ABI 1.2 (topoloc 0.1): geometric verification.
+    /// Most probable places verified geometrically per frame against the frame's image, 0..=64
+    /// (ORB matches + RANSAC; the result's `verified` / `inliers`). 0 = off (default). Needs a
+    /// map storing keypoints (maps built from images do; else `_INVALID_OPTION`) and frames
+    /// with images (else `_INVALID_IMAGE`). About 10 ms per checked view.
+    pub verify_candidates: u32,
+    /// Views checked per candidate place, those most similar to the frame, 1..=64. Default 2.
+    pub verify_views_per_candidate: u32,
+    /// Log-likelihood of one inlier: a checked place's belief is multiplied by
+    /// `exp(verify_inlier_weight * inliers)` (finite, >= 0). Default 0.1.
+    pub verify_inlier_weight: f32,
 }
 
 impl Versioned for topoloc_localizer_options {
-    /// ABI 1.0 ended before `image_backend`; 1.1 added the image fields.
+    /// ABI 1.0 ended before `image_backend`; 1.1 added the image fields, 1.2 verification.
     const LAYOUTS: &'static [usize] = &[
         std::mem::offset_of!(Self, image_backend),
+        std::mem::offset_of!(Self, verify_candidates),
         std::mem::size_of::<Self>(),
     ];
 }
@@ -93,6 +106,9 @@ impl Default for topoloc_localizer_options {
             image_backend: TOPOLOC_BACKEND_AUTO,
             onnx_model_path: std::ptr::null(),
             onnx_runtime_path: std::ptr::null(),
+            verify_candidates: d.verification.candidates as u32,
+            verify_views_per_candidate: d.verification.views_per_candidate as u32,
+            verify_inlier_weight: d.verification.inlier_weight,
         }
     }
 }
@@ -154,6 +170,12 @@ pub extern "C" fn topoloc_localizer_new(
                 o.expected_descriptor_model,
                 0,
             )?,
+            verification: VerificationOptions {
+                candidates: o.verify_candidates as usize,
+                views_per_candidate: o.verify_views_per_candidate as usize,
+                inlier_weight: o.verify_inlier_weight,
+                ..VerificationOptions::default()
+            },
             // The motion model's speed classes are not in the C options yet: defaults.
             ..LocalizerOptions::default()
         };
@@ -306,10 +328,20 @@ pub struct topoloc_result {
     pub candidates_capacity: usize,
     /// Number of candidates written: min(top_k, places, capacity).
     pub candidates_len: usize,
+    // ABI 1.2 (topoloc 0.1): geometric verification.
+    /// True when `place` was verified geometrically in this frame (`verify_candidates` > 0).
+    pub verified: bool,
+    /// RANSAC inliers between the frame and `view` (0 unless `verified`): with `place` and
+    /// `view`, the evidence for a loop closure.
+    pub inliers: u32,
 }
 
 impl Versioned for topoloc_result {
-    const LAYOUTS: &'static [usize] = &[std::mem::size_of::<Self>()];
+    /// ABI 1.0 and 1.1 ended before `verified`; 1.2 added verification.
+    const LAYOUTS: &'static [usize] = &[
+        std::mem::offset_of!(Self, verified),
+        std::mem::size_of::<Self>(),
+    ];
 }
 
 impl Default for topoloc_result {
@@ -326,6 +358,8 @@ impl Default for topoloc_result {
             candidates: std::ptr::null_mut(),
             candidates_capacity: 0,
             candidates_len: 0,
+            verified: false,
+            inliers: 0,
         }
     }
 }
@@ -345,9 +379,11 @@ pub extern "C" fn topoloc_result_init(result: *mut topoloc_result, size: usize) 
 /// Errors: `_DIMENSION_MISMATCH`, `_NON_FINITE`, `_ZERO_DESCRIPTOR`, `_TIMESTAMP`,
 /// `_INVALID_ARGUMENT` (odometry not a rigid transform), `_INVALID_IMAGE`,
 /// `_UNINFORMATIVE_IMAGE` (blank or featureless image: state unchanged), `_NO_DESCRIBER`,
-/// `_MODEL`, `_STRUCT_SIZE`, `_NULL_ARGUMENT`.
+/// `_MODEL`, `_STRUCT_SIZE`, `_NULL_ARGUMENT`. With verification on, the frame needs its image
+/// (`_INVALID_IMAGE`), beside its descriptor or instead of it.
 /// Cost: describing the image (if any), then one pass over the map's descriptors plus
-/// O(places + edges); no allocation for descriptor frames.
+/// O(places + edges); no allocation for descriptor frames without verification; verification
+/// adds keypoint detection and about 10 ms per checked view.
 #[no_mangle]
 pub extern "C" fn topoloc_localizer_process(
     localizer: *mut topoloc_localizer,
@@ -396,6 +432,8 @@ pub extern "C" fn topoloc_localizer_process(
                 candidates: buffer,
                 candidates_capacity: capacity,
                 candidates_len: written,
+                verified: out.candidates[0].verified,
+                inliers: out.candidates[0].inliers,
             },
             "result",
         )

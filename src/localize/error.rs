@@ -27,8 +27,8 @@ pub enum LocalizeError {
     /// with `Localizer::with_describer` on a map built from images).
     #[error("cannot describe images: {0}")]
     NoDescriber(String),
-    /// Geometric verification cannot run: the map stores no keypoints, or the frame has no
-    /// image.
+    /// Geometric verification is on but the map stores no keypoints. (A frame without an
+    /// image while verifying is a [`DescribeError::InvalidImage`].)
     #[error("cannot verify: {0}")]
     Verification(String),
     /// Odometry is not finite.

@@ -12,7 +12,7 @@ mod similarity;
 pub use error::LocalizeError;
 
 use crate::describe::image::ImageView;
-use crate::describe::{Describer, DescriberOptions};
+use crate::describe::{DescribeError, Describer, DescriberOptions};
 use crate::map::{normalize_descriptor_into, ExpectedDescriptor, Map, PlaceId, ViewId};
 use crate::verify::{check_pair, KeypointDetector, Keypoints, VerificationOptions};
 use filter::{Belief, FilterParams};
@@ -401,7 +401,9 @@ impl Localizer {
         normalize_descriptor_into(descriptor, self.map.dim(), &mut self.query)?;
         if let Some(verifier) = &mut self.verifier {
             let image = frame.image.as_ref().ok_or_else(|| {
-                LocalizeError::Verification("verification is on but the frame has no image".into())
+                DescribeError::InvalidImage(
+                    "verification is on: the frame needs its image (beside or instead of a descriptor)".into(),
+                )
             })?;
             verifier.query = verifier.detector.detect(image)?;
         }

@@ -1842,7 +1842,7 @@ static void test_versioned_structs(const topoloc_map *map)
         CHECK(all_bytes(nr.tail, sizeof nr.tail, 0xEE));
 
         /* A result whose struct_size is too small is refused, untouched. */
-        nr.r.struct_size = sizeof(topoloc_result) - 8;
+        nr.r.struct_size = sizeof(topoloc_result) - 2; /* cuts the last field */
         nr.r.place = 4242;
         CHECK_STATUS(topoloc_localizer_process(loc, &nf.f, &nr.r), TOPOLOC_ERR_STRUCT_SIZE);
         CHECK(nr.r.place == 4242);
@@ -2993,6 +2993,67 @@ static void test_abi_1_0_frame(const topoloc_map *world)
     topoloc_localizer_free(loc);
 }
 
+/* Geometric verification (ABI 1.2): maps built from images store keypoints; the top place of a
+ * revisit is verified with many inliers; a map without keypoints refuses the option; a frame
+ * without its image is refused with the state unchanged; an ABI 1.1 result is still filled. */
+static void test_verification(const topoloc_map *map, const topoloc_map *world)
+{
+    static uint8_t revisit[IMG_PIXELS];
+    static float descriptor[1024];
+    topoloc_localizer_options options;
+    topoloc_localizer *loc = NULL;
+    topoloc_result r;
+    topoloc_frame frame;
+    topoloc_image image;
+    uint32_t dim = 0;
+
+    section("images: geometric verification (keypoints, inliers, refusals)");
+    make_revisit(g_place_px[4], 204u, revisit);
+    CHECK_OK(topoloc_localizer_options_default(&options));
+    CHECK(options.verify_candidates == 0 && options.verify_views_per_candidate == 2);
+    CHECK(options.verify_inlier_weight > 0.0f);
+    options.verify_candidates = 3;
+    CHECK_STATUS(topoloc_localizer_new(world, &options, &loc), TOPOLOC_ERR_INVALID_OPTION);
+    CHECK_MESSAGE_HAS("keypoints");
+    CHECK(loc == NULL);
+    options.verify_views_per_candidate = 0;
+    CHECK_STATUS(topoloc_localizer_new(map, &options, &loc), TOPOLOC_ERR_INVALID_OPTION);
+    CHECK_MESSAGE_HAS("views_per_candidate");
+    options.verify_views_per_candidate = 2;
+
+    CHECK_OK(topoloc_localizer_new(map, &options, &loc));
+    if (loc == NULL) {
+        return;
+    }
+    CHECK_OK(topoloc_result_default(&r));
+    image = gray_image(revisit);
+    CHECK_OK(localize_image(loc, &image, 0.0, &r));
+    CHECK(r.place == 4 && r.verified);
+    CHECK(r.inliers >= 20);
+    printf("   revisit of place 4: place %u, %u inliers\n", (unsigned)r.place, (unsigned)r.inliers);
+    CHECK(r.frame_index == 0);
+
+    /* A descriptor-only frame cannot be verified: refused, nothing changes. */
+    topoloc_frame_default(&frame);
+    frame.timestamp = 1.0;
+    CHECK_OK(topoloc_map_descriptor_dim(map, &dim));
+    CHECK(dim >= 1 && dim <= 1024);
+    descriptor[0] = 1.0f;
+    frame.descriptor = descriptor;
+    frame.descriptor_len = dim;
+    CHECK_STATUS(topoloc_localizer_process(loc, &frame, &r), TOPOLOC_ERR_INVALID_IMAGE);
+    CHECK_MESSAGE_HAS("verification");
+    CHECK(r.frame_index == 0 && r.place == 4 && r.verified);
+
+    /* A caller of ABI 1.1 gets its result without the verification fields. */
+    CHECK_OK(topoloc_result_default(&r));
+    r.struct_size = offsetof(topoloc_result, verified);
+    r.inliers = 12345u;
+    CHECK_OK(localize_image(loc, &image, 2.0, &r));
+    CHECK(r.place == 4 && r.frame_index == 1 && r.inliers == 12345u);
+    topoloc_localizer_free(loc);
+}
+
 static void test_images(const topoloc_map *world)
 {
     topoloc_map *map;
@@ -3003,6 +3064,7 @@ static void test_images(const topoloc_map *world)
     CHECK(map != NULL);
     if (map != NULL) {
         test_image_localize(map, world);
+        test_verification(map, world);
         test_bad_images(map);
     }
     topoloc_map_free(map);

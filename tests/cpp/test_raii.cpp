@@ -909,6 +909,14 @@ TEST(image_localizer) {
   CHECK_THROWS_STATUS(plain.localize(gray(places_pixels()[0]), 0.0), TOPOLOC_ERR_NO_DESCRIBER);
   options.image_backend = TOPOLOC_BACKEND_VLAD_ORB;
   CHECK_THROWS_STATUS((void)topoloc::Localizer(chain_map(), options), TOPOLOC_ERR_NO_DESCRIBER);
+
+  // Geometric verification: the image map stores keypoints, a map from descriptors does not.
+  options = topoloc::default_localizer_options();
+  options.verify_candidates = 3;
+  topoloc::Localizer verifying(map, options);
+  const topoloc::Result &checked = verifying.localize(gray(places_pixels()[6]), 0.0);
+  CHECK(checked.place == 6 && checked.verified && checked.inliers >= 20);
+  CHECK_THROWS_STATUS((void)topoloc::Localizer(chain_map(), options), TOPOLOC_ERR_INVALID_OPTION);
 }
 
 void write_pgm(const std::string &path, const std::vector<uint8_t> &px) {

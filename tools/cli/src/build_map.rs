@@ -45,7 +45,7 @@ pub struct BuildMapArgs {
     pub threads: usize,
     /// ORB keypoints stored per view for geometric verification (0: none).
     #[arg(long, default_value_t = topoloc::verify::DEFAULT_KEYPOINTS)]
-    pub keypoints: usize,
+    pub verification_keypoints: usize,
     /// Output map file.
     #[arg(long)]
     pub out: PathBuf,
@@ -93,7 +93,7 @@ pub fn run(args: &BuildMapArgs) -> Result<()> {
             ..KeyframeOptions::default()
         },
         threads: args.threads,
-        keypoints: args.keypoints,
+        keypoints: args.verification_keypoints,
     };
     let sources: Vec<ImageSource> = files.iter().map(|f| ImageSource::File(f)).collect();
     let bar = progress_bar(files.len(), "describing");

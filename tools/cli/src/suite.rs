@@ -155,7 +155,12 @@ pub fn run(args: &SuiteArgs) -> Result<()> {
             if !args.json {
                 let figures: Vec<String> = results
                     .iter()
-                    .map(|r| format!("{} {:.3}/{:.3}", r.name, r.mna, r.oha))
+                    .map(|r| {
+                        format!(
+                            "{} {:.3}/{:.3} ({:.2} ms)",
+                            r.name, r.mna, r.oha, r.ms_median
+                        )
+                    })
                     .collect();
                 eprintln!(
                     "{split} world {k}: {} places, {} views, {} frames; MNA/OHA {}",
@@ -248,8 +253,9 @@ fn summary_json(
                     let oha = column(worlds, c, |r| r.oha);
                     let (mna_mean, mna_std) = mean_std(&mna);
                     let (oha_mean, oha_std) = mean_std(&oha);
+                    let localize_ms = column(worlds, c, |r| r.ms_median);
                     let value = json!({
-                        "mna": mna, "oha": oha,
+                        "mna": mna, "oha": oha, "localize_ms_median": localize_ms,
                         "mna_mean": mna_mean, "mna_std": mna_std,
                         "oha_mean": oha_mean, "oha_std": oha_std,
                     });
