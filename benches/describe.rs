@@ -1,5 +1,7 @@
 //! Describing images, one thread, 320x240 input, D = 512: the ONNX multi-level descriptor, the
-//! VLAD-ORB descriptor, and the whole localize step (describe + filter) on a 1k-view map.
+//! VLAD-ORB descriptor, and the whole localize step (describe + filter) on a 1k-view map; and
+//! geometric verification: ORB keypoints of the input, and one pair check (matching + RANSAC)
+//! against the input shifted by 6 pixels (many inliers) and against it mirrored (few).
 //!
 //! Run: `cargo bench --bench describe` (add `-- --quick` for a shorter run). The ONNX cases need
 //! scripts/setup-models.sh (skipped with a message otherwise). The input is a 320x240 colour
@@ -19,6 +21,7 @@ use topoloc::describe::pca::Pca;
 use topoloc::describe::vlad::{Codebook, VladOptions};
 use topoloc::describe::{BackendConfig, Describer, DescriberModel, Extractor};
 use topoloc::synthetic::random_map;
+use topoloc::verify::{check_pair, KeypointDetector, PairOptions, DEFAULT_KEYPOINTS};
 use topoloc::{Frame, Localization, Localizer, LocalizerOptions, MapBuilder};
 
 const DIM: usize = 512;
@@ -160,5 +163,48 @@ fn describe(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, describe);
+/// `pixels` (RGB, W x H) moved `dx` pixels left, or mirrored left-right when `dx` is `None`.
+fn moved(pixels: &[u8], dx: Option<usize>) -> Vec<u8> {
+    let w = W as usize;
+    let mut out = pixels.to_vec();
+    for (row_out, row_in) in out.chunks_exact_mut(w * 3).zip(pixels.chunks_exact(w * 3)) {
+        for x in 0..w {
+            let from = match dx {
+                Some(d) => (x + d).min(w - 1),
+                None => w - 1 - x,
+            };
+            row_out[x * 3..x * 3 + 3].copy_from_slice(&row_in[from * 3..from * 3 + 3]);
+        }
+    }
+    out
+}
+
+fn verify(c: &mut Criterion) {
+    let pixels = input_image();
+    let image = ImageView::packed(W, H, PixelFormat::Rgb8, &pixels);
+    let mut detector = KeypointDetector::new(DEFAULT_KEYPOINTS).unwrap();
+    let stored = detector.detect(&image).unwrap();
+    let mut group = c.benchmark_group("verify_320x240");
+    group
+        .sample_size(30)
+        .measurement_time(Duration::from_secs(6));
+    group.bench_function("detect_500_keypoints", |b| {
+        b.iter(|| detector.detect(black_box(&image)).unwrap())
+    });
+    let options = PairOptions::default();
+    for (name, dx) in [("check_pair/same_place", Some(6)), ("check_pair/other_place", None)] {
+        let query_pixels = moved(&pixels, dx);
+        let query = detector
+            .detect(&ImageView::packed(W, H, PixelFormat::Rgb8, &query_pixels))
+            .unwrap();
+        let check = check_pair(query.as_ref(), stored.as_ref(), &options).unwrap();
+        eprintln!("{name}: {check:?}");
+        group.bench_function(name, |b| {
+            b.iter(|| check_pair(black_box(query.as_ref()), stored.as_ref(), &options).unwrap())
+        });
+    }
+    group.finish();
+}
+
+criterion_group!(benches, describe, verify);
 criterion_main!(benches);

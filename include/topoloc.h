@@ -553,7 +553,7 @@ typedef struct topoloc_localizer_options {
   uint32_t verify_views_per_candidate;
   /**
    * Log-likelihood of one inlier: a checked place's belief is multiplied by
-   * `exp(verify_inlier_weight * inliers)` (finite, >= 0). Default 0.1.
+   * `exp(verify_inlier_weight * inliers)` (finite, >= 0). Default 0.05.
    */
   float verify_inlier_weight;
 } topoloc_localizer_options;

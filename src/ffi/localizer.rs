@@ -75,7 +75,7 @@ pub struct topoloc_localizer_options {
     /// Views checked per candidate place, those most similar to the frame, 1..=64. Default 2.
     pub verify_views_per_candidate: u32,
     /// Log-likelihood of one inlier: a checked place's belief is multiplied by
-    /// `exp(verify_inlier_weight * inliers)` (finite, >= 0). Default 0.1.
+    /// `exp(verify_inlier_weight * inliers)` (finite, >= 0). Default 0.05.
     pub verify_inlier_weight: f32,
 }
 

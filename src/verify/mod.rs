@@ -31,7 +31,8 @@ pub struct VerificationOptions {
     /// Views checked per candidate place: those most similar to the query. Default 2.
     pub views_per_candidate: usize,
     /// Log-likelihood of one inlier: a checked place's belief is multiplied by
-    /// `exp(inlier_weight * inliers)` before normalising. Default 0.1 (BENCHMARKS.md).
+    /// `exp(inlier_weight * inliers)` before normalising. Default 0.05 (0.025-0.2 compared
+    /// with `topoloc suite`, BENCHMARKS.md).
     pub inlier_weight: f32,
     /// Keypoints detected in the query image. Default [`DEFAULT_KEYPOINTS`].
     pub query_keypoints: usize,
@@ -44,7 +45,7 @@ impl Default for VerificationOptions {
         Self {
             candidates: 0,
             views_per_candidate: 2,
-            inlier_weight: 0.1,
+            inlier_weight: 0.05,
             query_keypoints: DEFAULT_KEYPOINTS,
             pair: PairOptions::default(),
         }
