@@ -192,7 +192,10 @@ fn verify(c: &mut Criterion) {
         b.iter(|| detector.detect(black_box(&image)).unwrap())
     });
     let options = PairOptions::default();
-    for (name, dx) in [("check_pair/same_place", Some(6)), ("check_pair/other_place", None)] {
+    for (name, dx) in [
+        ("check_pair/same_place", Some(6)),
+        ("check_pair/other_place", None),
+    ] {
         let query_pixels = moved(&pixels, dx);
         let query = detector
             .detect(&ImageView::packed(W, H, PixelFormat::Rgb8, &query_pixels))

@@ -47,15 +47,9 @@ pub struct SimulateArgs {
     /// Legs per trajectory (one of them revisits an earlier goal when there are two or more).
     #[arg(long, default_value_t = 4)]
     pub legs: usize,
-    /// Query frames per second.
-    #[arg(long, default_value_t = 10.0)]
-    pub rate_hz: f64,
-    /// Lighting of the query frames (the map is captured in bright light).
-    #[arg(long, default_value = "dim", value_parser = parse_condition)]
-    pub condition: ConditionKind,
-    /// Descriptor backend of the map; default: ONNX when its model is set up, else VLAD.
-    #[arg(long, value_enum)]
-    pub backend: Option<Backend>,
+    /// Query light and rate, map backend.
+    #[command(flatten)]
+    pub query: QueryArgs,
     /// Map capture.
     #[command(flatten)]
     pub capture: CaptureArgs,
@@ -65,6 +59,21 @@ pub struct SimulateArgs {
     /// Print one JSON summary object on stdout instead of text.
     #[arg(long)]
     pub json: bool,
+}
+
+/// Query frames' light and rate, and the map's descriptor backend, shared by `simulate` and
+/// `suite`.
+#[derive(clap::Args, Clone, Debug)]
+pub struct QueryArgs {
+    /// Query frames per second.
+    #[arg(long, default_value_t = 10.0)]
+    pub rate_hz: f64,
+    /// Lighting of the query frames (maps are captured in bright light).
+    #[arg(long, default_value = "dim", value_parser = parse_condition)]
+    pub condition: ConditionKind,
+    /// Descriptor backend of the map; default: ONNX when its model is set up, else VLAD.
+    #[arg(long, value_enum)]
+    pub backend: Option<Backend>,
 }
 
 pub(crate) fn parse_split(name: &str) -> Result<Split, String> {
@@ -87,7 +96,7 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
             eprintln!("{text}");
         }
     };
-    let (backend, backend_note) = choose_backend(args.backend);
+    let (backend, backend_note) = choose_backend(args.query.backend);
     say(format!("backend: {backend_note}"));
     let mut world = args.split.world_params(args.world);
     world.rooms_per_floor = args.rooms.unwrap_or(world.rooms_per_floor);
@@ -96,9 +105,9 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
         world,
         backend,
         &args.capture,
-        args.condition,
+        args.query.condition,
         args.legs,
-        args.rate_hz,
+        args.query.rate_hz,
     );
 
     let bars = StepBars::new(args.json);
@@ -143,7 +152,7 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
             dir.display(),
             flight.images.len(),
             flight.trajectory.length_m,
-            args.condition.name()
+            args.query.condition.name()
         ));
         trajectories.push(json!({
             "path": dir.display().to_string(),
@@ -161,7 +170,7 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
                 "out": args.out.display().to_string(),
                 "map": map_path.display().to_string(),
                 "split": args.split.name(), "world": args.world, "world_seed": options.world.seed,
-                "style": options.world.style.name, "condition": args.condition.name(),
+                "style": options.world.style.name, "condition": args.query.condition.name(),
                 "backend": scene.map.descriptor().to_string(),
                 "places": scene.map.place_count(), "views": scene.map.view_count(),
                 "edges": scene.map.edge_count(),
@@ -270,7 +279,7 @@ fn write_dataset(
         trajectory_seed: options.trajectory.seed,
         split: args.split.name().into(),
         style: options.world.style.name.clone(),
-        condition: args.condition.name().into(),
+        condition: args.query.condition.name().into(),
         rate_hz: options.trajectory.motion.rate_hz,
         // scenario::fly draws the odometry noise from the trajectory seed.
         odometry_seed: options.trajectory.seed,

@@ -9,10 +9,9 @@
 //! OHA per split as mean ± standard deviation over the worlds, the way the seed's tables do
 //! (thesis Table 4.2), and the graph sizes they were measured on.
 
-use crate::backend_args::Backend;
 use crate::demo::{choose_backend, evaluate, ConfigResult};
 use crate::progress::StepBars;
-use crate::simulate::{parse_condition, parse_split, scenario_options, CaptureArgs};
+use crate::simulate::{parse_split, scenario_options, CaptureArgs, QueryArgs};
 use anyhow::Result;
 use serde_json::json;
 use std::time::Instant;
@@ -22,7 +21,6 @@ use topoloc::eval::HopDistances;
 use topoloc::verify::VerificationOptions;
 use topoloc::{LocalizerOptions, Mode};
 use topoloc_sim::capture::image_view;
-use topoloc_sim::render::ConditionKind;
 use topoloc_sim::scenario::{build_scene, describe_flight, fly};
 use topoloc_sim::style::Split;
 
@@ -45,15 +43,9 @@ pub struct SuiteArgs {
     /// Legs of each query trajectory (one revisits an earlier goal when there are two or more).
     #[arg(long, default_value_t = 3)]
     pub legs: usize,
-    /// Query frames per second.
-    #[arg(long, default_value_t = 10.0)]
-    pub rate_hz: f64,
-    /// Lighting of the query frames (maps are captured in bright light).
-    #[arg(long, default_value = "dim", value_parser = parse_condition)]
-    pub condition: ConditionKind,
-    /// Descriptor backend; default: ONNX when its model is set up, else VLAD.
-    #[arg(long, value_enum)]
-    pub backend: Option<Backend>,
+    /// Query light and rate, map backend.
+    #[command(flatten)]
+    pub query: QueryArgs,
     /// Map capture.
     #[command(flatten)]
     pub capture: CaptureArgs,
@@ -103,7 +95,7 @@ pub fn run(args: &SuiteArgs) -> Result<()> {
         "--splits must name at least one split"
     );
     let start = Instant::now();
-    let (backend, backend_note) = choose_backend(args.backend);
+    let (backend, backend_note) = choose_backend(args.query.backend);
     if !args.json {
         eprintln!("backend: {backend_note}");
     }
@@ -123,9 +115,9 @@ pub fn run(args: &SuiteArgs) -> Result<()> {
                 world,
                 backend.clone(),
                 &args.capture,
-                args.condition,
+                args.query.condition,
                 args.legs,
-                args.rate_hz,
+                args.query.rate_hz,
             );
             options.trajectory.seed = split.trajectory_seed(k, 0);
             let report = |step, done, total| bars.report(step, done, total);
@@ -188,7 +180,7 @@ pub fn run(args: &SuiteArgs) -> Result<()> {
             "{} worlds per split, {} views per place, query light '{}', {:.0} s in all",
             args.worlds,
             args.capture.views_per_place,
-            args.condition.name(),
+            args.query.condition.name(),
             start.elapsed().as_secs_f64()
         );
     }
@@ -273,7 +265,7 @@ fn summary_json(
         })
         .collect();
     json!({
-        "backend": backend_note, "condition": args.condition.name(),
+        "backend": backend_note, "condition": args.query.condition.name(),
         "rooms": args.rooms, "floors": args.floors, "legs": args.legs,
         "views_per_place": args.capture.views_per_place,
         "verify": args.verify, "inlier_weight": args.inlier_weight,
