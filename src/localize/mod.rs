@@ -449,12 +449,7 @@ impl Localizer {
         let keypoints = self.map.keypoints().expect("checked at construction");
         let m = self.map.place_count();
         let c = options.candidates.min(m);
-        let p = &self.belief.places;
-        let by_probability =
-            |a: &u32, b: &u32| p[*b as usize].total_cmp(&p[*a as usize]).then(a.cmp(b));
-        if c < m {
-            self.order.select_nth_unstable_by(c - 1, by_probability);
-        }
+        select_most_probable(&mut self.order, &self.belief.places, c, false);
         verifier.checked.clear();
         for &place in &self.order[..c] {
             verifier.views.clear();
@@ -504,12 +499,7 @@ impl Localizer {
         let p = &self.belief.places;
         let on_map = 1.0 - self.belief.off_map;
         let k = self.options.top_k.min(m);
-        let by_probability =
-            |a: &u32, b: &u32| p[*b as usize].total_cmp(&p[*a as usize]).then(a.cmp(b));
-        if k < m {
-            self.order.select_nth_unstable_by(k - 1, by_probability);
-        }
-        self.order[..k].sort_unstable_by(by_probability);
+        select_most_probable(&mut self.order, p, k, true);
         out.candidates.clear();
         out.candidates.extend(self.order[..k].iter().map(|&place| {
             let view = self.best_views[place as usize];
@@ -533,5 +523,21 @@ impl Localizer {
         out.similarity = best.similarity;
         out.off_map_probability = self.belief.off_map as f32;
         out.off_map = self.belief.off_map > 0.5;
+    }
+}
+
+/// Moves the `k` (>= 1) most probable places of `order` (place ids) to its front, ties broken by
+/// the lower id; sorts them best first when `sorted`.
+fn select_most_probable(order: &mut [u32], probability: &[f64], k: usize, sorted: bool) {
+    let by_probability = |a: &u32, b: &u32| {
+        probability[*b as usize]
+            .total_cmp(&probability[*a as usize])
+            .then(a.cmp(b))
+    };
+    if k < order.len() {
+        order.select_nth_unstable_by(k - 1, by_probability);
+    }
+    if sorted {
+        order[..k].sort_unstable_by(by_probability);
     }
 }
