@@ -115,6 +115,13 @@
 #define TOPOLOC_MODE_SINGLE_FRAME 1
 
 /**
+ * Metric mode (ABI 1.3): Monte Carlo localization of the camera pose in the map frame, moved
+ * by the frames' odometry and weighed by appearance; the place is the one nearest to the
+ * particles. Needs a map with every place's position and every view's pose.
+ */
+#define TOPOLOC_MODE_METRIC 2
+
+/**
  * Place kind: a dead end of the skeleton.
  */
 #define TOPOLOC_NODE_END 0
@@ -486,7 +493,8 @@ typedef struct topoloc_localizer_options {
    */
   size_t struct_size;
   /**
-   * `TOPOLOC_MODE_FILTER` or `TOPOLOC_MODE_SINGLE_FRAME`.
+   * `TOPOLOC_MODE_FILTER`, `TOPOLOC_MODE_SINGLE_FRAME` or (ABI 1.3) `TOPOLOC_MODE_METRIC`
+   * (on a map without positions or view poses: `_INVALID_OPTION`).
    */
   uint32_t mode;
   /**
@@ -556,6 +564,18 @@ typedef struct topoloc_localizer_options {
    * `exp(verify_inlier_weight * inliers)` (finite, >= 0). Default 0.05.
    */
   float verify_inlier_weight;
+  /**
+   * Particles of `TOPOLOC_MODE_METRIC`, 1..=1,000,000. Default 2000.
+   */
+  uint32_t metric_particles;
+  /**
+   * Temperature of a particle's appearance likelihood in metric mode (> 0). Default 1.0.
+   */
+  float metric_temperature;
+  /**
+   * Seed of metric mode's random generator (results are deterministic). Default 0.
+   */
+  uint64_t metric_seed;
 } topoloc_localizer_options;
 
 /**

@@ -166,6 +166,9 @@ def test_defaults_are_the_library_defaults():
         assert d[name] == pytest.approx(getattr(raw, name), abs=0, rel=0)
     assert d["top_k"] == raw.top_k >= 1
     assert 0 < d["temperature"] < 1
+    assert d["metric_particles"] == raw.metric_particles >= 1
+    assert d["metric_temperature"] == raw.metric_temperature > 0
+    assert d["metric_seed"] == raw.metric_seed == 0
     kf = topoloc.keyframe_options_default()
     raw_kf = _lib.defaults(_lib.topoloc_keyframe_options, _lib.lib.topoloc_keyframe_options_init)
     assert kf["place_spacing_m"] == raw_kf.place_spacing_m > 0
@@ -355,6 +358,14 @@ VERIFICATION_FIELDS = {
     "topoloc_frame": [],
 }
 
+#: Fields appended after those for metric mode (ABI 1.3).
+METRIC_FIELDS = {
+    "topoloc_localizer_options": [
+        ("metric_particles", c_uint32), ("metric_temperature", c_float), ("metric_seed", c_uint64),
+    ],
+    "topoloc_frame": [],
+}
+
 
 @needs_header
 def test_image_structs_are_in_the_layout_checks():
@@ -371,7 +382,9 @@ def test_image_structs_are_in_the_layout_checks():
         assert [f for f, _ in fields[: len(old)]] == old, f"{name}: an ABI 1 field moved"
         images = len(old) + len(IMAGE_FIELDS[name])
         assert fields[len(old):images] == IMAGE_FIELDS[name], f"{name}: image fields not appended as expected"
-        assert fields[images:] == VERIFICATION_FIELDS[name], f"{name}: verification fields not appended"
+        verification = images + len(VERIFICATION_FIELDS[name])
+        assert fields[images:verification] == VERIFICATION_FIELDS[name], f"{name}: verification fields not appended"
+        assert fields[verification:] == METRIC_FIELDS[name], f"{name}: metric fields not appended"
     result = structs["topoloc_result"]
     assert [f for f, _ in result[-3:]] == ["candidates_len", "verified", "inliers"], "result: fields not appended"
 

@@ -84,6 +84,35 @@ def test_filter_with_odometry(corridor):
     assert r2.frame_index == 2
 
 
+def test_metric_mode_follows_a_walk_with_odometry(corridor):
+    """Metric mode moves its particles by the odometry (2 m per frame along x, as the
+    corridor's places are spaced); the same seed gives the same answers."""
+
+    queries = [corridor.query(p, noise=0.3) for p in range(6)]
+
+    def walk(loc):
+        out = [loc.process(queries[0], 0.0)]
+        for p in range(1, 6):
+            out.append(loc.process(queries[p], float(p), odometry=rot_z(0.0, (2.0, 0.0, 0.0))))
+        return out
+
+    loc = topoloc.Localizer(corridor.map, mode="metric", metric_particles=500, metric_seed=3)
+    assert loc.options["mode"] == "metric" and loc.options["metric_particles"] == 500
+    assert loc.options["metric_seed"] == 3
+    results = walk(loc)
+    assert [r.place for r in results] == [0, 1, 2, 3, 4, 5]
+    assert all(0 < r.confidence <= 1 for r in results)
+    again = walk(topoloc.Localizer(corridor.map, mode="metric", metric_particles=500, metric_seed=3))
+    assert [(r.place, r.confidence) for r in again] == [(r.place, r.confidence) for r in results]
+
+
+def test_metric_mode_needs_positions_and_poses(small_map):
+    with pytest.raises(topoloc.InvalidOptionError, match="position"):
+        topoloc.Localizer(small_map, mode="metric")
+    with pytest.raises(topoloc.InvalidOptionError, match="metric_seed"):
+        topoloc.Localizer(small_map, mode="metric", metric_seed=-1)
+
+
 def test_off_map_frames(corridor):
     # A descriptor orthogonal to every view scores 0 everywhere: the robot is off the map.
     views = corridor.views.astype(np.float64)
@@ -211,6 +240,8 @@ def test_equal_timestamps_are_allowed(corridor):
         {"top_k": 0},
         {"top_k": -1},
         {"mode": "bogus"},
+        {"mode": "metric", "metric_particles": 0},
+        {"mode": "metric", "metric_temperature": 0.0},
         {"mode": 7},
     ],
 )

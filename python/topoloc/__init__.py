@@ -71,6 +71,7 @@ from ._lib import (
     ABI_VERSION,
     MODE_FILTER,
     MODE_SINGLE_FRAME,
+    MODE_METRIC,
     NODE_BRANCH,
     NODE_CORNER,
     NODE_END,
@@ -122,6 +123,7 @@ __all__ = [
     "Candidate",
     "MODE_FILTER",
     "MODE_SINGLE_FRAME",
+    "MODE_METRIC",
     # versions and library
     "version",
     "abi_version",

@@ -1274,7 +1274,7 @@ class Result:
     inliers: int = 0
 
 
-_MODES = {"filter": _lib.MODE_FILTER, "single_frame": _lib.MODE_SINGLE_FRAME}
+_MODES = {"filter": _lib.MODE_FILTER, "single_frame": _lib.MODE_SINGLE_FRAME, "metric": _lib.MODE_METRIC}
 #: Localizer ``image_backend`` names -> ``TOPOLOC_BACKEND_*``.
 _IMAGE_BACKENDS = {
     "auto": _lib.BACKEND_AUTO,
@@ -1295,10 +1295,11 @@ _OPTION_FIELDS = (
 
 def localizer_options_default() -> Dict[str, Any]:
     """The library's default localizer options (``topoloc_localizer_options_init``) as a dict
-    with keys ``mode`` ("filter"/"single_frame"), the float options, ``top_k``,
+    with keys ``mode`` ("filter"/"single_frame"/"metric"), the float options, ``top_k``,
     ``expected_kind``, ``expected_model``, ``image_backend`` ("auto"), ``onnx_model_path`` and
     ``onnx_runtime_path`` (``None``: the library's search), ``verify_candidates`` (0: off),
-    ``verify_views_per_candidate`` and ``verify_inlier_weight``."""
+    ``verify_views_per_candidate``, ``verify_inlier_weight``, ``metric_particles``,
+    ``metric_temperature`` and ``metric_seed``."""
     o = _lib.defaults(_lib.topoloc_localizer_options, lib.topoloc_localizer_options_init)
     return _options_dict(o)
 
@@ -1316,14 +1317,21 @@ def _options_dict(o: _lib.topoloc_localizer_options) -> Dict[str, Any]:
     out["verify_candidates"] = int(o.verify_candidates)
     out["verify_views_per_candidate"] = int(o.verify_views_per_candidate)
     out["verify_inlier_weight"] = float(o.verify_inlier_weight)
+    out["metric_particles"] = int(o.metric_particles)
+    out["metric_temperature"] = float(o.metric_temperature)
+    out["metric_seed"] = int(o.metric_seed)
     return out
 
 
 class Localizer(_SingleThreaded):
     """Follows one camera through a :class:`Map`, one frame at a time.
 
-    ``mode``: ``"filter"`` (forward filter over the graph; timestamps must not decrease) or
-    ``"single_frame"`` (every frame judged on its own). Every other option left as ``None``
+    ``mode``: ``"filter"`` (forward filter over the graph; timestamps must not decrease),
+    ``"single_frame"`` (every frame judged on its own) or ``"metric"`` (Monte Carlo
+    localization of the camera pose, moved by the frames' ``odometry`` and weighed by
+    appearance; needs a map with every place's position and every view's pose, else
+    :class:`InvalidOptionError`; ``metric_particles``, ``metric_temperature`` and
+    ``metric_seed`` tune it). Every other option left as ``None``
     takes the library default (:func:`localizer_options_default`): ``temperature`` (> 0),
     ``stay_probability`` (persistence of the off-map state), ``jump_probability``,
     ``off_map_probability`` (0 disables off-map),
@@ -1378,6 +1386,9 @@ class Localizer(_SingleThreaded):
         verify_candidates: Optional[int] = None,
         verify_views_per_candidate: Optional[int] = None,
         verify_inlier_weight: Optional[float] = None,
+        metric_particles: Optional[int] = None,
+        metric_temperature: Optional[float] = None,
+        metric_seed: Optional[int] = None,
     ) -> None:
         self._init_guard()
         self._free = lib.topoloc_localizer_free
@@ -1386,7 +1397,7 @@ class Localizer(_SingleThreaded):
         options = _lib.defaults(_lib.topoloc_localizer_options, lib.topoloc_localizer_options_init)
         if isinstance(mode, str):
             if mode not in _MODES:
-                raise InvalidOptionError(f"mode must be 'filter' or 'single_frame', got {mode!r}")
+                raise InvalidOptionError(f"mode must be 'filter', 'single_frame' or 'metric', got {mode!r}")
             options.mode = _MODES[mode]
         else:
             options.mode = _u32(mode, "mode", InvalidOptionError)
@@ -1418,6 +1429,14 @@ class Localizer(_SingleThreaded):
             )
         if verify_inlier_weight is not None:
             options.verify_inlier_weight = float(verify_inlier_weight)
+        if metric_particles is not None:
+            options.metric_particles = _u32(metric_particles, "metric_particles", InvalidOptionError)
+        if metric_temperature is not None:
+            options.metric_temperature = float(metric_temperature)
+        if metric_seed is not None:
+            if not isinstance(metric_seed, int) or not 0 <= metric_seed < 2**64:
+                raise InvalidOptionError(f"metric_seed must be an integer in [0, 2**64), got {metric_seed!r}")
+            options.metric_seed = metric_seed
 
         out = _lib.LocalizerPtr()
         check(lib.topoloc_localizer_new(map._h, byref(options), byref(out)))

@@ -49,9 +49,10 @@ ABI_VERSION = 1
 #: Environment variable naming the shared library to load.
 ENV_VAR = "TOPOLOC_LIBRARY"
 
-#: ``TOPOLOC_MODE_FILTER`` / ``TOPOLOC_MODE_SINGLE_FRAME``.
+#: ``TOPOLOC_MODE_FILTER`` / ``TOPOLOC_MODE_SINGLE_FRAME`` / ``TOPOLOC_MODE_METRIC`` (ABI 1.3).
 MODE_FILTER = 0
 MODE_SINGLE_FRAME = 1
+MODE_METRIC = 2
 
 #: ``TOPOLOC_PIXEL_*``: pixel formats of ``topoloc_image`` (8 bits per channel, interleaved).
 PIXEL_NONE = 0
@@ -212,6 +213,9 @@ class topoloc_localizer_options(Structure):
         ("verify_candidates", c_uint32),
         ("verify_views_per_candidate", c_uint32),
         ("verify_inlier_weight", c_float),
+        ("metric_particles", c_uint32),
+        ("metric_temperature", c_float),
+        ("metric_seed", c_uint64),
     ]
 
 

@@ -193,7 +193,9 @@ impl From<LocalizeError> for FfiError {
             LocalizeError::Describe(d) => d.into(),
             LocalizeError::NoDescriber(_) => Self::new(TOPOLOC_ERR_NO_DESCRIBER, e.to_string()),
             // verify_candidates > 0 on a map without keypoints.
-            LocalizeError::Verification(_) => Self::new(TOPOLOC_ERR_INVALID_OPTION, e.to_string()),
+            LocalizeError::Verification(_) | LocalizeError::Metric(_) => {
+                Self::new(TOPOLOC_ERR_INVALID_OPTION, e.to_string())
+            }
         }
     }
 }

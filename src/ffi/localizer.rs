@@ -12,7 +12,7 @@ use super::images::{
 use super::map::topoloc_map;
 use super::topoloc_status;
 use crate::describe::DescriberOptions;
-use crate::localize::{Frame, Localization, Localizer, LocalizerOptions, Mode};
+use crate::localize::{Frame, Localization, Localizer, LocalizerOptions, MetricOptions, Mode};
 use crate::verify::VerificationOptions;
 use std::ffi::c_char;
 
@@ -20,6 +20,10 @@ use std::ffi::c_char;
 pub const TOPOLOC_MODE_FILTER: u32 = 0;
 /// Single-frame mode: every frame judged on its own.
 pub const TOPOLOC_MODE_SINGLE_FRAME: u32 = 1;
+/// Metric mode (ABI 1.3): Monte Carlo localization of the camera pose in the map frame, moved
+/// by the frames' odometry and weighed by appearance; the place is the one nearest to the
+/// particles. Needs a map with every place's position and every view's pose.
+pub const TOPOLOC_MODE_METRIC: u32 = 2;
 
 /// Follows one camera through a map. Created by `topoloc_localizer_new`, released by
 /// `topoloc_localizer_free`. Holds per-camera state: use it from one thread at a time (it may
@@ -36,7 +40,8 @@ pub struct topoloc_localizer {
 pub struct topoloc_localizer_options {
     /// `sizeof(topoloc_localizer_options)`, set by the `_default` function.
     pub struct_size: usize,
-    /// `TOPOLOC_MODE_FILTER` or `TOPOLOC_MODE_SINGLE_FRAME`.
+    /// `TOPOLOC_MODE_FILTER`, `TOPOLOC_MODE_SINGLE_FRAME` or (ABI 1.3) `TOPOLOC_MODE_METRIC`
+    /// (on a map without positions or view poses: `_INVALID_OPTION`).
     pub mode: u32,
     /// Softmax temperature of the observation likelihood (> 0). Default 0.2.
     pub temperature: f32,
@@ -77,13 +82,22 @@ pub struct topoloc_localizer_options {
     /// Log-likelihood of one inlier: a checked place's belief is multiplied by
     /// `exp(verify_inlier_weight * inliers)` (finite, >= 0). Default 0.05.
     pub verify_inlier_weight: f32,
+    // ABI 1.3 (topoloc 0.1): metric mode.
+    /// Particles of `TOPOLOC_MODE_METRIC`, 1..=1,000,000. Default 2000.
+    pub metric_particles: u32,
+    /// Temperature of a particle's appearance likelihood in metric mode (> 0). Default 1.0.
+    pub metric_temperature: f32,
+    /// Seed of metric mode's random generator (results are deterministic). Default 0.
+    pub metric_seed: u64,
 }
 
 impl Versioned for topoloc_localizer_options {
-    /// ABI 1.0 ended before `image_backend`; 1.1 added the image fields, 1.2 verification.
+    /// ABI 1.0 ended before `image_backend`; 1.1 added the image fields, 1.2 verification,
+    /// 1.3 metric mode.
     const LAYOUTS: &'static [usize] = &[
         std::mem::offset_of!(Self, image_backend),
         std::mem::offset_of!(Self, verify_candidates),
+        std::mem::offset_of!(Self, metric_particles),
         std::mem::size_of::<Self>(),
     ];
 }
@@ -109,6 +123,9 @@ impl Default for topoloc_localizer_options {
             verify_candidates: d.verification.candidates as u32,
             verify_views_per_candidate: d.verification.views_per_candidate as u32,
             verify_inlier_weight: d.verification.inlier_weight,
+            metric_particles: d.metric.particles as u32,
+            metric_temperature: d.metric.temperature,
+            metric_seed: d.metric.seed,
         }
     }
 }
@@ -149,6 +166,7 @@ pub extern "C" fn topoloc_localizer_new(
         let mode = match o.mode {
             TOPOLOC_MODE_FILTER => Mode::Filter,
             TOPOLOC_MODE_SINGLE_FRAME => Mode::SingleFrame,
+            TOPOLOC_MODE_METRIC => Mode::Metric,
             other => {
                 return Err(FfiError::new(
                     topoloc_status::TOPOLOC_ERR_INVALID_OPTION,
@@ -175,6 +193,12 @@ pub extern "C" fn topoloc_localizer_new(
                 views_per_candidate: o.verify_views_per_candidate as usize,
                 inlier_weight: o.verify_inlier_weight,
                 ..VerificationOptions::default()
+            },
+            metric: MetricOptions {
+                particles: o.metric_particles as usize,
+                temperature: o.metric_temperature,
+                seed: o.metric_seed,
+                ..MetricOptions::default()
             },
             // The motion model's speed classes are not in the C options yet: defaults.
             ..LocalizerOptions::default()

@@ -31,6 +31,9 @@ pub enum LocalizeError {
     /// image while verifying is a [`DescribeError::InvalidImage`].)
     #[error("cannot verify: {0}")]
     Verification(String),
+    /// Metric mode was asked for on a map without place positions or view poses.
+    #[error("cannot localize metrically: {0}")]
+    Metric(String),
     /// Odometry is not finite.
     #[error("bad odometry: {0}")]
     Odometry(String),

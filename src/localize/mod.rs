@@ -7,9 +7,11 @@
 mod error;
 mod filter;
 mod motion;
+mod particles;
 mod similarity;
 
 pub use error::LocalizeError;
+pub use particles::{MetricOptions, MAX_PARTICLES};
 
 use crate::describe::image::ImageView;
 use crate::describe::{DescribeError, Describer, DescriberOptions};
@@ -17,6 +19,7 @@ use crate::map::{normalize_descriptor_into, ExpectedDescriptor, Map, PlaceId, Vi
 use crate::verify::{check_pair, KeypointDetector, Keypoints, VerificationOptions};
 use filter::{Belief, FilterParams};
 use nalgebra::Isometry3;
+use particles::Particles;
 use std::sync::Arc;
 
 /// Whether frames are filtered over time or judged one by one.
@@ -27,6 +30,10 @@ pub enum Mode {
     Filter,
     /// Every frame on its own, from the same prior; for comparison and for unordered queries.
     SingleFrame,
+    /// Monte Carlo localization of the camera pose in the map frame, moved by the full
+    /// odometry and weighed by appearance (see `particles.rs`); the place is the one nearest
+    /// to the particles. Needs a map with place positions and view poses.
+    Metric,
 }
 
 /// Localizer parameters. `temperature` and `off_map_margin` were chosen with `topoloc sweep`
@@ -71,6 +78,8 @@ pub struct LocalizerOptions {
     /// Geometric verification of the most probable places against the query image (off by
     /// default; needs frames with images and a map storing keypoints).
     pub verification: VerificationOptions,
+    /// Parameters of [`Mode::Metric`] (ignored in the other modes).
+    pub metric: MetricOptions,
 }
 
 /// Most speed classes the motion model accepts.
@@ -93,6 +102,7 @@ impl Default for LocalizerOptions {
             speed_change_probability: 0.05,
             turn_probability: 0.02,
             verification: VerificationOptions::default(),
+            metric: MetricOptions::default(),
         }
     }
 }
@@ -136,6 +146,9 @@ impl LocalizerOptions {
             return bad("top_k must be at least 1");
         }
         self.verification
+            .validate()
+            .map_err(LocalizeError::InvalidOption)?;
+        self.metric
             .validate()
             .map_err(LocalizeError::InvalidOption)?;
         Ok(FilterParams {
@@ -217,6 +230,8 @@ pub struct Localizer {
     options: LocalizerOptions,
     params: FilterParams,
     belief: Belief,
+    /// The particle cloud of [`Mode::Metric`].
+    particles: Option<Particles>,
     initialized: bool,
     frames: u64,
     last_timestamp: Option<f64>,
@@ -239,6 +254,7 @@ struct Verifier {
     checked: Vec<(PlaceId, u32, ViewId)>,
     views: Vec<ViewId>,
     backup: Belief,
+    particles_backup: Option<Particles>,
 }
 
 impl Localizer {
@@ -250,6 +266,12 @@ impl Localizer {
         let (n, m) = (map.view_count(), map.place_count());
         let mut belief = Belief::new(&map, &params);
         belief.set_initial(&params);
+        let particles = match options.mode {
+            Mode::Metric => {
+                Some(Particles::new(&map, &options.metric).map_err(LocalizeError::Metric)?)
+            }
+            _ => None,
+        };
         let verifier = if options.verification.enabled() {
             if map.keypoints().is_none() {
                 return Err(LocalizeError::Verification(
@@ -262,6 +284,7 @@ impl Localizer {
                 checked: Vec::with_capacity(options.verification.candidates),
                 views: Vec::new(),
                 backup: Belief::new(&map, &params),
+                particles_backup: particles.clone(),
             })
         } else {
             None
@@ -269,6 +292,7 @@ impl Localizer {
         Ok(Self {
             verifier,
             belief,
+            particles,
             params,
             initialized: false,
             frames: 0,
@@ -333,6 +357,9 @@ impl Localizer {
     /// Forgets all history: the next frame is treated as the first.
     pub fn reset(&mut self) {
         self.belief.set_initial(&self.params);
+        if let Some(particles) = &mut self.particles {
+            particles.set_initial();
+        }
         self.initialized = false;
         self.frames = 0;
         self.last_timestamp = None;
@@ -355,7 +382,7 @@ impl Localizer {
         frame: &Frame<'_>,
         out: &mut Localization,
     ) -> Result<(), LocalizeError> {
-        let filtering = self.options.mode == Mode::Filter;
+        let filtering = self.options.mode != Mode::SingleFrame;
         if !frame.timestamp.is_finite() {
             return Err(LocalizeError::Timestamp(format!(
                 "{} is not finite",
@@ -417,6 +444,11 @@ impl Localizer {
         );
         if let Some(verifier) = &mut self.verifier {
             self.belief.save(&mut verifier.backup);
+            if let (Some(particles), Some(backup)) =
+                (&self.particles, &mut verifier.particles_backup)
+            {
+                particles.save(backup);
+            }
         }
         if filtering && self.initialized {
             self.belief.predict(&self.params, travelled);
@@ -424,9 +456,22 @@ impl Localizer {
             self.belief.set_initial(&self.params);
         }
         self.belief.update(&self.params, &self.place_scores);
+        if let Some(particles) = &mut self.particles {
+            if self.initialized {
+                particles.predict(frame.odometry.as_ref());
+            } else {
+                particles.set_initial();
+            }
+            particles.update(&self.view_scores);
+        }
         if let Err(e) = self.verify() {
             if let Some(verifier) = &self.verifier {
                 self.belief.restore(&verifier.backup);
+                if let (Some(particles), Some(backup)) =
+                    (&mut self.particles, &verifier.particles_backup)
+                {
+                    particles.restore(backup);
+                }
             }
             return Err(e);
         }
@@ -449,7 +494,11 @@ impl Localizer {
         let keypoints = self.map.keypoints().expect("checked at construction");
         let m = self.map.place_count();
         let c = options.candidates.min(m);
-        select_most_probable(&mut self.order, &self.belief.places, c, false);
+        let places = match &self.particles {
+            Some(particles) => &particles.places,
+            None => &self.belief.places,
+        };
+        select_most_probable(&mut self.order, places, c, false);
         verifier.checked.clear();
         for &place in &self.order[..c] {
             verifier.views.clear();
@@ -478,14 +527,18 @@ impl Localizer {
         // the same ratios as exp(weight * inliers) with unchecked places at 0, kept at most 1.
         let unchecked = (-weight * f64::from(most)).exp();
         let checked = &verifier.checked;
-        self.belief.weigh_places(&self.params, |place| {
+        let factor = |place| {
             checked
                 .iter()
                 .find(|c| c.0 as usize == place)
                 .map_or(unchecked, |c| {
                     (weight * (f64::from(c.1) - f64::from(most))).exp()
                 })
-        });
+        };
+        match &mut self.particles {
+            Some(particles) => particles.weigh_places(factor),
+            None => self.belief.weigh_places(&self.params, factor),
+        }
         for &(place, inliers, view) in checked {
             if inliers > 0 {
                 self.best_views[place as usize] = view;
@@ -496,7 +549,10 @@ impl Localizer {
 
     fn write_result(&mut self, out: &mut Localization) {
         let m = self.map.place_count();
-        let p = &self.belief.places;
+        let p = match &self.particles {
+            Some(particles) => &particles.places,
+            None => &self.belief.places,
+        };
         let on_map = 1.0 - self.belief.off_map;
         let k = self.options.top_k.min(m);
         select_most_probable(&mut self.order, p, k, true);

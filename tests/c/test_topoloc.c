@@ -277,8 +277,9 @@ static bool contains_u32(const uint32_t *xs, size_t n, uint32_t x)
     return false;
 }
 
-/* Builds the test world with the builder; NULL on failure (failures are counted). */
-static topoloc_map *build_world_map(void)
+/* Builds the test world with the builder, the last view without attributes when
+ * `bare_view`; NULL on failure (failures are counted). */
+static topoloc_map *build_world(bool bare_view)
 {
     topoloc_map_builder *b = NULL;
     topoloc_map *map = NULL;
@@ -305,8 +306,8 @@ static topoloc_map *build_world_map(void)
             attributes.keyframe_id = 1000u + v;
             attributes.world_T_camera = g_view_pose[v];
             attributes.image = g_view_image[v];
-            CHECK_OK(topoloc_map_builder_add_view(b, p, g_view_desc[v], DIM,
-                                                  v == BARE_VIEW ? NULL : &attributes, &id));
+            CHECK_OK(topoloc_map_builder_add_view(
+                b, p, g_view_desc[v], DIM, (bare_view && v == BARE_VIEW) ? NULL : &attributes, &id));
             CHECK(id == v);
         }
     }
@@ -318,6 +319,12 @@ static topoloc_map *build_world_map(void)
     CHECK_OK(topoloc_map_builder_build(b, &map));
     topoloc_map_builder_free(b);
     return map;
+}
+
+/* The test world as the accessor checks expect it: its last view has no attributes. */
+static topoloc_map *build_world_map(void)
+{
+    return build_world(true);
 }
 
 /* ------------------------------------------------------------------------------------------ */
@@ -3054,6 +3061,65 @@ static void test_verification(const topoloc_map *map, const topoloc_map *world)
     topoloc_localizer_free(loc);
 }
 
+static void test_metric_mode(const topoloc_map *world)
+{
+    topoloc_localizer_options options;
+    topoloc_localizer *loc = NULL;
+    topoloc_map *posed = NULL;
+    topoloc_frame frame;
+    topoloc_result r;
+    float desc[DIM];
+    double forward[16] = {1, 0, 0, 2, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1};
+    uint32_t p, placed = 0;
+
+    section("metric mode: particles moved by odometry, maps without poses refused");
+    CHECK_OK(topoloc_localizer_options_default(&options));
+    CHECK(options.metric_particles == 2000 && options.metric_temperature == 1.0f);
+    CHECK(options.metric_seed == 0);
+    options.mode = TOPOLOC_MODE_METRIC;
+    /* The world's last view has no pose. */
+    CHECK_STATUS(topoloc_localizer_new(world, &options, &loc), TOPOLOC_ERR_INVALID_OPTION);
+    CHECK_MESSAGE_HAS("pose");
+    CHECK(loc == NULL);
+
+    posed = build_world(false);
+    if (posed == NULL) {
+        return;
+    }
+    options.metric_particles = 0;
+    CHECK_STATUS(topoloc_localizer_new(posed, &options, &loc), TOPOLOC_ERR_INVALID_OPTION);
+    CHECK_MESSAGE_HAS("metric.particles");
+    options.metric_particles = 1000;
+    options.metric_seed = 7;
+    CHECK_OK(topoloc_localizer_new(posed, &options, &loc));
+    if (loc != NULL) {
+        /* Along the row of places facing +x (view 0 of each), 2 m of odometry per frame. */
+        CHECK_OK(topoloc_frame_default(&frame));
+        CHECK_OK(topoloc_result_default(&r));
+        for (p = 0; p < PLACES; p++) {
+            noisy_copy(desc, p * VIEWS_PER_PLACE, 0.3f);
+            frame.timestamp = (double)p;
+            frame.descriptor = desc;
+            frame.descriptor_len = DIM;
+            frame.odometry = p > 0 ? forward : NULL;
+            CHECK_OK(topoloc_localizer_process(loc, &frame, &r));
+            placed += r.place == p;
+        }
+        printf("   metric walk: %u of %u places right\n", (unsigned)placed, (unsigned)PLACES);
+        CHECK(placed >= PLACES - 1);
+        topoloc_localizer_free(loc);
+        loc = NULL;
+    }
+    /* A caller of ABI 1.2 gets the metric defaults. */
+    CHECK_OK(topoloc_localizer_options_default(&options));
+    options.mode = TOPOLOC_MODE_METRIC;
+    options.struct_size = offsetof(topoloc_localizer_options, metric_particles);
+    options.metric_particles = 0; /* beyond its size: ignored */
+    CHECK_OK(topoloc_localizer_new(posed, &options, &loc));
+    topoloc_localizer_free(loc);
+    topoloc_map_free(posed);
+}
+
 static void test_images(const topoloc_map *world)
 {
     topoloc_map *map;
@@ -3381,6 +3447,7 @@ int main(void)
         test_options_errors(map);
         test_versioned_structs(map);
         test_threads(map);
+        test_metric_mode(map);
         test_images(map);
     }
     topoloc_map_free(map);

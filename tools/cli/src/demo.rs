@@ -2,7 +2,8 @@
 //! (topoloc-sim), builds its graph from the voxel skeleton, captures four yaw views per place and
 //! builds the map (ONNX backend when scripts/setup-models.sh has run, else VLAD, saying which),
 //! flies a query trajectory under another lighting condition, localizes every frame single-frame,
-//! with the filter, and with the filter plus drifting odometry, and prints the seed's metrics
+//! with the filter, with the filter plus drifting odometry, and in metric mode (particles moved by
+//! that odometry), and prints the seed's metrics
 //! (MNA, OHA, R@1, R@5), precision-recall, calibration, latency and peak memory. It writes a PNG:
 //! the world from above with the graph, the trajectory and the predicted vs true place.
 
@@ -194,6 +195,7 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         ("single-frame", Mode::SingleFrame, false),
         ("filter", Mode::Filter, false),
         ("filter+odometry", Mode::Filter, true),
+        ("metric+odometry", Mode::Metric, true),
     ];
     let mut results = Vec::new();
     for (name, mode, odometry) in configs {

@@ -4,8 +4,10 @@
 //! skeleton graph and map and flies one query trajectory (seeds `Split::trajectory_seed(K, 0)`)
 //! exactly as `topoloc demo` and `topoloc simulate` do (12 views per place unless
 //! `--views-per-place` says otherwise), then localizes every frame with each
-//! localizer configuration (single-frame, filter, filter with drifting odometry, and that with
-//! geometric verification of the most probable places unless `--verify 0`). Prints MNA and
+//! localizer configuration (single-frame, filter, filter with drifting odometry, that with
+//! geometric verification of the most probable places unless `--verify 0`, and metric mode
+//! (particles moved by the odometry) without and with verification; `--configurations` picks
+//! some). Prints MNA and
 //! OHA per split as mean ± standard deviation over the worlds, the way the seed's tables do
 //! (thesis Table 4.2), and the graph sizes they were measured on.
 
@@ -56,6 +58,16 @@ pub struct SuiteArgs {
     /// Log-likelihood of one verification inlier (see `topoloc::verify`).
     #[arg(long, default_value_t = VerificationOptions::default().inlier_weight)]
     pub inlier_weight: f32,
+    /// Log-likelihood of one verification inlier in metric mode: smaller than the graph
+    /// filter's, since a verified view also matches from a few metres away and the particles
+    /// should keep to the odometry.
+    #[arg(long, default_value_t = 0.01)]
+    pub metric_inlier_weight: f32,
+    /// Configurations to run, comma-separated (default: all): single-frame, filter,
+    /// filter+odometry, filter+odometry+verification, metric+odometry,
+    /// metric+odometry+verification.
+    #[arg(long, value_delimiter = ',', value_parser = parse_configuration)]
+    pub configurations: Vec<String>,
     /// Print one JSON object (per split and configuration: every world's figures, mean, std).
     #[arg(long)]
     pub json: bool,
@@ -63,19 +75,37 @@ pub struct SuiteArgs {
 
 /// The localizer configurations compared: name, mode, whether odometry is given, whether the
 /// most probable places are verified geometrically.
-const CONFIGURATIONS: [(&str, Mode, bool, bool); 4] = [
+const CONFIGURATIONS: [(&str, Mode, bool, bool); 6] = [
     ("single-frame", Mode::SingleFrame, false, false),
     ("filter", Mode::Filter, false, false),
     ("filter+odometry", Mode::Filter, true, false),
     ("filter+odometry+verification", Mode::Filter, true, true),
+    ("metric+odometry", Mode::Metric, true, false),
+    ("metric+odometry+verification", Mode::Metric, true, true),
 ];
+
+/// Accepts the name of one of [`CONFIGURATIONS`].
+fn parse_configuration(name: &str) -> Result<String, String> {
+    match CONFIGURATIONS.iter().find(|c| c.0 == name) {
+        Some(c) => Ok(c.0.to_string()),
+        None => Err(format!(
+            "unknown configuration '{name}'; one of: {}",
+            CONFIGURATIONS.map(|c| c.0).join(", ")
+        )),
+    }
+}
 
 /// The configurations run with `args`.
 fn configurations(
     args: &SuiteArgs,
-) -> impl Iterator<Item = &'static (&'static str, Mode, bool, bool)> {
+) -> impl Iterator<Item = &'static (&'static str, Mode, bool, bool)> + '_ {
     let verify = args.verify > 0;
-    CONFIGURATIONS.iter().filter(move |c| verify || !c.3)
+    CONFIGURATIONS
+        .iter()
+        .filter(move |c| verify || !c.3)
+        .filter(move |c| {
+            args.configurations.is_empty() || args.configurations.iter().any(|o| o == c.0)
+        })
 }
 
 /// One world's run: its size and each configuration's result.
@@ -93,6 +123,10 @@ pub fn run(args: &SuiteArgs) -> Result<()> {
     anyhow::ensure!(
         !args.splits.is_empty(),
         "--splits must name at least one split"
+    );
+    anyhow::ensure!(
+        configurations(args).next().is_some(),
+        "no configuration to run (--configurations names only verification ones, and --verify is 0)"
     );
     let start = Instant::now();
     let (backend, backend_note) = choose_backend(args.query.backend);
@@ -132,7 +166,11 @@ pub fn run(args: &SuiteArgs) -> Result<()> {
                 .map(|&(name, mode, odometry, verify)| {
                     let verification = VerificationOptions {
                         candidates: if verify { args.verify } else { 0 },
-                        inlier_weight: args.inlier_weight,
+                        inlier_weight: if mode == Mode::Metric {
+                            args.metric_inlier_weight
+                        } else {
+                            args.inlier_weight
+                        },
                         ..VerificationOptions::default()
                     };
                     let options = LocalizerOptions {
@@ -269,6 +307,7 @@ fn summary_json(
         "rooms": args.rooms, "floors": args.floors, "legs": args.legs,
         "views_per_place": args.capture.views_per_place,
         "verify": args.verify, "inlier_weight": args.inlier_weight,
+        "metric_inlier_weight": args.metric_inlier_weight,
         "splits": splits, "seconds": start.elapsed().as_secs_f64(),
     })
 }

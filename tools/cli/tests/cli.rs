@@ -226,7 +226,12 @@ fn demo_runs_the_whole_pipeline_and_reports_the_contract_keys() {
     ] {
         assert!(report[key].is_number(), "{key} missing: {report}");
     }
-    for config in ["single-frame", "filter", "filter+odometry"] {
+    for config in [
+        "single-frame",
+        "filter",
+        "filter+odometry",
+        "metric+odometry",
+    ] {
         let c = &report["configurations"][config];
         for key in ["mna", "oha", "r_at_1", "r_at_5"] {
             let v = c[key].as_f64().unwrap_or(-1.0);
@@ -500,6 +505,8 @@ fn suite_reports_mean_and_std_per_split_and_configuration() {
             "filter",
             "filter+odometry",
             "filter+odometry+verification",
+            "metric+odometry",
+            "metric+odometry+verification",
         ] {
             let c = &s["configurations"][config];
             for metric in ["mna", "oha"] {
@@ -523,4 +530,28 @@ fn suite_reports_mean_and_std_per_split_and_configuration() {
     let out = topoloc(&["suite", "--splits", "tr-x"]);
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("tr-x"));
+}
+
+#[test]
+fn suite_refuses_unknown_or_empty_configuration_lists() {
+    let out = topoloc(&["suite", "--configurations", "filter,bogus"]);
+    assert!(!out.status.success());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stderr.contains("unknown configuration 'bogus'") && stderr.contains("metric+odometry"),
+        "{stderr}"
+    );
+    let out = topoloc(&[
+        "suite",
+        "--verify",
+        "0",
+        "--configurations",
+        "metric+odometry+verification",
+    ]);
+    assert!(!out.status.success());
+    assert!(
+        String::from_utf8_lossy(&out.stderr).contains("no configuration to run"),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
 }

@@ -1,0 +1,385 @@
+//! Monte Carlo localization over metric camera poses ([`Mode::Metric`](super::Mode::Metric)).
+//!
+//! The graph filter (`filter.rs`) knows places and the edges between them; odometry only tells
+//! it how far the camera went. A map built with place positions and view poses (a SLAM
+//! system's keyframes, or `topoloc-sim`'s captures) allows more: a cloud of camera poses in
+//! the map frame, moved by the full odometry (distance *and* turn) and weighed by appearance.
+//! The closest place is then a matter of geometry, and a turn at a junction tells the branches
+//! apart.
+//!
+//! Each frame:
+//!
+//! 1. *Predict.* Every particle is composed with the frame's odometry `previous_T_current`,
+//!    with noise: translation stretched by a relative error and shifted in the map's xy plane,
+//!    heading turned about the map's z axis (z is up, as visual-inertial odometry gives).
+//!    Without odometry, particles diffuse by [`MetricOptions::diffusion_m`] and
+//!    [`MetricOptions::diffusion_rad`].
+//! 2. *Resample and inject.* Particles are resampled by weight (systematic resampling), and a
+//!    fraction ([`MetricOptions::injection`]) is replaced by poses drawn around the map's views
+//!    in proportion to how well each view matches the frame (sensor resetting), so that a
+//!    lost or kidnapped cloud recovers. The first frame draws every particle this way.
+//! 3. *Update.* A particle's nearest place (by position) and, among that place's views, the
+//!    view nearest in pose give its likelihood `exp((score_view - max) / T)`. The place belief
+//!    is the weight of the particles nearest to each place.
+//!
+//! Deterministic: the random generator is seeded from [`MetricOptions::seed`] and reset with
+//! the localizer.
+
+use crate::map::Map;
+use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
+use rand::rngs::SmallRng;
+use rand::{Rng, SeedableRng};
+use rand_distr::StandardNormal;
+
+/// Parameters of the metric filter. The defaults were chosen on the Test worlds of
+/// `topoloc suite` (BENCHMARKS.md).
+#[derive(Clone, Debug, PartialEq)]
+pub struct MetricOptions {
+    /// Number of particles. Default 2000.
+    pub particles: usize,
+    /// Softmax temperature of a particle's appearance likelihood. Larger than the graph
+    /// filter's: particles moved by odometry stay together, and should follow the odometry
+    /// rather than each frame's best-looking view. Default 1.0.
+    pub temperature: f32,
+    /// A particle scores the best of its nearest place's views turned less than this from it,
+    /// radians (else the view nearest in heading). Default 1.0.
+    pub view_window_rad: f32,
+    /// Standard deviation of the translation error per metre travelled. Default 0.05.
+    pub translation_noise: f32,
+    /// Standard deviation of the heading error per frame, radians. Default 0.01.
+    pub rotation_noise_rad: f32,
+    /// Standard deviation of the position change per frame without odometry, metres.
+    /// Default 0.3.
+    pub diffusion_m: f32,
+    /// Standard deviation of the heading change per frame without odometry, radians.
+    /// Default 0.3.
+    pub diffusion_rad: f32,
+    /// Fraction of particles re-drawn around well-matching views each frame (0..1).
+    /// Default 0.002 (4 of 2000): enough to recover from a wrong start, few enough not to pull
+    /// the cloud to each frame's best-looking view.
+    pub injection: f32,
+    /// Spread of a drawn particle around its view: position, metres. Default 0.5.
+    pub injection_spread_m: f32,
+    /// Spread of a drawn particle around its view: heading, radians. Default 0.2.
+    pub injection_spread_rad: f32,
+    /// Seed of the random generator. Default 0.
+    pub seed: u64,
+}
+
+impl Default for MetricOptions {
+    fn default() -> Self {
+        Self {
+            particles: 2000,
+            temperature: 1.0,
+            view_window_rad: 1.0,
+            translation_noise: 0.05,
+            rotation_noise_rad: 0.01,
+            diffusion_m: 0.3,
+            diffusion_rad: 0.3,
+            injection: 0.002,
+            injection_spread_m: 0.5,
+            injection_spread_rad: 0.2,
+            seed: 0,
+        }
+    }
+}
+
+/// Most particles the metric filter accepts.
+pub const MAX_PARTICLES: usize = 1_000_000;
+
+impl MetricOptions {
+    /// Checks every field; the message names the first bad one.
+    pub fn validate(&self) -> Result<(), String> {
+        if self.particles == 0 || self.particles > MAX_PARTICLES {
+            return Err(format!("metric.particles must lie in 1..={MAX_PARTICLES}"));
+        }
+        let non_negative = [
+            ("metric.translation_noise", self.translation_noise),
+            ("metric.rotation_noise_rad", self.rotation_noise_rad),
+            ("metric.view_window_rad", self.view_window_rad),
+            ("metric.diffusion_m", self.diffusion_m),
+            ("metric.diffusion_rad", self.diffusion_rad),
+            ("metric.injection_spread_m", self.injection_spread_m),
+            ("metric.injection_spread_rad", self.injection_spread_rad),
+        ];
+        for (name, value) in non_negative {
+            if !(value.is_finite() && value >= 0.0) {
+                return Err(format!("{name} must be finite and >= 0"));
+            }
+        }
+        if !(self.injection.is_finite() && (0.0..=1.0).contains(&self.injection)) {
+            return Err("metric.injection must lie in [0, 1]".into());
+        }
+        if !(self.temperature.is_finite() && self.temperature > 0.0) {
+            return Err("metric.temperature must be finite and > 0".into());
+        }
+        Ok(())
+    }
+}
+
+/// The particle cloud, the map geometry it needs, and the place marginals.
+#[derive(Clone)]
+pub(crate) struct Particles {
+    options: MetricOptions,
+    /// Position of every place.
+    place_positions: Vec<Point3<f64>>,
+    /// Pose of every view.
+    view_poses: Vec<Isometry3<f64>>,
+    /// Views of place p: `place_views[place_view_offsets[p]..place_view_offsets[p + 1]]`.
+    place_view_offsets: Vec<usize>,
+    place_views: Vec<u32>,
+    poses: Vec<Isometry3<f64>>,
+    weights: Vec<f64>,
+    /// Nearest place of each particle.
+    nearest: Vec<u32>,
+    /// True until the first frame has drawn the cloud.
+    fresh: bool,
+    rng: SmallRng,
+    /// Posterior over the places: the weight of the particles nearest to each.
+    pub places: Vec<f64>,
+    resampled: Vec<Isometry3<f64>>,
+    cumulative: Vec<f64>,
+}
+
+impl Particles {
+    /// Fails (with a message) when a place has no position or a view no pose.
+    pub fn new(map: &Map, options: &MetricOptions) -> Result<Self, String> {
+        let m = map.place_count();
+        let mut place_positions = Vec::with_capacity(m);
+        for (p, position) in map.place_positions().iter().enumerate() {
+            place_positions.push(position.ok_or_else(|| {
+                format!("metric mode needs every place's position; place {p} has none")
+            })?);
+        }
+        let mut view_poses = Vec::with_capacity(map.view_count());
+        for (v, view) in map.views().iter().enumerate() {
+            view_poses.push(view.world_t_camera.ok_or_else(|| {
+                format!("metric mode needs every view's pose (world_T_camera); view {v} has none")
+            })?);
+        }
+        let mut place_view_offsets = Vec::with_capacity(m + 1);
+        let mut place_views = Vec::with_capacity(map.view_count());
+        place_view_offsets.push(0);
+        for p in 0..m as u32 {
+            place_views.extend_from_slice(map.place_views(p).expect("place in range"));
+            place_view_offsets.push(place_views.len());
+        }
+        let n = options.particles;
+        Ok(Self {
+            options: options.clone(),
+            place_positions,
+            view_poses,
+            place_view_offsets,
+            place_views,
+            poses: vec![Isometry3::identity(); n],
+            weights: vec![1.0 / n as f64; n],
+            nearest: vec![0; n],
+            fresh: true,
+            rng: SmallRng::seed_from_u64(options.seed),
+            places: vec![0.0; m],
+            resampled: Vec::with_capacity(n),
+            cumulative: Vec::with_capacity(map.view_count().max(n)),
+        })
+    }
+
+    /// Forgets the cloud: the next update draws it from the frame's appearance.
+    pub fn set_initial(&mut self) {
+        self.fresh = true;
+        self.rng = SmallRng::seed_from_u64(self.options.seed);
+    }
+
+    fn gaussian(&mut self) -> f64 {
+        self.rng.sample::<f64, _>(StandardNormal)
+    }
+
+    /// Moves every particle by the odometry (with noise), or diffuses it without odometry.
+    pub fn predict(&mut self, odometry: Option<&Isometry3<f64>>) {
+        if self.fresh {
+            return;
+        }
+        let o = &self.options;
+        let (sigma_xy, sigma_yaw, relative) = match odometry {
+            Some(motion) => (
+                f64::from(o.translation_noise) * motion.translation.vector.norm(),
+                f64::from(o.rotation_noise_rad),
+                f64::from(o.translation_noise),
+            ),
+            None => (f64::from(o.diffusion_m), f64::from(o.diffusion_rad), 0.0),
+        };
+        for i in 0..self.poses.len() {
+            let (nx, ny, nyaw, ns) = (
+                self.gaussian(),
+                self.gaussian(),
+                self.gaussian(),
+                self.gaussian(),
+            );
+            let mut pose = self.poses[i];
+            if let Some(motion) = odometry {
+                let stretched = Isometry3::from_parts(
+                    Translation3::from(motion.translation.vector * (1.0 + relative * ns)),
+                    motion.rotation,
+                );
+                pose *= stretched;
+            }
+            let turn = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), sigma_yaw * nyaw);
+            pose.rotation = turn * pose.rotation;
+            pose.translation.vector += Vector3::new(sigma_xy * nx, sigma_xy * ny, 0.0);
+            self.poses[i] = pose;
+        }
+    }
+
+    /// Resamples, injects particles drawn from the frame's view scores, weighs the cloud by
+    /// appearance and computes the place marginals.
+    pub fn update(&mut self, view_scores: &[f32]) {
+        let max_score = view_scores.iter().fold(f32::NEG_INFINITY, |a, &b| a.max(b)) as f64;
+        let inv_t = 1.0 / f64::from(self.options.temperature);
+        let n = self.poses.len();
+        let injected = if self.fresh {
+            n
+        } else {
+            ((f64::from(self.options.injection) * n as f64).round() as usize).min(n)
+        };
+        self.resample(n - injected);
+        self.inject(injected, view_scores, max_score, inv_t);
+        std::mem::swap(&mut self.poses, &mut self.resampled);
+        self.fresh = false;
+        for i in 0..n {
+            let pose = &self.poses[i];
+            let place = nearest_place(
+                &self.place_positions,
+                &Point3::from(pose.translation.vector),
+            );
+            self.nearest[i] = place as u32;
+            let score = self.view_score(place, &pose.rotation, view_scores);
+            self.weights[i] = ((score.unwrap_or(max_score) - max_score) * inv_t).exp();
+        }
+        self.normalise();
+    }
+
+    /// What a particle at `place` turned `rotation` scores: the best of the place's views
+    /// turned less than `view_window_rad` from it, else the view nearest in heading; `None`
+    /// for a place without views.
+    fn view_score(
+        &self,
+        place: usize,
+        rotation: &UnitQuaternion<f64>,
+        view_scores: &[f32],
+    ) -> Option<f64> {
+        let window = f64::from(self.options.view_window_rad);
+        let views =
+            &self.place_views[self.place_view_offsets[place]..self.place_view_offsets[place + 1]];
+        let mut within: Option<f64> = None;
+        let mut nearest = (f64::INFINITY, None);
+        for &v in views {
+            let angle = self.view_poses[v as usize].rotation.angle_to(rotation);
+            let score = f64::from(view_scores[v as usize]);
+            if angle < window {
+                within = Some(within.map_or(score, |w| w.max(score)));
+            }
+            if angle < nearest.0 {
+                nearest = (angle, Some(score));
+            }
+        }
+        within.or(nearest.1)
+    }
+
+    /// Multiplies the weight of every particle nearest to place p by `factor(p)` and
+    /// normalises.
+    pub fn weigh_places(&mut self, factor: impl Fn(usize) -> f64) {
+        for (w, &p) in self.weights.iter_mut().zip(&self.nearest) {
+            *w *= factor(p as usize);
+        }
+        self.normalise();
+    }
+
+    fn normalise(&mut self) {
+        let total: f64 = self.weights.iter().sum();
+        let n = self.weights.len();
+        if total > 0.0 && total.is_finite() {
+            self.weights.iter_mut().for_each(|w| *w /= total);
+        } else {
+            self.weights.fill(1.0 / n as f64);
+        }
+        self.places.fill(0.0);
+        for (w, &p) in self.weights.iter().zip(&self.nearest) {
+            self.places[p as usize] += w;
+        }
+    }
+
+    /// Systematic resampling of `count` particles into `resampled` (cleared first).
+    fn resample(&mut self, count: usize) {
+        self.resampled.clear();
+        if count == 0 {
+            return;
+        }
+        let step = 1.0 / count as f64;
+        let mut target = self.rng.random::<f64>() * step;
+        let mut cumulative = 0.0;
+        let mut i = 0;
+        let last = self.weights.len() - 1;
+        for _ in 0..count {
+            while i < last && cumulative + self.weights[i] < target {
+                cumulative += self.weights[i];
+                i += 1;
+            }
+            self.resampled.push(self.poses[i]);
+            target += step;
+        }
+    }
+
+    /// Appends `count` particles drawn around views chosen with probability
+    /// `exp((score - max) / T)`.
+    fn inject(&mut self, count: usize, view_scores: &[f32], max_score: f64, inv_t: f64) {
+        if count == 0 {
+            return;
+        }
+        self.cumulative.clear();
+        let mut total = 0.0;
+        for &s in view_scores {
+            total += ((f64::from(s) - max_score) * inv_t).exp();
+            self.cumulative.push(total);
+        }
+        let spread_m = f64::from(self.options.injection_spread_m);
+        let spread_rad = f64::from(self.options.injection_spread_rad);
+        for _ in 0..count {
+            let u = self.rng.random::<f64>() * total;
+            let v = self
+                .cumulative
+                .partition_point(|&c| c < u)
+                .min(view_scores.len() - 1);
+            let (nx, ny, nyaw) = (self.gaussian(), self.gaussian(), self.gaussian());
+            let mut pose = self.view_poses[v];
+            pose.rotation = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), spread_rad * nyaw)
+                * pose.rotation;
+            pose.translation.vector += Vector3::new(spread_m * nx, spread_m * ny, 0.0);
+            self.resampled.push(pose);
+        }
+    }
+
+    /// Copies the cloud into `backup` (made from the same map and options).
+    pub fn save(&self, backup: &mut Particles) {
+        backup.poses.copy_from_slice(&self.poses);
+        backup.weights.copy_from_slice(&self.weights);
+        backup.nearest.copy_from_slice(&self.nearest);
+        backup.places.copy_from_slice(&self.places);
+        backup.fresh = self.fresh;
+        backup.rng = self.rng.clone();
+    }
+
+    /// Restores a cloud saved with [`Particles::save`].
+    pub fn restore(&mut self, backup: &Particles) {
+        backup.save(self);
+    }
+}
+
+/// Index of the place nearest to `point`.
+fn nearest_place(positions: &[Point3<f64>], point: &Point3<f64>) -> usize {
+    let mut best = (f64::INFINITY, 0);
+    for (p, position) in positions.iter().enumerate() {
+        let d = (position - point).norm_squared();
+        if d < best.0 {
+            best = (d, p);
+        }
+    }
+    best.1
+}
