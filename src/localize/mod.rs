@@ -1,8 +1,11 @@
 //! Per-frame localization against a map: similarity of the query descriptor to every view,
 //! place scores, and a forward filter over the graph (see [`filter`](self) docs in
 //! `filter.rs`), giving the most probable place, a confidence, top-k candidates and an
-//! off-map flag. Optionally the most probable places are verified geometrically against the
-//! query image ([`crate::verify`]) and their belief weighed by the inliers found.
+//! off-map flag. [`Mode::Metric`] replaces the graph filter's place belief by a particle
+//! filter over camera poses (`particles.rs`), on maps with positions and view poses; the
+//! off-map state comes from the graph filter in every mode. Optionally the most probable places
+//! are verified geometrically against the query image ([`crate::verify`]) and their belief
+//! weighed by the inliers found.
 
 mod error;
 mod filter;
@@ -374,7 +377,8 @@ impl Localizer {
 
     /// Processes one frame, writing into `out` (reusing its candidate buffer). Validates the
     /// whole frame before touching any state, so an error leaves the localizer unchanged.
-    /// Cost: one pass over the descriptor matrix plus O(places + edges); with verification on,
+    /// Cost: one pass over the descriptor matrix plus O(places + edges); in metric mode also
+    /// O(particles x places) for the particles' nearest places; with verification on,
     /// also keypoint detection in the frame's image and one match + RANSAC per checked view
     /// (these allocate). Verification needs `frame.image` even when a descriptor is given.
     pub fn process(
