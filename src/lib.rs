@@ -23,7 +23,7 @@ pub mod synthetic;
 pub mod verify;
 
 pub use localize::{
-    Candidate, Frame, Localization, LocalizeError, Localizer, LocalizerOptions, Mode,
+    Candidate, Frame, Localization, LocalizeError, Localizer, LocalizerOptions, MetricOptions, Mode,
 };
 pub use map::{DescriptorIdentity, ExpectedDescriptor, LoadOptions, Map, MapBuilder, MapError};
 

@@ -308,3 +308,86 @@ fn bad_frames_leave_the_cloud_unchanged() {
         assert_eq!(result, expected[i].0, "frame {i}");
     }
 }
+
+/// Places every 2 m along x, each with three views facing +x: at the place and 0.7 m before
+/// and after it (as keyframes or `--ring-m` captures give), every view its own descriptor.
+fn corridor_with_views_around_places(places: u32) -> Map {
+    let mut builder =
+        MapBuilder::new(DescriptorIdentity::new("test", "around", DIM as u32).unwrap());
+    for p in 0..places {
+        let x = 2.0 * f64::from(p);
+        let place = builder.add_place(Some(Point3::new(x, 0.0, 0.0))).unwrap();
+        for (k, dx) in [-0.7, 0.0, 0.7].into_iter().enumerate() {
+            let attributes = ViewAttributes {
+                world_t_camera: Some(Isometry3::new(
+                    Vector3::new(x + dx, 0.0, 1.5),
+                    Vector3::zeros(),
+                )),
+                ..Default::default()
+            };
+            let descriptor = unit_vector(u64::from(p) * 3 + k as u64 + 700, DIM);
+            builder.add_view(place, &descriptor, attributes).unwrap();
+        }
+        if p > 0 {
+            builder.add_edge(p - 1, p, 1.0).unwrap();
+        }
+    }
+    builder.build().unwrap()
+}
+
+#[test]
+fn views_around_places_correct_odometry_that_overshoots() {
+    let map = Arc::new(corridor_with_views_around_places(12));
+    let poses = straight(22.0, 0.1);
+    // The frame shows the view captured nearest to the camera; the odometry overshoots by 15%.
+    let run = |tolerance: f32| {
+        let mut options = LocalizerOptions {
+            mode: Mode::Metric,
+            ..Default::default()
+        };
+        options.metric.view_position_tolerance_m = tolerance;
+        let mut localizer = Localizer::new(map.clone(), options).unwrap();
+        let mut hits = 0;
+        for (i, pose) in poses.iter().enumerate() {
+            let nearest_view = (0..map.view_count() as u32)
+                .min_by(|&a, &b| {
+                    let d = |v| {
+                        let t = map
+                            .view(v)
+                            .unwrap()
+                            .world_t_camera
+                            .unwrap()
+                            .translation
+                            .vector;
+                        (t.x - pose.x).abs()
+                    };
+                    d(a).total_cmp(&d(b))
+                })
+                .unwrap();
+            let descriptor = mix(
+                map.view_descriptor(nearest_view).unwrap(),
+                &unit_vector(90_000 + i as u64, DIM),
+                3.0,
+            );
+            let odometry = (i > 0).then(|| Isometry3::translation(0.1 * 1.15, 0.0, 0.0));
+            let result = localizer
+                .localize(&Frame {
+                    timestamp: i as f64 * 0.1,
+                    descriptor: &descriptor,
+                    odometry,
+                    image: None,
+                })
+                .unwrap();
+            let truth = (pose.x / 2.0).round() as u32;
+            hits += usize::from(result.place == truth);
+        }
+        hits as f64 / poses.len() as f64
+    };
+    let (near_views, any_view) = (run(0.3), run(100.0));
+    eprintln!("views near the particle {near_views:.3}, any view of the place {any_view:.3}");
+    assert!(near_views >= 0.9, "{near_views:.3}");
+    assert!(
+        near_views > any_view + 0.03,
+        "{near_views:.3} vs {any_view:.3}"
+    );
+}

@@ -18,9 +18,10 @@
 //!    fraction ([`MetricOptions::injection`]) is replaced by poses drawn around the map's views
 //!    in proportion to how well each view matches the frame (sensor resetting), so that a
 //!    lost or kidnapped cloud recovers. The first frame draws every particle this way.
-//! 3. *Update.* A particle's nearest place (by position) and, among that place's views, the
-//!    view nearest in pose give its likelihood `exp((score_view - max) / T)`. The place belief
-//!    is the weight of the particles nearest to each place.
+//! 3. *Update.* A particle's nearest place (by position) and, among that place's views, those
+//!    facing its way and captured nearest to it give its likelihood `exp((score - max) / T)`
+//!    (the best such view's score). The place belief is the weight of the particles nearest to
+//!    each place.
 //!
 //! Deterministic: the random generator is seeded from [`MetricOptions::seed`] and reset with
 //! the localizer.
@@ -44,6 +45,10 @@ pub struct MetricOptions {
     /// A particle scores the best of its nearest place's views turned less than this from it,
     /// radians (else the view nearest in heading). Default 1.0.
     pub view_window_rad: f32,
+    /// ... and, of those, captured within this distance of the closest one, metres: on maps
+    /// with views around each place (keyframes, `topoloc-sim --ring-m`), the views near the
+    /// particle say where in the place the camera is. Default 0.3.
+    pub view_position_tolerance_m: f32,
     /// Standard deviation of the translation error per metre travelled. Default 0.05.
     pub translation_noise: f32,
     /// Standard deviation of the heading error per frame, radians. Default 0.01.
@@ -72,6 +77,7 @@ impl Default for MetricOptions {
             particles: 2000,
             temperature: 1.0,
             view_window_rad: 1.0,
+            view_position_tolerance_m: 0.3,
             translation_noise: 0.05,
             rotation_noise_rad: 0.01,
             diffusion_m: 0.3,
@@ -97,6 +103,10 @@ impl MetricOptions {
             ("metric.translation_noise", self.translation_noise),
             ("metric.rotation_noise_rad", self.rotation_noise_rad),
             ("metric.view_window_rad", self.view_window_rad),
+            (
+                "metric.view_position_tolerance_m",
+                self.view_position_tolerance_m,
+            ),
             ("metric.diffusion_m", self.diffusion_m),
             ("metric.diffusion_rad", self.diffusion_rad),
             ("metric.injection_spread_m", self.injection_spread_m),
@@ -250,37 +260,45 @@ impl Particles {
                 &Point3::from(pose.translation.vector),
             );
             self.nearest[i] = place as u32;
-            let score = self.view_score(place, &pose.rotation, view_scores);
+            let score = self.view_score(place, pose, view_scores);
             self.weights[i] = ((score.unwrap_or(max_score) - max_score) * inv_t).exp();
         }
         self.normalise();
     }
 
-    /// What a particle at `place` turned `rotation` scores: the best of the place's views
-    /// turned less than `view_window_rad` from it, else the view nearest in heading; `None`
-    /// for a place without views.
-    fn view_score(
-        &self,
-        place: usize,
-        rotation: &UnitQuaternion<f64>,
-        view_scores: &[f32],
-    ) -> Option<f64> {
+    /// What a particle at `place` with `pose` scores: among the place's views turned less than
+    /// `view_window_rad` from it, those captured within `view_position_tolerance_m` of the
+    /// closest one, the best score (views around a place tell where in it the camera is); with
+    /// no view in the window, the view nearest in heading. `None` for a place without views.
+    fn view_score(&self, place: usize, pose: &Isometry3<f64>, view_scores: &[f32]) -> Option<f64> {
         let window = f64::from(self.options.view_window_rad);
+        let tolerance = f64::from(self.options.view_position_tolerance_m);
         let views =
             &self.place_views[self.place_view_offsets[place]..self.place_view_offsets[place + 1]];
-        let mut within: Option<f64> = None;
-        let mut nearest = (f64::INFINITY, None);
-        for &v in views {
-            let angle = self.view_poses[v as usize].rotation.angle_to(rotation);
-            let score = f64::from(view_scores[v as usize]);
-            if angle < window {
-                within = Some(within.map_or(score, |w| w.max(score)));
-            }
-            if angle < nearest.0 {
-                nearest = (angle, Some(score));
-            }
-        }
-        within.or(nearest.1)
+        let distance = |v: u32| {
+            (self.view_poses[v as usize].translation.vector - pose.translation.vector).norm()
+        };
+        let angle = |v: u32| {
+            self.view_poses[v as usize]
+                .rotation
+                .angle_to(&pose.rotation)
+        };
+        let closest = views
+            .iter()
+            .filter(|&&v| angle(v) < window)
+            .map(|&v| distance(v))
+            .fold(f64::INFINITY, f64::min);
+        let within = views
+            .iter()
+            .filter(|&&v| angle(v) < window && distance(v) <= closest + tolerance)
+            .map(|&v| f64::from(view_scores[v as usize]))
+            .reduce(f64::max);
+        within.or_else(|| {
+            views
+                .iter()
+                .min_by(|&&a, &&b| angle(a).total_cmp(&angle(b)))
+                .map(|&v| f64::from(view_scores[v as usize]))
+        })
     }
 
     /// Multiplies the weight of every particle nearest to place p by `factor(p)` and

@@ -21,7 +21,7 @@ use topoloc::describe::image::ImageView;
 use topoloc::describe::DescriberOptions;
 use topoloc::eval::HopDistances;
 use topoloc::verify::VerificationOptions;
-use topoloc::{LocalizerOptions, Mode};
+use topoloc::{LocalizerOptions, MetricOptions, Mode};
 use topoloc_sim::capture::image_view;
 use topoloc_sim::scenario::{build_scene, describe_flight, fly};
 use topoloc_sim::style::Split;
@@ -63,6 +63,9 @@ pub struct SuiteArgs {
     /// should keep to the odometry.
     #[arg(long, default_value_t = 0.01)]
     pub metric_inlier_weight: f32,
+    /// Seed of metric mode's particle filter (`MetricOptions::seed`).
+    #[arg(long, default_value_t = 0)]
+    pub metric_seed: u64,
     /// Configurations to run, comma-separated (default: all): single-frame, filter,
     /// filter+odometry, filter+odometry+verification, metric+odometry,
     /// metric+odometry+verification.
@@ -176,6 +179,10 @@ pub fn run(args: &SuiteArgs) -> Result<()> {
                     let options = LocalizerOptions {
                         mode,
                         verification,
+                        metric: MetricOptions {
+                            seed: args.metric_seed,
+                            ..MetricOptions::default()
+                        },
                         ..LocalizerOptions::default()
                     };
                     let given = verify.then_some(images.as_slice());
@@ -307,7 +314,7 @@ fn summary_json(
         "rooms": args.rooms, "floors": args.floors, "legs": args.legs,
         "views_per_place": args.capture.views_per_place,
         "verify": args.verify, "inlier_weight": args.inlier_weight,
-        "metric_inlier_weight": args.metric_inlier_weight,
+        "metric_inlier_weight": args.metric_inlier_weight, "metric_seed": args.metric_seed,
         "splits": splits, "seconds": start.elapsed().as_secs_f64(),
     })
 }
