@@ -498,10 +498,7 @@ impl Localizer {
         let keypoints = self.map.keypoints().expect("checked at construction");
         let m = self.map.place_count();
         let c = options.candidates.min(m);
-        let places = match &self.particles {
-            Some(particles) => &particles.places,
-            None => &self.belief.places,
-        };
+        let places = place_belief(&self.particles, &self.belief);
         select_most_probable(&mut self.order, places, c, false);
         verifier.checked.clear();
         for &place in &self.order[..c] {
@@ -553,10 +550,7 @@ impl Localizer {
 
     fn write_result(&mut self, out: &mut Localization) {
         let m = self.map.place_count();
-        let p = match &self.particles {
-            Some(particles) => &particles.places,
-            None => &self.belief.places,
-        };
+        let p = place_belief(&self.particles, &self.belief);
         let on_map = 1.0 - self.belief.off_map;
         let k = self.options.top_k.min(m);
         select_most_probable(&mut self.order, p, k, true);
@@ -584,6 +578,13 @@ impl Localizer {
         out.off_map_probability = self.belief.off_map as f32;
         out.off_map = self.belief.off_map > 0.5;
     }
+}
+
+/// The posterior over places given that the robot is on the map: the particle cloud's in
+/// metric mode, else the graph filter's. (A free function, so that callers may borrow other
+/// fields of the localizer mutably meanwhile.)
+fn place_belief<'a>(particles: &'a Option<Particles>, belief: &'a Belief) -> &'a [f64] {
+    particles.as_ref().map_or(&belief.places, |p| &p.places)
 }
 
 /// Moves the `k` (>= 1) most probable places of `order` (place ids) to its front, ties broken by
