@@ -24,6 +24,16 @@ fn localizer(map: &Arc<Map>, mode: Mode) -> Localizer {
     Localizer::new(map.clone(), options).unwrap()
 }
 
+/// A metric-mode localizer whose `MetricOptions` differ from the defaults by `tweak`.
+fn metric_localizer(map: &Arc<Map>, tweak: impl FnOnce(&mut MetricOptions)) -> Localizer {
+    let mut options = LocalizerOptions {
+        mode: Mode::Metric,
+        ..Default::default()
+    };
+    tweak(&mut options.metric);
+    Localizer::new(map.clone(), options).unwrap()
+}
+
 /// A camera pose in the plane: position and yaw (body x forward, z up).
 #[derive(Clone, Copy)]
 struct Pose2 {
@@ -348,12 +358,7 @@ fn views_around_places_correct_odometry_that_overshoots() {
     let poses = straight(22.0, 0.1);
     // The frame shows the view captured nearest to the camera; the odometry overshoots by 15%.
     let run = |tolerance: f32| {
-        let mut options = LocalizerOptions {
-            mode: Mode::Metric,
-            ..Default::default()
-        };
-        options.metric.view_position_tolerance_m = tolerance;
-        let mut localizer = Localizer::new(map.clone(), options).unwrap();
+        let mut localizer = metric_localizer(&map, |m| m.view_position_tolerance_m = tolerance);
         let mut hits = 0;
         for (i, pose) in poses.iter().enumerate() {
             let nearest_view = (0..map.view_count() as u32)
@@ -412,12 +417,7 @@ fn a_sharp_first_draw_finds_the_place_sooner() {
         .collect();
     // Accuracy and mean probability of the true place over the first frames.
     let first_frames = |initial_temperature: f32| {
-        let mut options = LocalizerOptions {
-            mode: Mode::Metric,
-            ..Default::default()
-        };
-        options.metric.initial_temperature = initial_temperature;
-        let mut localizer = Localizer::new(map.clone(), options).unwrap();
+        let mut localizer = metric_localizer(&map, |m| m.initial_temperature = initial_temperature);
         let results = fly(&mut localizer, &poses, 1.0, true);
         let probability: f64 = results
             .iter()
