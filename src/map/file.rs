@@ -22,6 +22,7 @@
 //! | `view_keypoint_offsets` | U64 | N+1 | (1.2, optional) ranges of each view's keypoints |
 //! | `view_keypoint_points` | F32 | T x 2 | (1.2) keypoint pixel positions x, y |
 //! | `view_keypoint_descriptors` | U8 | T x 32 | (1.2) their ORB descriptors |
+//! | `view_keypoint_world_points` | F32 | T x 3 | (1.3, optional) map-frame scene point of each keypoint, NaN when unknown |
 //!
 //! The only metadata key, `topoloc`, holds a JSON object with `format` (`"topoloc-map"`),
 //! `version` (`"MAJOR.MINOR"`), `descriptor` (`kind`, `model`, `dim`), `creator`, the counts, and
@@ -53,7 +54,7 @@ pub const FORMAT_NAME: &str = "topoloc-map";
 /// Major format version written and read by this build.
 pub const FORMAT_VERSION_MAJOR: u32 = 1;
 /// Minor format version written by this build.
-pub const FORMAT_VERSION_MINOR: u32 = 2;
+pub const FORMAT_VERSION_MINOR: u32 = 3;
 
 const META_KEY: &str = "topoloc";
 /// Longest JSON header accepted; far above any real map's header (a few hundred bytes).
@@ -312,6 +313,16 @@ impl Map {
                     le_bytes(k.points().as_flattened(), f32::to_le_bytes),
                 ),
             ));
+            if let Some(world) = k.world_points() {
+                tensors.push((
+                    "view_keypoint_world_points",
+                    OutTensor::new(
+                        Dtype::F32,
+                        vec![k.total(), 3],
+                        le_bytes(world.as_flattened(), f32::to_le_bytes),
+                    ),
+                ));
+            }
         }
         tensors.sort_by_key(|(name, _)| *name);
 
@@ -525,10 +536,13 @@ fn read_describer(
     Ok(model)
 }
 
-/// Decides whether a damaged header still looks like the start of a topoloc map, which tells a
-/// truncated or corrupt map apart from some other file.
-/// Reads the views' keypoints (1.2) of a map of `views` views.
-fn read_keypoints(reader: &TensorReader<'_, '_>, views: usize) -> Result<ViewKeypoints, MapError> {
+/// Reads the views' keypoints (1.2) of a map of `views` views, with their scene points (1.3)
+/// when `with_world_points`.
+fn read_keypoints(
+    reader: &TensorReader<'_, '_>,
+    views: usize,
+    with_world_points: bool,
+) -> Result<ViewKeypoints, MapError> {
     let offsets = reader.u64s("view_keypoint_offsets", &[views + 1])?;
     let total = offsets.last().copied().unwrap_or(0) as usize;
     let points = reader.f32s("view_keypoint_points", &[total, 2])?;
@@ -542,10 +556,18 @@ fn read_keypoints(reader: &TensorReader<'_, '_>, views: usize) -> Result<ViewKey
         .map(|c| c.try_into().expect("32 bytes"))
         .collect();
     let points = points.chunks_exact(2).map(|p| [p[0], p[1]]).collect();
-    ViewKeypoints::from_parts(offsets, points, descriptors)
-        .map_err(|e| MapError::Corrupt(format!("view keypoints: {e}")))
+    let corrupt = |e| MapError::Corrupt(format!("view keypoints: {e}"));
+    let keypoints = ViewKeypoints::from_parts(offsets, points, descriptors).map_err(corrupt)?;
+    if !with_world_points {
+        return Ok(keypoints);
+    }
+    let world = reader.f32s("view_keypoint_world_points", &[total, 3])?;
+    let world = world.chunks_exact(3).map(|p| [p[0], p[1], p[2]]).collect();
+    keypoints.with_world_points(world).map_err(corrupt)
 }
 
+/// Decides whether a damaged header still looks like the start of a topoloc map, which tells a
+/// truncated or corrupt map apart from some other file.
 fn starts_like_map(bytes: &[u8]) -> bool {
     let Some(header) = bytes.get(8..) else {
         return true;
@@ -744,7 +766,8 @@ fn parse(bytes: &[u8], options: &LoadOptions) -> Result<ParsedMap, MapError> {
     };
 
     let keypoints = if names.contains(&"view_keypoint_offsets") {
-        Some(read_keypoints(&reader, n)?)
+        let with_world_points = names.contains(&"view_keypoint_world_points");
+        Some(read_keypoints(&reader, n, with_world_points)?)
     } else {
         None
     };

@@ -130,12 +130,16 @@ impl KeypointDetector {
 }
 
 /// Keypoints of every view of a map, concatenated: view `v` owns entries
-/// `offsets[v]..offsets[v + 1]`.
+/// `offsets[v]..offsets[v + 1]`. Optionally, the map-frame 3D position of each keypoint's
+/// scene point (from depth, a SLAM system's map points, or `topoloc-sim`'s ray caster), which
+/// lets the localizer place the camera metrically against a view ([`crate::verify::locate`]).
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct ViewKeypoints {
     offsets: Vec<u64>,
     points: Vec<[f32; 2]>,
     descriptors: Vec<Descriptor>,
+    /// Map-frame position of each keypoint's scene point; NaN where unknown.
+    world_points: Option<Vec<[f32; 3]>>,
 }
 
 impl ViewKeypoints {
@@ -186,7 +190,42 @@ impl ViewKeypoints {
             offsets,
             points,
             descriptors,
+            world_points: None,
         })
+    }
+
+    /// Attaches the map-frame 3D position of every keypoint's scene point (same order as the
+    /// keypoints; all three coordinates NaN where unknown). Fails unless there is one per
+    /// keypoint and each is either finite or all NaN.
+    pub fn with_world_points(mut self, world_points: Vec<[f32; 3]>) -> Result<Self, String> {
+        if world_points.len() != self.points.len() {
+            return Err(format!(
+                "{} keypoint world points for {} keypoints",
+                world_points.len(),
+                self.points.len()
+            ));
+        }
+        let valid = |p: &[f32; 3]| p.iter().all(|x| x.is_finite()) || p.iter().all(|x| x.is_nan());
+        if let Some(i) = world_points.iter().position(|p| !valid(p)) {
+            return Err(format!(
+                "keypoint world point {i} is {:?}: must be finite, or NaN in all three coordinates when unknown",
+                world_points[i]
+            ));
+        }
+        self.world_points = Some(world_points);
+        Ok(self)
+    }
+
+    /// The map-frame positions of all keypoints' scene points, view after view, if stored.
+    pub fn world_points(&self) -> Option<&[[f32; 3]]> {
+        self.world_points.as_deref()
+    }
+
+    /// The map-frame scene points of view `view`'s keypoints (NaN where unknown), or `None`
+    /// when out of range or not stored.
+    pub fn view_world_points(&self, view: usize) -> Option<&[[f32; 3]]> {
+        let (a, b) = (*self.offsets.get(view)?, *self.offsets.get(view + 1)?);
+        Some(&self.world_points.as_ref()?[a as usize..b as usize])
     }
 
     /// Number of views.
