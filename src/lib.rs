@@ -23,7 +23,8 @@ pub mod synthetic;
 pub mod verify;
 
 pub use localize::{
-    Candidate, Frame, Localization, LocalizeError, Localizer, LocalizerOptions, MetricOptions, Mode,
+    Candidate, Frame, Localization, LocalizeError, Localizer, LocalizerOptions, MetricOptions,
+    Mode, PoseFix,
 };
 pub use map::{DescriptorIdentity, ExpectedDescriptor, LoadOptions, Map, MapBuilder, MapError};
 

@@ -5,7 +5,9 @@
 //! filter over camera poses (`particles.rs`), on maps with positions and view poses; the
 //! off-map state comes from the graph filter in every mode. Optionally the most probable places
 //! are verified geometrically against the query image ([`crate::verify`]) and their belief
-//! weighed by the inliers found.
+//! weighed by the inliers found; with the camera's intrinsics and a map storing keypoint scene
+//! points, the best-verified view also gives a metric pose of the camera
+//! ([`Localization::pose_fix`]), which metric mode uses to weigh its particles.
 
 mod error;
 mod filter;
@@ -19,9 +21,9 @@ pub use particles::{MetricOptions, MAX_PARTICLES};
 use crate::describe::image::ImageView;
 use crate::describe::{DescribeError, Describer, DescriberOptions};
 use crate::map::{normalize_descriptor_into, ExpectedDescriptor, Map, PlaceId, ViewId};
-use crate::verify::{check_pair, KeypointDetector, Keypoints, VerificationOptions};
+use crate::verify::{check_pair, locate, KeypointDetector, Keypoints, VerificationOptions};
 use filter::{Belief, FilterParams};
-use nalgebra::Isometry3;
+use nalgebra::{Isometry3, Point3};
 use particles::Particles;
 use std::sync::Arc;
 
@@ -201,6 +203,19 @@ pub struct Candidate {
     pub inliers: u32,
 }
 
+/// A metric pose of the camera found against one map view (see [`crate::verify::locate`]):
+/// what a pose graph adds as a loop-closure constraint.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PoseFix {
+    /// The view the camera was placed against.
+    pub view: ViewId,
+    /// The camera in the map frame, `world_T_optical` (optical axes: z forward, x right, y
+    /// down).
+    pub world_t_optical: Isometry3<f64>,
+    /// Keypoint pairs consistent with the pose.
+    pub inliers: u32,
+}
+
 /// The answer for one frame.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Localization {
@@ -221,6 +236,10 @@ pub struct Localization {
     pub off_map_probability: f32,
     /// Top-k places by posterior, best first; `candidates[0]` is `place`.
     pub candidates: Vec<Candidate>,
+    /// The camera's metric pose against the best-verified view, when verification has a camera
+    /// ([`VerificationOptions::camera`]), the map stores keypoint scene points and enough
+    /// keypoints agree on one pose.
+    pub pose_fix: Option<PoseFix>,
 }
 
 /// Localizes a stream of frames against one map.
@@ -256,6 +275,8 @@ struct Verifier {
     /// Places checked in the current frame with their best inlier count and view.
     checked: Vec<(PlaceId, u32, ViewId)>,
     views: Vec<ViewId>,
+    /// The pose fix of the current frame.
+    fix: Option<PoseFix>,
     backup: Belief,
     particles_backup: Option<Particles>,
 }
@@ -281,11 +302,19 @@ impl Localizer {
                     "verification is on but the map stores no keypoints (build it from images with keypoints > 0, or set verification.candidates to 0)".into(),
                 ));
             }
+            if options.verification.camera.is_some()
+                && map.keypoints().and_then(|k| k.world_points()).is_none()
+            {
+                return Err(LocalizeError::Verification(
+                    "verification.camera is set but the map stores no keypoint scene points (attach them with ViewKeypoints::with_world_points, or leave the camera unset)".into(),
+                ));
+            }
             Some(Verifier {
                 detector: KeypointDetector::new(options.verification.query_keypoints)?,
                 query: Keypoints::default(),
                 checked: Vec::with_capacity(options.verification.candidates),
                 views: Vec::new(),
+                fix: None,
                 backup: Belief::new(&map, &params),
                 particles_backup: particles.clone(),
             })
@@ -501,6 +530,7 @@ impl Localizer {
         let places = place_belief(&self.particles, &self.belief);
         select_most_probable(&mut self.order, places, c, false);
         verifier.checked.clear();
+        verifier.fix = None;
         for &place in &self.order[..c] {
             verifier.views.clear();
             verifier
@@ -545,6 +575,31 @@ impl Localizer {
                 self.best_views[place as usize] = view;
             }
         }
+        let best = checked.iter().max_by_key(|c| (c.1, std::cmp::Reverse(c.0)));
+        if let (Some(camera), Some(&(_, inliers, view))) = (&options.camera, best) {
+            if inliers >= options.locate.min_inliers {
+                let stored = keypoints.view(view as usize).expect("view in range");
+                let scene = keypoints
+                    .view_world_points(view as usize)
+                    .expect("checked at construction");
+                let found = locate(
+                    verifier.query.as_ref(),
+                    stored,
+                    scene,
+                    camera,
+                    options.pair.max_hamming,
+                    &options.locate,
+                )?;
+                verifier.fix = found.map(|f| PoseFix {
+                    view,
+                    world_t_optical: f.world_t_optical,
+                    inliers: f.inliers,
+                });
+            }
+        }
+        if let (Some(particles), Some(fix)) = (&mut self.particles, &verifier.fix) {
+            particles.weigh_by_position(&Point3::from(fix.world_t_optical.translation.vector));
+        }
         Ok(())
     }
 
@@ -577,6 +632,7 @@ impl Localizer {
         out.similarity = best.similarity;
         out.off_map_probability = self.belief.off_map as f32;
         out.off_map = self.belief.off_map > 0.5;
+        out.pose_fix = self.verifier.as_ref().and_then(|v| v.fix);
     }
 }
 

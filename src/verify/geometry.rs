@@ -77,15 +77,15 @@ fn descriptor_mat(descriptors: &[Descriptor]) -> opencv::Result<BoxedRef<'_, Mat
     )
 }
 
-/// Matches `query` to `view` and counts the geometric inliers. Deterministic (OpenCV's RANSAC
-/// uses a fixed seed). Options are assumed valid ([`PairOptions::validate`]).
-pub fn check_pair(
+/// Mutual nearest-neighbour matches of `query` to `view` (`query_idx` indexes the query,
+/// `train_idx` the view) within `max_hamming` bits.
+pub(crate) fn mutual_matches(
     query: KeypointsRef<'_>,
     view: KeypointsRef<'_>,
-    options: &PairOptions,
-) -> Result<PairCheck, DescribeError> {
-    if query.points.len() < MIN_MATCHES || view.points.len() < MIN_MATCHES {
-        return Ok(PairCheck::default());
+    max_hamming: u32,
+) -> Result<Vec<DMatch>, DescribeError> {
+    if query.points.is_empty() || view.points.is_empty() {
+        return Ok(Vec::new());
     }
     let query_mat = descriptor_mat(query.descriptors)?;
     let view_mat = descriptor_mat(view.descriptors)?;
@@ -97,10 +97,23 @@ pub fn check_pair(
         &mut matches,
         &opencv::core::no_array(),
     )?;
-    let kept: Vec<DMatch> = matches
+    Ok(matches
         .iter()
-        .filter(|m| m.distance <= options.max_hamming as f32)
-        .collect();
+        .filter(|m| m.distance <= max_hamming as f32)
+        .collect())
+}
+
+/// Matches `query` to `view` and counts the geometric inliers. Deterministic (OpenCV's RANSAC
+/// uses a fixed seed). Options are assumed valid ([`PairOptions::validate`]).
+pub fn check_pair(
+    query: KeypointsRef<'_>,
+    view: KeypointsRef<'_>,
+    options: &PairOptions,
+) -> Result<PairCheck, DescribeError> {
+    if query.points.len() < MIN_MATCHES || view.points.len() < MIN_MATCHES {
+        return Ok(PairCheck::default());
+    }
+    let kept = mutual_matches(query, view, options.max_hamming)?;
     let count = kept.len() as u32;
     if kept.len() < MIN_MATCHES {
         return Ok(PairCheck {

@@ -8,15 +8,22 @@
 //! weighs each checked place's belief by `exp(inlier_weight * inliers)`. Look-alike places
 //! (same wallpaper, another room) rarely agree with the query on one rigid scene, so their
 //! inlier counts stay low where the true place's are high.
+//!
+//! When the map also stores the scene point of each view keypoint (format 1.3) and the
+//! localizer knows the query camera's intrinsics ([`VerificationOptions::camera`]), the view
+//! with the most inliers is used to place the camera metrically ([`locate`]): a pose fix for
+//! the host's pose graph and, in metric mode, a measurement of the particles' position.
 
 mod geometry;
 mod keypoints;
+mod pose;
 
 pub use geometry::{check_pair, PairCheck, PairOptions, MIN_MATCHES};
 pub use keypoints::{
     Descriptor, KeypointDetector, Keypoints, KeypointsRef, ViewKeypoints, DESCRIPTOR_BYTES,
     MAX_KEYPOINTS,
 };
+pub use pose::{locate, LocateOptions, Located, PinholeCamera, MIN_PAIRS};
 
 /// Keypoints per view a map built from images stores by default, and a query detects.
 pub const DEFAULT_KEYPOINTS: usize = 500;
@@ -38,6 +45,11 @@ pub struct VerificationOptions {
     pub query_keypoints: usize,
     /// Matching and RANSAC.
     pub pair: PairOptions,
+    /// Intrinsics of the query camera. With them, and a map storing keypoint scene points, the
+    /// best-verified view gives a metric pose of the camera ([`locate`]). Default `None`.
+    pub camera: Option<PinholeCamera>,
+    /// The pose fit against the best-verified view.
+    pub locate: LocateOptions,
 }
 
 impl Default for VerificationOptions {
@@ -48,6 +60,8 @@ impl Default for VerificationOptions {
             inlier_weight: 0.05,
             query_keypoints: DEFAULT_KEYPOINTS,
             pair: PairOptions::default(),
+            camera: None,
+            locate: LocateOptions::default(),
         }
     }
 }
@@ -89,6 +103,12 @@ impl VerificationOptions {
                 self.query_keypoints
             ));
         }
+        if let Some(camera) = &self.camera {
+            camera.validate().map_err(|e| format!("verification.{e}"))?;
+        }
+        self.locate
+            .validate()
+            .map_err(|e| format!("verification.locate.{e}"))?;
         self.pair
             .validate()
             .map_err(|e| format!("verification.pair: {e}"))

@@ -1,0 +1,257 @@
+//! Metric pose of the query camera against one map view: the query's keypoints are matched to
+//! the view's, those whose scene point the map knows (map frame, [`ViewKeypoints`] world points)
+//! give 2D-3D pairs, and a perspective-n-point fit with RANSAC places the camera in the map
+//! frame. This is what a SLAM pose graph needs from a loop-closure hint, and what lets the
+//! metric filter know where in a place the camera is, which appearance alone cannot tell to
+//! better than half a metre.
+//!
+//! [`ViewKeypoints`]: super::ViewKeypoints
+
+use super::geometry::mutual_matches;
+use super::keypoints::KeypointsRef;
+use crate::describe::DescribeError;
+use nalgebra::{Isometry3, Matrix3, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
+use opencv::calib3d;
+use opencv::core::{
+    Mat, Point2f, Point3f, TermCriteria, TermCriteria_COUNT, TermCriteria_EPS, Vector,
+};
+use opencv::prelude::*;
+
+/// Fewest 2D-3D pairs a pose is fitted to.
+pub const MIN_PAIRS: usize = 6;
+
+/// Pinhole intrinsics of the query camera, in pixels of the image as given to the localizer
+/// and in OpenCV's convention: the centre of the top-left pixel is (0, 0), and the optical
+/// frame has z forward, x right, y down. Images are assumed undistorted.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PinholeCamera {
+    /// Focal length along x, pixels.
+    pub fx: f64,
+    /// Focal length along y, pixels.
+    pub fy: f64,
+    /// Principal point x, pixels.
+    pub cx: f64,
+    /// Principal point y, pixels.
+    pub cy: f64,
+}
+
+impl PinholeCamera {
+    /// Fails with a message naming the bad field: focal lengths must be finite and > 0, the
+    /// principal point finite.
+    pub fn validate(&self) -> Result<(), String> {
+        for (name, f) in [("fx", self.fx), ("fy", self.fy)] {
+            if !(f.is_finite() && f > 0.0) {
+                return Err(format!("camera.{name} is {f}, must be finite and > 0"));
+            }
+        }
+        for (name, c) in [("cx", self.cx), ("cy", self.cy)] {
+            if !c.is_finite() {
+                return Err(format!("camera.{name} is {c}, must be finite"));
+            }
+        }
+        Ok(())
+    }
+
+    fn matrix(&self) -> opencv::Result<Mat> {
+        Mat::from_slice_2d(&[
+            [self.fx, 0.0, self.cx],
+            [0.0, self.fy, self.cy],
+            [0.0, 0.0, 1.0],
+        ])
+    }
+}
+
+/// Options of [`locate`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct LocateOptions {
+    /// Fewest RANSAC inliers for a pose to be accepted. Default 30 (on the Test worlds of
+    /// `topoloc suite`, a third of the fixes with 15-30 inliers are more than half a metre
+    /// off, one in ten with 30-60; BENCHMARKS.md).
+    pub min_inliers: u32,
+    /// RANSAC inlier threshold: reprojection error, pixels. Default 2.0.
+    pub reprojection_px: f32,
+    /// RANSAC iterations at most. Default 100.
+    pub max_iterations: u32,
+}
+
+impl Default for LocateOptions {
+    fn default() -> Self {
+        Self {
+            min_inliers: 30,
+            reprojection_px: 2.0,
+            max_iterations: 100,
+        }
+    }
+}
+
+impl LocateOptions {
+    /// Fails with a message naming the field out of range.
+    pub fn validate(&self) -> Result<(), String> {
+        if !(MIN_PAIRS as u32..=10_000).contains(&self.min_inliers) {
+            return Err(format!(
+                "min_inliers is {}, must lie in {MIN_PAIRS}..=10000",
+                self.min_inliers
+            ));
+        }
+        if !(self.reprojection_px.is_finite() && self.reprojection_px > 0.0) {
+            return Err("reprojection_px must be finite and > 0".into());
+        }
+        if !(1..=100_000).contains(&self.max_iterations) {
+            return Err("max_iterations must lie in 1..=100000".into());
+        }
+        Ok(())
+    }
+}
+
+/// A camera pose found by [`locate`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Located {
+    /// The query camera in the map frame, `world_T_optical` (optical axes: z forward, x right,
+    /// y down).
+    pub world_t_optical: Isometry3<f64>,
+    /// 2D-3D pairs consistent with the pose.
+    pub inliers: u32,
+}
+
+impl Located {
+    /// The camera centre in the map frame.
+    pub fn position(&self) -> Point3<f64> {
+        Point3::from(self.world_t_optical.translation.vector)
+    }
+}
+
+/// Places the query camera against one view: matches `query` to `view` (mutual nearest
+/// neighbours within `max_hamming` bits), keeps the pairs whose view keypoint has a known scene
+/// point in `view_world_points` (one per view keypoint, NaN when unknown), and fits the pose
+/// with RANSAC. `None` when fewer than `options.min_inliers` pairs agree on one pose.
+/// Deterministic (OpenCV's RANSAC uses a fixed seed). Options and camera are assumed valid.
+pub fn locate(
+    query: KeypointsRef<'_>,
+    view: KeypointsRef<'_>,
+    view_world_points: &[[f32; 3]],
+    camera: &PinholeCamera,
+    max_hamming: u32,
+    options: &LocateOptions,
+) -> Result<Option<Located>, DescribeError> {
+    if view_world_points.len() != view.points.len() {
+        return Err(DescribeError::InvalidArgument(format!(
+            "{} scene points for {} view keypoints",
+            view_world_points.len(),
+            view.points.len()
+        )));
+    }
+    let matches = mutual_matches(query, view, max_hamming)?;
+    let mut image_points = Vector::<Point2f>::new();
+    let mut object_points = Vector::<Point3f>::new();
+    for m in &matches {
+        let scene = view_world_points[m.train_idx as usize];
+        if scene[0].is_finite() {
+            let pixel = query.points[m.query_idx as usize];
+            image_points.push(Point2f::new(pixel[0], pixel[1]));
+            object_points.push(Point3f::new(scene[0], scene[1], scene[2]));
+        }
+    }
+    let needed = (options.min_inliers as usize).max(MIN_PAIRS);
+    if object_points.len() < needed {
+        return Ok(None);
+    }
+    let mut rvec = Mat::default();
+    let mut tvec = Mat::default();
+    let mut inliers = Mat::default();
+    let k = camera.matrix()?;
+    // Minimal sets by AP3P (OpenCV refits the inliers with EPnP), then the inliers refitted
+    // by SQPnP (globally optimal; EPnP is poor on a single plane, a wall) and polished by
+    // Levenberg-Marquardt. OpenCV's solvers raise errors on degenerate samples (SQPnP asserts
+    // on nearly coincident points, hence not used for the minimal sets): degenerate geometry
+    // gives no pose, not a failed frame.
+    let found = calib3d::solve_pnp_ransac(
+        &object_points,
+        &image_points,
+        &k,
+        &Mat::default(),
+        &mut rvec,
+        &mut tvec,
+        false,
+        options.max_iterations as i32,
+        options.reprojection_px,
+        0.99,
+        &mut inliers,
+        calib3d::SOLVEPNP_AP3P,
+    );
+    let count = inliers.rows().max(0) as u32;
+    if !matches!(found, Ok(true))
+        || count < options.min_inliers
+        || rvec.total() != 3
+        || tvec.total() != 3
+    {
+        return Ok(None);
+    }
+    let indices: Vec<usize> = (0..count as i32)
+        .map(|i| inliers.at::<i32>(i).map(|&j| j as usize))
+        .collect::<opencv::Result<_>>()?;
+    let object_inliers: Vector<Point3f> = indices
+        .iter()
+        .map(|&j| object_points.get(j))
+        .collect::<opencv::Result<_>>()?;
+    let image_inliers: Vector<Point2f> = indices
+        .iter()
+        .map(|&j| image_points.get(j))
+        .collect::<opencv::Result<_>>()?;
+    let (mut rvec_sq, mut tvec_sq) = (Mat::default(), Mat::default());
+    let refit = calib3d::solve_pnp(
+        &object_inliers,
+        &image_inliers,
+        &k,
+        &Mat::default(),
+        &mut rvec_sq,
+        &mut tvec_sq,
+        false,
+        calib3d::SOLVEPNP_SQPNP,
+    );
+    if matches!(refit, Ok(true)) && rvec_sq.total() == 3 && tvec_sq.total() == 3 {
+        (rvec, tvec) = (rvec_sq, tvec_sq);
+    }
+    let criteria = TermCriteria::new(TermCriteria_COUNT + TermCriteria_EPS, 20, 1e-8)?;
+    if calib3d::solve_pnp_refine_lm(
+        &object_inliers,
+        &image_inliers,
+        &k,
+        &Mat::default(),
+        &mut rvec,
+        &mut tvec,
+        criteria,
+    )
+    .is_err()
+    {
+        return Ok(None);
+    }
+    let vector = |m: &Mat| -> opencv::Result<Vector3<f64>> {
+        Ok(Vector3::new(
+            *m.at::<f64>(0)?,
+            *m.at::<f64>(1)?,
+            *m.at::<f64>(2)?,
+        ))
+    };
+    let (r, t) = (vector(&rvec)?, vector(&tvec)?);
+    if !(r.iter().chain(t.iter()).all(|x| x.is_finite())) {
+        return Ok(None);
+    }
+    // OpenCV gives optical_T_world; invert it.
+    let optical_r_world = Rotation3::from_scaled_axis(r);
+    // A pose that puts an inlier behind the camera is a degenerate fit, not a place.
+    for p in &object_inliers {
+        let scene = Vector3::new(f64::from(p.x), f64::from(p.y), f64::from(p.z));
+        if (optical_r_world * scene + t).z <= 0.0 {
+            return Ok(None);
+        }
+    }
+    let world_r_optical: Matrix3<f64> = optical_r_world.matrix().transpose();
+    let centre = -(world_r_optical * t);
+    Ok(Some(Located {
+        world_t_optical: Isometry3::from_parts(
+            Translation3::from(centre),
+            UnitQuaternion::from_matrix(&world_r_optical),
+        ),
+        inliers: count,
+    }))
+}
