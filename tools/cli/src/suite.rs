@@ -6,8 +6,9 @@
 //! `--views-per-place` says otherwise), then localizes every frame with each
 //! localizer configuration (single-frame, filter, filter with drifting odometry, that with
 //! geometric verification of the most probable places unless `--verify 0`, and metric mode
-//! (particles moved by the odometry) without and with verification; `--configurations` picks
-//! some). Prints MNA and
+//! (particles moved by the odometry) without and with verification, and with pose fixes from
+//! the best-verified view (the map's keypoint scene points, the sim camera's intrinsics);
+//! `--configurations` picks some). Prints MNA and
 //! OHA per split as mean ± standard deviation over the worlds, the way the seed's tables do
 //! (thesis Table 4.2), and the graph sizes they were measured on.
 
@@ -68,7 +69,7 @@ pub struct SuiteArgs {
     pub metric_seed: u64,
     /// Configurations to run, comma-separated (default: all): single-frame, filter,
     /// filter+odometry, filter+odometry+verification, metric+odometry,
-    /// metric+odometry+verification.
+    /// metric+odometry+verification, metric+odometry+pose-fix.
     #[arg(long, value_delimiter = ',', value_parser = parse_configuration)]
     pub configurations: Vec<String>,
     /// Print one JSON object (per split and configuration: every world's figures, mean, std).
@@ -76,38 +77,80 @@ pub struct SuiteArgs {
     pub json: bool,
 }
 
-/// The localizer configurations compared: name, mode, whether odometry is given, whether the
-/// most probable places are verified geometrically.
-const CONFIGURATIONS: [(&str, Mode, bool, bool); 6] = [
-    ("single-frame", Mode::SingleFrame, false, false),
-    ("filter", Mode::Filter, false, false),
-    ("filter+odometry", Mode::Filter, true, false),
-    ("filter+odometry+verification", Mode::Filter, true, true),
-    ("metric+odometry", Mode::Metric, true, false),
-    ("metric+odometry+verification", Mode::Metric, true, true),
+/// One localizer configuration compared by the suite.
+struct Configuration {
+    /// Name in the table and in `--configurations`.
+    name: &'static str,
+    /// Graph filter, single-frame or metric.
+    mode: Mode,
+    /// Whether the drifting odometry is given.
+    odometry: bool,
+    /// Whether the most probable places are verified geometrically (`--verify` of them).
+    verify: bool,
+    /// Whether the best-verified view also places the camera metrically (a pose fix from the
+    /// map's keypoint scene points), weighing the particles by position; the places are then
+    /// not weighed by their inlier counts.
+    pose_fix: bool,
+}
+
+const fn configuration(
+    name: &'static str,
+    mode: Mode,
+    odometry: bool,
+    verify: bool,
+    pose_fix: bool,
+) -> Configuration {
+    Configuration {
+        name,
+        mode,
+        odometry,
+        verify,
+        pose_fix,
+    }
+}
+
+/// The localizer configurations compared.
+const CONFIGURATIONS: [Configuration; 7] = [
+    configuration("single-frame", Mode::SingleFrame, false, false, false),
+    configuration("filter", Mode::Filter, false, false, false),
+    configuration("filter+odometry", Mode::Filter, true, false, false),
+    configuration(
+        "filter+odometry+verification",
+        Mode::Filter,
+        true,
+        true,
+        false,
+    ),
+    configuration("metric+odometry", Mode::Metric, true, false, false),
+    configuration(
+        "metric+odometry+verification",
+        Mode::Metric,
+        true,
+        true,
+        false,
+    ),
+    configuration("metric+odometry+pose-fix", Mode::Metric, true, true, true),
 ];
 
 /// Accepts the name of one of [`CONFIGURATIONS`].
 fn parse_configuration(name: &str) -> Result<String, String> {
-    match CONFIGURATIONS.iter().find(|c| c.0 == name) {
-        Some(c) => Ok(c.0.to_string()),
+    match CONFIGURATIONS.iter().find(|c| c.name == name) {
+        Some(c) => Ok(c.name.to_string()),
         None => Err(format!(
             "unknown configuration '{name}'; one of: {}",
-            CONFIGURATIONS.map(|c| c.0).join(", ")
+            CONFIGURATIONS.map(|c| c.name).join(", ")
         )),
     }
 }
 
 /// The configurations run with `args`.
-fn configurations(
-    args: &SuiteArgs,
-) -> impl Iterator<Item = &'static (&'static str, Mode, bool, bool)> + '_ {
+fn configurations(args: &SuiteArgs) -> impl Iterator<Item = &'static Configuration> + '_ {
     let verify = args.verify > 0;
     CONFIGURATIONS
         .iter()
-        .filter(move |c| verify || !c.3)
+        .filter(move |c| verify || !c.verify)
         .filter(move |c| {
-            args.configurations.is_empty() || args.configurations.iter().any(|o| o == c.0)
+            args.configurations.is_empty() || args.configurations.iter().any(|o| o == c.name)
         })
 }
 
@@ -166,18 +209,19 @@ pub fn run(args: &SuiteArgs) -> Result<()> {
             let hops = HopDistances::from_map(&scene.map);
             let images: Vec<ImageView<'_>> = flight.images.iter().map(image_view).collect();
             let results = configurations(args)
-                .map(|&(name, mode, odometry, verify)| {
+                .map(|c| {
                     let verification = VerificationOptions {
-                        candidates: if verify { args.verify } else { 0 },
-                        inlier_weight: if mode == Mode::Metric {
-                            args.metric_inlier_weight
-                        } else {
-                            args.inlier_weight
+                        candidates: if c.verify { args.verify } else { 0 },
+                        inlier_weight: match (c.pose_fix, c.mode) {
+                            (true, _) => 0.0,
+                            (false, Mode::Metric) => args.metric_inlier_weight,
+                            (false, _) => args.inlier_weight,
                         },
+                        camera: c.pose_fix.then(|| options.capture.intrinsics.pinhole()),
                         ..VerificationOptions::default()
                     };
                     let options = LocalizerOptions {
-                        mode,
+                        mode: c.mode,
                         verification,
                         metric: MetricOptions {
                             seed: args.metric_seed,
@@ -185,8 +229,10 @@ pub fn run(args: &SuiteArgs) -> Result<()> {
                         },
                         ..LocalizerOptions::default()
                     };
-                    let given = verify.then_some(images.as_slice());
-                    evaluate(name, &scene.map, &sequence, &hops, options, odometry, given)
+                    let given = c.verify.then_some(images.as_slice());
+                    evaluate(
+                        c.name, &scene.map, &sequence, &hops, options, c.odometry, given,
+                    )
                 })
                 .collect::<Result<Vec<_>>>()?;
             if !args.json {
@@ -253,8 +299,8 @@ fn print_table(args: &SuiteArgs, runs: &[(Split, Vec<WorldRun>)]) {
         rule.push_str("---|---|");
     }
     println!("\n{header}\n{rule}");
-    for (c, (name, _, _, _)) in configurations(args).enumerate() {
-        let mut row = format!("| {name} |");
+    for (c, configuration) in configurations(args).enumerate() {
+        let mut row = format!("| {} |", configuration.name);
         for (_, worlds) in runs {
             for metric in [|r: &ConfigResult| r.mna, |r: &ConfigResult| r.oha] {
                 let (mean, std) = mean_std(&column(worlds, c, metric));
@@ -285,7 +331,7 @@ fn summary_json(
         .map(|(split, worlds)| {
             let configurations: serde_json::Map<String, serde_json::Value> = configurations(args)
                 .enumerate()
-                .map(|(c, (name, _, _, _))| {
+                .map(|(c, configuration)| {
                     let mna = column(worlds, c, |r| r.mna);
                     let oha = column(worlds, c, |r| r.oha);
                     let (mna_mean, mna_std) = mean_std(&mna);
@@ -296,7 +342,7 @@ fn summary_json(
                         "mna_mean": mna_mean, "mna_std": mna_std,
                         "oha_mean": oha_mean, "oha_std": oha_std,
                     });
-                    (name.to_string(), value)
+                    (configuration.name.to_string(), value)
                 })
                 .collect();
             let worlds_json: Vec<_> = worlds

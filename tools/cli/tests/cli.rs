@@ -507,6 +507,7 @@ fn suite_reports_mean_and_std_per_split_and_configuration() {
             "filter+odometry+verification",
             "metric+odometry",
             "metric+odometry+verification",
+            "metric+odometry+pose-fix",
         ] {
             let c = &s["configurations"][config];
             for metric in ["mna", "oha"] {

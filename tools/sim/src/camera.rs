@@ -79,6 +79,17 @@ impl Intrinsics {
         Ok(())
     }
 
+    /// The same camera in OpenCV's pixel convention (centre of the top-left pixel at
+    /// `(0, 0)`), as the localizer's pose fix takes it.
+    pub fn pinhole(&self) -> topoloc::verify::PinholeCamera {
+        topoloc::verify::PinholeCamera {
+            fx: self.fx,
+            fy: self.fy,
+            cx: self.cx - 0.5,
+            cy: self.cy - 0.5,
+        }
+    }
+
     /// The body-frame direction (not normalised) seen by the centre of pixel `(col, row)`.
     pub fn ray(&self, col: u32, row: u32) -> Vector3<f64> {
         let u = col as f64 + 0.5;

@@ -178,6 +178,56 @@ pub fn capture(
     Ok(Capture { images, layout })
 }
 
+/// Attaches to `map` (built from `capture` by [`build_map`], so with one keypoint entry per
+/// captured view) the world point each view keypoint sees, ray cast in `renderer`'s world: the
+/// scene points that let a localizer place the camera metrically against a view. Keypoints
+/// whose ray leaves the world get NaN. Fails when the map stores no keypoints or not one entry
+/// per view.
+pub fn with_scene_points(
+    map: Map,
+    renderer: &Renderer,
+    capture: &Capture,
+    intrinsics: &Intrinsics,
+) -> Result<Map, CaptureError> {
+    let keypoints = map.keypoints().cloned().ok_or_else(|| {
+        CaptureError::InvalidArgument(
+            "the map stores no keypoints to attach scene points to".into(),
+        )
+    })?;
+    if keypoints.view_count() != capture.layout.views.len() {
+        return Err(CaptureError::InvalidArgument(format!(
+            "the map has keypoints for {} views, the capture {} views",
+            keypoints.view_count(),
+            capture.layout.views.len()
+        )));
+    }
+    let scene: Vec<[f32; 3]> = capture
+        .layout
+        .views
+        .par_iter()
+        .enumerate()
+        .flat_map_iter(|(v, (_, pose))| {
+            let points = keypoints.view(v).expect("view in range").points;
+            points.iter().map(move |p| {
+                // OpenCV keypoints put the centre of the top-left pixel at (0, 0).
+                renderer
+                    .surface_point(
+                        pose,
+                        intrinsics,
+                        f64::from(p[0]) + 0.5,
+                        f64::from(p[1]) + 0.5,
+                    )
+                    .map_or([f32::NAN; 3], |q| [q.x as f32, q.y as f32, q.z as f32])
+            })
+        })
+        .collect();
+    let keypoints = keypoints
+        .with_world_points(scene)
+        .map_err(CaptureError::InvalidArgument)?;
+    map.with_keypoints(keypoints)
+        .map_err(|e| CaptureError::InvalidArgument(e.to_string()))
+}
+
 /// A packed RGB view of a rendered image, for the library's describers.
 pub fn image_view(image: &Image) -> ImageView<'_> {
     ImageView::packed(image.width, image.height, PixelFormat::Rgb8, &image.rgb)

@@ -32,7 +32,7 @@
 use crate::camera::{Intrinsics, Pose};
 use crate::texture::{face_uv, fetch, Material, Texture, TextureFamily};
 use crate::world::{RegionKind, SimRng, World, NO_REGION};
-use nalgebra::Vector3;
+use nalgebra::{Point3, Vector3};
 use serde::{Deserialize, Serialize};
 use std::collections::HashMap;
 use std::path::Path;
@@ -560,6 +560,37 @@ impl Renderer {
             }
         }
         Ok(image)
+    }
+
+    /// The surface point seen from `pose` through image position `(u, v)` (pixels, the centre
+    /// of the top-left pixel at `(0.5, 0.5)`, see [`Intrinsics`]), in world coordinates: the
+    /// entry point of the ray into its first occupied voxel. `None` when the ray leaves the
+    /// grid.
+    pub fn surface_point(
+        &self,
+        pose: &Pose,
+        k: &Intrinsics,
+        u: f64,
+        v: f64,
+    ) -> Option<Point3<f64>> {
+        let body = Vector3::new(k.fx, -(u - k.cx), -(v - k.cy) * k.fx / k.fy);
+        let d = (pose.rotation * body).normalize().map(|c| c as f32);
+        let t = pose.translation.vector;
+        let eye = [t.x as f32, t.y as f32, t.z as f32];
+        let o = [0, 1, 2].map(|i| (eye[i] - self.origin[i]) / self.voxel_size);
+        let mut ray = Ray::new(self, o, [d[0], d[1], d[2]]);
+        for _ in 0..MAX_STEPS {
+            if ray.state != RayState::Running {
+                break;
+            }
+            ray.step(self, o);
+        }
+        (ray.state == RayState::Hit).then(|| {
+            Point3::from([0, 1, 2].map(|i| {
+                f64::from(self.origin[i])
+                    + f64::from(o[i] + ray.t * d[i]) * f64::from(self.voxel_size)
+            }))
+        })
     }
 
     /// Walks the rays from `o` (voxel units from the grid origin) along the unit directions

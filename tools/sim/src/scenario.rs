@@ -6,7 +6,9 @@
 //! ([`build_scene`] then [`fly`] and [`describe_flight`] per trajectory).
 
 use crate::camera::Intrinsics;
-use crate::capture::{build_map, capture, image_view, CaptureError, CaptureOptions};
+use crate::capture::{
+    build_map, capture, image_view, with_scene_points, CaptureError, CaptureOptions,
+};
 use crate::ground_truth::{ground_truth, FrameTruth, PlaceGraph};
 use crate::odometry::{odometry, OdometryNoise};
 use crate::render::{Condition, ConditionKind, Image, RenderError, Renderer};
@@ -197,6 +199,10 @@ pub fn build_scene(
         }
         true
     })?;
+    let map = match map.keypoints() {
+        Some(_) => with_scene_points(map, &renderer, &captured, &options.capture.intrinsics)?,
+        None => map,
+    };
     timings.map_s = start.elapsed().as_secs_f64();
     Ok(Scene {
         world,

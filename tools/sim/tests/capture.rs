@@ -5,8 +5,11 @@ use std::sync::Arc;
 use topoloc::describe::vlad::VladOptions;
 use topoloc::describe::{BackendConfig, FitOptions};
 use topoloc::map::{skeleton_graph, ImageMapOptions, SkeletonOptions};
+use topoloc::verify::{locate, KeypointDetector, LocateOptions};
 use topoloc::{Frame, Localizer, LocalizerOptions, Mode};
-use topoloc_sim::capture::{build_map, capture, image_view, CaptureError, CaptureOptions};
+use topoloc_sim::capture::{
+    build_map, capture, image_view, with_scene_points, CaptureError, CaptureOptions,
+};
 use topoloc_sim::render::{Condition, ConditionKind, Renderer};
 use topoloc_sim::world::{World, WorldParams};
 
@@ -64,6 +67,36 @@ fn captured_views_build_a_map_on_the_skeleton_graph_that_finds_them_again() {
         ..options
     };
     let queries = capture(&renderer, world.grid(), &graph, &dim).unwrap();
+
+    // With scene points, each dim view is placed back at its own pose against its bright twin.
+    let map = with_scene_points(map, &renderer, &captured, &options.intrinsics).unwrap();
+    let keypoints = map.keypoints().unwrap();
+    let mut detector = KeypointDetector::new(500).unwrap();
+    let mut errors: Vec<f64> = (0..views)
+        .filter_map(|v| {
+            let query = detector.detect(&image_view(&queries.images[v])).unwrap();
+            let fix = locate(
+                query.as_ref(),
+                keypoints.view(v).unwrap(),
+                keypoints.view_world_points(v).unwrap(),
+                &options.intrinsics.pinhole(),
+                64,
+                &LocateOptions::default(),
+            )
+            .unwrap()?;
+            Some((fix.position().coords - captured.layout.views[v].1.translation.vector).norm())
+        })
+        .collect();
+    errors.sort_by(f64::total_cmp);
+    assert!(
+        errors.len() * 10 >= views * 8,
+        "{} of {views} views placed",
+        errors.len()
+    );
+    let (median, worst) = (errors[errors.len() / 2], errors[errors.len() - 1]);
+    assert!(median < 0.01, "median error {median:.3} m");
+    assert!(worst < 0.1, "worst error {worst:.3} m");
+
     let map = Arc::new(map);
     let mut localizer = Localizer::with_describer(
         map,
