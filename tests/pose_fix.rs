@@ -275,6 +275,17 @@ fn bad_scene_points_and_cameras_are_refused() {
         Localizer::new(Arc::new(map_with_scene_points(true)), bad_locate),
         Err(LocalizeError::InvalidOption(_))
     ));
+    let unverified = LocalizerOptions {
+        verification: VerificationOptions {
+            candidates: 0,
+            ..verifying(Some(camera())).verification
+        },
+        ..verifying(None)
+    };
+    match Localizer::new(Arc::new(map_with_scene_points(true)), unverified) {
+        Err(LocalizeError::InvalidOption(msg)) => assert!(msg.contains("candidates"), "{msg}"),
+        other => panic!("expected an invalid option, got {:?}", other.err()),
+    }
     match Localizer::new(
         Arc::new(map_with_scene_points(false)),
         verifying(Some(camera())),

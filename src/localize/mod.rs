@@ -408,8 +408,8 @@ impl Localizer {
     /// whole frame before touching any state, so an error leaves the localizer unchanged.
     /// Cost: one pass over the descriptor matrix plus O(places + edges); in metric mode also
     /// O(particles x places) for the particles' nearest places; with verification on,
-    /// also keypoint detection in the frame's image and one match + RANSAC per checked view
-    /// (these allocate). Verification needs `frame.image` even when a descriptor is given.
+    /// also keypoint detection in the frame's image and one match + RANSAC per checked view,
+    /// and with a camera one PnP fit (these allocate). Verification needs `frame.image` even when a descriptor is given.
     pub fn process(
         &mut self,
         frame: &Frame<'_>,

@@ -105,6 +105,11 @@ impl VerificationOptions {
         }
         if let Some(camera) = &self.camera {
             camera.validate().map_err(|e| format!("verification.{e}"))?;
+            if self.candidates == 0 {
+                return Err(
+                    "verification.camera is set but verification.candidates is 0: pose fixes come from verified views".into(),
+                );
+            }
         }
         self.locate
             .validate()
