@@ -15,14 +15,14 @@ use std::path::Path;
 use std::sync::Arc;
 use std::time::Duration;
 use topoloc::describe::describer::RawFeatures;
-use topoloc::describe::image::{read_rgb, ImageView, PixelFormat};
 use topoloc::describe::onnx::{cache_dir, OnnxOptions, DEFAULT_MODEL_FILE};
 use topoloc::describe::pca::Pca;
 use topoloc::describe::vlad::{Codebook, VladOptions};
 use topoloc::describe::{BackendConfig, Describer, DescriberModel, Extractor};
-use topoloc::synthetic::random_map;
+use topoloc::image::{read_rgb, ImageView, PixelFormat};
 use topoloc::verify::{check_pair, KeypointDetector, PairOptions, DEFAULT_KEYPOINTS};
 use topoloc::{Frame, Localization, Localizer, LocalizerOptions, MapBuilder};
+use topoloc_synthetic::random_map;
 
 const DIM: usize = 512;
 const VIEWS: usize = 1_000;

@@ -9,8 +9,8 @@ use std::hint::black_box;
 use std::sync::Arc;
 use std::time::Duration;
 use topoloc::map::LoadOptions;
-use topoloc::synthetic::random_map;
 use topoloc::{Frame, Localization, Localizer, LocalizerOptions, Map, Mode};
+use topoloc_synthetic::random_map;
 
 const DIM: usize = 512;
 const VIEWS_PER_PLACE: usize = 4;

@@ -10,7 +10,7 @@ mod worlds;
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use std::hint::black_box;
 use std::time::Duration;
-use topoloc::map::{skeleton_graph, skeletonize, SkeletonOptions};
+use topoloc::skeleton::{skeleton_graph, skeletonize, SkeletonOptions};
 
 fn office(c: &mut Criterion) {
     let options = SkeletonOptions::default();

@@ -1,32 +1,51 @@
 //! topoloc: visual topological localization and loop-closure hints for SLAM systems.
 //!
-//! A robot loads a pre-built graph map of places ([`map::Map`]), feeds every camera frame's
-//! global descriptor to a [`localize::Localizer`], and gets back the most probable place with a
-//! confidence, top-k candidates and an off-map flag. The method follows the graph-based
-//! localization of the seed thesis (chapter 4): places (macro nodes) with several views (micro
-//! nodes), similarity of the query to every view, and a spatio-temporal filter over the graph.
+//! A robot loads a pre-built graph map of places ([`map::Map`]), feeds every camera frame (its
+//! image or its global descriptor) to a [`localize::Localizer`], and gets back the most probable
+//! place with a confidence, top-k candidates and an off-map flag. The method follows the
+//! graph-based localization of the seed thesis (chapter 4): places (macro nodes) with several
+//! views (micro nodes), similarity of the query to every view, and a spatio-temporal filter over
+//! the graph.
 //!
-//! Modules: [`map`] (graph, file format, builders), [`localize`] (per-frame localization),
-//! [`eval`] (metrics: MNA, OHA, R@N, precision-recall), [`synthetic`] (generated maps and
-//! descriptor streams for demos, tests and benchmarks), [`verify`] (geometric verification of
-//! candidates with ORB keypoints and RANSAC). The C ABI in `ffi` is a thin layer over
-//! these and is the only place with `extern "C"` items.
+//! # Layers
+//! Modules are layered; a module imports only from layers below it (`tests/layers.rs` holds this
+//! order against every `use crate::` line):
+//!
+//! | layer | modules | what |
+//! |---|---|---|
+//! | 8 | `ffi` | the C ABI: the only place with `extern "C"` items |
+//! | 7 | (`loops`) | keyframe database and loop-closure hints (to come) |
+//! | 6 | [`localize`] | per-frame localization: similarity, graph filter, particles, verification |
+//! | 5 | [`build`], [`skeleton`], [`eval`] | maps from images and keyframes; graphs from occupancy grids; metrics |
+//! | 4 | [`map`] | the graph of places and views, and its file format |
+//! | 3 | [`describe`], [`verify`] | descriptor backends; local features and geometric checks |
+//! | 2 | [`image`], [`descriptor`] | leaf vocabulary: image views and pixel formats, descriptor identity |
+//! | 1 | [`errors`] | the error kinds several image-work modules share |
+//!
+//! [`eval`] (metrics: MNA, OHA, R@N, precision-recall, calibration) reads maps and results and
+//! is read by no other module of the library. Generated descriptor worlds for tests and
+//! benchmarks live in the dev-only crate `topoloc-synthetic` (`tools/synthetic`), not here.
 
 #![warn(missing_docs)]
 
+pub mod build;
 pub mod describe;
+pub mod descriptor;
+pub mod errors;
 pub mod eval;
 pub mod ffi;
+pub mod image;
 pub mod localize;
 pub mod map;
-pub mod synthetic;
+pub mod skeleton;
 pub mod verify;
 
+pub use descriptor::{DescriptorIdentity, ExpectedDescriptor};
 pub use localize::{
     Candidate, Frame, Localization, LocalizeError, Localizer, LocalizerOptions, MetricOptions,
     Mode, PoseFix,
 };
-pub use map::{DescriptorIdentity, ExpectedDescriptor, LoadOptions, Map, MapBuilder, MapError};
+pub use map::{LoadOptions, Map, MapBuilder, MapError};
 
 /// Crate version, `MAJOR.MINOR.PATCH`.
 pub const VERSION: &str = env!("CARGO_PKG_VERSION");

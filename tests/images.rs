@@ -8,16 +8,16 @@ mod common;
 use common::images::{gray, place_image, revisit, H, W};
 use nalgebra::{Isometry3, Point3, Vector3};
 use std::sync::Arc;
-use topoloc::describe::image::{ImageView, PixelFormat};
+use topoloc::build::{
+    build_from_images, BuildStage, ImageLayout, ImageMapError, ImageMapOptions, ImageSource,
+    PlaceLayout,
+};
 use topoloc::describe::onnx::{cache_dir, OnnxOptions, DEFAULT_MODEL_FILE};
 use topoloc::describe::vlad::VladOptions;
-use topoloc::describe::{
-    BackendConfig, BackendKind, BackendSpec, DescribeError, Describer, DescriberOptions,
-};
-use topoloc::map::{
-    build_from_images, BuildStage, ImageLayout, ImageMapError, ImageMapOptions, ImageSource,
-    MapError, PlaceLayout,
-};
+use topoloc::describe::{BackendConfig, BackendKind, BackendSpec, Describer, DescriberOptions};
+use topoloc::errors::VisionError;
+use topoloc::image::{ImageView, PixelFormat};
+use topoloc::map::MapError;
 use topoloc::{Frame, LoadOptions, LocalizeError, Localizer, LocalizerOptions, Map, Mode};
 
 /// A bad image: its name, the view, and the error it must get.
@@ -128,17 +128,17 @@ fn bad_images_give_typed_errors_and_leave_the_localizer_unchanged() {
         (
             "1x1",
             ImageView::packed(1, 1, PixelFormat::Gray8, &tiny),
-            |e| matches!(e, LocalizeError::Describe(DescribeError::Uninformative(_))),
+            |e| matches!(e, LocalizeError::Describe(VisionError::Uninformative(_))),
         ),
         (
             "10000x10000",
             ImageView::packed(10_000, 10_000, PixelFormat::Gray8, &tiny),
-            |e| matches!(e, LocalizeError::Describe(DescribeError::InvalidImage(_))),
+            |e| matches!(e, LocalizeError::Describe(VisionError::InvalidImage(_))),
         ),
         (
             "zero width",
             ImageView::packed(0, 10, PixelFormat::Gray8, &tiny),
-            |e| matches!(e, LocalizeError::Describe(DescribeError::InvalidImage(_))),
+            |e| matches!(e, LocalizeError::Describe(VisionError::InvalidImage(_))),
         ),
         (
             "short stride",
@@ -146,18 +146,18 @@ fn bad_images_give_typed_errors_and_leave_the_localizer_unchanged() {
                 stride: W - 1,
                 ..gray(&images[1])
             },
-            |e| matches!(e, LocalizeError::Describe(DescribeError::InvalidImage(_))),
+            |e| matches!(e, LocalizeError::Describe(VisionError::InvalidImage(_))),
         ),
         ("short buffer", gray(&images[1][..W * H - 1]), |e| {
-            matches!(e, LocalizeError::Describe(DescribeError::InvalidImage(_)))
+            matches!(e, LocalizeError::Describe(VisionError::InvalidImage(_)))
         }),
         ("constant", gray(&constant), |e| {
-            matches!(e, LocalizeError::Describe(DescribeError::Uninformative(_)))
+            matches!(e, LocalizeError::Describe(VisionError::Uninformative(_)))
         }),
         (
             "all black RGB",
             ImageView::packed(W as u32, H as u32, PixelFormat::Rgb8, &black),
-            |e| matches!(e, LocalizeError::Describe(DescribeError::Uninformative(_))),
+            |e| matches!(e, LocalizeError::Describe(VisionError::Uninformative(_))),
         ),
     ];
     for (t, (name, image, expected)) in cases.into_iter().enumerate() {
@@ -187,7 +187,7 @@ fn image_frames_need_a_describer() {
         plain.localize(&image_frame(&images[0], 0.0)),
         Err(LocalizeError::NoDescriber(_))
     ));
-    let descriptors_only = Arc::new(topoloc::synthetic::random_map(5, 1, 8, 1));
+    let descriptors_only = Arc::new(topoloc_synthetic::random_map(5, 1, 8, 1));
     assert!(matches!(
         Localizer::with_describer(descriptors_only, Default::default(), &Default::default()),
         Err(LocalizeError::NoDescriber(_))
@@ -204,7 +204,7 @@ fn a_describer_of_another_backend_or_model_is_refused() {
     };
     assert!(matches!(
         Localizer::with_describer(map.clone(), Default::default(), &onnx),
-        Err(LocalizeError::Describe(DescribeError::Mismatch(_)))
+        Err(LocalizeError::Describe(VisionError::Mismatch(_)))
     ));
     if !onnx_available() {
         return;
@@ -215,7 +215,7 @@ fn a_describer_of_another_backend_or_model_is_refused() {
         model_sha256.replace_range(0..4, "0000");
     }
     match Describer::new(Arc::new(model), &DescriberOptions::default()) {
-        Err(DescribeError::Mismatch(msg)) => assert!(msg.contains("sha256"), "{msg}"),
+        Err(VisionError::Mismatch(msg)) => assert!(msg.contains("sha256"), "{msg}"),
         Err(e) => panic!("expected Mismatch, got {e}"),
         Ok(_) => panic!("expected Mismatch, got a describer"),
     }
@@ -233,13 +233,13 @@ fn a_corrupt_or_missing_model_file_is_a_typed_error() {
             ..OnnxOptions::default()
         });
         match build(&images, backend) {
-            Err(ImageMapError::Describe(DescribeError::BackendUnavailable { tried, .. })) => {
+            Err(ImageMapError::Describe(VisionError::BackendUnavailable { tried, .. })) => {
                 assert!(
                     tried.contains(&model) || runtime_needed,
                     "the path tried is named: {tried:?}"
                 )
             }
-            Err(ImageMapError::Describe(DescribeError::Model(msg))) => {
+            Err(ImageMapError::Describe(VisionError::Model(msg))) => {
                 assert!(runtime_needed && msg.contains("corrupt.onnx"), "{msg}")
             }
             Err(e) => panic!("{}: unexpected error {e}", model.display()),

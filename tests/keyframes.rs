@@ -4,7 +4,7 @@ mod common;
 
 use common::{mix, unit_vector};
 use nalgebra::{Isometry3, Vector3};
-use topoloc::map::{from_keyframes, Keyframe, KeyframeOptions};
+use topoloc::build::{from_keyframes, Keyframe, KeyframeOptions};
 use topoloc::{DescriptorIdentity, MapError};
 
 const DIM: usize = 16;

@@ -167,7 +167,7 @@ fn kidnapped_robot_recovers() {
 
 #[test]
 fn frames_from_another_world_are_off_map_and_tracking_resumes() {
-    use topoloc::synthetic::{SyntheticWorld, WorldParams};
+    use topoloc_synthetic::{SyntheticWorld, WorldParams};
     let params = WorldParams {
         dim: 512,
         ..Default::default()
@@ -182,7 +182,7 @@ fn frames_from_another_world_are_off_map_and_tracking_resumes() {
     let away = stranger.sequence(60, 2).frames;
     let mut loc = localizer(world.map(), Mode::Filter);
     let mut t = 0.0;
-    let mut step = |f: &topoloc::synthetic::SequenceFrame| {
+    let mut step = |f: &topoloc_synthetic::SequenceFrame| {
         t += 0.1;
         loc.localize(&Frame {
             timestamp: t,

@@ -1,9 +1,9 @@
 //! The ONNX backend: typed errors naming what is missing, and, when scripts/setup-models.sh has
 //! put the model and runtime in the cache (CI does), real descriptors from the default model.
 
-use topoloc::describe::image::{ImageView, PixelFormat};
 use topoloc::describe::onnx::{cache_dir, OnnxMlf, OnnxOptions, DEFAULT_MODEL_FILE};
-use topoloc::describe::DescribeError;
+use topoloc::errors::VisionError;
+use topoloc::image::{ImageView, PixelFormat};
 
 #[test]
 fn a_missing_model_names_the_path_tried() {
@@ -12,7 +12,7 @@ fn a_missing_model_names_the_path_tried() {
         ..Default::default()
     };
     match OnnxMlf::new(options) {
-        Err(DescribeError::BackendUnavailable { what, tried, hint }) => {
+        Err(VisionError::BackendUnavailable { what, tried, hint }) => {
             assert_eq!(what, "ONNX model");
             assert_eq!(
                 tried,
@@ -41,7 +41,7 @@ fn cached_model() -> Option<std::path::PathBuf> {
 
 fn expect_runtime_unavailable(options: OnnxOptions, path: &str, hint_has: &str) {
     match OnnxMlf::new(options) {
-        Err(DescribeError::BackendUnavailable { what, tried, hint }) => {
+        Err(VisionError::BackendUnavailable { what, tried, hint }) => {
             assert_eq!(what, "ONNX Runtime");
             assert_eq!(tried, vec![std::path::PathBuf::from(path)]);
             assert!(hint.contains(hint_has), "{hint}");
@@ -121,6 +121,6 @@ fn the_default_model_gives_per_level_normalised_deterministic_vectors() {
     // Bad input is refused before the network runs.
     assert!(matches!(
         backend.raw_features(&ImageView { width: 0, ..image }),
-        Err(DescribeError::InvalidImage(_))
+        Err(VisionError::InvalidImage(_))
     ));
 }

@@ -9,9 +9,9 @@
 
 use std::path::Path;
 use std::process::Command;
-use topoloc::describe::image::{ImageView, PixelFormat};
 use topoloc::describe::onnx::{cache_dir, OnnxMlf, OnnxOptions, DEFAULT_MODEL_FILE};
 use topoloc::describe::pca::Pca;
+use topoloc::image::{ImageView, PixelFormat};
 
 const PYTHON: &str = "/usr/bin/python3";
 const WEIGHTS_FILE: &str = "models/mobilenet_v2-b0353104.pth";

@@ -1,12 +1,13 @@
 //! Skeleton map building on hand-made worlds: corridors, junctions, loops, rooms, height bands,
-//! clearance, errors and determinism (`topoloc::map::skeleton_graph`).
+//! clearance, errors and determinism (`topoloc::skeleton::skeleton_graph`).
 
 #[path = "common/skeleton_worlds.rs"]
 mod worlds;
 
 use nalgebra::Point3;
-use topoloc::map::{
-    skeleton_graph, skeletonize, MapError, NodeKind, OccupancyGrid, SkeletonOptions, TopoGraph,
+use topoloc::skeleton::SkeletonError;
+use topoloc::skeleton::{
+    skeleton_graph, skeletonize, NodeKind, OccupancyGrid, SkeletonOptions, TopoGraph,
 };
 use worlds::World;
 
@@ -371,7 +372,7 @@ fn clearance_closes_passages_too_narrow_to_fly() {
 fn bad_inputs_are_errors_naming_the_field() {
     let grid = worlds::corridor(0.2);
     let message = |options: SkeletonOptions| match skeleton_graph(&grid, &options) {
-        Err(MapError::InvalidArgument(m)) => m,
+        Err(SkeletonError::InvalidArgument(m)) => m,
         other => panic!("expected InvalidArgument, got {other:?}"),
     };
     let d = SkeletonOptions::default;
@@ -405,7 +406,7 @@ fn bad_inputs_are_errors_naming_the_field() {
         );
         assert!(matches!(
             skeletonize(&grid, &options),
-            Err(MapError::InvalidArgument(_))
+            Err(SkeletonError::InvalidArgument(_))
         ));
     }
     // The option checks alone.
@@ -420,7 +421,7 @@ fn bad_inputs_are_errors_naming_the_field() {
     // No free space at all.
     let full = OccupancyGrid::new([4, 3, 2], 0.1, Point3::origin(), vec![true; 24]).unwrap();
     let m = match skeleton_graph(&full, &d()) {
-        Err(MapError::InvalidArgument(m)) => m,
+        Err(SkeletonError::InvalidArgument(m)) => m,
         other => panic!("{other:?}"),
     };
     assert!(m.contains("cells") && m.contains("occupied"), "{m}");
@@ -434,7 +435,7 @@ fn bad_inputs_are_errors_naming_the_field() {
             ..d()
         },
     ) {
-        Err(MapError::InvalidArgument(m)) => m,
+        Err(SkeletonError::InvalidArgument(m)) => m,
         other => panic!("{other:?}"),
     };
     assert!(m.contains("z_band"), "{m}");

@@ -8,7 +8,7 @@ mod common;
 use common::images::{gray, place_image, revisit};
 use common::unit_vector;
 use std::sync::Arc;
-use topoloc::describe::DescribeError;
+use topoloc::errors::VisionError;
 use topoloc::map::ViewAttributes;
 use topoloc::verify::{
     check_pair, KeypointDetector, Keypoints, PairOptions, VerificationOptions, ViewKeypoints,
@@ -165,7 +165,7 @@ fn verification_needs_keypoints_in_the_map_and_an_image_in_the_frame() {
     };
     assert!(matches!(
         localizer.localize(&without_image),
-        Err(LocalizeError::Describe(DescribeError::InvalidImage(_)))
+        Err(LocalizeError::Describe(VisionError::InvalidImage(_)))
     ));
     // The failed frame left no trace: the next frame is the first.
     let image = place_image(1);

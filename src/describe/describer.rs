@@ -6,12 +6,12 @@
 //! descriptor. Localizing: [`Describer::new`] loads the backend named by a map's model, checks
 //! that it is the very same (model file hash, taps, preprocessing), and describes query images.
 
-use super::image::ImageView;
 use super::onnx::{OnnxMlf, OnnxOptions};
 use super::pca::Pca;
 use super::vlad::{Codebook, LocalExtractor, LocalFeature, LocalFeatures, VladOptions};
-use super::DescribeError;
-use crate::map::DescriptorIdentity;
+use crate::descriptor::DescriptorIdentity;
+use crate::errors::VisionError;
+use crate::image::ImageView;
 use serde::{Deserialize, Serialize};
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -152,8 +152,8 @@ pub struct DescriberModel {
 
 impl DescriberModel {
     /// Checks that the parts fit together (codebook present exactly for VLAD, dimensions agree).
-    pub fn validate(&self) -> Result<(), DescribeError> {
-        let bad = |m: String| Err(DescribeError::InvalidArgument(m));
+    pub fn validate(&self) -> Result<(), VisionError> {
+        let bad = |m: String| Err(VisionError::InvalidArgument(m));
         let pca = &self.pca;
         if pca.output_dim == 0
             || pca.mean.len() != pca.input_dim
@@ -249,7 +249,7 @@ pub struct Extractor {
 
 impl Extractor {
     /// Loads the backend: for ONNX the runtime and model (typed errors name every path tried).
-    pub fn new(config: &BackendConfig) -> Result<Self, DescribeError> {
+    pub fn new(config: &BackendConfig) -> Result<Self, VisionError> {
         Ok(match config {
             BackendConfig::Onnx(options) => {
                 let mlf = OnnxMlf::new(options.clone())?;
@@ -279,16 +279,16 @@ impl Extractor {
 
     /// Raw features of one image. Refuses images without content (every pixel within
     /// [`CONSTANT_IMAGE_RANGE`] grey levels, or no local feature found) with
-    /// [`DescribeError::Uninformative`].
-    pub fn extract(&mut self, image: &ImageView<'_>) -> Result<RawFeatures, DescribeError> {
+    /// [`VisionError::Uninformative`].
+    pub fn extract(&mut self, image: &ImageView<'_>) -> Result<RawFeatures, VisionError> {
         image.validate()?;
         if is_constant(image) {
-            return Err(DescribeError::Uninformative(format!(
+            return Err(VisionError::Uninformative(format!(
                 "every pixel lies within {CONSTANT_IMAGE_RANGE} grey levels (blank or constant image)"
             )));
         }
         match self.run(image)? {
-            RawFeatures::Local(l) if l.count() == 0 => Err(DescribeError::Uninformative(
+            RawFeatures::Local(l) if l.count() == 0 => Err(VisionError::Uninformative(
                 "no local features found in the image".into(),
             )),
             raw => Ok(raw),
@@ -301,7 +301,7 @@ impl Extractor {
     pub fn extract_keeping_uninformative(
         &mut self,
         image: &ImageView<'_>,
-    ) -> Result<(RawFeatures, bool), DescribeError> {
+    ) -> Result<(RawFeatures, bool), VisionError> {
         image.validate()?;
         let constant = is_constant(image);
         let raw = self.run(image)?;
@@ -309,7 +309,7 @@ impl Extractor {
         Ok((raw, informative))
     }
 
-    fn run(&mut self, image: &ImageView<'_>) -> Result<RawFeatures, DescribeError> {
+    fn run(&mut self, image: &ImageView<'_>) -> Result<RawFeatures, VisionError> {
         Ok(match &mut self.engine {
             Engine::Onnx(mlf) => RawFeatures::Mlf(mlf.raw_features(image)?),
             Engine::Vlad(local) => RawFeatures::Local(local.extract(image)?),
@@ -371,15 +371,15 @@ pub fn fit(
     spec: &BackendSpec,
     raws: &[RawFeatures],
     options: &FitOptions,
-) -> Result<(DescriberModel, Vec<Vec<f32>>), DescribeError> {
+) -> Result<(DescriberModel, Vec<Vec<f32>>), VisionError> {
     if raws.len() < 2 {
-        return Err(DescribeError::InvalidArgument(format!(
+        return Err(VisionError::InvalidArgument(format!(
             "a describer is fitted on at least 2 images, got {}",
             raws.len()
         )));
     }
     if options.dim == 0 || options.pca_samples < 2 {
-        return Err(DescribeError::InvalidArgument(format!(
+        return Err(VisionError::InvalidArgument(format!(
             "descriptor dimension {} must be >= 1 and PCA samples {} >= 2",
             options.dim, options.pca_samples
         )));
@@ -410,7 +410,7 @@ pub fn fit(
     };
     let raw_dim = vectors[0].len();
     if vectors.iter().any(|v| v.len() != raw_dim) {
-        return Err(DescribeError::InvalidArgument(
+        return Err(VisionError::InvalidArgument(
             "raw vectors differ in length (mixed backends or taps)".into(),
         ));
     }
@@ -429,15 +429,15 @@ pub fn fit(
     Ok((model, descriptors))
 }
 
-fn wrong_raw_kind() -> DescribeError {
-    DescribeError::InvalidArgument("raw features come from another backend than the spec".into())
+fn wrong_raw_kind() -> VisionError {
+    VisionError::InvalidArgument("raw features come from another backend than the spec".into())
 }
 
 fn train_codebook(
     locals: &[&LocalFeatures],
     clusters: usize,
     max_samples: usize,
-) -> Result<Codebook, DescribeError> {
+) -> Result<Codebook, VisionError> {
     let dim = locals[0].dim;
     let total: usize = locals.iter().map(|l| l.count()).sum();
     let step = total.div_ceil(max_samples.max(clusters)).max(1);
@@ -477,15 +477,15 @@ pub struct Describer {
 impl Describer {
     /// Loads the backend the model names and checks that it is the same one: the same backend
     /// as `options.backend` asks for, and for ONNX the same model file (by SHA-256). Mismatches
-    /// give [`DescribeError::Mismatch`]; missing files [`DescribeError::BackendUnavailable`].
+    /// give [`VisionError::Mismatch`]; missing files [`VisionError::BackendUnavailable`].
     pub fn new(
         model: Arc<DescriberModel>,
         options: &DescriberOptions,
-    ) -> Result<Self, DescribeError> {
+    ) -> Result<Self, VisionError> {
         model.validate()?;
         if let Some(kind) = options.backend {
             if kind != model.spec.kind() {
-                return Err(DescribeError::Mismatch(format!(
+                return Err(VisionError::Mismatch(format!(
                     "the map was built with the {} backend, the caller asked for {}",
                     model.spec.kind().name(),
                     kind.name()
@@ -501,7 +501,7 @@ impl Describer {
                 ..
             } => {
                 if preprocessing != ONNX_PREPROCESSING {
-                    return Err(DescribeError::Mismatch(format!(
+                    return Err(VisionError::Mismatch(format!(
                         "the map's preprocessing '{preprocessing}' is not supported by this build ('{ONNX_PREPROCESSING}')"
                     )));
                 }
@@ -518,7 +518,7 @@ impl Describer {
         };
         let extractor = Extractor::new(&config)?;
         if extractor.spec() != &model.spec {
-            return Err(DescribeError::Mismatch(format!(
+            return Err(VisionError::Mismatch(format!(
                 "the map was built with {}, the loaded backend is {}",
                 model.spec.summary(),
                 extractor.spec().summary()
@@ -546,7 +546,7 @@ impl Describer {
         &mut self,
         image: &ImageView<'_>,
         out: &mut Vec<f32>,
-    ) -> Result<(), DescribeError> {
+    ) -> Result<(), VisionError> {
         let raw = self.extractor.extract(image)?;
         let vlad;
         let vector = match &raw {
@@ -569,7 +569,7 @@ impl Describer {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::describe::image::PixelFormat;
+    use crate::image::PixelFormat;
 
     #[test]
     fn constant_images_are_detected_through_padding() {
@@ -632,7 +632,7 @@ mod tests {
                 &ImageView::packed(320, 240, PixelFormat::Gray8, &blank),
                 &mut out
             ),
-            Err(DescribeError::Uninformative(_))
+            Err(VisionError::Uninformative(_))
         ));
         let wrong = DescriberOptions {
             backend: Some(BackendKind::Onnx),
@@ -640,7 +640,7 @@ mod tests {
         };
         assert!(matches!(
             Describer::new(describer.model().clone(), &wrong),
-            Err(DescribeError::Mismatch(_))
+            Err(VisionError::Mismatch(_))
         ));
     }
 

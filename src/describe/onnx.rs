@@ -1,9 +1,9 @@
 //! The ONNX backend: a CNN run by ONNX Runtime (loaded at run time, so the library works without
 //! it until an ONNX model is asked for), whose selected feature maps become a multi-level vector.
 
-use super::image::ImageView;
 use super::mlf::{multi_level, FeatureMap};
-use super::DescribeError;
+use crate::errors::VisionError;
+use crate::image::ImageView;
 use opencv::core::Size;
 use opencv::prelude::*;
 use ort::session::Session;
@@ -108,12 +108,12 @@ struct LoadedRuntime {
 /// using the first. Failed loads are not remembered, so a corrected path works on retry.
 fn environment(
     explicit: Option<&Path>,
-) -> Result<&'static ort::environment::Environment, DescribeError> {
+) -> Result<&'static ort::environment::Environment, VisionError> {
     static RUNTIME: OnceLock<LoadedRuntime> = OnceLock::new();
     static LOADING: Mutex<()> = Mutex::new(());
     let configured = configured_runtime(explicit);
     let tried = runtime_candidates(explicit);
-    let unavailable = |hint: String| DescribeError::BackendUnavailable {
+    let unavailable = |hint: String| VisionError::BackendUnavailable {
         what: "ONNX Runtime".into(),
         tried: tried.clone(),
         hint,
@@ -173,15 +173,15 @@ pub struct OnnxMlf {
 
 impl OnnxMlf {
     /// Loads the runtime and the model; fails with a typed error naming every path tried.
-    pub fn new(options: OnnxOptions) -> Result<Self, DescribeError> {
+    pub fn new(options: OnnxOptions) -> Result<Self, VisionError> {
         if options.taps.is_empty() || options.grid.0 == 0 || options.grid.1 == 0 {
-            return Err(DescribeError::InvalidArgument(
+            return Err(VisionError::InvalidArgument(
                 "ONNX backend needs at least one tap and a non-empty grid".into(),
             ));
         }
         let (w, h) = options.input_size;
         if !(32..=2048).contains(&w) || !(32..=2048).contains(&h) {
-            return Err(DescribeError::InvalidArgument(format!(
+            return Err(VisionError::InvalidArgument(format!(
                 "input size {w}x{h} must lie in 32..2048 per side"
             )));
         }
@@ -189,13 +189,13 @@ impl OnnxMlf {
             .model
             .clone()
             .unwrap_or_else(|| cache_dir().join(DEFAULT_MODEL_FILE));
-        let bytes = std::fs::read(&model).map_err(|e| DescribeError::BackendUnavailable {
+        let bytes = std::fs::read(&model).map_err(|e| VisionError::BackendUnavailable {
             what: "ONNX model".into(),
             tried: vec![model.clone()],
             hint: format!("{e}; run scripts/setup-models.sh or pass the model path"),
         })?;
         let env = environment(options.runtime.as_deref())?;
-        let onnx = |e: ort::Error| DescribeError::Model(format!("{}: {e}", model.display()));
+        let onnx = |e: ort::Error| VisionError::Model(format!("{}: {e}", model.display()));
         let session = Session::builder(env)
             .map_err(onnx)?
             .with_intra_threads(options.threads.max(1))
@@ -204,7 +204,7 @@ impl OnnxMlf {
             .map_err(onnx)?;
         let outputs: Vec<&str> = session.outputs().iter().map(|o| o.name()).collect();
         if let Some(missing) = options.taps.iter().find(|t| !outputs.contains(&t.as_str())) {
-            return Err(DescribeError::Model(format!(
+            return Err(VisionError::Model(format!(
                 "{} has no output '{missing}' (it has {outputs:?})",
                 model.display()
             )));
@@ -243,7 +243,7 @@ impl OnnxMlf {
     }
 
     /// Runs the network on one image and returns the raw multi-level vector.
-    pub fn raw_features(&mut self, image: &ImageView<'_>) -> Result<Vec<f32>, DescribeError> {
+    pub fn raw_features(&mut self, image: &ImageView<'_>) -> Result<Vec<f32>, VisionError> {
         let (w, h) = self.options.input_size;
         let rgb = image.to_rgb_resized(Size::new(w as i32, h as i32))?;
         let pixels = rgb.data_bytes()?;
@@ -258,18 +258,18 @@ impl OnnxMlf {
             [1usize, 3, h as usize, w as usize],
             self.input.as_slice(),
         ))
-        .map_err(|e| DescribeError::Model(e.to_string()))?;
+        .map_err(|e| VisionError::Model(e.to_string()))?;
         let outputs = self
             .session
             .run(ort::inputs!["input" => tensor])
-            .map_err(|e| DescribeError::Model(e.to_string()))?;
+            .map_err(|e| VisionError::Model(e.to_string()))?;
         let mut levels = Vec::with_capacity(self.options.taps.len());
         for tap in &self.options.taps {
             let (shape, values) = outputs[tap.as_str()]
                 .try_extract_tensor::<f32>()
-                .map_err(|e| DescribeError::Model(e.to_string()))?;
+                .map_err(|e| VisionError::Model(e.to_string()))?;
             if shape.len() != 4 || shape[0] != 1 {
-                return Err(DescribeError::Model(format!(
+                return Err(VisionError::Model(format!(
                     "output '{tap}' has shape {shape:?}, expected [1, C, H, W]"
                 )));
             }

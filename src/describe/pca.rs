@@ -1,7 +1,7 @@
 //! Principal component analysis: fitted on a map's raw descriptors (thin SVD of the centred
 //! samples, faer), then used to project every descriptor to D dimensions.
 
-use super::DescribeError;
+use crate::errors::VisionError;
 use faer::linalg::matmul::matmul;
 use faer::{Accum, Mat, MatMut, MatRef, Par};
 
@@ -27,16 +27,16 @@ impl Pca {
         input_dim: usize,
         dim: usize,
         whiten: bool,
-    ) -> Result<Self, DescribeError> {
+    ) -> Result<Self, VisionError> {
         if input_dim == 0 || samples.len() % input_dim != 0 {
-            return Err(DescribeError::InvalidArgument(format!(
+            return Err(VisionError::InvalidArgument(format!(
                 "{} values are not rows of {input_dim}",
                 samples.len()
             )));
         }
         let n = samples.len() / input_dim;
         if n < 2 {
-            return Err(DescribeError::InvalidArgument(format!(
+            return Err(VisionError::InvalidArgument(format!(
                 "PCA needs at least 2 samples, got {n}"
             )));
         }
@@ -52,7 +52,7 @@ impl Pca {
         });
         let svd = centred
             .thin_svd()
-            .map_err(|e| DescribeError::InvalidArgument(format!("PCA: SVD failed: {e:?}")))?;
+            .map_err(|e| VisionError::InvalidArgument(format!("PCA: SVD failed: {e:?}")))?;
         let singular = svd.S().column_vector();
         let v = svd.V();
         let output_dim = dim.min(n - 1).min(input_dim);
@@ -74,9 +74,9 @@ impl Pca {
     }
 
     /// Projects one raw vector and L2-normalises the result.
-    pub fn project(&self, x: &[f32]) -> Result<Vec<f32>, DescribeError> {
+    pub fn project(&self, x: &[f32]) -> Result<Vec<f32>, VisionError> {
         if x.len() != self.input_dim {
-            return Err(DescribeError::InvalidArgument(format!(
+            return Err(VisionError::InvalidArgument(format!(
                 "PCA input has {} values, expected {}",
                 x.len(),
                 self.input_dim

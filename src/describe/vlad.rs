@@ -17,9 +17,9 @@
 //! Every option in [`VladOptions`] changes the descriptor space, so all of them are part of
 //! the map's descriptor identity. PCA whitening of the VLAD vectors is done by the caller.
 
-use super::image::ImageView;
 use super::mlf::l2_normalize;
-use super::DescribeError;
+use crate::errors::VisionError;
+use crate::image::ImageView;
 use opencv::core::{KeyPoint, Mat, Ptr, Size, TermCriteria, Vector, CV_32F, CV_8U};
 use opencv::features2d::{ORB_ScoreType, ORB, SIFT};
 use opencv::prelude::*;
@@ -94,9 +94,9 @@ impl Default for VladOptions {
 }
 
 impl VladOptions {
-    /// Checks every option against its accepted range ([`DescribeError::InvalidArgument`]).
-    pub fn validate(&self) -> Result<(), DescribeError> {
-        let bad = |m: String| Err(DescribeError::InvalidArgument(m));
+    /// Checks every option against its accepted range ([`VisionError::InvalidArgument`]).
+    pub fn validate(&self) -> Result<(), VisionError> {
+        let bad = |m: String| Err(VisionError::InvalidArgument(m));
         if !(2..=1024).contains(&self.clusters) {
             return bad(format!(
                 "VLAD clusters is {}, must be in 2..=1024",
@@ -155,7 +155,7 @@ pub struct LocalExtractor {
 
 impl LocalExtractor {
     /// Validates the options and creates the OpenCV detector.
-    pub fn new(options: &VladOptions) -> Result<Self, DescribeError> {
+    pub fn new(options: &VladOptions) -> Result<Self, VisionError> {
         options.validate()?;
         // validate() bounds max_features to 20000, so the cast cannot overflow.
         let n = options.max_features as i32;
@@ -190,7 +190,7 @@ impl LocalExtractor {
     ///
     /// An image without any keypoint (blank, constant, too blurred) gives zero descriptors,
     /// not an error; the caller decides what that means.
-    pub fn extract(&mut self, image: &ImageView<'_>) -> Result<LocalFeatures, DescribeError> {
+    pub fn extract(&mut self, image: &ImageView<'_>) -> Result<LocalFeatures, VisionError> {
         let rgb = image.to_rgb_resized(self.size)?;
         let mut grey = Mat::default();
         opencv::imgproc::cvt_color_def(&rgb, &mut grey, opencv::imgproc::COLOR_RGB2GRAY)?;
@@ -248,7 +248,7 @@ impl LocalExtractor {
 }
 
 /// Keypoints on a regular grid over an image of `size`, [`DENSE_BORDER`] pixels from its edges.
-fn dense_grid(size: Size) -> Result<Vector<KeyPoint>, DescribeError> {
+fn dense_grid(size: Size) -> Result<Vector<KeyPoint>, VisionError> {
     let mut grid = Vector::<KeyPoint>::new();
     for y in (DENSE_BORDER..size.height - DENSE_BORDER).step_by(DENSE_STEP as usize) {
         for x in (DENSE_BORDER..size.width - DENSE_BORDER).step_by(DENSE_STEP as usize) {
@@ -267,12 +267,12 @@ fn descriptor_rows<'m, T: opencv::core::DataType>(
     depth: i32,
     cols: usize,
     name: &str,
-) -> Result<&'m [T], DescribeError> {
+) -> Result<&'m [T], VisionError> {
     if descriptors.depth() != depth
         || descriptors.channels() != 1
         || descriptors.cols() as usize != cols
     {
-        return Err(DescribeError::Model(format!(
+        return Err(VisionError::Model(format!(
             "{name} returned descriptors of type {} with {} columns, expected {cols} columns",
             descriptors.typ(),
             descriptors.cols()
@@ -318,8 +318,8 @@ impl Codebook {
     /// n x dim). Error if n < clusters or values non-finite.
     ///
     /// Side effect: reseeds OpenCV's random generator of the calling thread.
-    pub fn train(samples: &[f32], dim: usize, clusters: usize) -> Result<Self, DescribeError> {
-        let bad = |m: String| Err(DescribeError::InvalidArgument(m));
+    pub fn train(samples: &[f32], dim: usize, clusters: usize) -> Result<Self, VisionError> {
+        let bad = |m: String| Err(VisionError::InvalidArgument(m));
         if dim == 0 || clusters == 0 {
             return bad(format!(
                 "codebook needs positive dimensions, got {clusters} clusters of {dim} values"
@@ -370,7 +370,7 @@ impl Codebook {
             &mut centres,
         )?;
         if centres.rows() != k || centres.cols() != cols || centres.typ() != CV_32F {
-            return Err(DescribeError::Model(format!(
+            return Err(VisionError::Model(format!(
                 "k-means returned {}x{} centres of type {}, expected {clusters}x{dim} floats",
                 centres.rows(),
                 centres.cols(),
@@ -382,12 +382,8 @@ impl Codebook {
     }
 
     /// Validates a stored codebook (shape, finite values), for maps loaded from files.
-    pub fn from_parts(
-        clusters: usize,
-        dim: usize,
-        centres: Vec<f32>,
-    ) -> Result<Self, DescribeError> {
-        let bad = |m: String| Err(DescribeError::InvalidArgument(m));
+    pub fn from_parts(clusters: usize, dim: usize, centres: Vec<f32>) -> Result<Self, VisionError> {
+        let bad = |m: String| Err(VisionError::InvalidArgument(m));
         if clusters == 0 || dim == 0 {
             return bad(format!(
                 "codebook needs positive dimensions, got {clusters} clusters of {dim} values"
@@ -499,7 +495,7 @@ fn dot(a: &[f32], b: &[f32]) -> f32 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::describe::image::PixelFormat;
+    use crate::image::PixelFormat;
     use opencv::core::{Point, Rect, Scalar, CV_8UC1};
 
     /// A deterministic grey test scene: random filled rectangles and circles of random shades
@@ -671,7 +667,7 @@ mod tests {
         let image = ImageView::packed(32, 32, PixelFormat::Gray8, &data);
         assert!(matches!(
             extractor.extract(&image),
-            Err(DescribeError::InvalidImage(_))
+            Err(VisionError::InvalidImage(_))
         ));
     }
 
@@ -850,12 +846,12 @@ mod tests {
         ];
         for options in cases {
             assert!(
-                matches!(options.validate(), Err(DescribeError::InvalidArgument(_))),
+                matches!(options.validate(), Err(VisionError::InvalidArgument(_))),
                 "{options:?}"
             );
             assert!(matches!(
                 LocalExtractor::new(&options),
-                Err(DescribeError::InvalidArgument(_))
+                Err(VisionError::InvalidArgument(_))
             ));
         }
     }
@@ -875,9 +871,8 @@ mod tests {
     #[test]
     fn training_refuses_unusable_samples() {
         let (samples, _) = blobs();
-        let invalid = |r: Result<Codebook, DescribeError>| {
-            matches!(r, Err(DescribeError::InvalidArgument(_)))
-        };
+        let invalid =
+            |r: Result<Codebook, VisionError>| matches!(r, Err(VisionError::InvalidArgument(_)));
         assert!(
             invalid(Codebook::train(&samples[..8], 4, 3)),
             "2 samples, 3 clusters"
@@ -897,9 +892,8 @@ mod tests {
 
     #[test]
     fn stored_codebooks_are_checked() {
-        let invalid = |r: Result<Codebook, DescribeError>| {
-            matches!(r, Err(DescribeError::InvalidArgument(_)))
-        };
+        let invalid =
+            |r: Result<Codebook, VisionError>| matches!(r, Err(VisionError::InvalidArgument(_)));
         assert!(invalid(Codebook::from_parts(2, 3, vec![0.0; 5])));
         assert!(invalid(Codebook::from_parts(2, 3, vec![0.0; 7])));
         assert!(invalid(Codebook::from_parts(0, 3, vec![])));

@@ -136,7 +136,8 @@ impl HopDistances {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::map::{DescriptorIdentity, MapBuilder};
+    use crate::descriptor::DescriptorIdentity;
+    use crate::map::MapBuilder;
 
     fn graph(adjacency: &[&[PlaceId]]) -> HopDistances {
         let lists: Vec<Vec<PlaceId>> = adjacency.iter().map(|l| l.to_vec()).collect();

@@ -2,9 +2,12 @@
 //! boundary, and checked conversions of raw pointers. All unsafe pointer handling of the C ABI
 //! goes through the helpers here.
 
-use crate::describe::DescribeError;
+use crate::build::ImageMapError;
+use crate::descriptor::{DescriptorError, IdentityError};
+use crate::errors::VisionError;
 use crate::localize::LocalizeError;
-use crate::map::{DescriptorError, ImageMapError, MapError};
+use crate::map::MapError;
+use crate::skeleton::SkeletonError;
 use std::cell::RefCell;
 use std::ffi::{c_char, CStr, CString};
 use std::panic::{catch_unwind, AssertUnwindSafe};
@@ -179,6 +182,20 @@ impl From<MapError> for FfiError {
     }
 }
 
+impl From<IdentityError> for FfiError {
+    fn from(e: IdentityError) -> Self {
+        MapError::from(e).into()
+    }
+}
+
+impl From<SkeletonError> for FfiError {
+    fn from(e: SkeletonError) -> Self {
+        match e {
+            SkeletonError::InvalidArgument(_) => Self::invalid(e.to_string()),
+        }
+    }
+}
+
 impl From<LocalizeError> for FfiError {
     fn from(e: LocalizeError) -> Self {
         match e {
@@ -200,15 +217,15 @@ impl From<LocalizeError> for FfiError {
     }
 }
 
-impl From<DescribeError> for FfiError {
-    fn from(e: DescribeError) -> Self {
+impl From<VisionError> for FfiError {
+    fn from(e: VisionError) -> Self {
         let status = match &e {
-            DescribeError::InvalidImage(_) => TOPOLOC_ERR_INVALID_IMAGE,
-            DescribeError::InvalidArgument(_) => TOPOLOC_ERR_INVALID_ARGUMENT,
-            DescribeError::BackendUnavailable { .. } => TOPOLOC_ERR_BACKEND_UNAVAILABLE,
-            DescribeError::Model(_) | DescribeError::OpenCv(_) => TOPOLOC_ERR_MODEL,
-            DescribeError::Uninformative(_) => TOPOLOC_ERR_UNINFORMATIVE_IMAGE,
-            DescribeError::Mismatch(_) => TOPOLOC_ERR_DESCRIPTOR_MISMATCH,
+            VisionError::InvalidImage(_) => TOPOLOC_ERR_INVALID_IMAGE,
+            VisionError::InvalidArgument(_) => TOPOLOC_ERR_INVALID_ARGUMENT,
+            VisionError::BackendUnavailable { .. } => TOPOLOC_ERR_BACKEND_UNAVAILABLE,
+            VisionError::Model(_) | VisionError::OpenCv(_) => TOPOLOC_ERR_MODEL,
+            VisionError::Uninformative(_) => TOPOLOC_ERR_UNINFORMATIVE_IMAGE,
+            VisionError::Mismatch(_) => TOPOLOC_ERR_DESCRIPTOR_MISMATCH,
         };
         Self::new(status, e.to_string())
     }

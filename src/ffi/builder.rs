@@ -7,9 +7,9 @@ use super::boundary::{
 use super::convert::optional_pose;
 use super::map::topoloc_map;
 use super::topoloc_status;
-use crate::map::{
-    from_keyframes, DescriptorIdentity, Keyframe, KeyframeOptions, MapBuilder, ViewAttributes,
-};
+use crate::build::{from_keyframes, Keyframe, KeyframeOptions};
+use crate::descriptor::DescriptorIdentity;
+use crate::map::{MapBuilder, ViewAttributes};
 use nalgebra::Point3;
 use std::ffi::c_char;
 

@@ -2,7 +2,7 @@
 //! Rust types of the core.
 
 use super::boundary::{slice, FfiError};
-use crate::map::ExpectedDescriptor;
+use crate::descriptor::ExpectedDescriptor;
 use nalgebra::{Isometry3, Matrix3, Rotation3, Translation3, UnitQuaternion};
 use std::ffi::c_char;
 

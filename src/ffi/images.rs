@@ -7,13 +7,13 @@ use super::boundary::{
 };
 use super::map::topoloc_map;
 use super::topoloc_status;
-use crate::describe::image::{ImageView, PixelFormat};
+use crate::build::{
+    build_from_images, read_tum, BuildStage, ImageLayout, ImageMapOptions, ImageSource,
+};
 use crate::describe::onnx::OnnxOptions;
 use crate::describe::vlad::{LocalFeature, VladOptions};
 use crate::describe::{BackendConfig, BackendKind, FitOptions};
-use crate::map::{
-    build_from_images, read_tum, BuildStage, ImageLayout, ImageMapOptions, ImageSource,
-};
+use crate::image::{ImageView, PixelFormat};
 use std::ffi::{c_char, c_void};
 use std::path::Path;
 

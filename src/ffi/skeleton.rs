@@ -1,12 +1,13 @@
 //! C functions of skeleton map building: a topological graph of places from an occupancy voxel
-//! grid (see `topoloc::map::skeleton_graph`).
+//! grid (see `topoloc::skeleton::skeleton_graph`).
 
 use super::boundary::{
     borrow, check_out, free_handle, init_versioned, into_handle, read_versioned, run, slice,
     write_array, write_out, FfiError, Versioned,
 };
 use super::topoloc_status;
-use crate::map::{skeleton_graph, MapError, OccupancyGrid, SkeletonOptions, TopoGraph};
+use crate::map::MapError;
+use crate::skeleton::{skeleton_graph, OccupancyGrid, SkeletonOptions, TopoGraph};
 use nalgebra::Point3;
 
 /// Place kind: a dead end of the skeleton.

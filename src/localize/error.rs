@@ -1,7 +1,8 @@
 //! Errors of the localizer.
 
-use crate::describe::DescribeError;
-use crate::map::{DescriptorError, MapError};
+use crate::descriptor::DescriptorError;
+use crate::errors::VisionError;
+use crate::map::MapError;
 
 /// What can go wrong when creating a localizer or processing a frame. On error the localizer's
 /// state is exactly what it was before the call.
@@ -22,13 +23,13 @@ pub enum LocalizeError {
     /// Describing the frame's image failed (bad image, uninformative image, backend error), or
     /// the describer does not fit the map.
     #[error(transparent)]
-    Describe(#[from] DescribeError),
+    Describe(#[from] VisionError),
     /// The frame has an image but no descriptor, and the localizer has no describer (create it
     /// with `Localizer::with_describer` on a map built from images).
     #[error("cannot describe images: {0}")]
     NoDescriber(String),
     /// Geometric verification is on but the map stores no keypoints. (A frame without an
-    /// image while verifying is a [`DescribeError::InvalidImage`].)
+    /// image while verifying is a [`VisionError::InvalidImage`].)
     #[error("cannot verify: {0}")]
     Verification(String),
     /// Metric mode was asked for on a map without place positions or view poses.

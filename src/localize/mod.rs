@@ -18,9 +18,11 @@ mod similarity;
 pub use error::LocalizeError;
 pub use particles::{MetricOptions, MAX_PARTICLES};
 
-use crate::describe::image::ImageView;
-use crate::describe::{DescribeError, Describer, DescriberOptions};
-use crate::map::{normalize_descriptor_into, ExpectedDescriptor, Map, PlaceId, ViewId};
+use crate::describe::{Describer, DescriberOptions};
+use crate::descriptor::{normalize_descriptor_into, ExpectedDescriptor};
+use crate::errors::VisionError;
+use crate::image::ImageView;
+use crate::map::{Map, MapError, PlaceId, ViewId};
 use crate::verify::{check_pair, locate, KeypointDetector, Keypoints, VerificationOptions};
 use filter::{Belief, FilterParams};
 use nalgebra::{Isometry3, Point3};
@@ -286,7 +288,9 @@ impl Localizer {
     /// descriptor than `options.expected`.
     pub fn new(map: Arc<Map>, options: LocalizerOptions) -> Result<Self, LocalizeError> {
         let params = options.filter_params()?;
-        map.descriptor().check_compatible(&options.expected)?;
+        map.descriptor()
+            .check_compatible(&options.expected)
+            .map_err(MapError::from)?;
         let (n, m) = (map.view_count(), map.place_count());
         let mut belief = Belief::new(&map, &params);
         belief.set_initial(&params);
@@ -344,7 +348,7 @@ impl Localizer {
     /// Creates a localizer that also describes images, with the describer model stored in the
     /// map (maps built from images have one). Loads the backend now, so a missing runtime or
     /// model, or a backend or model file other than the map's, fails here with a typed error
-    /// (`DescribeError::BackendUnavailable`, `DescribeError::Mismatch`).
+    /// (`VisionError::BackendUnavailable`, `VisionError::Mismatch`).
     pub fn with_describer(
         map: Arc<Map>,
         options: LocalizerOptions,
@@ -461,7 +465,7 @@ impl Localizer {
         normalize_descriptor_into(descriptor, self.map.dim(), &mut self.query)?;
         if let Some(verifier) = &mut self.verifier {
             let image = frame.image.as_ref().ok_or_else(|| {
-                DescribeError::InvalidImage(
+                VisionError::InvalidImage(
                     "verification is on: the frame needs its image (beside or instead of a descriptor)".into(),
                 )
             })?;

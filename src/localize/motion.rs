@@ -112,7 +112,8 @@ impl Headings {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::map::{DescriptorIdentity, MapBuilder};
+    use crate::descriptor::DescriptorIdentity;
+    use crate::map::MapBuilder;
 
     /// T-junction: 0 - 1 - 2, and 1 - 3; plus an isolated place 4.
     fn t_junction() -> Map {

@@ -453,7 +453,8 @@ fn nearest_place(positions: &[Point3<f64>], point: &Point3<f64>) -> usize {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::map::{DescriptorIdentity, MapBuilder, ViewAttributes};
+    use crate::descriptor::DescriptorIdentity;
+    use crate::map::{MapBuilder, ViewAttributes};
 
     /// Places 1 m apart along x, one view each facing +x, all with the same descriptor.
     fn corridor(places: u32) -> Map {

@@ -1,9 +1,7 @@
 //! Incremental construction of a [`Map`] from places, views and edges.
 
-use super::{
-    normalize_descriptor_into, DescriptorIdentity, DescriptorStore, Edge, Map, MapError, PlaceId,
-    ViewId, ViewRecord,
-};
+use super::{DescriptorStore, Edge, Map, MapError, PlaceId, ViewId, ViewRecord};
+use crate::descriptor::{normalize_descriptor_into, DescriptorIdentity};
 use nalgebra::{Isometry3, Point3};
 use std::collections::HashSet;
 

@@ -1,6 +1,7 @@
 //! Errors of map building, loading and saving.
 
-use super::{DescriptorError, DescriptorIdentity, ExpectedDescriptor, PlaceId, ViewId};
+use super::{PlaceId, ViewId};
+use crate::descriptor::{DescriptorError, DescriptorIdentity, ExpectedDescriptor, IdentityError};
 use std::path::PathBuf;
 
 /// Everything that can go wrong while building, loading, saving or querying a map.
@@ -71,4 +72,15 @@ pub enum MapError {
     /// The map's contents are inconsistent (found while building or validating).
     #[error("invalid map: {0}")]
     Invalid(String),
+}
+
+impl From<IdentityError> for MapError {
+    fn from(e: IdentityError) -> Self {
+        match e {
+            IdentityError::Invalid(msg) => MapError::InvalidArgument(msg),
+            IdentityError::Mismatch { map, expected } => {
+                MapError::DescriptorMismatch { map, expected }
+            }
+        }
+    }
 }

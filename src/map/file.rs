@@ -33,12 +33,11 @@
 //! fields added by newer minor versions stay covered (1.0 re-serialised its own struct). Readers accept any file of the
 //! same major version; a newer minor version may add tensors, which older readers ignore.
 
-use super::{
-    DescriptorIdentity, DescriptorStore, Edge, ExpectedDescriptor, Map, MapError, ViewRecord,
-};
+use super::{DescriptorStore, Edge, Map, MapError, ViewRecord};
 use crate::describe::describer::{BackendSpec, DescriberModel};
 use crate::describe::pca::Pca;
 use crate::describe::vlad::Codebook;
+use crate::descriptor::{DescriptorIdentity, ExpectedDescriptor};
 use crate::verify::{Descriptor, ViewKeypoints, DESCRIPTOR_BYTES};
 use nalgebra::{Isometry3, Point3, Quaternion, Translation3, UnitQuaternion};
 use safetensors::{Dtype, SafeTensors, View};

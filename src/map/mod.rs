@@ -2,7 +2,7 @@
 //! between places.
 //!
 //! A [`Map`] is immutable once built. Build one with [`MapBuilder`], from a keyframe sequence
-//! with [`from_keyframes`], or load one from a file with [`Map::load`]. Maps are `Send + Sync`
+//! with [`crate::build`], or load one from a file with [`Map::load`]. Maps are `Send + Sync`
 //! and are shared between localizers through `Arc<Map>`.
 //!
 //! Conventions: positions and translations are in metres; a view pose is `world_T_camera`
@@ -12,130 +12,21 @@
 mod builder;
 mod error;
 mod file;
-mod from_images;
-mod keyframes;
-mod occupancy;
-mod skeleton;
-mod tum;
 
 pub use builder::{MapBuilder, ViewAttributes};
 pub use error::MapError;
 pub use file::{LoadOptions, FORMAT_NAME, FORMAT_VERSION_MAJOR, FORMAT_VERSION_MINOR};
-pub use from_images::{
-    build_from_images, BuildStage, ImageLayout, ImageMapError, ImageMapOptions, ImageMapReport,
-    ImageSource, PlaceLayout,
-};
-pub use keyframes::{from_keyframes, Keyframe, KeyframeOptions};
-pub use occupancy::{OccupancyGrid, Voxel, MAX_VOXELS};
-pub use skeleton::{
-    skeleton_graph, skeletonize, squared_distance_transform, GraphEdge, GraphPlace, GridBorder,
-    NodeKind, SkeletonOptions, TopoGraph,
-};
-pub use tum::{parse_tum, read_tum, TimedPose};
 
 use crate::describe::DescriberModel;
+use crate::descriptor::{check_unit_descriptor, DescriptorIdentity, ExpectedDescriptor};
 use crate::verify::ViewKeypoints;
 use nalgebra::{Isometry3, Point3};
-use serde::{Deserialize, Serialize};
 use std::sync::Arc;
 
 /// Index of a place in a map, `0..map.place_count()`.
 pub type PlaceId = u32;
 /// Index of a view in a map, `0..map.view_count()`.
 pub type ViewId = u32;
-
-/// Tolerance on `| ||x|| - 1 |` for a stored descriptor to count as L2-normalised.
-pub const NORM_TOLERANCE: f32 = 1e-3;
-
-/// Which descriptor produced a map's vectors. A query described by anything else is refused,
-/// because similarities between different descriptor spaces mean nothing.
-#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
-pub struct DescriptorIdentity {
-    /// Backend family, e.g. `"onnx-mlf"`, `"vlad-orb"`, or a host-chosen name for external vectors.
-    pub kind: String,
-    /// Model identity within the family: file hash, taps, preprocessing; free text.
-    pub model: String,
-    /// Descriptor dimension D.
-    pub dim: u32,
-}
-
-impl DescriptorIdentity {
-    /// Creates an identity; `kind` must be non-empty and `dim` positive.
-    pub fn new(
-        kind: impl Into<String>,
-        model: impl Into<String>,
-        dim: u32,
-    ) -> Result<Self, MapError> {
-        let identity = Self {
-            kind: kind.into(),
-            model: model.into(),
-            dim,
-        };
-        identity.validate()?;
-        Ok(identity)
-    }
-
-    fn validate(&self) -> Result<(), MapError> {
-        if self.kind.is_empty() {
-            return Err(MapError::InvalidArgument(
-                "descriptor kind must not be empty".into(),
-            ));
-        }
-        if self.dim == 0 {
-            return Err(MapError::InvalidArgument(
-                "descriptor dimension must be positive".into(),
-            ));
-        }
-        Ok(())
-    }
-
-    /// Checks that a query described by `expected` may be compared with this map's vectors.
-    /// Empty `kind`/`model` and zero `dim` in `expected` mean "any".
-    pub fn check_compatible(&self, expected: &ExpectedDescriptor) -> Result<(), MapError> {
-        let kind_ok = expected.kind.as_deref().is_none_or(|k| k == self.kind);
-        let model_ok = expected.model.as_deref().is_none_or(|m| m == self.model);
-        let dim_ok = expected.dim.is_none_or(|d| d == self.dim);
-        if kind_ok && model_ok && dim_ok {
-            Ok(())
-        } else {
-            Err(MapError::DescriptorMismatch {
-                map: self.clone(),
-                expected: expected.clone(),
-            })
-        }
-    }
-}
-
-impl std::fmt::Display for DescriptorIdentity {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "{} (model '{}', D={})", self.kind, self.model, self.dim)
-    }
-}
-
-/// What a caller's descriptor is; each `None` field matches anything.
-#[derive(Clone, Debug, Default, PartialEq, Eq)]
-pub struct ExpectedDescriptor {
-    /// Required backend family.
-    pub kind: Option<String>,
-    /// Required model identity.
-    pub model: Option<String>,
-    /// Required dimension.
-    pub dim: Option<u32>,
-}
-
-impl std::fmt::Display for ExpectedDescriptor {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        let any = |s: &Option<String>| s.clone().unwrap_or_else(|| "*".into());
-        let dim = self.dim.map_or_else(|| "*".into(), |d| d.to_string());
-        write!(
-            f,
-            "{} (model '{}', D={})",
-            any(&self.kind),
-            any(&self.model),
-            dim
-        )
-    }
-}
 
 /// An undirected edge between two places; `a < b`.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -571,24 +462,6 @@ fn prefix_offsets(counts: &[u32]) -> Vec<u32> {
     offsets
 }
 
-/// Checks that a stored descriptor is finite and has unit L2 norm.
-fn check_unit_descriptor(row: &[f32]) -> Result<(), String> {
-    let mut sum = 0.0f32;
-    for &x in row {
-        if !x.is_finite() {
-            return Err("descriptor has a NaN or infinite value".into());
-        }
-        sum += x * x;
-    }
-    let norm = sum.sqrt();
-    if (norm - 1.0).abs() > NORM_TOLERANCE {
-        return Err(format!(
-            "descriptor norm is {norm}, expected 1 (L2-normalised)"
-        ));
-    }
-    Ok(())
-}
-
 fn check_pose(pose: &Isometry3<f64>) -> Result<(), String> {
     let finite = pose.translation.vector.iter().all(|x| x.is_finite())
         && pose.rotation.coords.iter().all(|x| x.is_finite());
@@ -596,53 +469,4 @@ fn check_pose(pose: &Isometry3<f64>) -> Result<(), String> {
         return Err("pose has a non-finite value".into());
     }
     Ok(())
-}
-
-/// Returns a unit-norm copy of `descriptor`, or an error naming what is wrong with it
-/// (wrong length, NaN/Inf, all zeros). Writes into `out` so that per-frame callers reuse a buffer.
-pub fn normalize_descriptor_into(
-    descriptor: &[f32],
-    dim: usize,
-    out: &mut Vec<f32>,
-) -> Result<(), DescriptorError> {
-    if descriptor.len() != dim {
-        return Err(DescriptorError::Dimension {
-            got: descriptor.len(),
-            expected: dim,
-        });
-    }
-    let mut sum = 0.0f64;
-    for &x in descriptor {
-        if !x.is_finite() {
-            return Err(DescriptorError::NonFinite);
-        }
-        sum += f64::from(x) * f64::from(x);
-    }
-    // In f64 even the smallest subnormal f32 squares to a positive number: only zeros give 0.
-    if sum == 0.0 {
-        return Err(DescriptorError::Zero);
-    }
-    let inv = 1.0 / sum.sqrt();
-    out.clear();
-    out.extend(descriptor.iter().map(|&x| (f64::from(x) * inv) as f32));
-    Ok(())
-}
-
-/// What is wrong with a descriptor given by a caller.
-#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
-pub enum DescriptorError {
-    /// Length differs from the map's D.
-    #[error("descriptor has {got} values, the map's descriptor has D={expected}")]
-    Dimension {
-        /// Values given.
-        got: usize,
-        /// The map's D.
-        expected: usize,
-    },
-    /// Contains NaN or infinity.
-    #[error("descriptor contains NaN or infinite values")]
-    NonFinite,
-    /// All values are (close to) zero, so it has no direction.
-    #[error("descriptor is all zeros")]
-    Zero,
 }

@@ -2,7 +2,7 @@
 //! RANSAC; the inliers are the matches consistent with one rigid scene seen from two poses.
 
 use super::keypoints::{Descriptor, KeypointsRef, DESCRIPTOR_BYTES};
-use crate::describe::DescribeError;
+use crate::errors::VisionError;
 use opencv::boxed_ref::BoxedRef;
 use opencv::calib3d;
 use opencv::core::{DMatch, Mat, Point2f, Vector, NORM_HAMMING};
@@ -83,7 +83,7 @@ pub(crate) fn mutual_matches(
     query: KeypointsRef<'_>,
     view: KeypointsRef<'_>,
     max_hamming: u32,
-) -> Result<Vec<DMatch>, DescribeError> {
+) -> Result<Vec<DMatch>, VisionError> {
     if query.points.is_empty() || view.points.is_empty() {
         return Ok(Vec::new());
     }
@@ -109,7 +109,7 @@ pub fn check_pair(
     query: KeypointsRef<'_>,
     view: KeypointsRef<'_>,
     options: &PairOptions,
-) -> Result<PairCheck, DescribeError> {
+) -> Result<PairCheck, VisionError> {
     if query.points.len() < MIN_MATCHES || view.points.len() < MIN_MATCHES {
         return Ok(PairCheck::default());
     }

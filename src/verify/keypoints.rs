@@ -1,7 +1,7 @@
 //! ORB keypoints of one image, and the per-view store a map keeps them in.
 
-use crate::describe::image::ImageView;
-use crate::describe::DescribeError;
+use crate::errors::VisionError;
+use crate::image::ImageView;
 use opencv::core::{KeyPoint, Mat, Ptr, Size, Vector};
 use opencv::features2d::{ORB_ScoreType, ORB};
 use opencv::prelude::*;
@@ -61,9 +61,9 @@ pub struct KeypointDetector {
 
 impl KeypointDetector {
     /// A detector keeping at most `max_keypoints` (1..=[`MAX_KEYPOINTS`]) per image.
-    pub fn new(max_keypoints: usize) -> Result<Self, DescribeError> {
+    pub fn new(max_keypoints: usize) -> Result<Self, VisionError> {
         if !(1..=MAX_KEYPOINTS).contains(&max_keypoints) {
-            return Err(DescribeError::InvalidArgument(format!(
+            return Err(VisionError::InvalidArgument(format!(
                 "keypoints per image is {max_keypoints}, must lie in 1..={MAX_KEYPOINTS}"
             )));
         }
@@ -91,7 +91,7 @@ impl KeypointDetector {
 
     /// Validates the image, converts it to grey at its own size, detects and describes.
     /// A featureless image gives no keypoints, not an error.
-    pub fn detect(&mut self, image: &ImageView<'_>) -> Result<Keypoints, DescribeError> {
+    pub fn detect(&mut self, image: &ImageView<'_>) -> Result<Keypoints, VisionError> {
         let size = Size::new(image.width as i32, image.height as i32);
         let rgb = image.to_rgb_resized(size)?;
         let mut grey = Mat::default();
@@ -112,7 +112,7 @@ impl KeypointDetector {
         if descriptors.cols() as usize != DESCRIPTOR_BYTES
             || bytes.len() != found.len() * DESCRIPTOR_BYTES
         {
-            return Err(DescribeError::Model(format!(
+            return Err(VisionError::Model(format!(
                 "ORB gave {} descriptors of {} bytes for {} keypoints",
                 descriptors.rows(),
                 descriptors.cols(),

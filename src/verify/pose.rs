@@ -9,7 +9,7 @@
 
 use super::geometry::mutual_matches;
 use super::keypoints::KeypointsRef;
-use crate::describe::DescribeError;
+use crate::errors::VisionError;
 use nalgebra::{Isometry3, Matrix3, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
 use opencv::calib3d;
 use opencv::core::{
@@ -132,9 +132,9 @@ pub fn locate(
     camera: &PinholeCamera,
     max_hamming: u32,
     options: &LocateOptions,
-) -> Result<Option<Located>, DescribeError> {
+) -> Result<Option<Located>, VisionError> {
     if view_world_points.len() != view.points.len() {
-        return Err(DescribeError::InvalidArgument(format!(
+        return Err(VisionError::InvalidArgument(format!(
             "{} scene points for {} view keypoints",
             view_world_points.len(),
             view.points.len()

@@ -1,6 +1,6 @@
 //! Deterministic grey test images: a "place" of random rectangles and the same place seen again.
 
-use topoloc::describe::image::{ImageView, PixelFormat};
+use topoloc::image::{ImageView, PixelFormat};
 
 /// Test image width.
 pub const W: usize = 320;

@@ -3,7 +3,7 @@
 #![allow(dead_code)]
 
 use nalgebra::Point3;
-use topoloc::map::OccupancyGrid;
+use topoloc::skeleton::OccupancyGrid;
 
 /// Builds a grid by filling axis-aligned boxes (metres, world frame with the origin at the
 /// grid's corner): a voxel belongs to a box when its centre is inside it.

@@ -6,11 +6,11 @@ use anyhow::{bail, Result};
 use clap::Args;
 use serde_json::json;
 use std::path::PathBuf;
-use topoloc::describe::FitOptions;
-use topoloc::map::{
+use topoloc::build::{
     build_from_images, read_tum, BuildStage, ImageLayout, ImageMapOptions, ImageSource,
     KeyframeOptions,
 };
+use topoloc::describe::FitOptions;
 
 /// Options of `build-map`.
 #[derive(Args, Clone, Debug)]

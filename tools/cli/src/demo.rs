@@ -17,17 +17,17 @@ use serde_json::json;
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::Instant;
-use topoloc::describe::image::ImageView;
 use topoloc::describe::onnx::{cache_dir, DEFAULT_MODEL_FILE};
 use topoloc::describe::{BackendConfig, DescriberOptions};
 use topoloc::eval::{calibration, precision_recall, GraphEvaluator, HopDistances, Prediction};
+use topoloc::image::ImageView;
 use topoloc::map::{LoadOptions, PlaceId};
-use topoloc::synthetic::Sequence;
 use topoloc::{Frame, Localization, Localizer, LocalizerOptions, Map, Mode};
 use topoloc_sim::render::ConditionKind;
 use topoloc_sim::scenario::{build_scene, describe_flight, fly};
 use topoloc_sim::style::Style;
 use topoloc_sim::world::WorldParams;
+use topoloc_synthetic::Sequence;
 
 /// Demo settings (command-line options).
 #[derive(clap::Args, Clone, Debug)]

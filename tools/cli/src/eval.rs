@@ -24,12 +24,13 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Instant;
-use topoloc::describe::image::{read_rgb, ImageView, PixelFormat};
-use topoloc::describe::{DescribeError, Describer};
+use topoloc::describe::Describer;
+use topoloc::errors::VisionError;
 use topoloc::eval::{
     precision_recall, recall_at_n_frames, FrameRanking, GraphEvaluator, GraphMetrics, HopDistances,
     PrCurve, Prediction, ScoredOutcome,
 };
+use topoloc::image::{read_rgb, ImageView, PixelFormat};
 use topoloc::map::PlaceId;
 use topoloc::{Frame, LoadOptions, Localization, Localizer, LocalizerOptions, Map, Mode};
 use topoloc_sim::dataset::{Dataset, GRAPH_FILE, RECALL_DEPTHS};
@@ -157,7 +158,7 @@ fn describe_frames(
                     bar.inc(1);
                     match result {
                         Ok(()) => Ok((Some(out), ms)),
-                        Err(DescribeError::Uninformative(_)) => Ok((None, ms)),
+                        Err(VisionError::Uninformative(_)) => Ok((None, ms)),
                         Err(e) => Err(anyhow::anyhow!("{}: {e}", path.display())),
                     }
                 },

@@ -13,7 +13,7 @@ use topoloc::{Frame, Localizer, LocalizerOptions, Map};
 pub fn run(views: usize, dim: usize, json: bool) -> Result<()> {
     let dir = tempfile::tempdir()?;
     let path = dir.path().join("bench.topoloc");
-    topoloc::synthetic::random_map(views, 4, dim, 11).save(&path)?;
+    topoloc_synthetic::random_map(views, 4, dim, 11).save(&path)?;
     let file_bytes = std::fs::metadata(&path)?.len();
     let exe = std::env::current_exe()?;
     let output = std::process::Command::new(exe)

@@ -20,8 +20,8 @@ use serde_json::{json, Value};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 use topoloc::describe::FitOptions;
-use topoloc::synthetic::{SyntheticWorld, WorldParams};
 use topoloc::{Frame, Localization, Localizer, LocalizerOptions, Mode};
+use topoloc_synthetic::{SyntheticWorld, WorldParams};
 
 /// Frames processed by every localizer before timing starts (caches, page faults, filter
 /// settling); they precede the timed frames on the same walk.

@@ -8,8 +8,8 @@ use crate::demo::evaluate;
 use anyhow::Result;
 use std::sync::Arc;
 use topoloc::eval::HopDistances;
-use topoloc::synthetic::{SyntheticWorld, WorldParams};
 use topoloc::{Frame, Localization, Localizer, LocalizerOptions, Mode};
+use topoloc_synthetic::{SyntheticWorld, WorldParams};
 
 /// First world seed of the sweep: worlds 100.. are held out from the demo's default seed 0.
 const FIRST_SEED: u64 = 100;
@@ -78,7 +78,7 @@ pub fn run(worlds: u64, frames: usize, temperatures: &[f32], margins: &[f32]) ->
 /// after a 10-frame settling period.
 fn off_map_rate(
     map: &Arc<topoloc::Map>,
-    sequence: &topoloc::synthetic::Sequence,
+    sequence: &topoloc_synthetic::Sequence,
     options: LocalizerOptions,
 ) -> Result<f64> {
     let mut localizer = Localizer::new(map.clone(), options)?;

@@ -9,7 +9,8 @@ use plotters::element::BitMapElement;
 use plotters::prelude::*;
 use std::path::Path;
 use topoloc::eval::HopDistances;
-use topoloc::map::{NodeKind, PlaceId};
+use topoloc::map::PlaceId;
+use topoloc::skeleton::NodeKind;
 use topoloc_sim::scenario::{Flight, Scene};
 
 /// Shortest side of the picture, pixels; the plan is scaled up by a whole factor to reach it.

@@ -15,11 +15,13 @@ use crate::render::{Condition, Image, RenderError, Renderer};
 use nalgebra::Point3;
 use rayon::prelude::*;
 use std::f64::consts::TAU;
-use topoloc::describe::image::{ImageView, PixelFormat};
-use topoloc::map::{
+use topoloc::build::{
     build_from_images, BuildStage, ImageLayout, ImageMapError, ImageMapOptions, ImageMapReport,
-    ImageSource, Map, OccupancyGrid, PlaceLayout, TopoGraph,
+    ImageSource, PlaceLayout,
 };
+use topoloc::image::{ImageView, PixelFormat};
+use topoloc::map::Map;
+use topoloc::skeleton::{OccupancyGrid, TopoGraph};
 
 /// How the views of a map are captured.
 #[derive(Clone, Debug, PartialEq)]

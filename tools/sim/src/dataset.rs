@@ -25,8 +25,9 @@ use opencv::core::{Mat, Vec3b};
 use serde::{Deserialize, Serialize};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
+use topoloc::build::{parse_tum, TimedPose};
 use topoloc::eval::{GraphEvaluator, GraphMetrics, Prediction};
-use topoloc::map::{parse_tum, PlaceId, TimedPose};
+use topoloc::map::PlaceId;
 
 /// Value of the manifest's `format` key.
 pub const FORMAT_NAME: &str = "topoloc-sim-dataset";
@@ -551,8 +552,8 @@ impl Dataset {
     /// naming the file, when it does not decode or its size differs from the intrinsics.
     pub fn read_image(&self, frame: usize) -> Result<Vec<u8>, DatasetError> {
         let path = self.image_path(frame);
-        let (w, h, rgb) = topoloc::describe::image::read_rgb(&path)
-            .map_err(|e| invalid(&path, None, e.to_string()))?;
+        let (w, h, rgb) =
+            topoloc::image::read_rgb(&path).map_err(|e| invalid(&path, None, e.to_string()))?;
         let (iw, ih) = (self.intrinsics.width, self.intrinsics.height);
         if (w, h) != (iw, ih) {
             return Err(invalid(

@@ -11,8 +11,10 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::f64::consts::FRAC_PI_2;
 use std::ops::Range;
+use topoloc::build::TimedPose;
 use topoloc::eval::HopDistances;
-use topoloc::map::{OccupancyGrid, PlaceId, TimedPose, ViewId};
+use topoloc::map::{PlaceId, ViewId};
+use topoloc::skeleton::OccupancyGrid;
 
 /// One place of the graph.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]

@@ -19,7 +19,7 @@ use rand::rngs::SmallRng;
 use rand::SeedableRng;
 use rand_distr::{Distribution, StandardNormal};
 use serde::{Deserialize, Serialize};
-use topoloc::map::TimedPose;
+use topoloc::build::TimedPose;
 
 /// How odometry drifts. All zero: odometry equals the ground truth.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]

@@ -19,12 +19,13 @@ use rayon::prelude::*;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::Arc;
 use std::time::Instant;
-use topoloc::describe::{DescribeError, Describer, DescriberOptions};
-use topoloc::map::{
-    skeleton_graph, BuildStage, ImageMapError, ImageMapOptions, Map, MapError, SkeletonOptions,
-    TimedPose, TopoGraph,
-};
-use topoloc::synthetic::{Sequence, SequenceFrame};
+use topoloc::build::{BuildStage, ImageMapError, ImageMapOptions, TimedPose};
+use topoloc::describe::{Describer, DescriberOptions};
+use topoloc::errors::VisionError;
+use topoloc::map::{Map, MapError};
+use topoloc::skeleton::SkeletonError;
+use topoloc::skeleton::{skeleton_graph, SkeletonOptions, TopoGraph};
+use topoloc_synthetic::{Sequence, SequenceFrame};
 
 /// Everything that defines an experiment.
 #[derive(Clone, Debug)]
@@ -99,7 +100,10 @@ pub enum ScenarioError {
     /// Generating the world.
     #[error(transparent)]
     World(#[from] WorldError),
-    /// Building the graph (skeleton) or the map.
+    /// Building the graph from the world's occupancy grid.
+    #[error(transparent)]
+    Skeleton(#[from] SkeletonError),
+    /// Building the map.
     #[error(transparent)]
     Map(#[from] MapError),
     /// Capturing the views.
@@ -116,7 +120,7 @@ pub enum ScenarioError {
     Trajectory(#[from] TrajectoryError),
     /// Describing query frames.
     #[error(transparent)]
-    Describe(#[from] DescribeError),
+    Describe(#[from] VisionError),
     /// Ground truth or odometry.
     #[error("{0}")]
     Other(String),
@@ -296,10 +300,8 @@ pub fn describe_flight(
         .par_iter()
         .map_init(
             || Describer::new(model.clone(), describer),
-            |d, image| -> Result<(Vec<f32>, f64), DescribeError> {
-                let d = d
-                    .as_mut()
-                    .map_err(|e| DescribeError::Model(e.to_string()))?;
+            |d, image| -> Result<(Vec<f32>, f64), VisionError> {
+                let d = d.as_mut().map_err(|e| VisionError::Model(e.to_string()))?;
                 let mut out = Vec::new();
                 let start = Instant::now();
                 d.describe(&image_view(image), &mut out)?;

@@ -23,7 +23,8 @@ use rand::seq::IndexedRandom;
 use rand::{Rng, SeedableRng};
 use serde::{Deserialize, Serialize};
 use std::f64::consts::PI;
-use topoloc::map::{OccupancyGrid, TimedPose};
+use topoloc::build::TimedPose;
+use topoloc::skeleton::OccupancyGrid;
 
 /// A bad option, point or request; messages name the field or the point.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]

@@ -53,7 +53,8 @@ use crate::texture::Material;
 use nalgebra::Point3;
 use serde::{Deserialize, Serialize};
 use std::collections::VecDeque;
-use topoloc::map::{MapError, OccupancyGrid, Voxel};
+use topoloc::skeleton::SkeletonError;
+use topoloc::skeleton::{OccupancyGrid, Voxel};
 
 /// Voxel size of worlds made by [`WorldParams::from_style`], metres.
 pub const DEFAULT_VOXEL_SIZE: f64 = 0.1;
@@ -77,7 +78,7 @@ pub enum WorldError {
     },
     /// The voxel grid could not be built.
     #[error(transparent)]
-    Grid(#[from] MapError),
+    Grid(#[from] SkeletonError),
 }
 
 fn invalid(field: &'static str, message: String) -> WorldError {

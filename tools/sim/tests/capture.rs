@@ -2,9 +2,10 @@
 //! place, a VLAD map on that graph, and views found again under another condition.
 
 use std::sync::Arc;
+use topoloc::build::ImageMapOptions;
 use topoloc::describe::vlad::VladOptions;
 use topoloc::describe::{BackendConfig, FitOptions};
-use topoloc::map::{skeleton_graph, ImageMapOptions, SkeletonOptions};
+use topoloc::skeleton::{skeleton_graph, SkeletonOptions};
 use topoloc::verify::{locate, KeypointDetector, LocateOptions};
 use topoloc::{Frame, Localizer, LocalizerOptions, Mode};
 use topoloc_sim::capture::{

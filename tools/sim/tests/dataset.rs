@@ -4,7 +4,8 @@
 
 use nalgebra::Point3;
 use std::path::Path;
-use topoloc::map::{OccupancyGrid, TimedPose};
+use topoloc::build::TimedPose;
+use topoloc::skeleton::OccupancyGrid;
 use topoloc_sim::camera::Intrinsics;
 use topoloc_sim::dataset::{image_name, Dataset, DatasetError, DatasetInfo, DatasetWriter};
 use topoloc_sim::ground_truth::{ground_truth, visits, FrameTruth, PlaceGraph};

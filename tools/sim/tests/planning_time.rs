@@ -4,7 +4,7 @@
 
 use nalgebra::Point3;
 use std::time::Instant;
-use topoloc::map::OccupancyGrid;
+use topoloc::skeleton::OccupancyGrid;
 use topoloc_sim::trajectory::{Planner, PlannerOptions, TrajectorySpec};
 
 fn office(voxel: f64) -> OccupancyGrid {

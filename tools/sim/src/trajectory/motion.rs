@@ -6,7 +6,7 @@ use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion};
 use rand::rngs::SmallRng;
 use rand_distr::{Distribution, StandardNormal};
 use std::f64::consts::PI;
-use topoloc::map::TimedPose;
+use topoloc::build::TimedPose;
 
 /// A turn sharper than this at one path vertex (radians) is taken by stopping and turning in
 /// place: it is a corner the smoother could not round.

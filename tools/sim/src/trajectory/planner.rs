@@ -5,7 +5,7 @@
 use nalgebra::{Point3, Vector3};
 use std::cmp::Ordering;
 use std::collections::BinaryHeap;
-use topoloc::map::{squared_distance_transform, GridBorder, OccupancyGrid};
+use topoloc::skeleton::{squared_distance_transform, GridBorder, OccupancyGrid};
 
 /// One of the 26 moves of the voxel neighbourhood.
 struct Move {

@@ -9,7 +9,7 @@ use crate::style::FurnitureKind;
 use crate::texture::{face_uv, Material, Placement, TextureFamily};
 use nalgebra::Point3;
 use std::collections::HashMap;
-use topoloc::map::OccupancyGrid;
+use topoloc::skeleton::OccupancyGrid;
 
 /// Irradiance a lamp gives 1 m away under a 2.7 m ceiling (scaled with the ceiling height
 /// squared), chosen so that a lit office wall gets about 0.3-0.6 on top of the ambient term.

@@ -4,14 +4,14 @@
 //! clearance and the `topoloc-sim` path planner both use it.
 
 use super::{out_of_memory, try_vec};
-use crate::map::{MapError, OccupancyGrid};
+use super::{OccupancyGrid, SkeletonError};
 
 /// Squared distance, in voxels, used for "no obstacle anywhere on this line (yet)": finite, so
 /// that the parabola intersections never compute `inf - inf`.
 const FAR: f64 = 1e30;
 
 /// Any value at or above this is [`FAR`] plus a few squared voxels: no obstacle was reached
-/// (a real squared distance in a grid of at most [`MAX_VOXELS`](crate::map::MAX_VOXELS) voxels
+/// (a real squared distance in a grid of at most [`MAX_VOXELS`](crate::skeleton::MAX_VOXELS) voxels
 /// is below 1.4e19).
 const UNREACHED: f64 = 1e29;
 
@@ -20,7 +20,7 @@ const UNREACHED: f64 = 1e29;
 pub enum GridBorder {
     /// Outside the grid is free: only the grid's occupied voxels are obstacles, and a grid
     /// without any gives `f64::INFINITY` everywhere. (Skeleton clearance,
-    /// [`SkeletonOptions::min_clearance_m`](crate::map::SkeletonOptions::min_clearance_m).)
+    /// [`SkeletonOptions::min_clearance_m`](crate::skeleton::SkeletonOptions::min_clearance_m).)
     Open,
     /// Outside the grid is occupied, as in [`OccupancyGrid::is_occupied`] (the grid is
     /// closed): the voxels just beyond each face are obstacles too, so a voxel is at most
@@ -43,12 +43,12 @@ pub enum GridBorder {
 /// time (three passes over the grid), single-threaded; memory: one `f64` per voxel for the
 /// result plus a few lines of scratch.
 ///
-/// Fails with [`MapError::InvalidArgument`] naming `dims` when the memory for the result
+/// Fails with [`SkeletonError::InvalidArgument`] naming `dims` when the memory for the result
 /// cannot be reserved.
 pub fn squared_distance_transform(
     grid: &OccupancyGrid,
     border: GridBorder,
-) -> Result<Vec<f64>, MapError> {
+) -> Result<Vec<f64>, SkeletonError> {
     squared_distance_to(grid.dims(), grid.cells(), border)
         .ok_or_else(|| out_of_memory(grid, "distance transform"))
 }

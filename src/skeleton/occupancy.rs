@@ -5,7 +5,7 @@
 //! world metres (z up). Voxels are stored x fastest, then y, then z:
 //! `index = x + nx * (y + ny * z)`. A voxel is occupied (an obstacle) or free.
 
-use super::MapError;
+use super::SkeletonError;
 use nalgebra::{Point3, Vector3};
 
 /// Most voxels a grid may hold (2^31): 2 GiB of cells, far beyond any indoor map at 0.1 m.
@@ -25,7 +25,7 @@ pub struct OccupancyGrid {
 
 impl OccupancyGrid {
     /// A grid of `dims` voxels of `voxel_size` metres whose corner voxel starts at `origin`,
-    /// with cells `occupied` in the module's order. Fails with [`MapError::InvalidArgument`]
+    /// with cells `occupied` in the module's order. Fails with [`SkeletonError::InvalidArgument`]
     /// naming the field for a zero or oversized dimension, a non-positive or non-finite voxel
     /// size, a non-finite origin, or a cell count other than `nx * ny * nz`.
     pub fn new(
@@ -33,8 +33,8 @@ impl OccupancyGrid {
         voxel_size: f64,
         origin: Point3<f64>,
         occupied: Vec<bool>,
-    ) -> Result<Self, MapError> {
-        let invalid = |msg: String| Err(MapError::InvalidArgument(msg));
+    ) -> Result<Self, SkeletonError> {
+        let invalid = |msg: String| Err(SkeletonError::InvalidArgument(msg));
         if dims.contains(&0) {
             return invalid(format!("dims {dims:?}: every dimension must be at least 1"));
         }
@@ -68,7 +68,11 @@ impl OccupancyGrid {
     }
 
     /// A grid with every voxel free (errors as [`OccupancyGrid::new`]).
-    pub fn empty(dims: [usize; 3], voxel_size: f64, origin: Point3<f64>) -> Result<Self, MapError> {
+    pub fn empty(
+        dims: [usize; 3],
+        voxel_size: f64,
+        origin: Point3<f64>,
+    ) -> Result<Self, SkeletonError> {
         let count = dims
             .iter()
             .try_fold(1usize, |n, &d| n.checked_mul(d))
@@ -253,7 +257,7 @@ mod tests {
     #[test]
     fn bad_parameters_name_the_field() {
         let o = Point3::origin();
-        let msg = |r: Result<OccupancyGrid, MapError>| r.unwrap_err().to_string();
+        let msg = |r: Result<OccupancyGrid, SkeletonError>| r.unwrap_err().to_string();
         assert!(msg(OccupancyGrid::new([0, 1, 1], 0.1, o, vec![])).contains("dims"));
         assert!(msg(OccupancyGrid::new([1, 1, 1], 0.0, o, vec![false])).contains("voxel_size"));
         assert!(msg(OccupancyGrid::new([1, 1, 1], f64::NAN, o, vec![false])).contains("voxel_size"));

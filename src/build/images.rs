@@ -8,12 +8,11 @@
 //! describe query images exactly as the map's images were. Each view records the index of its
 //! source image as its keyframe id and the image's path (when built from files).
 
-use super::{
-    from_keyframes, Keyframe, KeyframeOptions, Map, MapBuilder, MapError, PlaceId, ViewAttributes,
-};
+use super::keyframes::{from_keyframes, Keyframe, KeyframeOptions};
 use crate::describe::describer::{fit, BackendConfig, Extractor, FitOptions, RawFeatures};
-use crate::describe::image::{read_rgb, ImageView, PixelFormat};
-use crate::describe::DescribeError;
+use crate::errors::VisionError;
+use crate::image::{read_rgb, ImageView, PixelFormat};
+use crate::map::{Map, MapBuilder, MapError, PlaceId, ViewAttributes};
 use crate::verify::{KeypointDetector, Keypoints, ViewKeypoints, DEFAULT_KEYPOINTS, MAX_KEYPOINTS};
 use nalgebra::{Isometry3, Point3};
 use rayon::prelude::*;
@@ -100,11 +99,11 @@ pub enum ImageMapError {
         /// Path, or "pixels".
         source_name: String,
         /// Why.
-        error: DescribeError,
+        error: VisionError,
     },
     /// Loading the backend or fitting the model failed.
     #[error(transparent)]
-    Describe(#[from] DescribeError),
+    Describe(#[from] VisionError),
     /// Assembling the map failed.
     #[error(transparent)]
     Map(#[from] MapError),
@@ -259,7 +258,7 @@ pub fn build_from_images(
 
 /// Consecutive groups of `per_place` images form places, chained in order.
 fn sequence_map(
-    identity: crate::map::DescriptorIdentity,
+    identity: crate::descriptor::DescriptorIdentity,
     descriptors: &[Vec<f32>],
     sources: &[Option<String>],
     per_place: usize,
@@ -288,7 +287,7 @@ fn sequence_map(
 
 /// The places and edges of `graph`, each image a view of its place.
 fn graph_map(
-    identity: crate::map::DescriptorIdentity,
+    identity: crate::descriptor::DescriptorIdentity,
     descriptors: &[Vec<f32>],
     sources: &[Option<String>],
     graph: &PlaceLayout,
@@ -344,7 +343,7 @@ fn describe_in_parallel(
                     .par_iter()
                     .enumerate()
                     .map_init(
-                        || -> Result<Workers, DescribeError> {
+                        || -> Result<Workers, VisionError> {
                             let extractor = match spare.lock().map(|mut s| s.take()) {
                                 Ok(Some(e)) => e,
                                 _ => Extractor::new(&options.backend)?,
@@ -360,7 +359,7 @@ fn describe_in_parallel(
                                 return Err(ImageMapError::Cancelled);
                             }
                             let (extractor, detector) = workers.as_mut().map_err(|e| {
-                                ImageMapError::Describe(DescribeError::Model(e.to_string()))
+                                ImageMapError::Describe(VisionError::Model(e.to_string()))
                             })?;
                             let result = describe_one(extractor, detector.as_mut(), source)
                                 .map_err(|error| ImageMapError::Image {
@@ -384,7 +383,7 @@ fn describe_in_parallel(
         rayon::ThreadPoolBuilder::new()
             .num_threads(options.threads)
             .build_scoped(|thread| thread.run(), work)
-            .map_err(|e| DescribeError::InvalidArgument(format!("thread pool: {e}")))?
+            .map_err(|e| VisionError::InvalidArgument(format!("thread pool: {e}")))?
     };
     std::thread::scope(|scope| {
         let handle = scope.spawn(run_pool);
@@ -419,7 +418,7 @@ fn describe_one(
     extractor: &mut Extractor,
     detector: Option<&mut KeypointDetector>,
     source: &ImageSource<'_>,
-) -> Result<Described, DescribeError> {
+) -> Result<Described, VisionError> {
     let owned;
     let view = match source {
         ImageSource::File(path) => {

@@ -1,4 +1,4 @@
-//! Skeleton map building: a topological graph of places from an occupancy voxel grid, for users
+//! Skeleton graphs: a topological graph of places from an occupancy voxel grid, for users
 //! with a 3D map from their own mapping stack (and for `topoloc-sim` worlds).
 //!
 //! Method (after the seed thesis, §4.4.2.1):
@@ -28,13 +28,22 @@
 
 mod distance;
 mod graph;
+mod occupancy;
 mod thinning;
 
 pub use distance::{squared_distance_transform, GridBorder};
 
-use super::occupancy::{OccupancyGrid, Voxel};
-use super::MapError;
 use nalgebra::Point3;
+pub use occupancy::{OccupancyGrid, Voxel, MAX_VOXELS};
+
+/// What can go wrong while building a grid or a skeleton graph.
+#[derive(Debug, thiserror::Error)]
+pub enum SkeletonError {
+    /// An argument or option is out of range, or the grid is too large for memory; the message
+    /// names the field.
+    #[error("invalid argument: {0}")]
+    InvalidArgument(String),
+}
 
 /// Parameters of skeleton map building. `Default` gives the documented defaults, chosen for
 /// indoor MAV maps at 0.05-0.2 m voxels (places every ~1-3 m, as in the seed's graphs).
@@ -82,22 +91,22 @@ impl Default for SkeletonOptions {
 }
 
 impl SkeletonOptions {
-    /// Checks every option on its own; fails with [`MapError::InvalidArgument`] naming the
+    /// Checks every option on its own; fails with [`SkeletonError::InvalidArgument`] naming the
     /// field. ([`skeleton_graph`] also checks `max_edge_m` against the grid's voxel size.)
-    pub fn validate(&self) -> Result<(), MapError> {
+    pub fn validate(&self) -> Result<(), SkeletonError> {
         let invalid = |field: &str, value: f64, rule: &str| {
-            Err(MapError::InvalidArgument(format!(
+            Err(SkeletonError::InvalidArgument(format!(
                 "{field} {value}: must be {rule}"
             )))
         };
         if let Some((lo, hi)) = self.z_band {
             if !(lo.is_finite() && hi.is_finite()) {
-                return Err(MapError::InvalidArgument(format!(
+                return Err(SkeletonError::InvalidArgument(format!(
                     "z_band [{lo}, {hi}]: both bounds must be finite"
                 )));
             }
             if lo > hi {
-                return Err(MapError::InvalidArgument(format!(
+                return Err(SkeletonError::InvalidArgument(format!(
                     "z_band [{lo}, {hi}]: z_min must not exceed z_max"
                 )));
             }
@@ -128,11 +137,11 @@ impl SkeletonOptions {
     }
 
     /// [`validate`](Self::validate) plus the checks that need the grid.
-    fn validate_for(&self, grid: &OccupancyGrid) -> Result<(), MapError> {
+    fn validate_for(&self, grid: &OccupancyGrid) -> Result<(), SkeletonError> {
         self.validate()?;
         let least = 2.0 * grid.voxel_size();
         if self.max_edge_m < least {
-            return Err(MapError::InvalidArgument(format!(
+            return Err(SkeletonError::InvalidArgument(format!(
                 "max_edge_m {}: must be at least two voxels ({least} m at voxel_size {})",
                 self.max_edge_m,
                 grid.voxel_size()
@@ -227,8 +236,8 @@ fn try_vec<T: Clone>(n: usize, value: T) -> Option<Vec<T>> {
 }
 
 /// The error for a grid whose working memory cannot be reserved.
-fn out_of_memory(grid: &OccupancyGrid, what: &str) -> MapError {
-    MapError::InvalidArgument(format!(
+fn out_of_memory(grid: &OccupancyGrid, what: &str) -> SkeletonError {
+    SkeletonError::InvalidArgument(format!(
         "dims {:?}: not enough memory for the {what} of {} voxels",
         grid.dims(),
         grid.len()
@@ -243,9 +252,9 @@ struct FreeSpace {
     free: Vec<bool>,
 }
 
-fn free_space(grid: &OccupancyGrid, options: &SkeletonOptions) -> Result<FreeSpace, MapError> {
+fn free_space(grid: &OccupancyGrid, options: &SkeletonOptions) -> Result<FreeSpace, SkeletonError> {
     if grid.free_count() == 0 {
-        return Err(MapError::InvalidArgument(format!(
+        return Err(SkeletonError::InvalidArgument(format!(
             "cells: all {} voxels of the grid are occupied; a skeleton needs free space",
             grid.len()
         )));
@@ -261,7 +270,7 @@ fn free_space(grid: &OccupancyGrid, options: &SkeletonOptions) -> Result<FreeSpa
             match layers {
                 Some((f, n)) if n > 0 => (f, f + n),
                 _ => {
-                    return Err(MapError::InvalidArgument(format!(
+                    return Err(SkeletonError::InvalidArgument(format!(
                         "z_band [{lo}, {hi}]: no voxel layer of the grid has its centre in the \
                          band (layer centres run from {} to {} m)",
                         centre(0),
@@ -279,7 +288,7 @@ fn free_space(grid: &OccupancyGrid, options: &SkeletonOptions) -> Result<FreeSpa
     }
     if !free.contains(&true) {
         let (lo, hi) = options.z_band.unwrap_or_default();
-        return Err(MapError::InvalidArgument(format!(
+        return Err(SkeletonError::InvalidArgument(format!(
             "z_band [{lo}, {hi}]: every voxel in the band is occupied"
         )));
     }
@@ -291,7 +300,7 @@ fn free_space(grid: &OccupancyGrid, options: &SkeletonOptions) -> Result<FreeSpa
             *f = *f && d >= need;
         }
         if !free.contains(&true) {
-            return Err(MapError::InvalidArgument(format!(
+            return Err(SkeletonError::InvalidArgument(format!(
                 "min_clearance_m {}: no free voxel{} is that far from every obstacle",
                 options.min_clearance_m,
                 if options.z_band.is_some() {
@@ -319,7 +328,7 @@ fn free_space(grid: &OccupancyGrid, options: &SkeletonOptions) -> Result<FreeSpa
 pub fn skeletonize(
     grid: &OccupancyGrid,
     options: &SkeletonOptions,
-) -> Result<Vec<Voxel>, MapError> {
+) -> Result<Vec<Voxel>, SkeletonError> {
     options.validate_for(grid)?;
     let space = free_space(grid, options)?;
     let [nx, ny, _] = space.dims;
@@ -339,13 +348,13 @@ pub fn skeletonize(
 
 /// Builds the topological graph of the free space of `grid` (see the module documentation).
 ///
-/// Errors ([`MapError::InvalidArgument`], the message naming the field): an option out of
+/// Errors ([`SkeletonError::InvalidArgument`], the message naming the field): an option out of
 /// range, `max_edge_m` under two voxels, a grid with no free voxel (`cells`), a height band
 /// without free voxels (`z_band`), or a clearance that leaves none (`min_clearance_m`).
 pub fn skeleton_graph(
     grid: &OccupancyGrid,
     options: &SkeletonOptions,
-) -> Result<TopoGraph, MapError> {
+) -> Result<TopoGraph, SkeletonError> {
     let skeleton = skeletonize(grid, options)?;
     Ok(graph::build(grid, options, skeleton))
 }

@@ -1,7 +1,7 @@
 //! Camera trajectories in the TUM RGB-D format: one pose per line,
 //! `timestamp tx ty tz qx qy qz qw` (`world_T_camera`, metres), `#` comments.
 
-use super::MapError;
+use crate::map::MapError;
 use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion};
 use std::path::Path;
 

@@ -27,7 +27,7 @@
 
 use super::thinning::Volume;
 use super::{try_vec, GraphEdge, GraphPlace, NodeKind, SkeletonOptions, TopoGraph};
-use crate::map::occupancy::{OccupancyGrid, Voxel};
+use super::{OccupancyGrid, Voxel};
 use nalgebra::Point3;
 use std::cmp::Ordering;
 use std::collections::{BTreeSet, BinaryHeap};

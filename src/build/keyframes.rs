@@ -8,10 +8,8 @@
 //! place, and is dropped as redundant otherwise. Edges join the places of consecutive keyframes
 //! and, with positions, all places closer than `neighbour_radius_m`.
 
-use super::{
-    normalize_descriptor_into, DescriptorIdentity, Map, MapBuilder, MapError, PlaceId,
-    ViewAttributes,
-};
+use crate::descriptor::{normalize_descriptor_into, DescriptorIdentity};
+use crate::map::{Map, MapBuilder, MapError, PlaceId, ViewAttributes};
 use nalgebra::{Isometry3, Point3};
 
 /// One keyframe of the input sequence.

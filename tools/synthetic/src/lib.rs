@@ -17,8 +17,6 @@
 //! Camera convention: a view or camera with yaw `a` has `world_T_camera = (position,
 //! rotation of a about the world z axis)`; it looks along its x axis, `(cos a, sin a, 0)`.
 
-use crate::localize::Frame;
-use crate::map::{DescriptorIdentity, Map, MapBuilder, MapError, PlaceId, ViewAttributes, ViewId};
 use nalgebra::{Isometry3, Point3, Vector3};
 use rand::rngs::SmallRng;
 use rand::seq::SliceRandom;
@@ -26,6 +24,9 @@ use rand::{Rng, SeedableRng};
 use rand_distr::StandardNormal;
 use std::f64::consts::TAU;
 use std::sync::Arc;
+use topoloc::descriptor::DescriptorIdentity;
+use topoloc::localize::Frame;
+use topoloc::map::{Map, MapBuilder, MapError, PlaceId, ViewAttributes, ViewId};
 
 /// Parameters of a synthetic world and of the query streams walked in it.
 #[derive(Clone, Debug, PartialEq)]
@@ -259,9 +260,10 @@ impl SyntheticWorld {
         }
 
         let identity =
-            DescriptorIdentity::new("synthetic", format!("world seed={}", params.seed), d as u32)?;
+            DescriptorIdentity::new("synthetic", format!("world seed={}", params.seed), d as u32)
+                .map_err(MapError::from)?;
         let mut builder = MapBuilder::new(identity);
-        builder.set_creator(format!("topoloc {} synthetic world", crate::VERSION));
+        builder.set_creator(format!("topoloc {} synthetic world", topoloc::VERSION));
         let mut appearance = Vec::with_capacity(m * d);
         let mut buffer = Vec::with_capacity(d);
         let cols = (m as f64).sqrt().ceil() as usize;
@@ -466,7 +468,7 @@ pub fn random_map(views: usize, views_per_place: usize, dim: usize, seed: u64) -
     let identity = DescriptorIdentity::new("synthetic", format!("random seed={seed}"), dim as u32)
         .expect("dim > 0");
     let mut builder = MapBuilder::new(identity);
-    builder.set_creator(format!("topoloc {} random map", crate::VERSION));
+    builder.set_creator(format!("topoloc {} random map", topoloc::VERSION));
     let places = views.div_ceil(views_per_place);
     let cols = (places as f64).sqrt().ceil() as usize;
     let cell = |p: usize| {
@@ -618,7 +620,7 @@ fn normalize(v: &mut [f32]) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::localize::{Localizer, LocalizerOptions, Mode};
+    use topoloc::localize::{Localizer, LocalizerOptions, Mode};
 
     fn small(seed: u64) -> WorldParams {
         WorldParams {

@@ -28,7 +28,7 @@ fn the_height_band_keeps_the_layers_whose_centres_are_in_it() {
     assert_eq!((space.z0, space.dims), (0, [3, 3, 4]));
     for (lo, hi) in [(0.8, 1.0), (-5.0, 0.2), (1.8, 9.0)] {
         match free_space(&grid, &band(lo, hi)) {
-            Err(MapError::InvalidArgument(m)) => assert!(m.contains("z_band"), "{m}"),
+            Err(SkeletonError::InvalidArgument(m)) => assert!(m.contains("z_band"), "{m}"),
             _ => panic!("band [{lo}, {hi}] holds no layer"),
         }
     }
@@ -59,7 +59,7 @@ fn clearance_is_measured_to_the_nearest_obstacle_face() {
             ..SkeletonOptions::default()
         },
     ) {
-        Err(MapError::InvalidArgument(m)) => assert!(m.contains("min_clearance_m"), "{m}"),
+        Err(SkeletonError::InvalidArgument(m)) => assert!(m.contains("min_clearance_m"), "{m}"),
         _ => panic!("no voxel keeps 0.7 m"),
     }
 }

@@ -1,7 +1,7 @@
 //! Camera images as hosts hand them over: a borrowed pixel buffer with width, height, row
 //! stride and pixel format, validated before anything reads it.
 
-use super::DescribeError;
+use crate::errors::VisionError;
 use opencv::core::{Mat, Size, CV_8UC1, CV_8UC3, CV_8UC4};
 use opencv::prelude::*;
 
@@ -63,8 +63,8 @@ impl<'a> ImageView<'a> {
     }
 
     /// Checks size, stride and buffer length; every reader calls this first.
-    pub fn validate(&self) -> Result<(), DescribeError> {
-        let bad = |msg: String| Err(DescribeError::InvalidImage(msg));
+    pub fn validate(&self) -> Result<(), VisionError> {
+        let bad = |msg: String| Err(VisionError::InvalidImage(msg));
         if self.width == 0 || self.height == 0 {
             return bad(format!(
                 "image is {}x{}: width and height must be positive",
@@ -108,7 +108,7 @@ impl<'a> ImageView<'a> {
 
     /// Converts to an owned 8-bit RGB OpenCV matrix resized to `size` (area interpolation when
     /// shrinking, linear when enlarging).
-    pub(crate) fn to_rgb_resized(self, size: Size) -> Result<Mat, DescribeError> {
+    pub(crate) fn to_rgb_resized(self, size: Size) -> Result<Mat, VisionError> {
         self.validate()?;
         let kind = match self.format.channels() {
             1 => CV_8UC1,
@@ -152,19 +152,19 @@ impl<'a> ImageView<'a> {
 }
 
 /// Reads an image file (any format OpenCV decodes) as packed RGB8 bytes with its size.
-pub fn read_rgb(path: &std::path::Path) -> Result<(u32, u32, Vec<u8>), DescribeError> {
+pub fn read_rgb(path: &std::path::Path) -> Result<(u32, u32, Vec<u8>), VisionError> {
     let name = path.to_str().ok_or_else(|| {
-        DescribeError::InvalidImage(format!("path {} is not UTF-8", path.display()))
+        VisionError::InvalidImage(format!("path {} is not UTF-8", path.display()))
     })?;
     if !path.is_file() {
-        return Err(DescribeError::InvalidImage(format!(
+        return Err(VisionError::InvalidImage(format!(
             "cannot read image '{}': no such file",
             path.display()
         )));
     }
     let bgr = opencv::imgcodecs::imread(name, opencv::imgcodecs::IMREAD_COLOR)?;
     if bgr.empty() {
-        return Err(DescribeError::InvalidImage(format!(
+        return Err(VisionError::InvalidImage(format!(
             "cannot read image '{}'",
             path.display()
         )));
@@ -219,7 +219,7 @@ mod tests {
         ];
         for (image, why) in cases {
             match image.validate() {
-                Err(DescribeError::InvalidImage(msg)) => assert!(msg.contains(why), "{msg}"),
+                Err(VisionError::InvalidImage(msg)) => assert!(msg.contains(why), "{msg}"),
                 other => panic!("{image:?}: {other:?}"),
             }
         }
