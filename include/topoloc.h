@@ -8,8 +8,15 @@
  *  - Out-parameters are written only on success, except the documented `needed`/`count` sizes.
  *  - Handles come in _new/_load + _free pairs; _free(NULL) is a no-op.
  *  - Options structs start with struct_size: fill them with their _default() function.
- *  - Thread safety: a const topoloc_map* may be used from many threads at once; builders and
- *    localizers must be used from one thread at a time.
+ *  - Versions: check topoloc_abi_version() == TOPOLOC_ABI_VERSION at start-up; an item marked
+ *    "ABI 1.N" exists when topoloc_abi_version_minor() >= N.
+ *  - Thread safety: a const topoloc_map* (and a const topoloc_graph*) may be used from many
+ *    threads at once; builders and localizers are used from one thread at a time (they may
+ *    move between threads). The last error message is per thread.
+ *  - Callbacks (topoloc_progress_fn) must return normally: never unwind (C++ exceptions) or
+ *    longjmp through topoloc.
+ *  - Reading order: versions and errors, maps, the localizer, builders, skeleton graphs; the
+ *    constants and structs they use come first.
  *  - Poses are 16 doubles, row-major 4x4 [R t; 0 0 0 1], metres; view poses are world_T_camera,
  *    odometry is previous_T_current.
  */
@@ -39,113 +46,19 @@
 
 
 /**
- * No image (the frame carries a descriptor only).
- */
-#define TOPOLOC_PIXEL_NONE 0
-
-/**
- * 8-bit grey, one byte per pixel.
- */
-#define TOPOLOC_PIXEL_GRAY8 1
-
-/**
- * 8-bit red, green, blue.
- */
-#define TOPOLOC_PIXEL_RGB8 2
-
-/**
- * 8-bit blue, green, red (OpenCV's `CV_8UC3` order).
- */
-#define TOPOLOC_PIXEL_BGR8 3
-
-/**
- * 8-bit red, green, blue, alpha.
- */
-#define TOPOLOC_PIXEL_RGBA8 4
-
-/**
- * 8-bit blue, green, red, alpha.
- */
-#define TOPOLOC_PIXEL_BGRA8 5
-
-/**
- * Backend choice: the map's own describer when it has one (localizer), or the ONNX backend
- * (map building).
- */
-#define TOPOLOC_BACKEND_AUTO 0
-
-/**
- * No describer: frames must carry descriptors (localizer only).
- */
-#define TOPOLOC_BACKEND_NONE 1
-
-/**
- * ONNX multi-level CNN features (needs ONNX Runtime and the model).
- */
-#define TOPOLOC_BACKEND_ONNX 2
-
-/**
- * VLAD of OpenCV ORB features (no learned weights).
- */
-#define TOPOLOC_BACKEND_VLAD_ORB 3
-
-/**
- * VLAD of OpenCV SIFT features.
- */
-#define TOPOLOC_BACKEND_VLAD_SIFT 4
-
-/**
- * Build stage reported to the progress callback: describing images (`done` of `total`).
- */
-#define TOPOLOC_STAGE_DESCRIBING 0
-
-/**
- * Build stage reported to the progress callback: fitting PCA/codebook and assembling (0 or 1 of 1).
- */
-#define TOPOLOC_STAGE_FITTING 1
-
-/**
- * Filter mode: forward filter over the graph (default).
- */
-#define TOPOLOC_MODE_FILTER 0
-
-/**
- * Single-frame mode: every frame judged on its own.
- */
-#define TOPOLOC_MODE_SINGLE_FRAME 1
-
-/**
- * Metric mode (ABI 1.3): Monte Carlo localization of the camera pose in the map frame, moved
- * by the frames' odometry and weighed by appearance; the place is the one nearest to the
- * particles. Needs a map with every place's position and every view's pose.
- */
-#define TOPOLOC_MODE_METRIC 2
-
-/**
- * Place kind: a dead end of the skeleton.
- */
-#define TOPOLOC_NODE_END 0
-
-/**
- * Place kind: a bend of the skeleton.
- */
-#define TOPOLOC_NODE_CORNER 1
-
-/**
- * Place kind: a junction of three or more skeleton branches.
- */
-#define TOPOLOC_NODE_BRANCH 2
-
-/**
- * Place kind: inserted on a skeleton path to keep edges straight, obstacle-free and short.
- */
-#define TOPOLOC_NODE_INTERMEDIATE 3
-
-/**
  * ABI version: bumped only when an existing C signature or struct layout changes
  * incompatibly (which the project avoids: it adds functions and appends struct fields).
  */
 #define TOPOLOC_ABI_VERSION 1
+
+/**
+ * ABI minor version: bumped when functions, struct fields or constants are added. The header
+ * marks additions "ABI 1.N"; a host that uses one checks `topoloc_abi_version_minor() >= N`
+ * at run time (the library it loaded may be older than the header it was built with).
+ * 1.1: image maps; 1.2: verification; 1.3: metric mode; 1.4: `topoloc_abi_version_minor`,
+ * `topoloc_status_name`.
+ */
+#define TOPOLOC_ABI_VERSION_MINOR 4
 
 /**
  * Result of every fallible C function. Values are grouped in ranges and never renumbered;
@@ -306,13 +219,40 @@ typedef struct topoloc_map topoloc_map;
 typedef struct topoloc_map_builder topoloc_map_builder;
 
 /**
- * Optional attributes of a view. Initialise with `topoloc_view_attributes_default`.
+ * Options of `topoloc_map_load`. Initialise with `topoloc_map_load_options_default`.
  */
-typedef struct topoloc_view_attributes {
+typedef struct topoloc_map_load_options {
   /**
-   * `sizeof(topoloc_view_attributes)`, set by the `_default` function.
+   * `sizeof(topoloc_map_load_options)`, set by the `_default` function.
    */
   size_t struct_size;
+  /**
+   * Refuse maps whose descriptor kind differs (`TOPOLOC_ERR_DESCRIPTOR_MISMATCH`); NULL or "" = any.
+   */
+  const char *expected_descriptor_kind;
+  /**
+   * Refuse maps whose descriptor model differs; NULL or "" = any.
+   */
+  const char *expected_descriptor_model;
+  /**
+   * Refuse maps whose descriptor dimension differs; 0 = any.
+   */
+  uint32_t expected_descriptor_dim;
+} topoloc_map_load_options;
+
+/**
+ * Attributes of one view, filled by `topoloc_map_view_info`. Initialise with
+ * `topoloc_view_info_default` (which sets `struct_size`) before the call.
+ */
+typedef struct topoloc_view_info {
+  /**
+   * `sizeof(topoloc_view_info)`, set by the caller.
+   */
+  size_t struct_size;
+  /**
+   * Place the view belongs to.
+   */
+  uint32_t place;
   /**
    * Whether `keyframe_id` is set.
    */
@@ -322,166 +262,25 @@ typedef struct topoloc_view_attributes {
    */
   uint64_t keyframe_id;
   /**
-   * Camera pose, 16 doubles row-major 4x4; NULL = none.
+   * Whether `world_T_camera` is set.
    */
-  const double *world_T_camera;
+  bool has_pose;
   /**
-   * Image reference (path or URI), NUL-terminated UTF-8; NULL = none.
+   * Camera pose, row-major 4x4 (identity when absent).
    */
-  const char *image;
-} topoloc_view_attributes;
+  double world_T_camera[16];
+} topoloc_view_info;
 
 /**
- * Parameters of `topoloc_map_from_keyframes`. Initialise with `topoloc_keyframe_options_default`.
+ * How a localizer estimates the place: one of the `TOPOLOC_MODE_*` values.
  */
-typedef struct topoloc_keyframe_options {
-  /**
-   * `sizeof(topoloc_keyframe_options)`, set by the `_default` function.
-   */
-  size_t struct_size;
-  /**
-   * Distance (m) within which a keyframe joins an existing place. Default 2.0.
-   */
-  double place_spacing_m;
-  /**
-   * Cosine similarity below which a keyframe's appearance is novel. Default 0.9.
-   */
-  float novelty_similarity;
-  /**
-   * Places closer than this (m) are joined by an edge. Default 3.0.
-   */
-  double neighbour_radius_m;
-  /**
-   * Most views per place. Default 4.
-   */
-  uint32_t max_views_per_place;
-} topoloc_keyframe_options;
+typedef uint32_t topoloc_mode;
 
 /**
- * One keyframe for `topoloc_map_from_keyframes`. Array element: its layout never changes.
+ * Descriptor backend of map building and localizer options: one of the `TOPOLOC_BACKEND_*`
+ * values.
  */
-typedef struct topoloc_keyframe {
-  /**
-   * Host keyframe id, stored with the view it becomes.
-   */
-  uint64_t id;
-  /**
-   * Global descriptor.
-   */
-  const float *descriptor;
-  /**
-   * Number of floats at `descriptor` (must equal the map's D).
-   */
-  size_t descriptor_len;
-  /**
-   * Camera pose, 16 doubles row-major 4x4; NULL = none (then NULL for every keyframe).
-   */
-  const double *world_T_camera;
-} topoloc_keyframe;
-
-/**
- * How `topoloc_map_build_from_image_files` / `_from_images` build a map. Initialise with
- * `topoloc_image_map_options_default`.
- */
-typedef struct topoloc_image_map_options {
-  /**
-   * `sizeof(topoloc_image_map_options)`, set by the `_default` function.
-   */
-  size_t struct_size;
-  /**
-   * `TOPOLOC_BACKEND_ONNX` (also for `_AUTO`, the default), `_VLAD_ORB` or `_VLAD_SIFT`.
-   */
-  uint32_t backend;
-  /**
-   * Descriptor dimension D; with fewer than D + 1 images it becomes the number of images
-   * minus one (`topoloc_map_dim` tells). Default 512.
-   */
-  uint32_t dim;
-  /**
-   * Without poses: consecutive images per place (1, or 4 for yaw views); with poses: most
-   * views per place. Default 1.
-   */
-  uint32_t views_per_place;
-  /**
-   * Describing threads; 0 = one per core, at most 256 (more: `TOPOLOC_ERR_INVALID_ARGUMENT`).
-   * They are joined before the build returns. Default 0.
-   */
-  uint32_t threads;
-  /**
-   * ONNX model file; NULL or "" = the cache's default (scripts/setup-models.sh).
-   */
-  const char *onnx_model_path;
-  /**
-   * ONNX Runtime library; NULL or "" = `TOPOLOC_ORT_LIBRARY`, `ORT_DYLIB_PATH`, the cache.
-   */
-  const char *onnx_runtime_path;
-  /**
-   * ONNX outputs to pool, comma-separated; NULL or "" = "f6,f13,f17,f18".
-   */
-  const char *onnx_taps;
-  /**
-   * ONNX pooling grid rows and columns (1 = global pooling). Default 4 x 4.
-   */
-  uint32_t grid_rows;
-  /**
-   * See `grid_rows`.
-   */
-  uint32_t grid_cols;
-  /**
-   * VLAD codebook size. Default 64.
-   */
-  uint32_t vlad_clusters;
-  /**
-   * VLAD keypoints on a dense grid (true, default) or detected by ORB/SIFT (false).
-   */
-  bool vlad_dense;
-  /**
-   * TUM trajectory with one pose per image (same order); NULL or "" = none (a sequence map).
-   */
-  const char *poses_tum_path;
-  /**
-   * Place spacing in metres when poses are given. Default 2.0.
-   */
-  double place_spacing_m;
-} topoloc_image_map_options;
-
-/**
- * Progress of a long operation: `stage` is a `TOPOLOC_STAGE_*` value, `done` of `total` units.
- * Called on the thread that called the building function, about ten times a second. Return
- * `true` to go on, `false` to cancel (the function then returns `TOPOLOC_ERR_CANCELLED`).
- */
-typedef bool (*topoloc_progress_fn)(void *user_data, uint32_t stage, size_t done, size_t total);
-
-/**
- * A borrowed image: `height` rows of `stride` bytes, each starting with `width` pixels.
- * Plain data, embedded in other structs; all-zero means "no image".
- */
-typedef struct topoloc_image {
-  /**
-   * First byte of the first row; read only during the call it is passed to.
-   */
-  const uint8_t *data;
-  /**
-   * Bytes readable at `data` (at least `stride * (height - 1) + width * channels`).
-   */
-  size_t data_len;
-  /**
-   * Width in pixels (1..8192).
-   */
-  uint32_t width;
-  /**
-   * Height in pixels (1..8192).
-   */
-  uint32_t height;
-  /**
-   * Bytes from one row to the next (>= width * channels).
-   */
-  size_t stride;
-  /**
-   * One of the `TOPOLOC_PIXEL_*` formats; `TOPOLOC_PIXEL_NONE` means no image.
-   */
-  uint32_t format;
-} topoloc_image;
+typedef uint32_t topoloc_backend;
 
 /**
  * Localizer parameters. Initialise with `topoloc_localizer_options_default`; the defaults and
@@ -496,7 +295,7 @@ typedef struct topoloc_localizer_options {
    * `TOPOLOC_MODE_FILTER`, `TOPOLOC_MODE_SINGLE_FRAME` or (ABI 1.3) `TOPOLOC_MODE_METRIC`
    * (on a map without positions or view poses: `_INVALID_OPTION`).
    */
-  uint32_t mode;
+  topoloc_mode mode;
   /**
    * Softmax temperature of the observation likelihood (> 0). Default 0.2.
    */
@@ -539,7 +338,7 @@ typedef struct topoloc_localizer_options {
    * the map has one; `_NONE` never (descriptor frames only, no runtime needed); `_ONNX` or
    * `_VLAD_*` also require the map to use that backend (else `_DESCRIPTOR_MISMATCH`).
    */
-  uint32_t image_backend;
+  topoloc_backend image_backend;
   /**
    * ONNX model file; NULL or "" = the cache's default. Must be the map's model (by hash).
    */
@@ -577,6 +376,42 @@ typedef struct topoloc_localizer_options {
    */
   uint64_t metric_seed;
 } topoloc_localizer_options;
+
+/**
+ * Pixel layout of a [`topoloc_image`]: one of the `TOPOLOC_PIXEL_*` values.
+ */
+typedef uint32_t topoloc_pixel_format;
+
+/**
+ * A borrowed image: `height` rows of `stride` bytes, each starting with `width` pixels.
+ * Plain data, embedded in other structs; all-zero means "no image".
+ */
+typedef struct topoloc_image {
+  /**
+   * First byte of the first row; read only during the call it is passed to.
+   */
+  const uint8_t *data;
+  /**
+   * Bytes readable at `data` (at least `stride * (height - 1) + width * channels`).
+   */
+  size_t data_len;
+  /**
+   * Width in pixels (1..8192).
+   */
+  uint32_t width;
+  /**
+   * Height in pixels (1..8192).
+   */
+  uint32_t height;
+  /**
+   * Bytes from one row to the next (>= width * channels).
+   */
+  size_t stride;
+  /**
+   * One of the `TOPOLOC_PIXEL_*` formats; `TOPOLOC_PIXEL_NONE` means no image.
+   */
+  topoloc_pixel_format format;
+} topoloc_image;
 
 /**
  * One camera frame. Initialise with `topoloc_frame_default`.
@@ -693,40 +528,13 @@ typedef struct topoloc_result {
 } topoloc_result;
 
 /**
- * Options of `topoloc_map_load`. Initialise with `topoloc_map_load_options_default`.
+ * Optional attributes of a view. Initialise with `topoloc_view_attributes_default`.
  */
-typedef struct topoloc_map_load_options {
+typedef struct topoloc_view_attributes {
   /**
-   * `sizeof(topoloc_map_load_options)`, set by the `_default` function.
+   * `sizeof(topoloc_view_attributes)`, set by the `_default` function.
    */
   size_t struct_size;
-  /**
-   * Refuse maps whose descriptor kind differs (`TOPOLOC_ERR_DESCRIPTOR_MISMATCH`); NULL or "" = any.
-   */
-  const char *expected_descriptor_kind;
-  /**
-   * Refuse maps whose descriptor model differs; NULL or "" = any.
-   */
-  const char *expected_descriptor_model;
-  /**
-   * Refuse maps whose descriptor dimension differs; 0 = any.
-   */
-  uint32_t expected_descriptor_dim;
-} topoloc_map_load_options;
-
-/**
- * Attributes of one view, filled by `topoloc_map_view_info`. Initialise with
- * `topoloc_view_info_default` (which sets `struct_size`) before the call.
- */
-typedef struct topoloc_view_info {
-  /**
-   * `sizeof(topoloc_view_info)`, set by the caller.
-   */
-  size_t struct_size;
-  /**
-   * Place the view belongs to.
-   */
-  uint32_t place;
   /**
    * Whether `keyframe_id` is set.
    */
@@ -736,14 +544,143 @@ typedef struct topoloc_view_info {
    */
   uint64_t keyframe_id;
   /**
-   * Whether `world_T_camera` is set.
+   * Camera pose, 16 doubles row-major 4x4; NULL = none.
    */
-  bool has_pose;
+  const double *world_T_camera;
   /**
-   * Camera pose, row-major 4x4 (identity when absent).
+   * Image reference (path or URI), NUL-terminated UTF-8; NULL = none.
    */
-  double world_T_camera[16];
-} topoloc_view_info;
+  const char *image;
+} topoloc_view_attributes;
+
+/**
+ * Parameters of `topoloc_map_from_keyframes`. Initialise with `topoloc_keyframe_options_default`.
+ */
+typedef struct topoloc_keyframe_options {
+  /**
+   * `sizeof(topoloc_keyframe_options)`, set by the `_default` function.
+   */
+  size_t struct_size;
+  /**
+   * Distance (m) within which a keyframe joins an existing place. Default 2.0.
+   */
+  double place_spacing_m;
+  /**
+   * Cosine similarity below which a keyframe's appearance is novel. Default 0.9.
+   */
+  float novelty_similarity;
+  /**
+   * Places closer than this (m) are joined by an edge. Default 3.0.
+   */
+  double neighbour_radius_m;
+  /**
+   * Most views per place. Default 4.
+   */
+  uint32_t max_views_per_place;
+} topoloc_keyframe_options;
+
+/**
+ * One keyframe for `topoloc_map_from_keyframes`. Array element: its layout never changes.
+ */
+typedef struct topoloc_keyframe {
+  /**
+   * Host keyframe id, stored with the view it becomes.
+   */
+  uint64_t id;
+  /**
+   * Global descriptor.
+   */
+  const float *descriptor;
+  /**
+   * Number of floats at `descriptor` (must equal the map's D).
+   */
+  size_t descriptor_len;
+  /**
+   * Camera pose, 16 doubles row-major 4x4; NULL = none (then NULL for every keyframe).
+   */
+  const double *world_T_camera;
+} topoloc_keyframe;
+
+/**
+ * How `topoloc_map_build_from_image_files` / `_from_images` build a map. Initialise with
+ * `topoloc_image_map_options_default`.
+ */
+typedef struct topoloc_image_map_options {
+  /**
+   * `sizeof(topoloc_image_map_options)`, set by the `_default` function.
+   */
+  size_t struct_size;
+  /**
+   * `TOPOLOC_BACKEND_ONNX` (also for `_AUTO`, the default), `_VLAD_ORB` or `_VLAD_SIFT`.
+   */
+  topoloc_backend backend;
+  /**
+   * Descriptor dimension D; with fewer than D + 1 images it becomes the number of images
+   * minus one (`topoloc_map_dim` tells). Default 512.
+   */
+  uint32_t dim;
+  /**
+   * Without poses: consecutive images per place (1, or 4 for yaw views); with poses: most
+   * views per place. Default 1.
+   */
+  uint32_t views_per_place;
+  /**
+   * Describing threads; 0 = one per core, at most 256 (more: `TOPOLOC_ERR_INVALID_ARGUMENT`).
+   * They are joined before the build returns. Default 0.
+   */
+  uint32_t threads;
+  /**
+   * ONNX model file; NULL or "" = the cache's default (scripts/setup-models.sh).
+   */
+  const char *onnx_model_path;
+  /**
+   * ONNX Runtime library; NULL or "" = `TOPOLOC_ORT_LIBRARY`, `ORT_DYLIB_PATH`, the cache.
+   */
+  const char *onnx_runtime_path;
+  /**
+   * ONNX outputs to pool, comma-separated; NULL or "" = "f6,f13,f17,f18".
+   */
+  const char *onnx_taps;
+  /**
+   * ONNX pooling grid rows and columns (1 = global pooling). Default 4 x 4.
+   */
+  uint32_t grid_rows;
+  /**
+   * See `grid_rows`.
+   */
+  uint32_t grid_cols;
+  /**
+   * VLAD codebook size. Default 64.
+   */
+  uint32_t vlad_clusters;
+  /**
+   * VLAD keypoints on a dense grid (true, default) or detected by ORB/SIFT (false).
+   */
+  bool vlad_dense;
+  /**
+   * TUM trajectory with one pose per image (same order); NULL or "" = none (a sequence map).
+   */
+  const char *poses_tum_path;
+  /**
+   * Place spacing in metres when poses are given. Default 2.0.
+   */
+  double place_spacing_m;
+} topoloc_image_map_options;
+
+/**
+ * Stage of a long operation reported to a [`topoloc_progress_fn`]: a `TOPOLOC_STAGE_*` value.
+ */
+typedef uint32_t topoloc_stage;
+
+/**
+ * Progress of a long operation: `stage` is a `TOPOLOC_STAGE_*` value, `done` of `total` units.
+ * Called on the thread that called the building function, about ten times a second. Return
+ * `true` to go on, `false` to cancel (the function then returns `TOPOLOC_ERR_CANCELLED`).
+ * The callback must return normally: it must not unwind (a C++ exception, a Rust panic) or
+ * `longjmp` through topoloc, which would skip its clean-up and leave the process undefined;
+ * catch inside the callback and return `false` instead.
+ */
+typedef bool (*topoloc_progress_fn)(void *user_data, topoloc_stage stage, size_t done, size_t total);
 
 /**
  * Parameters of `topoloc_graph_from_occupancy`. Initialise with
@@ -793,149 +730,165 @@ typedef struct topoloc_skeleton_options {
   double min_spur_m;
 } topoloc_skeleton_options;
 
+/**
+ * Kind of a graph place: one of the `TOPOLOC_NODE_*` values.
+ */
+typedef uint32_t topoloc_node_kind;
+
+/**
+ * Filter mode: forward filter over the graph (default).
+ */
+#define TOPOLOC_MODE_FILTER 0
+
+/**
+ * Single-frame mode: every frame judged on its own.
+ */
+#define TOPOLOC_MODE_SINGLE_FRAME 1
+
+/**
+ * Metric mode (ABI 1.3): Monte Carlo localization of the camera pose in the map frame, moved
+ * by the frames' odometry and weighed by appearance; the place is the one nearest to the
+ * particles. Needs a map with every place's position and every view's pose.
+ */
+#define TOPOLOC_MODE_METRIC 2
+
+/**
+ * No image (the frame carries a descriptor only).
+ */
+#define TOPOLOC_PIXEL_NONE 0
+
+/**
+ * 8-bit grey, one byte per pixel.
+ */
+#define TOPOLOC_PIXEL_GRAY8 1
+
+/**
+ * 8-bit red, green, blue.
+ */
+#define TOPOLOC_PIXEL_RGB8 2
+
+/**
+ * 8-bit blue, green, red (OpenCV's `CV_8UC3` order).
+ */
+#define TOPOLOC_PIXEL_BGR8 3
+
+/**
+ * 8-bit red, green, blue, alpha.
+ */
+#define TOPOLOC_PIXEL_RGBA8 4
+
+/**
+ * 8-bit blue, green, red, alpha.
+ */
+#define TOPOLOC_PIXEL_BGRA8 5
+
+/**
+ * Backend choice: the map's own describer when it has one (localizer), or the ONNX backend
+ * (map building).
+ */
+#define TOPOLOC_BACKEND_AUTO 0
+
+/**
+ * No describer: frames must carry descriptors (localizer only).
+ */
+#define TOPOLOC_BACKEND_NONE 1
+
+/**
+ * ONNX multi-level CNN features (needs ONNX Runtime and the model).
+ */
+#define TOPOLOC_BACKEND_ONNX 2
+
+/**
+ * VLAD of OpenCV ORB features (no learned weights).
+ */
+#define TOPOLOC_BACKEND_VLAD_ORB 3
+
+/**
+ * VLAD of OpenCV SIFT features.
+ */
+#define TOPOLOC_BACKEND_VLAD_SIFT 4
+
+/**
+ * Build stage reported to the progress callback: describing images (`done` of `total`).
+ */
+#define TOPOLOC_STAGE_DESCRIBING 0
+
+/**
+ * Build stage reported to the progress callback: fitting PCA/codebook and assembling (0 or 1 of 1).
+ */
+#define TOPOLOC_STAGE_FITTING 1
+
+/**
+ * Place kind: a dead end of the skeleton.
+ */
+#define TOPOLOC_NODE_END 0
+
+/**
+ * Place kind: a bend of the skeleton.
+ */
+#define TOPOLOC_NODE_CORNER 1
+
+/**
+ * Place kind: a junction of three or more skeleton branches.
+ */
+#define TOPOLOC_NODE_BRANCH 2
+
+/**
+ * Place kind: inserted on a skeleton path to keep edges straight, obstacle-free and short.
+ */
+#define TOPOLOC_NODE_INTERMEDIATE 3
+
 #ifdef __cplusplus
 extern "C" {
 #endif // __cplusplus
 
-/**
- * Starts a map whose vectors come from descriptor `kind` / `model` with dimension `dim`
- * (`model` may be NULL). On success `*out` owns a new builder.
- * Errors: `_NULL_ARGUMENT`, `_INVALID_ARGUMENT` (empty kind, dim 0), `_INVALID_UTF8`.
- */
-topoloc_status topoloc_map_builder_new(const char *kind, const char *model, uint32_t dim, struct topoloc_map_builder **out);
+/* ========================================
+ * Versions and errors
+ * ======================================== */
 
 /**
- * Releases a builder. `NULL` is a no-op.
+ * Library version "MAJOR.MINOR.PATCH" as a static NUL-terminated string (never free it).
+ * Compare with the `TOPOLOC_VERSION_*` macros of the header the program was built against.
  */
-void topoloc_map_builder_free(struct topoloc_map_builder *builder);
+const char *topoloc_version(void);
 
 /**
- * Adds a place; `position` (3 doubles, metres) may be NULL. `*place_out` receives its id.
+ * ABI version of the loaded library; must equal `TOPOLOC_ABI_VERSION` of the header.
  */
-topoloc_status topoloc_map_builder_add_place(struct topoloc_map_builder *builder, const double *position, uint32_t *place_out);
+uint32_t topoloc_abi_version(void);
 
 /**
- * Fills the first `size` bytes of `*attributes` with defaults and sets `struct_size`; call it
- * through the header macro `topoloc_view_attributes_default(attributes)`, which passes `sizeof *(attributes)`.
- * Errors: `_NULL_ARGUMENT`, `_STRUCT_SIZE` (size below the first published layout).
+ * ABI minor version of the loaded library (ABI 1.4; see `TOPOLOC_ABI_VERSION_MINOR`): fields
+ * and functions marked "ABI 1.N" in the header exist when this is at least N. Thread-safe.
  */
-topoloc_status topoloc_view_attributes_init(struct topoloc_view_attributes *attributes, size_t size);
+uint32_t topoloc_abi_version_minor(void);
 
 /**
- * Adds a view with `descriptor` (`len` floats, normalised here) to `place`; `attributes` may be
- * NULL. `*view_out` receives its id. On error the builder is unchanged.
- * Errors: `_UNKNOWN_PLACE`, `_DIMENSION_MISMATCH`, `_NON_FINITE`, `_ZERO_DESCRIPTOR`, `_INVALID_ARGUMENT`.
+ * Static English description of a status code (never free it); unknown codes give
+ * "unknown status code". Thread-safe.
  */
-topoloc_status topoloc_map_builder_add_view(struct topoloc_map_builder *builder, uint32_t place, const float *descriptor, size_t len, const struct topoloc_view_attributes *attributes, uint32_t *view_out);
+const char *topoloc_status_str(uint32_t status);
 
 /**
- * Joins places `a` and `b` (different, existing, not yet joined) with weight > 0.
+ * Static C name of a status code, e.g. `"TOPOLOC_ERR_IO"` (ABI 1.4; never free it), or NULL
+ * for a code this library does not know. Language bindings use it to check that they map
+ * every code. Thread-safe.
  */
-topoloc_status topoloc_map_builder_add_edge(struct topoloc_map_builder *builder, uint32_t a, uint32_t b, float weight);
+const char *topoloc_status_name(uint32_t status);
 
 /**
- * Validates and produces a map from what was added; the builder stays usable. On success
- * `*out` owns a new map. Errors: `_EMPTY_MAP`, `_INVALID_MAP` (e.g. a place without views).
+ * Copies the message of the most recent failed call on this thread (NUL-terminated; "" if
+ * none) into `buf` of `len` bytes. `*needed` (if not NULL) receives the size required
+ * including the NUL, also when the buffer is too small. Returns `TOPOLOC_OK`,
+ * `TOPOLOC_ERR_BUFFER_TOO_SMALL`, or `TOPOLOC_ERR_NULL_ARGUMENT` (NULL `buf` with `len` large
+ * enough); never changes the stored message. Thread-safe: each thread
+ * has its own last error.
  */
-topoloc_status topoloc_map_builder_build(const struct topoloc_map_builder *builder, struct topoloc_map **out);
+topoloc_status topoloc_last_error_message(char *buf, size_t len, size_t *needed);
 
-/**
- * Fills the first `size` bytes of `*options` with defaults and sets `struct_size`; call it
- * through the header macro `topoloc_keyframe_options_default(options)`, which passes `sizeof *(options)`.
- * Errors: `_NULL_ARGUMENT`, `_STRUCT_SIZE` (size below the first published layout).
- */
-topoloc_status topoloc_keyframe_options_init(struct topoloc_keyframe_options *options, size_t size);
-
-/**
- * Builds a map from `count` keyframes in order (places by spacing and appearance novelty, edges
- * between consecutive and nearby places). `options` may be NULL. On success `*out` owns a new map.
- * Errors: `_EMPTY_MAP`, `_INVALID_ARGUMENT` (bad keyframe or option; the message names it).
- */
-topoloc_status topoloc_map_from_keyframes(const char *kind, const char *model, uint32_t dim, const struct topoloc_keyframe *keyframes, size_t count, const struct topoloc_keyframe_options *options, struct topoloc_map **out);
-
-/**
- * Fills the first `size` bytes of `*options` with defaults and sets `struct_size`; call it
- * through the header macro `topoloc_image_map_options_default(options)`.
- * Errors: `_NULL_ARGUMENT`, `_STRUCT_SIZE`.
- */
-topoloc_status topoloc_image_map_options_init(struct topoloc_image_map_options *options, size_t size);
-
-/**
- * Builds a map from `count` image files (any format OpenCV reads), describing them in
- * parallel; the map stores its describer, so localizers on it accept image frames. Views
- * record their image's index (as keyframe id) and path. `options` may be NULL for defaults
- * (ONNX backend); `progress` may be NULL. On success `*out` owns a new map.
- * Errors: `_INVALID_ARGUMENT` (fewer than 2 images, bad options, pose count), `_INVALID_IMAGE`
- * (an unreadable file; the message names it), `_BACKEND_UNAVAILABLE`, `_MODEL`, `_IO` (poses
- * file), `_CANCELLED`, `_NULL_ARGUMENT`, `_INVALID_UTF8`, `_STRUCT_SIZE`.
- */
-topoloc_status topoloc_map_build_from_image_files(const char *const *paths, size_t count, const struct topoloc_image_map_options *options, topoloc_progress_fn progress, void *user_data, struct topoloc_map **out);
-
-/**
- * Builds a map from `count` images in memory (see `topoloc_map_build_from_image_files`; the
- * views have no path). The pixels are only read during the call.
- * Errors: as `topoloc_map_build_from_image_files`, with `_INVALID_IMAGE` for a bad buffer.
- */
-topoloc_status topoloc_map_build_from_images(const struct topoloc_image *images, size_t count, const struct topoloc_image_map_options *options, topoloc_progress_fn progress, void *user_data, struct topoloc_map **out);
-
-/**
- * Fills the first `size` bytes of `*options` with defaults and sets `struct_size`; call it
- * through the header macro `topoloc_localizer_options_default(options)`, which passes `sizeof *(options)`.
- * Errors: `_NULL_ARGUMENT`, `_STRUCT_SIZE` (size below the first published layout).
- */
-topoloc_status topoloc_localizer_options_init(struct topoloc_localizer_options *options, size_t size);
-
-/**
- * Creates a localizer on `map` (which it keeps alive; the caller may free its own handle).
- * `options` may be NULL for defaults. With `image_backend` `TOPOLOC_BACKEND_AUTO` and a map
- * built from images, the map's describer is loaded now (for ONNX: the runtime and model).
- * On success `*out` owns a new localizer.
- * Errors: `_INVALID_OPTION`, `_DESCRIPTOR_MISMATCH` (also another backend or model file than
- * the map's), `_BACKEND_UNAVAILABLE` (paths tried in the message; pass
- * `TOPOLOC_BACKEND_NONE` to localize descriptors only), `_MODEL`, `_NO_DESCRIBER` (a backend
- * was required but the map stores none), `_STRUCT_SIZE`, `_NULL_ARGUMENT`, `_INVALID_UTF8`.
- */
-topoloc_status topoloc_localizer_new(const struct topoloc_map *map, const struct topoloc_localizer_options *options, struct topoloc_localizer **out);
-
-/**
- * Releases a localizer. `NULL` is a no-op.
- */
-void topoloc_localizer_free(struct topoloc_localizer *localizer);
-
-/**
- * Forgets all history; the next frame is treated as the first.
- */
-topoloc_status topoloc_localizer_reset(struct topoloc_localizer *localizer);
-
-/**
- * Fills the first `size` bytes of `*frame` with defaults and sets `struct_size`; call it
- * through the header macro `topoloc_frame_default(frame)`, which passes `sizeof *(frame)`.
- * Errors: `_NULL_ARGUMENT`, `_STRUCT_SIZE` (size below the first published layout).
- */
-topoloc_status topoloc_frame_init(struct topoloc_frame *frame, size_t size);
-
-/**
- * Fills the first `size` bytes of `*result` with defaults and sets `struct_size`; call it
- * through the header macro `topoloc_result_default(result)`, which passes `sizeof *(result)`.
- * Errors: `_NULL_ARGUMENT`, `_STRUCT_SIZE` (size below the first published layout).
- */
-topoloc_status topoloc_result_init(struct topoloc_result *result, size_t size);
-
-/**
- * Localizes one frame and writes the answer into `*result`. The whole frame is validated
- * first: on any error the localizer state and `*result` are unchanged.
- * A frame with `descriptor_len` 0 and an image is described first (the localizer needs a
- * describer: see `topoloc_localizer_new`).
- * Errors: `_DIMENSION_MISMATCH`, `_NON_FINITE`, `_ZERO_DESCRIPTOR`, `_TIMESTAMP`,
- * `_INVALID_ARGUMENT` (odometry not a rigid transform), `_INVALID_IMAGE`,
- * `_UNINFORMATIVE_IMAGE` (blank or featureless image: state unchanged), `_NO_DESCRIBER`,
- * `_MODEL`, `_STRUCT_SIZE`, `_NULL_ARGUMENT`. With verification on, the frame needs its image
- * (`_INVALID_IMAGE`), beside its descriptor or instead of it.
- * Cost: describing the image (if any), then one pass over the map's descriptors plus
- * O(places + edges); no allocation for descriptor frames without verification; verification
- * adds keypoint detection and about 10 ms per checked view.
- */
-topoloc_status topoloc_localizer_process(struct topoloc_localizer *localizer, const struct topoloc_frame *frame, struct topoloc_result *result);
+/* ============================================================================
+ * Maps: load, save, query (a const topoloc_map* may be shared by many threads)
+ * ============================================================================ */
 
 /**
  * Fills the first `size` bytes of `*options` with defaults and sets `struct_size`; call it
@@ -1046,6 +999,158 @@ topoloc_status topoloc_map_view_image(const struct topoloc_map *map, uint32_t vi
  */
 topoloc_status topoloc_map_view_descriptor(const struct topoloc_map *map, uint32_t view, float *buf, size_t len);
 
+/* ============================================
+ * Localizer (one camera, one thread at a time)
+ * ============================================ */
+
+/**
+ * Fills the first `size` bytes of `*options` with defaults and sets `struct_size`; call it
+ * through the header macro `topoloc_localizer_options_default(options)`, which passes `sizeof *(options)`.
+ * Errors: `_NULL_ARGUMENT`, `_STRUCT_SIZE` (size below the first published layout).
+ */
+topoloc_status topoloc_localizer_options_init(struct topoloc_localizer_options *options, size_t size);
+
+/**
+ * Creates a localizer on `map` (which it keeps alive; the caller may free its own handle).
+ * `options` may be NULL for defaults. With `image_backend` `TOPOLOC_BACKEND_AUTO` and a map
+ * built from images, the map's describer is loaded now (for ONNX: the runtime and model).
+ * On success `*out` owns a new localizer.
+ * Errors: `_INVALID_OPTION`, `_DESCRIPTOR_MISMATCH` (also another backend or model file than
+ * the map's), `_BACKEND_UNAVAILABLE` (paths tried in the message; pass
+ * `TOPOLOC_BACKEND_NONE` to localize descriptors only), `_MODEL`, `_NO_DESCRIBER` (a backend
+ * was required but the map stores none), `_STRUCT_SIZE`, `_NULL_ARGUMENT`, `_INVALID_UTF8`.
+ */
+topoloc_status topoloc_localizer_new(const struct topoloc_map *map, const struct topoloc_localizer_options *options, struct topoloc_localizer **out);
+
+/**
+ * Releases a localizer. `NULL` is a no-op.
+ */
+void topoloc_localizer_free(struct topoloc_localizer *localizer);
+
+/**
+ * Forgets all history; the next frame is treated as the first.
+ */
+topoloc_status topoloc_localizer_reset(struct topoloc_localizer *localizer);
+
+/**
+ * Fills the first `size` bytes of `*frame` with defaults and sets `struct_size`; call it
+ * through the header macro `topoloc_frame_default(frame)`, which passes `sizeof *(frame)`.
+ * Errors: `_NULL_ARGUMENT`, `_STRUCT_SIZE` (size below the first published layout).
+ */
+topoloc_status topoloc_frame_init(struct topoloc_frame *frame, size_t size);
+
+/**
+ * Fills the first `size` bytes of `*result` with defaults and sets `struct_size`; call it
+ * through the header macro `topoloc_result_default(result)`, which passes `sizeof *(result)`.
+ * Errors: `_NULL_ARGUMENT`, `_STRUCT_SIZE` (size below the first published layout).
+ */
+topoloc_status topoloc_result_init(struct topoloc_result *result, size_t size);
+
+/**
+ * Localizes one frame and writes the answer into `*result`. The whole frame is validated
+ * first: on any error the localizer state and `*result` are unchanged.
+ * A frame with `descriptor_len` 0 and an image is described first (the localizer needs a
+ * describer: see `topoloc_localizer_new`).
+ * Errors: `_DIMENSION_MISMATCH`, `_NON_FINITE`, `_ZERO_DESCRIPTOR`, `_TIMESTAMP`,
+ * `_INVALID_ARGUMENT` (odometry not a rigid transform), `_INVALID_IMAGE`,
+ * `_UNINFORMATIVE_IMAGE` (blank or featureless image: state unchanged), `_NO_DESCRIBER`,
+ * `_MODEL`, `_STRUCT_SIZE`, `_NULL_ARGUMENT`. With verification on, the frame needs its image
+ * (`_INVALID_IMAGE`), beside its descriptor or instead of it.
+ * Cost: describing the image (if any), then one pass over the map's descriptors plus
+ * O(places + edges); no allocation for descriptor frames without verification; verification
+ * adds keypoint detection and about 10 ms per checked view.
+ */
+topoloc_status topoloc_localizer_process(struct topoloc_localizer *localizer, const struct topoloc_frame *frame, struct topoloc_result *result);
+
+/* =======================================================
+ * Building maps: from places and views, keyframes, images
+ * ======================================================= */
+
+/**
+ * Starts a map whose vectors come from descriptor `kind` / `model` with dimension `dim`
+ * (`model` may be NULL). On success `*out` owns a new builder.
+ * Errors: `_NULL_ARGUMENT`, `_INVALID_ARGUMENT` (empty kind, dim 0), `_INVALID_UTF8`.
+ */
+topoloc_status topoloc_map_builder_new(const char *kind, const char *model, uint32_t dim, struct topoloc_map_builder **out);
+
+/**
+ * Releases a builder. `NULL` is a no-op.
+ */
+void topoloc_map_builder_free(struct topoloc_map_builder *builder);
+
+/**
+ * Adds a place; `position` (3 doubles, metres) may be NULL. `*place_out` receives its id.
+ */
+topoloc_status topoloc_map_builder_add_place(struct topoloc_map_builder *builder, const double *position, uint32_t *place_out);
+
+/**
+ * Fills the first `size` bytes of `*attributes` with defaults and sets `struct_size`; call it
+ * through the header macro `topoloc_view_attributes_default(attributes)`, which passes `sizeof *(attributes)`.
+ * Errors: `_NULL_ARGUMENT`, `_STRUCT_SIZE` (size below the first published layout).
+ */
+topoloc_status topoloc_view_attributes_init(struct topoloc_view_attributes *attributes, size_t size);
+
+/**
+ * Adds a view with `descriptor` (`len` floats, normalised here) to `place`; `attributes` may be
+ * NULL. `*view_out` receives its id. On error the builder is unchanged.
+ * Errors: `_UNKNOWN_PLACE`, `_DIMENSION_MISMATCH`, `_NON_FINITE`, `_ZERO_DESCRIPTOR`, `_INVALID_ARGUMENT`.
+ */
+topoloc_status topoloc_map_builder_add_view(struct topoloc_map_builder *builder, uint32_t place, const float *descriptor, size_t len, const struct topoloc_view_attributes *attributes, uint32_t *view_out);
+
+/**
+ * Joins places `a` and `b` (different, existing, not yet joined) with weight > 0.
+ */
+topoloc_status topoloc_map_builder_add_edge(struct topoloc_map_builder *builder, uint32_t a, uint32_t b, float weight);
+
+/**
+ * Validates and produces a map from what was added; the builder stays usable. On success
+ * `*out` owns a new map. Errors: `_EMPTY_MAP`, `_INVALID_MAP` (e.g. a place without views).
+ */
+topoloc_status topoloc_map_builder_build(const struct topoloc_map_builder *builder, struct topoloc_map **out);
+
+/**
+ * Fills the first `size` bytes of `*options` with defaults and sets `struct_size`; call it
+ * through the header macro `topoloc_keyframe_options_default(options)`, which passes `sizeof *(options)`.
+ * Errors: `_NULL_ARGUMENT`, `_STRUCT_SIZE` (size below the first published layout).
+ */
+topoloc_status topoloc_keyframe_options_init(struct topoloc_keyframe_options *options, size_t size);
+
+/**
+ * Builds a map from `count` keyframes in order (places by spacing and appearance novelty, edges
+ * between consecutive and nearby places). `options` may be NULL. On success `*out` owns a new map.
+ * Errors: `_EMPTY_MAP`, `_INVALID_ARGUMENT` (bad keyframe or option; the message names it).
+ */
+topoloc_status topoloc_map_from_keyframes(const char *kind, const char *model, uint32_t dim, const struct topoloc_keyframe *keyframes, size_t count, const struct topoloc_keyframe_options *options, struct topoloc_map **out);
+
+/**
+ * Fills the first `size` bytes of `*options` with defaults and sets `struct_size`; call it
+ * through the header macro `topoloc_image_map_options_default(options)`.
+ * Errors: `_NULL_ARGUMENT`, `_STRUCT_SIZE`.
+ */
+topoloc_status topoloc_image_map_options_init(struct topoloc_image_map_options *options, size_t size);
+
+/**
+ * Builds a map from `count` image files (any format OpenCV reads), describing them in
+ * parallel; the map stores its describer, so localizers on it accept image frames. Views
+ * record their image's index (as keyframe id) and path. `options` may be NULL for defaults
+ * (ONNX backend); `progress` may be NULL. On success `*out` owns a new map.
+ * Errors: `_INVALID_ARGUMENT` (fewer than 2 images, bad options, pose count), `_INVALID_IMAGE`
+ * (an unreadable file; the message names it), `_BACKEND_UNAVAILABLE`, `_MODEL`, `_IO` (poses
+ * file), `_CANCELLED`, `_NULL_ARGUMENT`, `_INVALID_UTF8`, `_STRUCT_SIZE`.
+ */
+topoloc_status topoloc_map_build_from_image_files(const char *const *paths, size_t count, const struct topoloc_image_map_options *options, topoloc_progress_fn progress, void *user_data, struct topoloc_map **out);
+
+/**
+ * Builds a map from `count` images in memory (see `topoloc_map_build_from_image_files`; the
+ * views have no path). The pixels are only read during the call.
+ * Errors: as `topoloc_map_build_from_image_files`, with `_INVALID_IMAGE` for a bad buffer.
+ */
+topoloc_status topoloc_map_build_from_images(const struct topoloc_image *images, size_t count, const struct topoloc_image_map_options *options, topoloc_progress_fn progress, void *user_data, struct topoloc_map **out);
+
+/* ========================================
+ * Skeleton graphs from occupancy grids
+ * ======================================== */
+
 /**
  * Fills the first `size` bytes of `*options` with defaults and sets `struct_size`; call it
  * through the header macro `topoloc_skeleton_options_default(options)`, which passes
@@ -1096,7 +1201,7 @@ topoloc_status topoloc_graph_edge_count(const struct topoloc_graph *graph, size_
  * branches, ends, corners, then intermediate places. Errors: `_NULL_ARGUMENT`,
  * `_UNKNOWN_PLACE`.
  */
-topoloc_status topoloc_graph_place(const struct topoloc_graph *graph, uint32_t place, double *xyz, uint32_t *kind);
+topoloc_status topoloc_graph_place(const struct topoloc_graph *graph, uint32_t place, double *xyz, topoloc_node_kind *kind);
 
 /**
  * Edge number `index` (0..edge_count, sorted by (a, b)): places `*a < *b` and the straight
@@ -1112,33 +1217,6 @@ topoloc_status topoloc_graph_edge(const struct topoloc_graph *graph, size_t inde
  * to ask. Errors: `_NULL_ARGUMENT`, `_BUFFER_TOO_SMALL`.
  */
 topoloc_status topoloc_graph_skeleton(const struct topoloc_graph *graph, uint32_t *xyz, size_t len, size_t *count);
-
-/**
- * Library version "MAJOR.MINOR.PATCH" as a static NUL-terminated string (never free it).
- * Compare with the `TOPOLOC_VERSION_*` macros of the header the program was built against.
- */
-const char *topoloc_version(void);
-
-/**
- * ABI version of the loaded library; must equal `TOPOLOC_ABI_VERSION` of the header.
- */
-uint32_t topoloc_abi_version(void);
-
-/**
- * Static English description of a status code (never free it); unknown codes give
- * "unknown status code".
- */
-const char *topoloc_status_str(uint32_t status);
-
-/**
- * Copies the message of the most recent failed call on this thread (NUL-terminated; "" if
- * none) into `buf` of `len` bytes. `*needed` (if not NULL) receives the size required
- * including the NUL, also when the buffer is too small. Returns `TOPOLOC_OK`,
- * `TOPOLOC_ERR_BUFFER_TOO_SMALL`, or `TOPOLOC_ERR_NULL_ARGUMENT` (NULL `buf` with `len` large
- * enough); never changes the stored message. Thread-safe: each thread
- * has its own last error.
- */
-topoloc_status topoloc_last_error_message(char *buf, size_t len, size_t *needed);
 
 #ifdef __cplusplus
 }  // extern "C"

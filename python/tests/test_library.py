@@ -504,6 +504,19 @@ def test_status_codes_match_header():
     assert header_codes == _errors.STATUS_NAMES
 
 
+def test_status_names_match_the_librarys_table():
+    """The library's own status table (topoloc_status_name) names exactly the codes these
+    bindings know, with the same names, so a code added in Rust cannot be missed here."""
+    library = {code: topoloc.status_name(code) for code in range(0, 1000)}
+    library = {code: name for code, name in library.items() if name is not None}
+    assert library == _errors.STATUS_NAMES
+    assert topoloc.status_name(7) is None
+
+
+def test_abi_minor_version():
+    assert topoloc.abi_version_minor() >= _lib.ABI_VERSION_MINOR == 4
+
+
 EXPECTED_CLASSES = {
     1: "NullArgumentError",
     2: "InvalidArgumentError",

@@ -89,11 +89,13 @@ from ._core import (
     Result,
     ViewInfo,
     abi_version,
+    abi_version_minor,
     keyframe_options_default,
     localizer_options_default,
     map_from_keyframes,
     skeleton_graph,
     skeleton_options_default,
+    status_name,
     status_str,
     version,
 )
@@ -127,6 +129,8 @@ __all__ = [
     # versions and library
     "version",
     "abi_version",
+    "abi_version_minor",
+    "status_name",
     "status_str",
     "ABI_VERSION",
     "library_path",

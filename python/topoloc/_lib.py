@@ -46,6 +46,10 @@ from ._errors import error_from_status
 #: ABI version these bindings were written for (``TOPOLOC_ABI_VERSION`` of the header).
 ABI_VERSION = 1
 
+#: ABI minor version these bindings were written for (``TOPOLOC_ABI_VERSION_MINOR``): they use
+#: items up to "ABI 1.N" of the header.
+ABI_VERSION_MINOR = 4
+
 #: Environment variable naming the shared library to load.
 ENV_VAR = "TOPOLOC_LIBRARY"
 
@@ -401,7 +405,9 @@ SIGNATURES = {
     "topoloc_graph_skeleton": (status_t, [GraphPtr, _p(c_uint32), c_size_t, _p(c_size_t)]),
     "topoloc_version": (c_char_p, []),
     "topoloc_abi_version": (c_uint32, []),
+    "topoloc_abi_version_minor": (c_uint32, []),
     "topoloc_status_str": (c_char_p, [c_uint32]),
+    "topoloc_status_name": (c_char_p, [c_uint32]),
     "topoloc_last_error_message": (status_t, [_p(c_char), c_size_t, _p(c_size_t)]),
 }
 

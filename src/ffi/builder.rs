@@ -1,12 +1,12 @@
 //! C functions that build maps: the incremental builder and the keyframe path.
 
-use super::boundary::{
-    borrow, borrow_mut, check_out, free_handle, init_versioned, into_handle, optional_string,
-    read_versioned, run, slice, string, write_out, FfiError, Versioned,
-};
+use super::boundary::{check_out, optional_string, run, slice, string, write_out};
 use super::convert::optional_pose;
-use super::map::topoloc_map;
+use super::error::FfiError;
+use super::handles::{free_box, new_box, try_mut, try_ref, Castable, Opaque, OwnedBox};
+use super::map::{map_handle, topoloc_map};
 use super::topoloc_status;
+use super::versioned::{init_versioned, read_versioned, Versioned};
 use crate::build::{from_keyframes, Keyframe, KeyframeOptions};
 use crate::descriptor::DescriptorIdentity;
 use crate::map::{MapBuilder, ViewAttributes};
@@ -16,7 +16,12 @@ use std::ffi::c_char;
 /// Collects places, views and edges for a new map. Created by `topoloc_map_builder_new`,
 /// released by `topoloc_map_builder_free`. Not thread-safe: use from one thread at a time.
 pub struct topoloc_map_builder {
-    builder: MapBuilder,
+    _opaque: Opaque,
+}
+
+impl Castable for topoloc_map_builder {
+    type Ownership = OwnedBox;
+    type RustType = MapBuilder;
 }
 
 /// Starts a map whose vectors come from descriptor `kind` / `model` with dimension `dim`
@@ -34,9 +39,7 @@ pub extern "C" fn topoloc_map_builder_new(
         check_out(out, "out")?;
         write_out(
             out,
-            into_handle(topoloc_map_builder {
-                builder: MapBuilder::new(identity),
-            }),
+            new_box::<topoloc_map_builder>(MapBuilder::new(identity)),
         );
         Ok(())
     })
@@ -55,7 +58,7 @@ fn identity(
 /// Releases a builder. `NULL` is a no-op.
 #[no_mangle]
 pub extern "C" fn topoloc_map_builder_free(builder: *mut topoloc_map_builder) {
-    free_handle(builder)
+    free_box(builder)
 }
 
 /// Adds a place; `position` (3 doubles, metres) may be NULL. `*place_out` receives its id.
@@ -66,7 +69,7 @@ pub extern "C" fn topoloc_map_builder_add_place(
     place_out: *mut u32,
 ) -> topoloc_status {
     run(|| {
-        let builder = &mut borrow_mut(builder, "builder")?.builder;
+        let builder = try_mut(builder, "builder")?;
         check_out(place_out, "place_out")?;
         let position = match position.is_null() {
             true => None,
@@ -137,7 +140,7 @@ pub extern "C" fn topoloc_map_builder_add_view(
     view_out: *mut u32,
 ) -> topoloc_status {
     run(|| {
-        let builder = &mut borrow_mut(builder, "builder")?.builder;
+        let builder = try_mut(builder, "builder")?;
         let descriptor = slice(descriptor, len, "descriptor")?;
         check_out(view_out, "view_out")?;
         let attributes = if attributes.is_null() {
@@ -164,9 +167,7 @@ pub extern "C" fn topoloc_map_builder_add_edge(
     weight: f32,
 ) -> topoloc_status {
     run(|| {
-        borrow_mut(builder, "builder")?
-            .builder
-            .add_edge(a, b, weight)?;
+        try_mut(builder, "builder")?.add_edge(a, b, weight)?;
         Ok(())
     })
 }
@@ -179,9 +180,9 @@ pub extern "C" fn topoloc_map_builder_build(
     out: *mut *mut topoloc_map,
 ) -> topoloc_status {
     run(|| {
-        let builder = &borrow(builder, "builder")?.builder;
+        let builder = try_ref(builder, "builder")?;
         check_out(out, "out")?;
-        write_out(out, topoloc_map::into_raw(builder.build()?));
+        write_out(out, map_handle(builder.build()?));
         Ok(())
     })
 }
@@ -293,7 +294,7 @@ pub extern "C" fn topoloc_map_from_keyframes(
             .collect::<Result<Vec<_>, FfiError>>()?;
         write_out(
             out,
-            topoloc_map::into_raw(from_keyframes(identity, &keyframes, &options)?),
+            map_handle(from_keyframes(identity, &keyframes, &options)?),
         );
         Ok(())
     })

@@ -1,7 +1,8 @@
 //! Conversions between C representations (row-major 4x4 pose arrays, optional strings) and the
 //! Rust types of the core.
 
-use super::boundary::{slice, FfiError};
+use super::boundary::slice;
+use super::error::FfiError;
 use crate::descriptor::ExpectedDescriptor;
 use nalgebra::{Isometry3, Matrix3, Rotation3, Translation3, UnitQuaternion};
 use std::ffi::c_char;

@@ -1,12 +1,11 @@
 //! C functions and types for images: the image view passed in frames, and maps built from
 //! image files or pixel buffers with a progress callback.
 
-use super::boundary::{
-    check_out, init_versioned, optional_string, read_versioned, run, slice, string, FfiError,
-    Versioned,
-};
-use super::map::topoloc_map;
+use super::boundary::{check_out, optional_string, run, slice, string};
+use super::error::FfiError;
+use super::map::{map_handle, topoloc_map};
 use super::topoloc_status;
+use super::versioned::{init_versioned, read_versioned, Versioned};
 use crate::build::{
     build_from_images, read_tum, BuildStage, ImageLayout, ImageMapOptions, ImageSource,
 };
@@ -17,35 +16,43 @@ use crate::image::{ImageView, PixelFormat};
 use std::ffi::{c_char, c_void};
 use std::path::Path;
 
+/// Pixel layout of a [`topoloc_image`]: one of the `TOPOLOC_PIXEL_*` values.
+pub type topoloc_pixel_format = u32;
+/// Descriptor backend of map building and localizer options: one of the `TOPOLOC_BACKEND_*`
+/// values.
+pub type topoloc_backend = u32;
+/// Stage of a long operation reported to a [`topoloc_progress_fn`]: a `TOPOLOC_STAGE_*` value.
+pub type topoloc_stage = u32;
+
 /// No image (the frame carries a descriptor only).
-pub const TOPOLOC_PIXEL_NONE: u32 = 0;
+pub const TOPOLOC_PIXEL_NONE: topoloc_pixel_format = 0;
 /// 8-bit grey, one byte per pixel.
-pub const TOPOLOC_PIXEL_GRAY8: u32 = 1;
+pub const TOPOLOC_PIXEL_GRAY8: topoloc_pixel_format = 1;
 /// 8-bit red, green, blue.
-pub const TOPOLOC_PIXEL_RGB8: u32 = 2;
+pub const TOPOLOC_PIXEL_RGB8: topoloc_pixel_format = 2;
 /// 8-bit blue, green, red (OpenCV's `CV_8UC3` order).
-pub const TOPOLOC_PIXEL_BGR8: u32 = 3;
+pub const TOPOLOC_PIXEL_BGR8: topoloc_pixel_format = 3;
 /// 8-bit red, green, blue, alpha.
-pub const TOPOLOC_PIXEL_RGBA8: u32 = 4;
+pub const TOPOLOC_PIXEL_RGBA8: topoloc_pixel_format = 4;
 /// 8-bit blue, green, red, alpha.
-pub const TOPOLOC_PIXEL_BGRA8: u32 = 5;
+pub const TOPOLOC_PIXEL_BGRA8: topoloc_pixel_format = 5;
 
 /// Backend choice: the map's own describer when it has one (localizer), or the ONNX backend
 /// (map building).
-pub const TOPOLOC_BACKEND_AUTO: u32 = 0;
+pub const TOPOLOC_BACKEND_AUTO: topoloc_backend = 0;
 /// No describer: frames must carry descriptors (localizer only).
-pub const TOPOLOC_BACKEND_NONE: u32 = 1;
+pub const TOPOLOC_BACKEND_NONE: topoloc_backend = 1;
 /// ONNX multi-level CNN features (needs ONNX Runtime and the model).
-pub const TOPOLOC_BACKEND_ONNX: u32 = 2;
+pub const TOPOLOC_BACKEND_ONNX: topoloc_backend = 2;
 /// VLAD of OpenCV ORB features (no learned weights).
-pub const TOPOLOC_BACKEND_VLAD_ORB: u32 = 3;
+pub const TOPOLOC_BACKEND_VLAD_ORB: topoloc_backend = 3;
 /// VLAD of OpenCV SIFT features.
-pub const TOPOLOC_BACKEND_VLAD_SIFT: u32 = 4;
+pub const TOPOLOC_BACKEND_VLAD_SIFT: topoloc_backend = 4;
 
 /// Build stage reported to the progress callback: describing images (`done` of `total`).
-pub const TOPOLOC_STAGE_DESCRIBING: u32 = 0;
+pub const TOPOLOC_STAGE_DESCRIBING: topoloc_stage = 0;
 /// Build stage reported to the progress callback: fitting PCA/codebook and assembling (0 or 1 of 1).
-pub const TOPOLOC_STAGE_FITTING: u32 = 1;
+pub const TOPOLOC_STAGE_FITTING: topoloc_stage = 1;
 
 /// A borrowed image: `height` rows of `stride` bytes, each starting with `width` pixels.
 /// Plain data, embedded in other structs; all-zero means "no image".
@@ -63,7 +70,7 @@ pub struct topoloc_image {
     /// Bytes from one row to the next (>= width * channels).
     pub stride: usize,
     /// One of the `TOPOLOC_PIXEL_*` formats; `TOPOLOC_PIXEL_NONE` means no image.
-    pub format: u32,
+    pub format: topoloc_pixel_format,
 }
 
 impl Default for topoloc_image {
@@ -124,8 +131,16 @@ pub(crate) fn image_view<'a>(
 /// Progress of a long operation: `stage` is a `TOPOLOC_STAGE_*` value, `done` of `total` units.
 /// Called on the thread that called the building function, about ten times a second. Return
 /// `true` to go on, `false` to cancel (the function then returns `TOPOLOC_ERR_CANCELLED`).
+/// The callback must return normally: it must not unwind (a C++ exception, a Rust panic) or
+/// `longjmp` through topoloc, which would skip its clean-up and leave the process undefined;
+/// catch inside the callback and return `false` instead.
 pub type topoloc_progress_fn = Option<
-    unsafe extern "C" fn(user_data: *mut c_void, stage: u32, done: usize, total: usize) -> bool,
+    unsafe extern "C" fn(
+        user_data: *mut c_void,
+        stage: topoloc_stage,
+        done: usize,
+        total: usize,
+    ) -> bool,
 >;
 
 /// How `topoloc_map_build_from_image_files` / `_from_images` build a map. Initialise with
@@ -136,7 +151,7 @@ pub struct topoloc_image_map_options {
     /// `sizeof(topoloc_image_map_options)`, set by the `_default` function.
     pub struct_size: usize,
     /// `TOPOLOC_BACKEND_ONNX` (also for `_AUTO`, the default), `_VLAD_ORB` or `_VLAD_SIFT`.
-    pub backend: u32,
+    pub backend: topoloc_backend,
     /// Descriptor dimension D; with fewer than D + 1 images it becomes the number of images
     /// minus one (`topoloc_map_dim` tells). Default 512.
     pub dim: u32,
@@ -204,7 +219,7 @@ pub extern "C" fn topoloc_image_map_options_init(
 }
 
 /// The descriptor family a C backend code requires, if it names one precisely.
-pub(crate) fn backend_family(code: u32) -> Option<&'static str> {
+pub(crate) fn backend_family(code: topoloc_backend) -> Option<&'static str> {
     match code {
         TOPOLOC_BACKEND_ONNX => Some("onnx-mlf"),
         TOPOLOC_BACKEND_VLAD_ORB => Some("vlad-orb"),
@@ -215,7 +230,7 @@ pub(crate) fn backend_family(code: u32) -> Option<&'static str> {
 
 /// The backend kind a C backend code names (`_AUTO` maps to `default`).
 pub(crate) fn backend_kind(
-    code: u32,
+    code: topoloc_backend,
     default: Option<BackendKind>,
 ) -> Result<Option<BackendKind>, FfiError> {
     match code {
@@ -327,7 +342,7 @@ fn build(
         &options,
         &mut report,
     )?;
-    super::boundary::write_out(out, topoloc_map::into_raw(map));
+    super::boundary::write_out(out, map_handle(map));
     Ok(())
 }
 

@@ -1,36 +1,49 @@
 //! C functions of the localizer: create, process a frame, reset, free.
 
-use super::boundary::{
-    borrow, borrow_mut, check_out, free_handle, init_versioned, into_handle, optional_string,
-    read_versioned, run, slice, struct_size_of, write_out, write_versioned, FfiError, Versioned,
-};
+use super::boundary::{check_out, optional_string, run, slice, write_out};
 use super::convert::{expected_descriptor, optional_pose};
+use super::error::FfiError;
+use super::handles::{clone_arc, free_box, new_box, try_mut, Castable, Opaque, OwnedBox};
 use super::images::{
-    backend_family, backend_kind, image_view, topoloc_image, TOPOLOC_BACKEND_AUTO,
+    backend_family, backend_kind, image_view, topoloc_backend, topoloc_image, TOPOLOC_BACKEND_AUTO,
     TOPOLOC_BACKEND_NONE,
 };
 use super::map::topoloc_map;
 use super::topoloc_status;
+use super::versioned::{init_versioned, read_versioned, write_versioned, Versioned};
 use crate::describe::DescriberOptions;
 use crate::localize::{Frame, Localization, Localizer, LocalizerOptions, MetricOptions, Mode};
 use crate::verify::VerificationOptions;
 use std::ffi::c_char;
 
+/// How a localizer estimates the place: one of the `TOPOLOC_MODE_*` values.
+pub type topoloc_mode = u32;
+
 /// Filter mode: forward filter over the graph (default).
-pub const TOPOLOC_MODE_FILTER: u32 = 0;
+pub const TOPOLOC_MODE_FILTER: topoloc_mode = 0;
 /// Single-frame mode: every frame judged on its own.
-pub const TOPOLOC_MODE_SINGLE_FRAME: u32 = 1;
+pub const TOPOLOC_MODE_SINGLE_FRAME: topoloc_mode = 1;
 /// Metric mode (ABI 1.3): Monte Carlo localization of the camera pose in the map frame, moved
 /// by the frames' odometry and weighed by appearance; the place is the one nearest to the
 /// particles. Needs a map with every place's position and every view's pose.
-pub const TOPOLOC_MODE_METRIC: u32 = 2;
+pub const TOPOLOC_MODE_METRIC: topoloc_mode = 2;
 
 /// Follows one camera through a map. Created by `topoloc_localizer_new`, released by
 /// `topoloc_localizer_free`. Holds per-camera state: use it from one thread at a time (it may
 /// move between threads). It keeps its own reference to the map.
 pub struct topoloc_localizer {
+    _opaque: Opaque,
+}
+
+/// What a localizer handle owns: the localizer and the result buffer its frames reuse.
+pub(crate) struct LocalizerState {
     localizer: Localizer,
     scratch: Localization,
+}
+
+impl Castable for topoloc_localizer {
+    type Ownership = OwnedBox;
+    type RustType = LocalizerState;
 }
 
 /// Localizer parameters. Initialise with `topoloc_localizer_options_default`; the defaults and
@@ -42,7 +55,7 @@ pub struct topoloc_localizer_options {
     pub struct_size: usize,
     /// `TOPOLOC_MODE_FILTER`, `TOPOLOC_MODE_SINGLE_FRAME` or (ABI 1.3) `TOPOLOC_MODE_METRIC`
     /// (on a map without positions or view poses: `_INVALID_OPTION`).
-    pub mode: u32,
+    pub mode: topoloc_mode,
     /// Softmax temperature of the observation likelihood (> 0). Default 0.2.
     pub temperature: f32,
     /// Probability that the off-map state persists from one frame to the next. Default 0.7.
@@ -66,7 +79,7 @@ pub struct topoloc_localizer_options {
     /// Describing image frames: `TOPOLOC_BACKEND_AUTO` (default) loads the map's describer when
     /// the map has one; `_NONE` never (descriptor frames only, no runtime needed); `_ONNX` or
     /// `_VLAD_*` also require the map to use that backend (else `_DESCRIPTOR_MISMATCH`).
-    pub image_backend: u32,
+    pub image_backend: topoloc_backend,
     /// ONNX model file; NULL or "" = the cache's default. Must be the map's model (by hash).
     pub onnx_model_path: *const c_char,
     /// ONNX Runtime library; NULL or "" = `TOPOLOC_ORT_LIBRARY`, `ORT_DYLIB_PATH`, the cache.
@@ -156,7 +169,7 @@ pub extern "C" fn topoloc_localizer_new(
     out: *mut *mut topoloc_localizer,
 ) -> topoloc_status {
     run(|| {
-        let map = borrow(map, "map")?.map.clone();
+        let map = clone_arc(map, "map")?;
         check_out(out, "out")?;
         let o = if options.is_null() {
             topoloc_localizer_options::default()
@@ -237,7 +250,7 @@ pub extern "C" fn topoloc_localizer_new(
         };
         write_out(
             out,
-            into_handle(topoloc_localizer {
+            new_box::<topoloc_localizer>(LocalizerState {
                 localizer,
                 scratch: Localization::default(),
             }),
@@ -249,14 +262,14 @@ pub extern "C" fn topoloc_localizer_new(
 /// Releases a localizer. `NULL` is a no-op.
 #[no_mangle]
 pub extern "C" fn topoloc_localizer_free(localizer: *mut topoloc_localizer) {
-    free_handle(localizer)
+    free_box(localizer)
 }
 
 /// Forgets all history; the next frame is treated as the first.
 #[no_mangle]
 pub extern "C" fn topoloc_localizer_reset(localizer: *mut topoloc_localizer) -> topoloc_status {
     run(|| {
-        borrow_mut(localizer, "localizer")?.localizer.reset();
+        try_mut(localizer, "localizer")?.localizer.reset();
         Ok(())
     })
 }
@@ -415,10 +428,14 @@ pub extern "C" fn topoloc_localizer_process(
     result: *mut topoloc_result,
 ) -> topoloc_status {
     run(|| {
-        let state = borrow_mut(localizer, "localizer")?;
+        let state = try_mut(localizer, "localizer")?;
         let f = read_versioned(frame, topoloc_frame::default(), "frame")?;
-        struct_size_of(result as *const topoloc_result, "result")?;
-        let caller = borrow(result as *const topoloc_result, "result")?;
+        // The caller's result is read through its own layout only (it may be an older one).
+        let caller = read_versioned(
+            result as *const topoloc_result,
+            topoloc_result::default(),
+            "result",
+        )?;
         let (buffer, capacity) = (caller.candidates, caller.candidates_capacity);
         if buffer.is_null() && capacity > 0 {
             return Err(FfiError::null("result.candidates"));

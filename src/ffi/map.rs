@@ -1,11 +1,11 @@
 //! C functions on maps: load, save, free and read-only accessors.
 
-use super::boundary::{
-    borrow, check_out, copy_c_string, free_handle, init_versioned, into_handle, read_versioned,
-    run, slice, string, write_array, write_out, write_versioned, FfiError, Versioned,
-};
+use super::boundary::{check_out, copy_c_string, run, slice, string, write_array, write_out};
 use super::convert::{expected_descriptor, pose_to_row_major};
+use super::error::FfiError;
+use super::handles::{free_arc, new_arc, try_ref, Castable, Opaque, OwnedArc};
 use super::topoloc_status;
+use super::versioned::{init_versioned, read_versioned, write_versioned, Versioned};
 use crate::map::{LoadOptions, Map};
 use std::ffi::c_char;
 use std::sync::Arc;
@@ -16,13 +16,17 @@ use std::sync::Arc;
 /// once, and localizers keep their own reference, so a map may be freed while localizers that
 /// were created from it are still in use.
 pub struct topoloc_map {
-    pub(crate) map: Arc<Map>,
+    _opaque: Opaque,
 }
 
-impl topoloc_map {
-    pub(crate) fn into_raw(map: Map) -> *mut topoloc_map {
-        into_handle(topoloc_map { map: Arc::new(map) })
-    }
+impl Castable for topoloc_map {
+    type Ownership = OwnedArc;
+    type RustType = Map;
+}
+
+/// Gives C a new map handle holding the only reference to `map`.
+pub(crate) fn map_handle(map: Map) -> *mut topoloc_map {
+    new_arc(Arc::new(map))
 }
 
 /// Options of `topoloc_map_load`. Initialise with `topoloc_map_load_options_default`.
@@ -93,7 +97,7 @@ pub extern "C" fn topoloc_map_load(
         let path = string(path, "path")?;
         check_out(out, "out")?;
         let map = Map::load(path, &load_options(options)?)?;
-        write_out(out, topoloc_map::into_raw(map));
+        write_out(out, map_handle(map));
         Ok(())
     })
 }
@@ -111,7 +115,7 @@ pub extern "C" fn topoloc_map_load_from_memory(
         let bytes = slice(data, len, "data")?;
         check_out(out, "out")?;
         let map = Map::from_bytes(bytes, &load_options(options)?)?;
-        write_out(out, topoloc_map::into_raw(map));
+        write_out(out, map_handle(map));
         Ok(())
     })
 }
@@ -121,7 +125,7 @@ pub extern "C" fn topoloc_map_load_from_memory(
 #[no_mangle]
 pub extern "C" fn topoloc_map_save(map: *const topoloc_map, path: *const c_char) -> topoloc_status {
     run(|| {
-        let map = &borrow(map, "map")?.map;
+        let map = try_ref(map, "map")?;
         map.save(string(path, "path")?)?;
         Ok(())
     })
@@ -130,7 +134,7 @@ pub extern "C" fn topoloc_map_save(map: *const topoloc_map, path: *const c_char)
 /// Releases a map handle. Localizers created from it keep working. `NULL` is a no-op.
 #[no_mangle]
 pub extern "C" fn topoloc_map_free(map: *mut topoloc_map) {
-    free_handle(map)
+    free_arc(map)
 }
 
 /// Number of places (`*out`).
@@ -175,7 +179,7 @@ fn map_value<T>(
     read: impl FnOnce(&Map) -> T,
 ) -> topoloc_status {
     run(|| {
-        let map = &borrow(map, "map")?.map;
+        let map = try_ref(map, "map")?;
         check_out(out, "out")?;
         write_out(out, read(map));
         Ok(())
@@ -213,7 +217,7 @@ fn map_string(
     read: impl FnOnce(&Map) -> String,
 ) -> topoloc_status {
     run(|| {
-        let text = read(&borrow(map, "map")?.map);
+        let text = read(try_ref(map, "map")?);
         copy_c_string(text.as_bytes(), buf, len, needed)
     })
 }
@@ -229,7 +233,7 @@ pub extern "C" fn topoloc_map_neighbours(
     count: *mut usize,
 ) -> topoloc_status {
     run(|| {
-        let (ids, _) = borrow(map, "map")?.map.neighbours(place)?;
+        let (ids, _) = try_ref(map, "map")?.neighbours(place)?;
         write_array(ids, buf, len, count)
     })
 }
@@ -244,7 +248,7 @@ pub extern "C" fn topoloc_map_place_views(
     count: *mut usize,
 ) -> topoloc_status {
     run(|| {
-        let views = borrow(map, "map")?.map.place_views(place)?;
+        let views = try_ref(map, "map")?.place_views(place)?;
         write_array(views, buf, len, count)
     })
 }
@@ -259,7 +263,7 @@ pub extern "C" fn topoloc_map_place_position(
     has_position: *mut bool,
 ) -> topoloc_status {
     run(|| {
-        let position = borrow(map, "map")?.map.place_position(place)?;
+        let position = try_ref(map, "map")?.place_position(place)?;
         check_out(xyz, "xyz")?;
         check_out(has_position, "has_position")?;
         let p = position.map_or([0.0; 3], |p| [p.x, p.y, p.z]);
@@ -279,7 +283,7 @@ pub extern "C" fn topoloc_map_edge(
     weight: *mut f32,
 ) -> topoloc_status {
     run(|| {
-        let map = &borrow(map, "map")?.map;
+        let map = try_ref(map, "map")?;
         let edge = *map.edges().get(index).ok_or_else(|| {
             FfiError::invalid(format!(
                 "edge index {index} out of range (the map has {} edges)",
@@ -352,7 +356,7 @@ pub extern "C" fn topoloc_map_view_info(
     out: *mut topoloc_view_info,
 ) -> topoloc_status {
     run(|| {
-        let record = borrow(map, "map")?.map.view(view)?;
+        let record = try_ref(map, "map")?.view(view)?;
         let pose = record
             .world_t_camera
             .unwrap_or_else(nalgebra::Isometry3::identity);
@@ -382,7 +386,7 @@ pub extern "C" fn topoloc_map_view_image(
     needed: *mut usize,
 ) -> topoloc_status {
     run(|| {
-        let record = borrow(map, "map")?.map.view(view)?;
+        let record = try_ref(map, "map")?.view(view)?;
         copy_c_string(
             record.image.as_deref().unwrap_or("").as_bytes(),
             buf,
@@ -402,7 +406,7 @@ pub extern "C" fn topoloc_map_view_descriptor(
     len: usize,
 ) -> topoloc_status {
     run(|| {
-        let descriptor = borrow(map, "map")?.map.view_descriptor(view)?;
+        let descriptor = try_ref(map, "map")?.view_descriptor(view)?;
         write_array(descriptor, buf, len, std::ptr::null_mut())
     })
 }

@@ -19,21 +19,34 @@
 // nothing for C callers.
 #![allow(clippy::not_unsafe_ptr_arg_deref)]
 
+// Plumbing shared by the entry points (no `extern "C"` items).
 mod boundary;
-mod builder;
 mod convert;
-mod images;
-mod localizer;
-mod map;
-mod skeleton;
+mod error;
+mod handles;
+mod status;
+mod versioned;
+
+// The entry points, declared in the order include/topoloc.h presents them (cbindgen follows
+// this order): versions and errors, maps, the localizer, builders, skeleton graphs.
 mod version;
 
-pub use boundary::topoloc_status;
+mod map;
+
+mod localizer;
+
+mod builder;
+
+mod images;
+
+mod skeleton;
+
 pub use builder::*;
 pub use images::*;
 pub use localizer::*;
 pub use map::*;
 pub use skeleton::*;
+pub use status::topoloc_status;
 pub use version::*;
 
 #[cfg(test)]

@@ -1,23 +1,26 @@
 //! C functions of skeleton map building: a topological graph of places from an occupancy voxel
 //! grid (see `topoloc::skeleton::skeleton_graph`).
 
-use super::boundary::{
-    borrow, check_out, free_handle, init_versioned, into_handle, read_versioned, run, slice,
-    write_array, write_out, FfiError, Versioned,
-};
+use super::boundary::{check_out, run, slice, write_array, write_out};
+use super::error::FfiError;
+use super::handles::{free_box, new_box, try_ref, Castable, Opaque, OwnedBox};
 use super::topoloc_status;
+use super::versioned::{init_versioned, read_versioned, Versioned};
 use crate::map::MapError;
 use crate::skeleton::{skeleton_graph, OccupancyGrid, SkeletonOptions, TopoGraph};
 use nalgebra::Point3;
 
+/// Kind of a graph place: one of the `TOPOLOC_NODE_*` values.
+pub type topoloc_node_kind = u32;
+
 /// Place kind: a dead end of the skeleton.
-pub const TOPOLOC_NODE_END: u32 = 0;
+pub const TOPOLOC_NODE_END: topoloc_node_kind = 0;
 /// Place kind: a bend of the skeleton.
-pub const TOPOLOC_NODE_CORNER: u32 = 1;
+pub const TOPOLOC_NODE_CORNER: topoloc_node_kind = 1;
 /// Place kind: a junction of three or more skeleton branches.
-pub const TOPOLOC_NODE_BRANCH: u32 = 2;
+pub const TOPOLOC_NODE_BRANCH: topoloc_node_kind = 2;
 /// Place kind: inserted on a skeleton path to keep edges straight, obstacle-free and short.
-pub const TOPOLOC_NODE_INTERMEDIATE: u32 = 3;
+pub const TOPOLOC_NODE_INTERMEDIATE: topoloc_node_kind = 3;
 
 /// Parameters of `topoloc_graph_from_occupancy`. Initialise with
 /// `topoloc_skeleton_options_default`. Lengths are metres.
@@ -101,7 +104,12 @@ pub extern "C" fn topoloc_skeleton_options_init(
 /// `topoloc_graph_from_occupancy`, released by `topoloc_graph_free`. Immutable: a
 /// `const topoloc_graph*` may be used from many threads at once.
 pub struct topoloc_graph {
-    graph: TopoGraph,
+    _opaque: Opaque,
+}
+
+impl Castable for topoloc_graph {
+    type Ownership = OwnedBox;
+    type RustType = TopoGraph;
 }
 
 /// Builds the topological graph of the free space of an occupancy voxel grid: the free space
@@ -163,9 +171,7 @@ pub extern "C" fn topoloc_graph_from_occupancy(
         let grid = OccupancyGrid::new(dims, voxel_size, Point3::new(o[0], o[1], o[2]), occupied)?;
         write_out(
             out,
-            into_handle(topoloc_graph {
-                graph: skeleton_graph(&grid, &options)?,
-            }),
+            new_box::<topoloc_graph>(skeleton_graph(&grid, &options)?),
         );
         Ok(())
     })
@@ -174,7 +180,7 @@ pub extern "C" fn topoloc_graph_from_occupancy(
 /// Releases a graph. `NULL` is a no-op.
 #[no_mangle]
 pub extern "C" fn topoloc_graph_free(graph: *mut topoloc_graph) {
-    free_handle(graph)
+    free_box(graph)
 }
 
 /// Number of places (`*out`). Errors: `_NULL_ARGUMENT`.
@@ -201,7 +207,7 @@ fn graph_value<T>(
     read: impl FnOnce(&TopoGraph) -> T,
 ) -> topoloc_status {
     run(|| {
-        let graph = &borrow(graph, "graph")?.graph;
+        let graph = try_ref(graph, "graph")?;
         check_out(out, "out")?;
         write_out(out, read(graph));
         Ok(())
@@ -217,10 +223,10 @@ pub extern "C" fn topoloc_graph_place(
     graph: *const topoloc_graph,
     place: u32,
     xyz: *mut f64,
-    kind: *mut u32,
+    kind: *mut topoloc_node_kind,
 ) -> topoloc_status {
     run(|| {
-        let graph = &borrow(graph, "graph")?.graph;
+        let graph = try_ref(graph, "graph")?;
         let p = graph
             .places
             .get(place as usize)
@@ -253,7 +259,7 @@ pub extern "C" fn topoloc_graph_edge(
     length_m: *mut f64,
 ) -> topoloc_status {
     run(|| {
-        let graph = &borrow(graph, "graph")?.graph;
+        let graph = try_ref(graph, "graph")?;
         let edge = *graph.edges.get(index).ok_or_else(|| {
             FfiError::invalid(format!(
                 "edge index {index} out of range (the graph has {} edges)",
@@ -282,7 +288,7 @@ pub extern "C" fn topoloc_graph_skeleton(
     count: *mut usize,
 ) -> topoloc_status {
     run(|| {
-        let graph = &borrow(graph, "graph")?.graph;
+        let graph = try_ref(graph, "graph")?;
         // Voxel indices fit in 32 bits: a grid holds at most 2^31 voxels.
         let values: Vec<u32> = graph
             .skeleton

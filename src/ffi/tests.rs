@@ -401,3 +401,91 @@ fn status_strings_and_versions() {
     );
     assert_eq!(topoloc_abi_version(), TOPOLOC_ABI_VERSION);
 }
+
+#[test]
+fn the_status_table_matches_the_header_and_names_every_code() {
+    let header = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/include/topoloc.h"))
+        .expect("include/topoloc.h");
+    let mut in_header = Vec::new();
+    for line in header.lines() {
+        let line = line.trim().trim_end_matches(',');
+        if let Some((name, value)) = line.split_once(" = ") {
+            if name.starts_with("TOPOLOC_OK") || name.starts_with("TOPOLOC_ERR_") {
+                in_header.push((
+                    name.to_string(),
+                    value.parse::<u32>().expect("numeric code"),
+                ));
+            }
+        }
+    }
+    let table: Vec<(String, u32)> = topoloc_status::ALL
+        .iter()
+        .map(|&s| {
+            let name = unsafe { CStr::from_ptr(topoloc_status_name(s as u32)) };
+            (name.to_str().unwrap().to_string(), s as u32)
+        })
+        .collect();
+    assert_eq!(table, in_header, "status table and header disagree");
+    assert!(
+        table.windows(2).all(|w| w[0].1 < w[1].1),
+        "codes unique, ascending"
+    );
+    for &status in topoloc_status::ALL {
+        let (name, text) = status.entry();
+        assert!(
+            !text.is_empty() && text != c"unknown status code",
+            "{name:?}"
+        );
+        assert_eq!(topoloc_status::from_code(status as u32), Some(status));
+        assert_eq!(
+            unsafe { CStr::from_ptr(topoloc_status_str(status as u32)) },
+            text
+        );
+    }
+    assert!(topoloc_status_name(7).is_null());
+    assert!(topoloc_status_name(u32::MAX).is_null());
+    assert_eq!(topoloc_abi_version_minor(), TOPOLOC_ABI_VERSION_MINOR);
+    assert!(header.contains(&format!(
+        "#define TOPOLOC_ABI_VERSION_MINOR {TOPOLOC_ABI_VERSION_MINOR}"
+    )));
+}
+
+#[test]
+fn a_result_of_the_oldest_layout_is_read_and_written_within_its_size() {
+    let map = small_map();
+    let mut localizer = null_mut();
+    assert_eq!(
+        topoloc_localizer_new(map, null(), &mut localizer),
+        TOPOLOC_OK
+    );
+    let oldest = <topoloc_result as super::versioned::Versioned>::LAYOUTS[0];
+    assert!(oldest < std::mem::size_of::<topoloc_result>());
+    // Guard bytes right after the caller's struct: nothing may change them.
+    let mut storage = vec![0xCDu8; oldest + 64];
+    let result = storage.as_mut_ptr().cast::<topoloc_result>();
+    assert_eq!(topoloc_result_init(result, oldest), TOPOLOC_OK);
+    let mut candidates = [topoloc_candidate::default(); 2];
+    unsafe {
+        (*result).candidates = candidates.as_mut_ptr();
+        (*result).candidates_capacity = 2;
+    }
+    let query = [0.0f32, 0.0, 1.0, 0.0];
+    let frame = topoloc_frame {
+        descriptor: query.as_ptr(),
+        descriptor_len: 4,
+        ..Default::default()
+    };
+    assert_eq!(
+        topoloc_localizer_process(localizer, &frame, result),
+        TOPOLOC_OK
+    );
+    assert!(
+        storage[oldest..].iter().all(|&b| b == 0xCD),
+        "wrote past struct_size"
+    );
+    let struct_size = unsafe { result.cast::<usize>().read_unaligned() };
+    assert_eq!(struct_size, oldest);
+    assert_eq!(candidates[0].place, 1);
+    topoloc_localizer_free(localizer);
+    topoloc_map_free(map);
+}

@@ -1,11 +1,19 @@
 //! Version and error-text functions.
 
-use super::boundary::{copy_last_error, topoloc_status};
+use super::boundary::copy_last_error;
+use super::status::topoloc_status;
 use std::ffi::{c_char, CStr};
 
 /// ABI version: bumped only when an existing C signature or struct layout changes
 /// incompatibly (which the project avoids: it adds functions and appends struct fields).
 pub const TOPOLOC_ABI_VERSION: u32 = 1;
+
+/// ABI minor version: bumped when functions, struct fields or constants are added. The header
+/// marks additions "ABI 1.N"; a host that uses one checks `topoloc_abi_version_minor() >= N`
+/// at run time (the library it loaded may be older than the header it was built with).
+/// 1.1: image maps; 1.2: verification; 1.3: metric mode; 1.4: `topoloc_abi_version_minor`,
+/// `topoloc_status_name`.
+pub const TOPOLOC_ABI_VERSION_MINOR: u32 = 4;
 
 static VERSION: &CStr =
     match CStr::from_bytes_with_nul(concat!(env!("CARGO_PKG_VERSION"), "\0").as_bytes()) {
@@ -26,11 +34,28 @@ pub extern "C" fn topoloc_abi_version() -> u32 {
     TOPOLOC_ABI_VERSION
 }
 
+/// ABI minor version of the loaded library (ABI 1.4; see `TOPOLOC_ABI_VERSION_MINOR`): fields
+/// and functions marked "ABI 1.N" in the header exist when this is at least N. Thread-safe.
+#[no_mangle]
+pub extern "C" fn topoloc_abi_version_minor() -> u32 {
+    TOPOLOC_ABI_VERSION_MINOR
+}
+
 /// Static English description of a status code (never free it); unknown codes give
-/// "unknown status code".
+/// "unknown status code". Thread-safe.
 #[no_mangle]
 pub extern "C" fn topoloc_status_str(status: u32) -> *const c_char {
-    topoloc_status::description(status).as_ptr()
+    topoloc_status::from_code(status)
+        .map_or(c"unknown status code", |s| s.entry().1)
+        .as_ptr()
+}
+
+/// Static C name of a status code, e.g. `"TOPOLOC_ERR_IO"` (ABI 1.4; never free it), or NULL
+/// for a code this library does not know. Language bindings use it to check that they map
+/// every code. Thread-safe.
+#[no_mangle]
+pub extern "C" fn topoloc_status_name(status: u32) -> *const c_char {
+    topoloc_status::from_code(status).map_or(std::ptr::null(), |s| s.entry().0.as_ptr())
 }
 
 /// Copies the message of the most recent failed call on this thread (NUL-terminated; "" if

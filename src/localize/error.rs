@@ -19,7 +19,7 @@ pub enum LocalizeError {
     InvalidOption(String),
     /// Frame timestamp is NaN/Inf or earlier than the previous frame's.
     #[error("bad timestamp: {0}")]
-    Timestamp(String),
+    Timestamp(TimestampError),
     /// Describing the frame's image failed (bad image, uninformative image, backend error), or
     /// the describer does not fit the map.
     #[error(transparent)]
@@ -38,4 +38,20 @@ pub enum LocalizeError {
     /// Odometry is not finite.
     #[error("bad odometry: {0}")]
     Odometry(String),
+}
+
+/// What is wrong with a frame's timestamp.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum TimestampError {
+    /// NaN or infinite.
+    #[error("{0} is not finite")]
+    NonFinite(f64),
+    /// Earlier than the previous frame's (filter and metric modes need time to move forward).
+    #[error("{timestamp} is earlier than the previous frame's {previous}; reset the localizer to start a new sequence")]
+    Backwards {
+        /// The frame's timestamp.
+        timestamp: f64,
+        /// The previous frame's.
+        previous: f64,
+    },
 }

@@ -15,7 +15,7 @@ mod motion;
 mod particles;
 mod similarity;
 
-pub use error::LocalizeError;
+pub use error::{LocalizeError, TimestampError};
 pub use particles::{MetricOptions, MAX_PARTICLES};
 
 use crate::describe::{Describer, DescriberOptions};
@@ -421,17 +421,16 @@ impl Localizer {
     ) -> Result<(), LocalizeError> {
         let filtering = self.options.mode != Mode::SingleFrame;
         if !frame.timestamp.is_finite() {
-            return Err(LocalizeError::Timestamp(format!(
-                "{} is not finite",
-                frame.timestamp
+            return Err(LocalizeError::Timestamp(TimestampError::NonFinite(
+                frame.timestamp,
             )));
         }
         if let (true, Some(last)) = (filtering, self.last_timestamp) {
             if frame.timestamp < last {
-                return Err(LocalizeError::Timestamp(format!(
-                    "{} is earlier than the previous frame's {last}; reset the localizer to start a new sequence",
-                    frame.timestamp
-                )));
+                return Err(LocalizeError::Timestamp(TimestampError::Backwards {
+                    timestamp: frame.timestamp,
+                    previous: last,
+                }));
             }
         }
         let travelled = match &frame.odometry {

@@ -50,6 +50,113 @@ const DEFAULT_MACROS: &str = "
 #define topoloc_skeleton_options_default(p) topoloc_skeleton_options_init((p), sizeof *(p))
 ";
 
+/// The header's sections of functions, in reading order: a banner and the functions' name
+/// prefixes. cbindgen writes functions in the order of src/ffi/mod.rs's modules; this only
+/// names the sections, and fails when a function belongs to none or a section is split.
+const SECTIONS: &[(&str, &[&str])] = &[
+    (
+        "Versions and errors",
+        &[
+            "topoloc_version",
+            "topoloc_abi_version",
+            "topoloc_status_",
+            "topoloc_last_error_message",
+        ],
+    ),
+    (
+        "Maps: load, save, query (a const topoloc_map* may be shared by many threads)",
+        &[
+            "topoloc_map_load",
+            "topoloc_map_save",
+            "topoloc_map_free",
+            "topoloc_map_place",
+            "topoloc_map_view",
+            "topoloc_map_edge",
+            "topoloc_map_descriptor",
+            "topoloc_map_neighbours",
+            "topoloc_view_info",
+        ],
+    ),
+    (
+        "Localizer (one camera, one thread at a time)",
+        &["topoloc_localizer_", "topoloc_frame_", "topoloc_result_"],
+    ),
+    (
+        "Building maps: from places and views, keyframes, images",
+        &[
+            "topoloc_map_builder_",
+            "topoloc_view_attributes_",
+            "topoloc_keyframe_options_",
+            "topoloc_map_from_keyframes",
+            "topoloc_image_map_options_",
+            "topoloc_map_build_from_",
+        ],
+    ),
+    (
+        "Skeleton graphs from occupancy grids",
+        &["topoloc_skeleton_options_", "topoloc_graph_"],
+    ),
+];
+
+/// Puts a banner comment before the first function of every section of [`SECTIONS`].
+fn add_section_banners(header: &str) -> Result<String, String> {
+    let mut out = String::with_capacity(header.len() + 1024);
+    let mut pending_doc = String::new();
+    let mut current: Option<usize> = None;
+    let mut seen = vec![false; SECTIONS.len()];
+    for line in header.split_inclusive('\n') {
+        let in_doc = !pending_doc.is_empty();
+        if line.starts_with("/**") || (in_doc && !pending_doc.ends_with("*/\n")) {
+            pending_doc.push_str(line);
+            continue;
+        }
+        if let Some(name) = function_name(line) {
+            let section = SECTIONS
+                .iter()
+                .position(|(_, prefixes)| prefixes.iter().any(|p| name.starts_with(p)))
+                .ok_or_else(|| {
+                    format!(
+                        "function {name} belongs to no header section (tools/gen-header SECTIONS)"
+                    )
+                })?;
+            if current != Some(section) {
+                if seen[section] {
+                    return Err(format!(
+                        "section '{}' is split: order src/ffi/mod.rs's modules",
+                        SECTIONS[section].0
+                    ));
+                }
+                seen[section] = true;
+                current = Some(section);
+                let title = SECTIONS[section].0;
+                out.push_str(&format!(
+                    "/* {0}\n * {title}\n * {0} */\n\n",
+                    "=".repeat(title.len().max(40))
+                ));
+            }
+        }
+        out.push_str(&pending_doc);
+        pending_doc.clear();
+        out.push_str(line);
+    }
+    out.push_str(&pending_doc);
+    Ok(out)
+}
+
+/// The function a declaration line declares (`type name(...);` at column 0), if it is one.
+fn function_name(line: &str) -> Option<&str> {
+    if line.starts_with(' ')
+        || line.starts_with('#')
+        || line.starts_with("typedef")
+        || !line.trim_end().ends_with(");")
+    {
+        return None;
+    }
+    let open = line.find('(')?;
+    let name = line[..open].rsplit([' ', '*']).next()?;
+    name.starts_with("topoloc_").then_some(name)
+}
+
 fn generate(root: &Path) -> Result<Vec<u8>, String> {
     let (major, minor, patch) = package_version(root)?;
     let mut config =
@@ -65,7 +172,8 @@ fn generate(root: &Path) -> Result<Vec<u8>, String> {
         .map_err(|e| format!("cbindgen: {e}"))?;
     let mut out = Vec::new();
     bindings.write(&mut out);
-    Ok(out)
+    let text = String::from_utf8(out).map_err(|e| format!("cbindgen wrote non-UTF-8: {e}"))?;
+    Ok(add_section_banners(&text)?.into_bytes())
 }
 
 fn main() -> ExitCode {
