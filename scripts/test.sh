@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
-# Runs every test layer: Rust (unit, integration, FFI), the header check, C (plain, ASan+UBSan,
-# valgrind, static), C++ RAII, the CMake consumer against the installed package, and Python.
+# Runs every test layer: formatting and lints, Rust (unit, integration, FFI, the layer order),
+# the header check, C (plain, ASan+UBSan, valgrind, static), C++ RAII, the CMake consumer against
+# the installed package, and Python.
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$root"
@@ -8,6 +9,10 @@ bash scripts/install-deps.sh
 bash scripts/setup-models.sh
 
 section() { printf '\n=== %s ===\n' "$1"; }
+
+section "Rust formatting and lints"
+cargo fmt --all -- --check
+cargo clippy --workspace --all-targets --quiet -- -D warnings
 
 section "Rust tests"
 cargo test --workspace --quiet
