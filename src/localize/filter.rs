@@ -73,6 +73,7 @@ fn off_map_score(params: &FilterParams, place_scores: &[f32], max_score: f64) ->
 }
 
 /// Motion belief, place marginals, off-map probability, and scratch buffers.
+#[derive(Clone)]
 pub(crate) struct Belief {
     headings: Headings,
     speeds: usize,
@@ -270,13 +271,6 @@ impl Belief {
         backup.states.copy_from_slice(&self.states);
         backup.places.copy_from_slice(&self.places);
         backup.off_map = self.off_map;
-    }
-
-    /// Restores a belief saved with [`Belief::save`].
-    pub fn restore(&mut self, backup: &Belief) {
-        self.states.copy_from_slice(&backup.states);
-        self.places.copy_from_slice(&backup.places);
-        self.off_map = backup.off_map;
     }
 
     /// Multiplies every state by the likelihood of its place (held in `places`) and returns the

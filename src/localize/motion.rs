@@ -6,6 +6,7 @@
 use crate::map::Map;
 
 /// Directed edges of a map with their continuations, in compressed-row form.
+#[derive(Clone)]
 pub(crate) struct Headings {
     /// Place the heading starts from.
     pub from: Vec<u32>,

@@ -431,11 +431,6 @@ impl Particles {
         backup.fresh = self.fresh;
         backup.rng = self.rng.clone();
     }
-
-    /// Restores a cloud saved with [`Particles::save`].
-    pub fn restore(&mut self, backup: &Particles) {
-        backup.save(self);
-    }
 }
 
 /// Index of the place nearest to `point`.

@@ -1,0 +1,152 @@
+//! What a localizer is asked to do: its [`Mode`] and [`LocalizerOptions`], validated into the
+//! graph filter's parameters.
+
+use super::filter::FilterParams;
+use super::particles::MetricOptions;
+use super::LocalizeError;
+use crate::descriptor::ExpectedDescriptor;
+use crate::verify::VerificationOptions;
+
+/// Whether frames are filtered over time or judged one by one.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum Mode {
+    /// Forward filter over the graph (default).
+    #[default]
+    Filter,
+    /// Every frame on its own, from the same prior; for comparison and for unordered queries.
+    SingleFrame,
+    /// Monte Carlo localization of the camera pose in the map frame, moved by the full
+    /// odometry and weighed by appearance (see `particles.rs`); the place is the one nearest
+    /// to the particles. Needs a map with place positions and view poses.
+    Metric,
+}
+
+/// Localizer parameters. `temperature` and `off_map_margin` were chosen with `topoloc sweep`
+/// on generated worlds held out from the demo (table in BENCHMARKS.md); the same temperature
+/// serves MobileNetV2 multi-level and VLAD descriptors on real images (BENCHMARKS.md).
+#[derive(Clone, Debug, PartialEq)]
+pub struct LocalizerOptions {
+    /// Filter or single-frame.
+    pub mode: Mode,
+    /// Softmax temperature turning similarities into likelihoods for the motion belief; smaller
+    /// trusts each frame's appearance more, larger lets evidence accumulate along the route.
+    /// Default 0.2 (best OHA, then R@100P, on held-out generated worlds; BENCHMARKS.md).
+    /// Scaling it with the map's similarity spread was measured and is worse on real images.
+    pub temperature: f32,
+    /// Probability that the off-map state persists from one frame to the next. Default 0.7.
+    pub stay_probability: f32,
+    /// Probability of a jump to any place (kidnapping, relocalization). Default 0.01.
+    pub jump_probability: f32,
+    /// Probability of entering the off-map state per frame. Default 0.01; 0 disables off-map.
+    pub off_map_probability: f32,
+    /// Absolute floor of the off-map hypothesis' score: frames whose best place scores below it
+    /// (for long enough) are reported off-map. Default 0.2.
+    pub off_map_similarity: f32,
+    /// How many standard deviations above the expected best background score a place must
+    /// score to beat the off-map hypothesis (see `filter.rs`; negative values lower the bar,
+    /// since neighbouring places make the background scores correlated). Default -1.0.
+    pub off_map_margin: f32,
+    /// Temperature of the on-map vs off-map decision (see `filter.rs`). Default 0.03.
+    pub off_map_temperature: f32,
+    /// Candidates reported per frame. Default 5.
+    pub top_k: usize,
+    /// Refuse maps built with another descriptor than this one.
+    pub expected: ExpectedDescriptor,
+    /// Speed classes of the motion model: the chance of advancing one edge per frame, each in
+    /// [0, 1], at most [`MAX_SPEED_CLASSES`]. Default 1, 0.5, 0.2, 0.05, 0 (from a camera that
+    /// advances a place every frame to a standing one). Odometry, when given, sets the advance.
+    pub speeds: Vec<f32>,
+    /// Per-frame probability of moving to a neighbouring speed class. Default 0.05.
+    pub speed_change_probability: f32,
+    /// Per-frame probability of turning to another heading at the same place. Default 0.02.
+    pub turn_probability: f32,
+    /// Geometric verification of the most probable places against the query image (off by
+    /// default; needs frames with images and a map storing keypoints).
+    pub verification: VerificationOptions,
+    /// Parameters of [`Mode::Metric`] (ignored in the other modes).
+    pub metric: MetricOptions,
+}
+
+/// Most speed classes the motion model accepts.
+pub const MAX_SPEED_CLASSES: usize = 8;
+
+impl Default for LocalizerOptions {
+    fn default() -> Self {
+        Self {
+            mode: Mode::Filter,
+            temperature: 0.2,
+            stay_probability: 0.7,
+            jump_probability: 0.01,
+            off_map_probability: 0.01,
+            off_map_similarity: 0.2,
+            off_map_margin: -1.0,
+            off_map_temperature: 0.03,
+            top_k: 5,
+            expected: ExpectedDescriptor::default(),
+            speeds: vec![1.0, 0.5, 0.2, 0.05, 0.0],
+            speed_change_probability: 0.05,
+            turn_probability: 0.02,
+            verification: VerificationOptions::default(),
+            metric: MetricOptions::default(),
+        }
+    }
+}
+
+impl LocalizerOptions {
+    pub(super) fn filter_params(&self) -> Result<FilterParams, LocalizeError> {
+        let bad = |msg: &str| Err(LocalizeError::InvalidOption(msg.to_string()));
+        let prob = |x: f32| x.is_finite() && (0.0..=1.0).contains(&x);
+        if !(self.temperature.is_finite() && self.temperature > 0.0) {
+            return bad("temperature must be finite and > 0");
+        }
+        if !(self.off_map_temperature.is_finite() && self.off_map_temperature > 0.0) {
+            return bad("off_map_temperature must be finite and > 0");
+        }
+        if !prob(self.stay_probability) {
+            return bad("stay_probability must lie in [0, 1]");
+        }
+        if !prob(self.jump_probability) || !prob(self.off_map_probability) {
+            return bad("jump_probability and off_map_probability must lie in [0, 1]");
+        }
+        if self.jump_probability + self.off_map_probability >= 1.0 {
+            return bad("jump_probability + off_map_probability must be below 1");
+        }
+        if !(self.off_map_similarity.is_finite() && (-1.0..=1.0).contains(&self.off_map_similarity))
+        {
+            return bad("off_map_similarity must lie in [-1, 1]");
+        }
+        if !self.off_map_margin.is_finite() {
+            return bad("off_map_margin must be finite");
+        }
+        if self.speeds.is_empty()
+            || self.speeds.len() > MAX_SPEED_CLASSES
+            || !self.speeds.iter().all(|&v| prob(v))
+        {
+            return bad("speeds must hold 1 to 8 values in [0, 1]");
+        }
+        if !prob(self.speed_change_probability) || !prob(self.turn_probability) {
+            return bad("speed_change_probability and turn_probability must lie in [0, 1]");
+        }
+        if self.top_k == 0 {
+            return bad("top_k must be at least 1");
+        }
+        self.verification
+            .validate()
+            .map_err(LocalizeError::InvalidOption)?;
+        self.metric
+            .validate()
+            .map_err(LocalizeError::InvalidOption)?;
+        Ok(FilterParams {
+            temperature: f64::from(self.temperature),
+            stay_probability: f64::from(self.stay_probability),
+            jump_probability: f64::from(self.jump_probability),
+            off_map_probability: f64::from(self.off_map_probability),
+            off_map_similarity: f64::from(self.off_map_similarity),
+            off_map_margin: f64::from(self.off_map_margin),
+            off_map_temperature: f64::from(self.off_map_temperature),
+            speeds: self.speeds.iter().map(|&v| f64::from(v)).collect(),
+            speed_change_probability: f64::from(self.speed_change_probability),
+            turn_probability: f64::from(self.turn_probability),
+        })
+    }
+}
