@@ -206,6 +206,16 @@ def _strip_comments(text: str) -> str:
     return re.sub(r"//[^\n]*", "", text)
 
 
+def _header_integer_typedefs() -> dict:
+    """``typedef uint32_t topoloc_mode;`` and its kind, read from the header: alias -> type."""
+    if HEADER is None or not HEADER.is_file():
+        return {}
+    return dict(
+        (alias, base)
+        for base, alias in re.findall(r"^typedef (u?int\d+_t) (topoloc_\w+);", HEADER.read_text(), re.M)
+    )
+
+
 def _ctype_for(c_type: str):
     """ctypes type the shim must use for a C type written in the header.
 
@@ -242,6 +252,9 @@ def _ctype_for(c_type: str):
     }
     table.update(_lib.STRUCTS)
     table.update(_lib.HANDLES)
+    # Integer typedefs of the header (topoloc_mode, topoloc_backend, ...) are their base type.
+    for alias, aliased in _header_integer_typedefs().items():
+        table[alias] = table[aliased]
     ty = table[base]
     for _ in range(stars):
         ty = POINTER(ty)
