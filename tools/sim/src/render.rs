@@ -969,7 +969,9 @@ impl World {
 
 /// Chebyshev (L-infinity) distance in voxels from each voxel to the nearest occupied one,
 /// saturated at 255; voxels outside the grid count as occupied. Exact: two raster passes over
-/// the 26-neighbourhood with unit weights.
+/// the 26-neighbourhood with unit weights. Not the library's Euclidean
+/// [`topoloc::skeleton::squared_distance_transform`]: the traversal needs the free cube around a
+/// voxel, and a Euclidean distance `d` only guarantees a cube of half-side `d / sqrt(3)`.
 fn chebyshev_distance(occupied: &[bool], dims: [usize; 3]) -> Vec<u8> {
     let [nx, ny, nz] = dims;
     let mut d: Vec<u8> = occupied.iter().map(|&o| if o { 0 } else { 255 }).collect();
