@@ -10,15 +10,14 @@
 use crate::backend_args::Backend;
 use crate::process::{median_and_p90, resident_memory_mib};
 use crate::progress::StepBars;
-use crate::simulate::{scenario_options, CaptureArgs};
+use crate::scenario_args::{choose_backend, scenario_options, CaptureArgs};
 use crate::top_view::write_top_view;
 use anyhow::{Context, Result};
 use serde_json::json;
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::Instant;
-use topoloc::describe::onnx::{cache_dir, DEFAULT_MODEL_FILE};
-use topoloc::describe::{BackendConfig, DescriberOptions};
+use topoloc::describe::DescriberOptions;
 use topoloc::eval::{calibration, precision_recall, GraphEvaluator, HopDistances, Prediction};
 use topoloc::image::ImageView;
 use topoloc::map::{LoadOptions, PlaceId};
@@ -77,26 +76,6 @@ pub(crate) struct ConfigResult {
     pub ms_p90: f64,
     /// Predicted place per frame.
     pub predicted: Vec<PlaceId>,
-}
-
-/// The backend the demo uses: the one asked for, else ONNX when its model is in the cache.
-pub(crate) fn choose_backend(asked: Option<Backend>) -> (BackendConfig, String) {
-    let model = cache_dir().join(DEFAULT_MODEL_FILE);
-    match asked {
-        Some(Backend::Vlad) => (BackendConfig::Vlad(Default::default()), "VLAD (asked for)".into()),
-        Some(Backend::Onnx) => (BackendConfig::Onnx(Default::default()), "ONNX MLF (asked for)".into()),
-        None if model.is_file() => (
-            BackendConfig::Onnx(Default::default()),
-            format!("ONNX MLF (model found: {})", model.display()),
-        ),
-        None => (
-            BackendConfig::Vlad(Default::default()),
-            format!(
-                "VLAD dense ORB: no ONNX model at {} (run scripts/setup-models.sh for the CNN backend)",
-                model.display()
-            ),
-        ),
-    }
 }
 
 pub fn run(args: &DemoArgs) -> Result<()> {

@@ -10,6 +10,7 @@ mod plot;
 mod process;
 mod progress;
 mod scaling;
+mod scenario_args;
 mod simulate;
 mod suite;
 mod sweep;

@@ -6,21 +6,17 @@
 //! folder `OUT/traj-00i/` (topoloc-sim format: PNG images, TUM ground truth and odometry, the
 //! ground-truth nodes CSV, intrinsics, the place graph and a manifest).
 
-use crate::backend_args::{progress_bar, Backend};
-use crate::demo::choose_backend;
+use crate::backend_args::progress_bar;
 use crate::progress::StepBars;
+use crate::scenario_args::{choose_backend, parse_split, scenario_options, CaptureArgs, QueryArgs};
 use anyhow::{bail, Context, Result};
 use rayon::prelude::*;
 use serde_json::json;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
-use topoloc::build::ImageMapOptions;
-use topoloc::describe::BackendConfig;
 use topoloc_sim::dataset::{DatasetInfo, DatasetWriter};
-use topoloc_sim::render::{Condition, ConditionKind};
 use topoloc_sim::scenario::{build_scene, fly, Flight, ScenarioOptions, Scene};
 use topoloc_sim::style::Split;
-use topoloc_sim::world::WorldParams;
 
 /// File name of the map inside `--out`.
 pub const MAP_FILE: &str = "map.topoloc";
@@ -59,32 +55,6 @@ pub struct SimulateArgs {
     /// Print one JSON summary object on stdout instead of text.
     #[arg(long)]
     pub json: bool,
-}
-
-/// Query frames' light and rate, and the map's descriptor backend, shared by `simulate` and
-/// `suite`.
-#[derive(clap::Args, Clone, Debug)]
-pub struct QueryArgs {
-    /// Query frames per second.
-    #[arg(long, default_value_t = 10.0)]
-    pub rate_hz: f64,
-    /// Lighting of the query frames (maps are captured in bright light).
-    #[arg(long, default_value = "dim", value_parser = parse_condition)]
-    pub condition: ConditionKind,
-    /// Descriptor backend of the map; default: ONNX when its model is set up, else VLAD.
-    #[arg(long, value_enum)]
-    pub backend: Option<Backend>,
-}
-
-pub(crate) fn parse_split(name: &str) -> Result<Split, String> {
-    name.parse()
-}
-
-pub(crate) fn parse_condition(name: &str) -> Result<ConditionKind, String> {
-    ConditionKind::from_name(name).ok_or_else(|| {
-        let names: Vec<_> = ConditionKind::ALL.iter().map(|k| k.name()).collect();
-        format!("expected one of {}", names.join(", "))
-    })
 }
 
 /// Runs the command.
@@ -184,54 +154,6 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
         say(format!("done in {:.1} s", start.elapsed().as_secs_f64()));
     }
     Ok(())
-}
-
-/// Views captured per place by `demo`, `simulate` and `suite` unless `--views-per-place` says
-/// otherwise. The seed's micro nodes are 4 views 90 degrees apart; 12 (30 degrees apart) was
-/// measured better on generated worlds (test world 0: filter MNA 0.26 with 4, 0.42 with 8,
-/// 0.50 with 12, 0.47 with 16; BENCHMARKS.md), since a query turned 45 degrees from every
-/// view shares only half its field of view with each.
-pub(crate) const VIEWS_PER_PLACE: usize = 12;
-
-/// Map capture options shared by `demo`, `simulate` and `suite`.
-#[derive(clap::Args, Clone, Debug)]
-pub struct CaptureArgs {
-    /// Map views per place, evenly turned in yaw, 1..=16 (4 is the seed's micro nodes).
-    #[arg(long, default_value_t = VIEWS_PER_PLACE)]
-    pub views_per_place: usize,
-    /// Also capture those views from 4 points this far around each place (metres, 0 = off;
-    /// points kept where free, in sight of the place and nearest to it). 0.8 raised test-split
-    /// MNA/OHA by about 0.05 at 5x the views and map build time (BENCHMARKS.md).
-    #[arg(long, default_value_t = 0.0)]
-    pub ring_m: f64,
-}
-
-/// The scenario of `demo`, `simulate` and `suite`: `world` with `capture` views per place
-/// captured in bright light and described with `backend`, queried under `condition`
-/// along `legs` legs (one of them back to an earlier goal, a loop, when there are two or more)
-/// at `rate_hz`; the trajectory seed is left to the caller.
-pub(crate) fn scenario_options(
-    world: WorldParams,
-    backend: BackendConfig,
-    capture: &CaptureArgs,
-    condition: ConditionKind,
-    legs: usize,
-    rate_hz: f64,
-) -> ScenarioOptions {
-    let mut options = ScenarioOptions::new(
-        world,
-        ImageMapOptions {
-            backend,
-            ..ImageMapOptions::default()
-        },
-    );
-    options.capture.views_per_place = capture.views_per_place;
-    options.capture.ring_radius_m = capture.ring_m;
-    options.query_condition = Condition::preset(condition);
-    options.trajectory.goals = legs;
-    options.trajectory.revisits = options.trajectory.revisits.min(legs.saturating_sub(1));
-    options.trajectory.motion.rate_hz = rate_hz;
-    options
 }
 
 /// Refuses an output folder that already holds something (stale trajectories would mix in).

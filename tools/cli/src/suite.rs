@@ -12,9 +12,9 @@
 //! OHA per split as mean ± standard deviation over the worlds, the way the seed's tables do
 //! (thesis Table 4.2), and the graph sizes they were measured on.
 
-use crate::demo::{choose_backend, evaluate, ConfigResult};
+use crate::demo::{evaluate, ConfigResult};
 use crate::progress::StepBars;
-use crate::simulate::{parse_split, scenario_options, CaptureArgs, QueryArgs};
+use crate::scenario_args::{choose_backend, parse_split, scenario_options, CaptureArgs, QueryArgs};
 use anyhow::Result;
 use serde_json::json;
 use std::time::Instant;

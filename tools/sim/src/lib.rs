@@ -16,6 +16,7 @@ pub mod dataset;
 pub mod ground_truth;
 pub mod odometry;
 pub mod render;
+pub mod rng;
 pub mod scenario;
 pub mod style;
 pub mod texture;

@@ -30,8 +30,9 @@
 //! `cargo bench -p topoloc-sim --bench render`): about half traversal, half shading.
 
 use crate::camera::{Intrinsics, Pose};
+use crate::rng::SimRng;
 use crate::texture::{face_uv, fetch, Material, Texture, TextureFamily};
-use crate::world::{RegionKind, SimRng, World, NO_REGION};
+use crate::world::{RegionKind, World, NO_REGION};
 use nalgebra::{Point3, Vector3};
 use serde::{Deserialize, Serialize};
 use std::collections::HashMap;
@@ -910,9 +911,67 @@ fn box_blur_rows(px: &mut [[f32; 3]], width: usize, len: usize) {
     }
 }
 
+// The world's plan is drawn here, where images are: the world module does not import the renderer.
+impl World {
+    /// A plan of storey `floor` at the middle of its flight band, one pixel per voxel column,
+    /// north (+y) up: walls dark, rooms light with a tint per wall material, corridors grey,
+    /// furniture brown, landmarks red, doorways green, shaft openings (above and below) blue.
+    pub fn top_view(&self, floor: usize) -> Image {
+        use TextureFamily as F;
+        let [nx, ny, _] = self.grid().dims();
+        let vs = self.grid().voxel_size();
+        let [lo, hi] = self.flight_band(floor);
+        let z = ((0.5 * (lo + hi) - self.grid().origin().z) / vs) as usize;
+        let furniture: Vec<u16> = self.furniture().iter().map(|f| f.material).collect();
+        let map = self.region_map(floor);
+        let mut image = Image::new(nx as u32, ny as u32);
+        let mut put = |x: usize, y: usize, c| image.set_pixel(x as u32, (ny - 1 - y) as u32, c);
+        for y in 0..ny {
+            for x in 0..nx {
+                let m = self.materials()[x + nx * (y + ny * z)];
+                let colour = if m != 0 {
+                    match self.material_table()[m as usize].family {
+                        F::Poster | F::Sign => [220, 30, 30],
+                        _ if furniture.contains(&m) => [140, 90, 40],
+                        _ => [40, 40, 40],
+                    }
+                } else {
+                    match self.regions().get(map[x + nx * y] as usize) {
+                        Some(r) if r.kind == RegionKind::Room => {
+                            let tint = r.wall_material as u32 * 67;
+                            [
+                                (180 + tint % 60) as u8,
+                                (180 + (tint / 3) % 60) as u8,
+                                (200 + (tint / 7) % 50) as u8,
+                            ]
+                        }
+                        Some(_) => [160, 160, 160],
+                        None => [60, 170, 60],
+                    }
+                };
+                put(x, y, colour);
+            }
+        }
+        let shafts = self
+            .regions()
+            .iter()
+            .filter(|r| r.kind == RegionKind::Shaft && (r.floor == floor || r.floor + 1 == floor));
+        for r in shafts {
+            for y in (r.min[1] / vs).round() as usize..(r.max[1] / vs).round() as usize {
+                for x in (r.min[0] / vs).round() as usize..(r.max[0] / vs).round() as usize {
+                    put(x, y, [60, 90, 220]);
+                }
+            }
+        }
+        image
+    }
+}
+
 /// Chebyshev (L-infinity) distance in voxels from each voxel to the nearest occupied one,
 /// saturated at 255; voxels outside the grid count as occupied. Exact: two raster passes over
-/// the 26-neighbourhood with unit weights.
+/// the 26-neighbourhood with unit weights. Not the library's Euclidean
+/// [`topoloc::skeleton::squared_distance_transform`]: the traversal needs the free cube around a
+/// voxel, and a Euclidean distance `d` only guarantees a cube of half-side `d / sqrt(3)`.
 fn chebyshev_distance(occupied: &[bool], dims: [usize; 3]) -> Vec<u8> {
     let [nx, ny, nz] = dims;
     let mut d: Vec<u8> = occupied.iter().map(|&o| if o { 0 } else { 255 }).collect();

@@ -16,9 +16,8 @@
 //! worlds as `Train` flown along new trajectories; `TrA`, new worlds (new seeds) of the training
 //! style; `Test`, worlds of the unseen style.
 
+use crate::rng::mix64;
 use crate::texture::TextureFamily;
-use crate::world::rng::mix64;
-use crate::world::WorldParams;
 use serde::{Deserialize, Serialize};
 use std::fmt;
 use std::str::FromStr;
@@ -89,7 +88,7 @@ impl FurnitureKind {
     }
 }
 
-/// Ranges a world's layout parameters are drawn from (see [`WorldParams::from_style`]).
+/// Ranges a world's layout parameters are drawn from (see [`WorldParams::from_style`](crate::world::WorldParams::from_style)).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct LayoutRanges {
     /// Storeys, inclusive range.
@@ -271,12 +270,6 @@ impl Split {
             Self::Test => 3,
         };
         range << 32 | k as u64
-    }
-
-    /// The parameters of world `k` of the split: its seed and style, layout drawn from the
-    /// style's ranges.
-    pub fn world_params(self, k: u32) -> WorldParams {
-        WorldParams::from_style(self.world_seed(k), self.style())
     }
 
     /// A seed for trajectory `i` in world `k`, different for every split (so `TrT` flies new

@@ -10,10 +10,10 @@
 //! [`Placement`] maps the tile once onto their rectangle.
 //!
 //! Texel values are albedo (reflectance) in 8 bits per channel; lighting and the output gamma
-//! are the renderer's business. Patterns use only integer hashes and [`crate::world::SimRng`],
+//! are the renderer's business. Patterns use only integer hashes and [`crate::rng::SimRng`],
 //! so a material gives the same texels on every platform.
 
-use crate::world::rng::{hash3, hash_unit, SimRng};
+use crate::rng::{hash3, hash_unit, SimRng};
 use serde::{Deserialize, Serialize};
 use std::f32::consts::TAU;
 

@@ -14,6 +14,7 @@ mod motion;
 mod planner;
 
 pub(crate) use motion::wrap_angle;
+pub use motion::MotionOptions;
 
 use motion::Knot;
 use nalgebra::{Point3, Vector3};
@@ -149,54 +150,7 @@ impl PlannerOptions {
     }
 }
 
-/// How the vehicle moves along a path and how frames are taken.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(default)]
-pub struct MotionOptions {
-    /// Frame rate, Hz (1..=100; 10 to 20 is typical). Default 15.
-    pub rate_hz: f64,
-    /// Each leg (start to goal) cruises at a speed drawn uniformly from this range, m/s
-    /// (0 < min <= max <= 5). Default `(0.5, 1.5)`.
-    pub speed_range_mps: (f64, f64),
-    /// Acceleration and braking, m/s^2 (0.05..=10). Default 0.5.
-    pub accel_mps2: f64,
-    /// Most lateral (centripetal) acceleration in turns, m/s^2 (0.05..=20). Default 0.5.
-    pub lateral_accel_mps2: f64,
-    /// Most yaw rate, rad/s (0.1..=2 pi); the speed drops in turns so that the heading can
-    /// follow. Default 1.0 (57 deg/s).
-    pub max_yaw_rate_rad_s: f64,
-    /// Radius of the arcs that round path corners, metres (0..=10; 0 keeps corners sharp:
-    /// stop and turn in place). Default 0.8.
-    pub corner_radius_m: f64,
-    /// Standard deviation of the heading noise, radians (0..=pi/4). Default 0.05 (3 deg).
-    pub yaw_noise_std_rad: f64,
-    /// Standard deviation of the pitch and roll noise, radians (0..=0.5). Default 0: level
-    /// camera.
-    pub tilt_noise_std_rad: f64,
-    /// Correlation time of the angle noise, seconds (0.01..=60). Default 1.
-    pub noise_tau_s: f64,
-    /// Pause at each goal before the next leg, seconds (0..=60), after turning to the new
-    /// direction in place. Default 0.5.
-    pub goal_pause_s: f64,
-}
-
-impl Default for MotionOptions {
-    fn default() -> Self {
-        Self {
-            rate_hz: 15.0,
-            speed_range_mps: (0.5, 1.5),
-            accel_mps2: 0.5,
-            lateral_accel_mps2: 0.5,
-            max_yaw_rate_rad_s: 1.0,
-            corner_radius_m: 0.8,
-            yaw_noise_std_rad: 0.05,
-            tilt_noise_std_rad: 0.0,
-            noise_tau_s: 1.0,
-            goal_pause_s: 0.5,
-        }
-    }
-}
-
+// Checked here, with the other options' checks (the motion module does not import this one).
 impl MotionOptions {
     /// Checks ranges; the error names the field.
     pub fn validate(&self) -> Result<(), TrajectoryError> {

@@ -43,12 +43,9 @@
 //! `(0, 0, -slab)`. [`World::flight_band`] gives the heights a MAV flies at on each storey.
 
 mod build;
-pub mod rng;
 
-pub use rng::SimRng;
-
-use crate::render::Image;
-use crate::style::{FurnitureKind, Style};
+use crate::rng::SimRng;
+use crate::style::{FurnitureKind, Split, Style};
 use crate::texture::Material;
 use nalgebra::Point3;
 use serde::{Deserialize, Serialize};
@@ -507,58 +504,14 @@ impl World {
         }
         components
     }
+}
 
-    /// A plan of storey `floor` at the middle of its flight band, one pixel per voxel column,
-    /// north (+y) up: walls dark, rooms light with a tint per wall material, corridors grey,
-    /// furniture brown, landmarks red, doorways green, shaft openings (above and below) blue.
-    pub fn top_view(&self, floor: usize) -> Image {
-        use crate::texture::TextureFamily as F;
-        let [nx, ny, _] = self.grid.dims();
-        let vs = self.grid.voxel_size();
-        let [lo, hi] = self.flight_band(floor);
-        let z = ((0.5 * (lo + hi) - self.grid.origin().z) / vs) as usize;
-        let furniture: Vec<u16> = self.furniture.iter().map(|f| f.material).collect();
-        let map = self.region_map(floor);
-        let mut image = Image::new(nx as u32, ny as u32);
-        let mut put = |x: usize, y: usize, c| image.set_pixel(x as u32, (ny - 1 - y) as u32, c);
-        for y in 0..ny {
-            for x in 0..nx {
-                let m = self.materials[x + nx * (y + ny * z)];
-                let colour = if m != 0 {
-                    match self.material_table[m as usize].family {
-                        F::Poster | F::Sign => [220, 30, 30],
-                        _ if furniture.contains(&m) => [140, 90, 40],
-                        _ => [40, 40, 40],
-                    }
-                } else {
-                    match self.regions.get(map[x + nx * y] as usize) {
-                        Some(r) if r.kind == RegionKind::Room => {
-                            let tint = r.wall_material as u32 * 67;
-                            [
-                                (180 + tint % 60) as u8,
-                                (180 + (tint / 3) % 60) as u8,
-                                (200 + (tint / 7) % 50) as u8,
-                            ]
-                        }
-                        Some(_) => [160, 160, 160],
-                        None => [60, 170, 60],
-                    }
-                };
-                put(x, y, colour);
-            }
-        }
-        let shafts = self
-            .regions
-            .iter()
-            .filter(|r| r.kind == RegionKind::Shaft && (r.floor == floor || r.floor + 1 == floor));
-        for r in shafts {
-            for y in (r.min[1] / vs).round() as usize..(r.max[1] / vs).round() as usize {
-                for x in (r.min[0] / vs).round() as usize..(r.max[0] / vs).round() as usize {
-                    put(x, y, [60, 90, 220]);
-                }
-            }
-        }
-        image
+impl Split {
+    /// The parameters of world `k` of the split: its seed and style, layout drawn from the
+    /// style's ranges. (Defined here, beside [`WorldParams::from_style`], so that the style
+    /// module does not import this one.)
+    pub fn world_params(self, k: u32) -> WorldParams {
+        WorldParams::from_style(self.world_seed(k), self.style())
     }
 }
 

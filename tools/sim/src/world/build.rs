@@ -2,9 +2,10 @@
 //! decorate and furnish (see the module documentation of [`crate::world`]).
 
 use super::{
-    invalid, Door, Furniture, Lamp, Landmark, LandmarkKind, Region, RegionKind, SimRng, World,
-    WorldError, WorldParams, MAX_WORLD_VOXELS, NO_REGION,
+    invalid, Door, Furniture, Lamp, Landmark, LandmarkKind, Region, RegionKind, World, WorldError,
+    WorldParams, MAX_WORLD_VOXELS, NO_REGION,
 };
+use crate::rng::SimRng;
 use crate::style::FurnitureKind;
 use crate::texture::{face_uv, Material, Placement, TextureFamily};
 use nalgebra::Point3;
