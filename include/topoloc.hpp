@@ -29,11 +29,8 @@
  * `NoDescriberError`, `CancelledError`), so a stream can skip frames with
  * `catch (const topoloc::UninformativeImageError &)`.
  *
- * OpenCV: when OpenCV's core header is included *before* this one (so that `CV_VERSION` is
- * defined), `Localizer::process` and `MapBuilder::add_view` gain `cv::Mat` descriptor
- * overloads, and `image_view(const cv::Mat &)`, `Localizer::localize(const cv::Mat &, ...)` and
- * `Map::build_from_images(const std::vector<cv::Mat> &, ...)` take 8-bit images (CV_8UC1 grey,
- * CV_8UC3 BGR, CV_8UC4 BGRA; any row step, so ROIs work).
+ * OpenCV: `cv::Mat` conveniences live in topoloc_opencv.hpp (which includes this header and
+ * OpenCV). Nothing in this header depends on what was included before it.
  */
 
 #ifndef TOPOLOC_HPP
@@ -520,53 +517,9 @@ template <typename Call> topoloc_map *build_with_progress(const Progress &progre
   return raw;
 }
 
-#ifdef CV_VERSION
-/// A descriptor held in a cv::Mat: one row or one column of CV_32F, continuous, non-empty.
-inline std::pair<const float *, std::size_t> mat_descriptor(const cv::Mat &mat) {
-  if (mat.empty() || mat.dims != 2 || mat.type() != CV_32FC1 || !mat.isContinuous() ||
-      (mat.rows != 1 && mat.cols != 1)) {
-    throw Error(TOPOLOC_ERR_INVALID_ARGUMENT,
-                "descriptor cv::Mat must be a non-empty, continuous 1xD or Dx1 CV_32F matrix");
-  }
-  return {mat.ptr<float>(), mat.total()};
-}
-#endif
 
 }  // namespace detail
 
-#ifdef CV_VERSION
-/// A view of an 8-bit OpenCV image: CV_8UC1 (grey), CV_8UC3 (BGR, OpenCV's order) or CV_8UC4
-/// (BGRA), two-dimensional and non-empty; any row step (so ROIs of larger images work without
-/// a copy). The Mat must outlive the view's use. Other types throw `InvalidImageError`.
-inline Image image_view(const cv::Mat &mat) {
-  uint32_t format = TOPOLOC_PIXEL_NONE;
-  switch (mat.type()) {
-  case CV_8UC1:
-    format = TOPOLOC_PIXEL_GRAY8;
-    break;
-  case CV_8UC3:
-    format = TOPOLOC_PIXEL_BGR8;
-    break;
-  case CV_8UC4:
-    format = TOPOLOC_PIXEL_BGRA8;
-    break;
-  default:
-    break;
-  }
-  if (format == TOPOLOC_PIXEL_NONE || mat.dims != 2 || mat.empty()) {
-    throw InvalidImageError(
-        TOPOLOC_ERR_INVALID_IMAGE,
-        "image cv::Mat must be a non-empty 2-D CV_8UC1 (grey), CV_8UC3 (BGR) or CV_8UC4 (BGRA) "
-        "matrix, got type " + std::to_string(mat.type()) + " with " + std::to_string(mat.dims) +
-            " dimensions");
-  }
-  const std::size_t step = mat.step[0];
-  const std::size_t row = static_cast<std::size_t>(mat.cols) * mat.elemSize();
-  return image_view(mat.data, step * static_cast<std::size_t>(mat.rows - 1) + row,
-                    static_cast<uint32_t>(mat.cols), static_cast<uint32_t>(mat.rows), format,
-                    step);
-}
-#endif
 
 // ---------------------------------------------------------------------------------------------
 // Map
@@ -646,20 +599,6 @@ public:
     return build_from_images(images.data(), images.size(), options, progress);
   }
 
-#ifdef CV_VERSION
-  /// `build_from_images` over 8-bit OpenCV images (see `image_view(const cv::Mat &)`; another
-  /// type throws `InvalidImageError`).
-  static Map build_from_images(const std::vector<cv::Mat> &images,
-                               const ImageMapOptions &options = default_image_map_options(),
-                               const Progress &progress = Progress()) {
-    std::vector<Image> views;
-    views.reserve(images.size());
-    for (const cv::Mat &mat : images) {
-      views.push_back(image_view(mat));
-    }
-    return build_from_images(views.data(), views.size(), options, progress);
-  }
-#endif
 
   /// Builds a map from image files (any format OpenCV reads), like `build_from_images`; views
   /// also record their file's path (`view_image`). Throws `InvalidImageError` for a missing or
@@ -880,15 +819,6 @@ public:
     return add_view(place, descriptor.data(), descriptor.size(), attributes);
   }
 
-#ifdef CV_VERSION
-  /// `add_view` with a 1xD or Dx1 continuous CV_32F matrix (else throws `Error` with
-  /// `TOPOLOC_ERR_INVALID_ARGUMENT`).
-  uint32_t add_view(uint32_t place, const cv::Mat &descriptor,
-                    const ViewAttributes &attributes = ViewAttributes()) {
-    const auto d = detail::mat_descriptor(descriptor);
-    return add_view(place, d.first, d.second, attributes);
-  }
-#endif
 
   /// Joins places `a` and `b` (different, existing, not yet joined) with `weight` > 0.
   void add_edge(uint32_t a, uint32_t b, float weight = 1.0f) {
@@ -1076,15 +1006,6 @@ public:
     return process(descriptor.data(), descriptor.size(), timestamp, odometry.data());
   }
 
-#ifdef CV_VERSION
-  /// `process` with a 1xD or Dx1 continuous CV_32F matrix (else throws `Error` with
-  /// `TOPOLOC_ERR_INVALID_ARGUMENT`).
-  const Result &process(const cv::Mat &descriptor, double timestamp,
-                        const double *odometry = nullptr) {
-    const auto d = detail::mat_descriptor(descriptor);
-    return process(d.first, d.second, timestamp, odometry);
-  }
-#endif
 
   /// Localizes one camera image (see `image_view`), described with the map's own backend; the
   /// localizer needs a describer (see the constructor). Same result lifetime as `process`.
@@ -1107,15 +1028,6 @@ public:
     return localize(image, timestamp, odometry.data());
   }
 
-#ifdef CV_VERSION
-  /// `localize` of an 8-bit OpenCV image: CV_8UC1 grey, CV_8UC3 BGR or CV_8UC4 BGRA, any row
-  /// step (ROIs work without a copy); other types throw `InvalidImageError`. (`process` with a
-  /// cv::Mat takes a CV_32F descriptor instead.)
-  const Result &localize(const cv::Mat &image, double timestamp,
-                         const double *odometry = nullptr) {
-    return localize(image_view(image), timestamp, odometry);
-  }
-#endif
 
   /// Forgets all history: the next frame is treated as the first (any timestamp accepted).
   void reset() {

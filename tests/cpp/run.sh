@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
 # C++ layer tests: builds tests/cpp/test_raii.cpp against include/topoloc.hpp and the release
-# library, runs it normally and under ASan+UBSan (leak checking on), and compiles and runs the
-# C++ examples so that they cannot rot.
+# library, runs it normally and under ASan+UBSan (leak checking on); with OpenCV 4, builds and
+# runs tests/cpp/test_opencv.cpp against include/topoloc_opencv.hpp; checks that topoloc.hpp
+# does not depend on include order and that each C++ header compiles alone; and compiles and
+# runs the C++ examples so that they cannot rot.
 #
 #   TOPOLOC_TARGET_DIR   directory holding libtopoloc.so (default: <repo>/target/release;
 #                        build it with `cargo build --release --lib`)
@@ -41,14 +43,34 @@ sanitize=(-fsanitize=address,undefined -fno-omit-frame-pointer -fno-sanitize-rec
 
 step() { printf '\n== %s\n' "$*"; }
 
-# With OpenCV installed, also build a variant that includes it first and so tests the cv::Mat
-# overloads; without it they are skipped (the header only enables them after OpenCV).
-# OpenCV's own headers are included as system headers, so -Werror judges only our code.
+# OpenCV's headers are included as system headers, so -Werror judges only our code.
 opencv_cflags=() opencv_libs=()
 if pkg-config --exists opencv4 2>/dev/null; then
     read -r -a opencv_cflags <<<"$(pkg-config --cflags opencv4 | sed 's/\(^\| \)-I/\1-isystem /g')"
     read -r -a opencv_libs <<<"$(pkg-config --libs opencv4)"
 fi
+
+# topoloc.hpp must mean the same in every translation unit, whatever was included before it:
+# nothing in it may test for OpenCV (or anything else a host may or may not have included).
+step "topoloc.hpp does not depend on include order"
+# (Code lines only: comments may mention OpenCV.)
+if sed -e 's://.*$::' -e 's:^ *\*.*$::' -e 's:/\*.*$::' "$repo/include/topoloc.hpp" |
+    grep -nE '__has_include|CV_VERSION|cv::|opencv|^ *# *if(n?def)? ' | grep -v ':#ifndef TOPOLOC_HPP$'; then
+    echo "topoloc.hpp has the conditional or OpenCV code above; it belongs in topoloc_opencv.hpp" >&2
+    exit 1
+fi
+echo "ok"
+
+step "each C++ header compiles alone"
+printf '#include "topoloc.hpp"\nint main() { return topoloc::abi_matches() ? 0 : 1; }\n' \
+    >"$out/hpp_alone.cpp"
+"$cxx" "${cxxflags[@]}" -fsyntax-only "$out/hpp_alone.cpp"
+if ((${#opencv_cflags[@]})); then
+    printf '#include "topoloc_opencv.hpp"\nint main() { return topoloc::abi_matches() ? 0 : 1; }\n' \
+        >"$out/opencv_hpp_alone.cpp"
+    "$cxx" "${cxxflags[@]}" "${opencv_cflags[@]}" -fsyntax-only "$out/opencv_hpp_alone.cpp"
+fi
+echo "ok"
 
 step "compile test_raii (plain)"
 "$cxx" "${cxxflags[@]}" -O1 "$here/test_raii.cpp" -o "$out/test_raii" "${ldflags[@]}"
@@ -69,12 +91,14 @@ UBSAN_OPTIONS="print_stacktrace=1:halt_on_error=1${UBSAN_OPTIONS:+:$UBSAN_OPTION
     "$out/test_raii_asan"
 
 if ((${#opencv_cflags[@]})); then
-    step "compile and run test_raii with OpenCV included first (cv::Mat overloads)"
-    "$cxx" "${cxxflags[@]}" -O1 "${opencv_cflags[@]}" -include opencv2/core.hpp \
-        "$here/test_raii.cpp" -o "$out/test_raii_opencv" "${ldflags[@]}" "${opencv_libs[@]}"
-    "$out/test_raii_opencv"
+    step "compile and run test_opencv (topoloc_opencv.hpp, ASan+UBSan)"
+    "$cxx" "${cxxflags[@]}" -O1 "${sanitize[@]}" "${opencv_cflags[@]}" "$here/test_opencv.cpp" \
+        -o "$out/test_opencv" "${ldflags[@]}" "${opencv_libs[@]}"
+    ASAN_OPTIONS="detect_leaks=1:abort_on_error=0:halt_on_error=1${ASAN_OPTIONS:+:$ASAN_OPTIONS}" \
+    UBSAN_OPTIONS="print_stacktrace=1:halt_on_error=1${UBSAN_OPTIONS:+:$UBSAN_OPTIONS}" \
+        "$out/test_opencv"
 else
-    step "OpenCV (opencv4) not found: cv::Mat overloads not tested"
+    step "OpenCV (opencv4) not found: topoloc_opencv.hpp not tested"
 fi
 
 step "compile and run cpp-examples/localize_stream"
