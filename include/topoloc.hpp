@@ -45,7 +45,6 @@
 #include <exception>
 #include <functional>
 #include <limits>
-#include <memory>
 #include <optional>
 #include <stdexcept>
 #include <string>
@@ -421,21 +420,61 @@ using Progress = std::function<bool(Stage stage, std::size_t done, std::size_t t
 
 namespace detail {
 
-struct MapFree {
-  void operator()(topoloc_map *map) const noexcept { topoloc_map_free(map); }
-};
-struct MapBuilderFree {
-  void operator()(topoloc_map_builder *builder) const noexcept {
-    topoloc_map_builder_free(builder);
+/// The one move-only owner of a C handle, shared by every owner class of this header (`Map`,
+/// `MapBuilder`, `Localizer`, `Graph` derive from it): it holds a `Handle *`, calls `Free` (the
+/// handle's C `_free` function, a no-op for null) when destroyed or assigned over, hands the
+/// handle out for interop (`capi()`, `get()`) or gives it up (`release()`), and cannot be
+/// copied. Moved-from owners are empty. Not thread-safe by itself; the derived classes state
+/// their own rules.
+template <typename Handle, void (*Free)(Handle *)> class Owner {
+public:
+  /// The C handle type.
+  using handle_type = Handle;
+
+  /// The raw handle, still owned by this object (null when empty).
+  [[nodiscard]] const Handle *capi() const noexcept { return handle_; }
+  /// The raw handle, still owned by this object (null when empty).
+  [[nodiscard]] Handle *capi() noexcept { return handle_; }
+  /// Same as `capi()`.
+  [[nodiscard]] const Handle *get() const noexcept { return handle_; }
+  /// Same as `capi()`.
+  [[nodiscard]] Handle *get() noexcept { return handle_; }
+
+  /// Gives up ownership: returns the handle (free it with the C `_free` function) and leaves
+  /// this object empty.
+  [[nodiscard]] Handle *release() noexcept {
+    Handle *raw = handle_;
+    handle_ = nullptr;
+    return raw;
   }
-};
-struct LocalizerFree {
-  void operator()(topoloc_localizer *localizer) const noexcept {
-    topoloc_localizer_free(localizer);
+
+  /// True when this object owns a handle.
+  explicit operator bool() const noexcept { return handle_ != nullptr; }
+
+protected:
+  Owner() noexcept = default;
+  /// Takes ownership of `raw` (null gives an empty owner).
+  explicit Owner(Handle *raw) noexcept : handle_(raw) {}
+  Owner(const Owner &) = delete;
+  Owner &operator=(const Owner &) = delete;
+  Owner(Owner &&other) noexcept : handle_(other.release()) {}
+  Owner &operator=(Owner &&other) noexcept {
+    if (this != &other) {
+      adopt(other.release());
+    }
+    return *this;
   }
-};
-struct GraphFree {
-  void operator()(topoloc_graph *graph) const noexcept { topoloc_graph_free(graph); }
+  ~Owner() { Free(handle_); }
+
+  /// Frees the current handle (if any) and owns `raw` instead.
+  void adopt(Handle *raw) noexcept {
+    Handle *old = handle_;
+    handle_ = raw;
+    Free(old);
+  }
+
+private:
+  Handle *handle_ = nullptr;
 };
 
 /// Optional string argument: "" becomes NULL (the C API treats both as "not given").
@@ -531,23 +570,17 @@ template <typename Call> topoloc_map *build_with_progress(const Progress &progre
 ///
 /// Thread safety: all const methods may be called concurrently from many threads.
 /// Errors: every method that calls the library throws `Error` on failure.
-class Map {
+class Map : public detail::Owner<topoloc_map, &topoloc_map_free> {
 public:
   /// An empty owner (`!map`).
   Map() noexcept = default;
 
   /// Takes ownership of `raw` (from a C call such as `topoloc_map_load`); null gives an empty
   /// owner.
-  explicit Map(topoloc_map *raw) noexcept : ptr_(raw) {}
+  explicit Map(topoloc_map *raw) noexcept : Owner(raw) {}
 
-  Map(const Map &) = delete;
-  Map &operator=(const Map &) = delete;
-  /// Moves ownership; `other` is left empty.
-  Map(Map &&other) noexcept = default;
-  /// Frees the current map (if any) and takes `other`'s; `other` is left empty.
-  Map &operator=(Map &&other) noexcept = default;
-  /// Frees the map (`topoloc_map_free`).
-  ~Map() = default;
+  // Moves (noexcept; the source is left empty) and the destructor (calls `topoloc_map_free`) come
+  // from `detail::Owner`; copies are deleted.
 
   /// Loads and validates a map file (memory-mapped: do not modify the file while the map
   /// lives). Throws `Error` (`TOPOLOC_ERR_IO`, `_NOT_A_MAP`, `_TRUNCATED`, `_CORRUPT`,
@@ -620,61 +653,61 @@ public:
 
   /// Saves the map to `path` atomically (temporary file, fsync, rename). Throws `Error`
   /// (`TOPOLOC_ERR_IO`, ...).
-  void save(const std::string &path) const { check(topoloc_map_save(ptr_.get(), path.c_str())); }
+  void save(const std::string &path) const { check(topoloc_map_save(get(), path.c_str())); }
 
   /// Number of places.
   std::size_t place_count() const {
     std::size_t n = 0;
-    check(topoloc_map_place_count(ptr_.get(), &n));
+    check(topoloc_map_place_count(get(), &n));
     return n;
   }
 
   /// Number of views.
   std::size_t view_count() const {
     std::size_t n = 0;
-    check(topoloc_map_view_count(ptr_.get(), &n));
+    check(topoloc_map_view_count(get(), &n));
     return n;
   }
 
   /// Number of undirected edges.
   std::size_t edge_count() const {
     std::size_t n = 0;
-    check(topoloc_map_edge_count(ptr_.get(), &n));
+    check(topoloc_map_edge_count(get(), &n));
     return n;
   }
 
   /// Descriptor dimension D: every descriptor given to a localizer of this map has D floats.
   uint32_t dim() const {
     uint32_t d = 0;
-    check(topoloc_map_descriptor_dim(ptr_.get(), &d));
+    check(topoloc_map_descriptor_dim(get(), &d));
     return d;
   }
 
   /// Descriptor kind the map was built with (e.g. the backend family).
   std::string descriptor_kind() const {
     return detail::read_string([this](char *buf, std::size_t len, std::size_t *needed) {
-      return topoloc_map_descriptor_kind(ptr_.get(), buf, len, needed);
+      return topoloc_map_descriptor_kind(get(), buf, len, needed);
     });
   }
 
   /// Descriptor model identity the map was built with ("" when none).
   std::string descriptor_model() const {
     return detail::read_string([this](char *buf, std::size_t len, std::size_t *needed) {
-      return topoloc_map_descriptor_model(ptr_.get(), buf, len, needed);
+      return topoloc_map_descriptor_model(get(), buf, len, needed);
     });
   }
 
   /// Places joined to `place` by an edge. Throws `Error` (`TOPOLOC_ERR_UNKNOWN_PLACE`).
   std::vector<uint32_t> neighbours(uint32_t place) const {
     return detail::read_ids([this, place](uint32_t *buf, std::size_t len, std::size_t *count) {
-      return topoloc_map_neighbours(ptr_.get(), place, buf, len, count);
+      return topoloc_map_neighbours(get(), place, buf, len, count);
     });
   }
 
   /// View ids of `place`. Throws `Error` (`TOPOLOC_ERR_UNKNOWN_PLACE`).
   std::vector<uint32_t> place_views(uint32_t place) const {
     return detail::read_ids([this, place](uint32_t *buf, std::size_t len, std::size_t *count) {
-      return topoloc_map_place_views(ptr_.get(), place, buf, len, count);
+      return topoloc_map_place_views(get(), place, buf, len, count);
     });
   }
 
@@ -683,7 +716,7 @@ public:
   std::optional<Position> place_position(uint32_t place) const {
     Position xyz{};
     bool has = false;
-    check(topoloc_map_place_position(ptr_.get(), place, xyz.data(), &has));
+    check(topoloc_map_place_position(get(), place, xyz.data(), &has));
     if (!has) {
       return std::nullopt;
     }
@@ -694,7 +727,7 @@ public:
   /// (`TOPOLOC_ERR_INVALID_ARGUMENT` when out of range).
   Edge edge(std::size_t index) const {
     Edge e;
-    check(topoloc_map_edge(ptr_.get(), index, &e.a, &e.b, &e.weight));
+    check(topoloc_map_edge(get(), index, &e.a, &e.b, &e.weight));
     return e;
   }
 
@@ -711,7 +744,7 @@ public:
   ViewInfo view_info(uint32_t view) const {
     topoloc_view_info raw;
     check(topoloc_view_info_default(&raw));
-    check(topoloc_map_view_info(ptr_.get(), view, &raw));
+    check(topoloc_map_view_info(get(), view, &raw));
     ViewInfo info;
     info.place = raw.place;
     if (raw.has_keyframe_id) {
@@ -728,31 +761,17 @@ public:
   /// The unit-norm descriptor of `view` (D floats). Throws `Error` (`TOPOLOC_ERR_UNKNOWN_VIEW`).
   std::vector<float> view_descriptor(uint32_t view) const {
     std::vector<float> descriptor(dim());
-    check(topoloc_map_view_descriptor(ptr_.get(), view, descriptor.data(), descriptor.size()));
+    check(topoloc_map_view_descriptor(get(), view, descriptor.data(), descriptor.size()));
     return descriptor;
   }
 
   /// Image reference of `view` ("" when none). Throws `Error` (`TOPOLOC_ERR_UNKNOWN_VIEW`).
   std::string view_image(uint32_t view) const {
     return detail::read_string([this, view](char *buf, std::size_t len, std::size_t *needed) {
-      return topoloc_map_view_image(ptr_.get(), view, buf, len, needed);
+      return topoloc_map_view_image(get(), view, buf, len, needed);
     });
   }
 
-  /// The raw handle, still owned by this object (null when empty).
-  const topoloc_map *capi() const noexcept { return ptr_.get(); }
-  /// The raw handle, still owned by this object (null when empty).
-  topoloc_map *capi() noexcept { return ptr_.get(); }
-
-  /// Gives up ownership: returns the handle (free it with `topoloc_map_free`) and leaves this
-  /// object empty.
-  topoloc_map *release() noexcept { return ptr_.release(); }
-
-  /// True when this object owns a map.
-  explicit operator bool() const noexcept { return static_cast<bool>(ptr_); }
-
-private:
-  std::unique_ptr<topoloc_map, detail::MapFree> ptr_;
 };
 
 // ---------------------------------------------------------------------------------------------
@@ -765,7 +784,7 @@ private:
 /// Thread safety: not thread-safe; use from one thread at a time.
 /// Errors: every method that calls the library throws `Error` on failure; a failed call leaves
 /// the builder unchanged.
-class MapBuilder {
+class MapBuilder : public detail::Owner<topoloc_map_builder, &topoloc_map_builder_free> {
 public:
   /// An empty owner (`!builder`).
   MapBuilder() noexcept = default;
@@ -775,25 +794,19 @@ public:
   MapBuilder(const std::string &kind, const std::string &model, uint32_t dim) {
     topoloc_map_builder *raw = nullptr;
     check(topoloc_map_builder_new(kind.c_str(), detail::optional_c_str(model), dim, &raw));
-    ptr_.reset(raw);
+    adopt(raw);
   }
 
   /// Takes ownership of `raw`; null gives an empty owner.
-  explicit MapBuilder(topoloc_map_builder *raw) noexcept : ptr_(raw) {}
+  explicit MapBuilder(topoloc_map_builder *raw) noexcept : Owner(raw) {}
 
-  MapBuilder(const MapBuilder &) = delete;
-  MapBuilder &operator=(const MapBuilder &) = delete;
-  /// Moves ownership; `other` is left empty.
-  MapBuilder(MapBuilder &&other) noexcept = default;
-  /// Frees the current builder (if any) and takes `other`'s; `other` is left empty.
-  MapBuilder &operator=(MapBuilder &&other) noexcept = default;
-  /// Frees the builder (`topoloc_map_builder_free`).
-  ~MapBuilder() = default;
+  // Moves (noexcept; the source is left empty) and the destructor (calls `topoloc_map_builder_free`) come
+  // from `detail::Owner`; copies are deleted.
 
   /// Adds a place, optionally at `position` (metres); returns its id.
   uint32_t add_place(const std::optional<Position> &position = std::nullopt) {
     uint32_t id = 0;
-    check(topoloc_map_builder_add_place(ptr_.get(), position ? position->data() : nullptr, &id));
+    check(topoloc_map_builder_add_place(get(), position ? position->data() : nullptr, &id));
     return id;
   }
 
@@ -809,7 +822,7 @@ public:
     raw.world_T_camera = attributes.world_T_camera ? attributes.world_T_camera->data() : nullptr;
     raw.image = detail::optional_c_str(attributes.image);
     uint32_t id = 0;
-    check(topoloc_map_builder_add_view(ptr_.get(), place, descriptor, len, &raw, &id));
+    check(topoloc_map_builder_add_view(get(), place, descriptor, len, &raw, &id));
     return id;
   }
 
@@ -822,31 +835,17 @@ public:
 
   /// Joins places `a` and `b` (different, existing, not yet joined) with `weight` > 0.
   void add_edge(uint32_t a, uint32_t b, float weight = 1.0f) {
-    check(topoloc_map_builder_add_edge(ptr_.get(), a, b, weight));
+    check(topoloc_map_builder_add_edge(get(), a, b, weight));
   }
 
   /// Validates and returns a map of what was added; the builder stays usable. Throws `Error`
   /// (`TOPOLOC_ERR_EMPTY_MAP`, `_INVALID_MAP` e.g. for a place without views).
   Map build() const {
     topoloc_map *raw = nullptr;
-    check(topoloc_map_builder_build(ptr_.get(), &raw));
+    check(topoloc_map_builder_build(get(), &raw));
     return Map(raw);
   }
 
-  /// The raw handle, still owned by this object (null when empty).
-  const topoloc_map_builder *capi() const noexcept { return ptr_.get(); }
-  /// The raw handle, still owned by this object (null when empty).
-  topoloc_map_builder *capi() noexcept { return ptr_.get(); }
-
-  /// Gives up ownership: returns the handle (free it with `topoloc_map_builder_free`) and
-  /// leaves this object empty.
-  topoloc_map_builder *release() noexcept { return ptr_.release(); }
-
-  /// True when this object owns a builder.
-  explicit operator bool() const noexcept { return static_cast<bool>(ptr_); }
-
-private:
-  std::unique_ptr<topoloc_map_builder, detail::MapBuilderFree> ptr_;
 };
 
 /// Builds a map from keyframes in order (`topoloc_map_from_keyframes`): places by spacing and
@@ -893,7 +892,7 @@ inline Map map_from_keyframes(const std::string &kind, const std::string &model,
 /// threads). Many localizers may share one map on many threads.
 /// Errors: every method that calls the library throws `Error` on failure; a failed `process`
 /// leaves the localizer and its last result unchanged.
-class Localizer {
+class Localizer : public detail::Owner<topoloc_localizer, &topoloc_localizer_free> {
 public:
   /// An empty owner (`!localizer`).
   Localizer() noexcept = default;
@@ -911,7 +910,7 @@ public:
                      const LocalizerOptions &options = default_localizer_options()) {
     topoloc_localizer *raw = nullptr;
     check(topoloc_localizer_new(map.capi(), &options, &raw));
-    ptr_.reset(raw);
+    adopt(raw);
     check(topoloc_frame_default(&frame_template_));
     check(topoloc_result_default(&result_template_));
     const std::size_t places = map.place_count();
@@ -921,12 +920,12 @@ public:
     last_.candidates.reserve(capacity);
   }
 
-  Localizer(const Localizer &) = delete;
-  Localizer &operator=(const Localizer &) = delete;
+  // Copies are deleted and the destructor (calls `topoloc_localizer_free`) comes from
+  // `detail::Owner`; the moves below also move the result buffers.
 
-  /// Moves ownership and buffers; `other` is left empty.
+  /// Moves ownership and buffers; `other` is left empty (no handle, no buffers).
   Localizer(Localizer &&other) noexcept
-      : ptr_(std::move(other.ptr_)), frame_template_(other.frame_template_),
+      : Owner(std::move(other)), frame_template_(other.frame_template_),
         result_template_(other.result_template_), buffer_(std::move(other.buffer_)),
         last_(std::move(other.last_)) {
     other.clear_buffers();
@@ -935,7 +934,7 @@ public:
   /// Frees the current localizer (if any) and takes `other`'s; `other` is left empty.
   Localizer &operator=(Localizer &&other) noexcept {
     if (this != &other) {
-      ptr_ = std::move(other.ptr_);
+      Owner::operator=(std::move(other));
       frame_template_ = other.frame_template_;
       result_template_ = other.result_template_;
       buffer_ = std::move(other.buffer_);
@@ -944,9 +943,6 @@ public:
     }
     return *this;
   }
-
-  /// Frees the localizer (`topoloc_localizer_free`).
-  ~Localizer() = default;
 
   /// Localizes one frame: `descriptor` holds `len` floats (the map's D; normalised by the
   /// library), `timestamp` is in seconds and must not decrease in filter mode, `odometry` is
@@ -978,7 +974,7 @@ public:
     topoloc_result raw = result_template_;
     raw.candidates = buffer_.empty() ? nullptr : buffer_.data();
     raw.candidates_capacity = buffer_.size();
-    check(topoloc_localizer_process(ptr_.get(), &frame, &raw));
+    check(topoloc_localizer_process(get(), &frame, &raw));
     last_.frame_index = raw.frame_index;
     last_.place = raw.place;
     last_.view = raw.view;
@@ -1031,7 +1027,7 @@ public:
 
   /// Forgets all history: the next frame is treated as the first (any timestamp accepted).
   void reset() {
-    check(topoloc_localizer_reset(ptr_.get()));
+    check(topoloc_localizer_reset(get()));
     clear_result();
   }
 
@@ -1042,20 +1038,12 @@ public:
   /// Most candidates a result can hold: min(options.top_k, places).
   std::size_t candidate_capacity() const noexcept { return buffer_.size(); }
 
-  /// The raw handle, still owned by this object (null when empty).
-  const topoloc_localizer *capi() const noexcept { return ptr_.get(); }
-  /// The raw handle, still owned by this object (null when empty).
-  topoloc_localizer *capi() noexcept { return ptr_.get(); }
-
   /// Gives up ownership: returns the handle (free it with `topoloc_localizer_free`) and leaves
-  /// this object empty.
-  topoloc_localizer *release() noexcept {
+  /// this object empty, its buffers released.
+  [[nodiscard]] topoloc_localizer *release() noexcept {
     clear_buffers();
-    return ptr_.release();
+    return Owner::release();
   }
-
-  /// True when this object owns a localizer.
-  explicit operator bool() const noexcept { return static_cast<bool>(ptr_); }
 
 private:
   // Keeps the reserved capacity of the candidates: reset() must not cost an allocation later.
@@ -1078,7 +1066,6 @@ private:
     last_ = Result();
   }
 
-  std::unique_ptr<topoloc_localizer, detail::LocalizerFree> ptr_;
   topoloc_frame frame_template_{};    // filled once by topoloc_frame_default
   topoloc_result result_template_{};  // filled once by topoloc_result_default
   std::vector<Candidate> buffer_;  // handed to the C call as the candidate array
@@ -1107,22 +1094,16 @@ struct GraphEdge {
 ///
 /// Thread safety: immutable; const methods may be called from many threads at once.
 /// Errors: every method that calls the library throws `Error` on failure.
-class Graph {
+class Graph : public detail::Owner<topoloc_graph, &topoloc_graph_free> {
 public:
   /// An empty owner (`!graph`).
   Graph() noexcept = default;
 
   /// Takes ownership of `raw` (from `topoloc_graph_from_occupancy`); null gives an empty owner.
-  explicit Graph(topoloc_graph *raw) noexcept : ptr_(raw) {}
+  explicit Graph(topoloc_graph *raw) noexcept : Owner(raw) {}
 
-  Graph(const Graph &) = delete;
-  Graph &operator=(const Graph &) = delete;
-  /// Moves ownership; `other` is left empty.
-  Graph(Graph &&other) noexcept = default;
-  /// Frees the current graph (if any) and takes `other`'s; `other` is left empty.
-  Graph &operator=(Graph &&other) noexcept = default;
-  /// Frees the graph (`topoloc_graph_free`).
-  ~Graph() = default;
+  // Moves (noexcept; the source is left empty) and the destructor (calls `topoloc_graph_free`) come
+  // from `detail::Owner`; copies are deleted.
 
   /// Builds the graph of the free space of an occupancy grid of `dims` voxels (x, y, z) of
   /// `voxel_size` metres whose voxel (0, 0, 0) starts at `origin`; `cells` holds one byte per
@@ -1149,14 +1130,14 @@ public:
   /// Number of places.
   std::size_t place_count() const {
     std::size_t n = 0;
-    check(topoloc_graph_place_count(ptr_.get(), &n));
+    check(topoloc_graph_place_count(get(), &n));
     return n;
   }
 
   /// Number of undirected edges.
   std::size_t edge_count() const {
     std::size_t n = 0;
-    check(topoloc_graph_edge_count(ptr_.get(), &n));
+    check(topoloc_graph_edge_count(get(), &n));
     return n;
   }
 
@@ -1164,7 +1145,7 @@ public:
   /// (`TOPOLOC_ERR_UNKNOWN_PLACE`).
   GraphPlace place(uint32_t index) const {
     GraphPlace p;
-    check(topoloc_graph_place(ptr_.get(), index, p.position.data(), &p.kind));
+    check(topoloc_graph_place(get(), index, p.position.data(), &p.kind));
     return p;
   }
 
@@ -1181,7 +1162,7 @@ public:
   /// (`TOPOLOC_ERR_INVALID_ARGUMENT` when out of range).
   GraphEdge edge(std::size_t index) const {
     GraphEdge e;
-    check(topoloc_graph_edge(ptr_.get(), index, &e.a, &e.b, &e.length_m));
+    check(topoloc_graph_edge(get(), index, &e.a, &e.b, &e.length_m));
     return e;
   }
 
@@ -1197,24 +1178,10 @@ public:
   /// The skeleton the graph was built on: voxel indices x0, y0, z0, x1, y1, z1, ... in grid order.
   std::vector<uint32_t> skeleton() const {
     return detail::read_ids([this](uint32_t *buf, std::size_t len, std::size_t *count) {
-      return topoloc_graph_skeleton(ptr_.get(), buf, len, count);
+      return topoloc_graph_skeleton(get(), buf, len, count);
     });
   }
 
-  /// The raw handle, still owned by this object (null when empty).
-  const topoloc_graph *capi() const noexcept { return ptr_.get(); }
-  /// The raw handle, still owned by this object (null when empty).
-  topoloc_graph *capi() noexcept { return ptr_.get(); }
-
-  /// Gives up ownership: returns the handle (free it with `topoloc_graph_free`) and leaves this
-  /// object empty.
-  topoloc_graph *release() noexcept { return ptr_.release(); }
-
-  /// True when this object owns a graph.
-  explicit operator bool() const noexcept { return static_cast<bool>(ptr_); }
-
-private:
-  std::unique_ptr<topoloc_graph, detail::GraphFree> ptr_;
 };
 
 }  // namespace topoloc

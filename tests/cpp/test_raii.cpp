@@ -38,8 +38,27 @@ TEST(owners_are_move_only) {
   static_assert(!std::is_copy_assignable_v<topoloc::Localizer>);
   static_assert(std::is_nothrow_move_constructible_v<topoloc::Localizer>);
   static_assert(std::is_nothrow_move_assignable_v<topoloc::Localizer>);
+  static_assert(!std::is_copy_constructible_v<topoloc::Graph>);
+  static_assert(!std::is_copy_assignable_v<topoloc::Graph>);
+  static_assert(std::is_nothrow_move_constructible_v<topoloc::Graph>);
+  static_assert(std::is_nothrow_move_assignable_v<topoloc::Graph>);
   static_assert(!std::is_convertible_v<topoloc::Map, bool>, "operator bool must be explicit");
-  CHECK(true);
+  // One owner template for every handle, not one hand-written owner per class.
+  static_assert(std::is_base_of_v<topoloc::detail::Owner<topoloc_map, &topoloc_map_free>,
+                                  topoloc::Map>);
+  static_assert(std::is_base_of_v<topoloc::detail::Owner<topoloc_map_builder,
+                                                         &topoloc_map_builder_free>,
+                                  topoloc::MapBuilder>);
+  static_assert(std::is_base_of_v<topoloc::detail::Owner<topoloc_localizer,
+                                                         &topoloc_localizer_free>,
+                                  topoloc::Localizer>);
+  static_assert(std::is_base_of_v<topoloc::detail::Owner<topoloc_graph, &topoloc_graph_free>,
+                                  topoloc::Graph>);
+  // get() is capi().
+  topoloc::Map map = chain_map();
+  CHECK(map.get() == map.capi() && map.get() != nullptr);
+  const topoloc::Map &const_map = map;
+  CHECK(const_map.get() == const_map.capi());
 }
 
 TEST(map_moves) {
@@ -112,6 +131,31 @@ TEST(localizer_moves) {
   CHECK_EQ(c.process(observe(0, 2), 0.2).frame_index, uint64_t{2});
   assign_from(c, c);
   CHECK(c.capi() == raw);
+}
+
+TEST(graph_moves) {
+  // A free corridor 40 x 8 voxels of 0.1 m (walls around it), 3 voxels high.
+  const std::array<std::size_t, 3> dims{40, 8, 3};
+  std::vector<uint8_t> cells(dims[0] * dims[1] * dims[2], 0);
+  for (std::size_t z = 0; z < dims[2]; ++z)
+    for (std::size_t y = 0; y < dims[1]; ++y)
+      for (std::size_t x = 0; x < dims[0]; ++x)
+        if (x == 0 || y == 0 || x + 1 == dims[0] || y + 1 == dims[1])
+          cells[x + dims[0] * (y + dims[1] * z)] = 1;
+  topoloc::Graph a = topoloc::Graph::from_occupancy(dims, 0.1, {0.0, 0.0, 0.0}, cells);
+  CHECK(static_cast<bool>(a));
+  CHECK(a.place_count() >= 2);
+  const topoloc_graph *raw = a.capi();
+  topoloc::Graph b(std::move(a));
+  CHECK(!a && b.capi() == raw);
+  CHECK_THROWS_STATUS(a.place_count(), TOPOLOC_ERR_NULL_ARGUMENT);
+  topoloc::Graph c = topoloc::Graph::from_occupancy(dims, 0.1, {0.0, 0.0, 0.0}, cells);
+  c = std::move(b);  // frees c's first graph (ASan would see a leak or a double free)
+  CHECK(!b && c.capi() == raw);
+  CHECK_EQ(c.edges().size(), c.edge_count());
+  topoloc_graph *released = c.release();
+  CHECK(!c && released == raw);
+  topoloc_graph_free(released);
 }
 
 TEST(dimension_mismatch_throws) {
