@@ -1,14 +1,38 @@
 /*
  * topoloc.hpp: header-only C++17 RAII layer over the C ABI in topoloc.h.
  *
- * Every type here is a thin, move-only owner of one C handle: its destructor calls the matching
- * C `_free` function, `capi()` returns the raw handle for code that talks to the C API directly,
- * and every failing C call is turned into a `topoloc::Error` exception carrying the C status and
- * the thread-local message of `topoloc_last_error_message`. Nothing here adds behaviour the C
- * API does not have; the C header documents the semantics of each call.
+ * Every owner class (`Map`, `MapBuilder`, `Localizer`, `Graph`) is the one move-only owner
+ * template `detail::Owner` over one C handle: its destructor calls the matching C `_free`
+ * function, `capi()` / `get()` return the raw handle for code that talks to the C API directly,
+ * and `release()` gives it up. Every failing C call is turned into a `topoloc::Error` exception
+ * (or a subclass) carrying the C status and the thread-local message of
+ * `topoloc_last_error_message`; `throw_error` maps each status to its exception class in one
+ * switch. Nothing here adds behaviour the C API does not have; the C header documents the
+ * semantics of each call.
+ *
+ * One name per operation. The per-frame call is `process` in C, C++ and Python; the Rust core
+ * calls it `Localizer::localize(&Frame) -> Localization`.
+ *
+ *   operation                 C                                   C++                                Python
+ *   load a map file           topoloc_map_load                    Map::load                          Map.load
+ *   load a map from bytes     topoloc_map_load_from_memory        Map::from_memory                   Map.from_bytes
+ *   save a map                topoloc_map_save                    Map::save                          Map.save
+ *   build from descriptors    topoloc_map_builder_new/_add_*      MapBuilder, add_place/view/edge    MapBuilder
+ *                             topoloc_map_builder_build           MapBuilder::build                  MapBuilder.build
+ *   build from keyframes      topoloc_map_from_keyframes          map_from_keyframes                 map_from_keyframes
+ *   build from images         topoloc_map_build_from_images       Map::build_from_images             Map.build_from_images
+ *   build from image files    topoloc_map_build_from_image_files  Map::build_from_image_files        Map.build_from_image_files
+ *   graph from occupancy      topoloc_graph_from_occupancy        Graph::from_occupancy              skeleton_graph
+ *   new localizer             topoloc_localizer_new               Localizer(map, options)            Localizer(map, ...)
+ *   one frame (descriptor     topoloc_localizer_process           Localizer::process                 Localizer.process
+ *     or image)                                                   (+ process_descriptor,
+ *                                                                 process_image of a cv::Mat in
+ *                                                                 topoloc_opencv.hpp)
+ *   forget history            topoloc_localizer_reset             Localizer::reset                   Localizer.reset
  *
  * Thread safety (the C rules, restated):
- *  - `Map`, `Graph`: immutable. Their const methods may be called from many threads at once.
+ *  - `Map`, `Graph`: immutable. A const one may be shared by many threads, its const methods
+ *    called concurrently; many localizers on many threads may use one map.
  *  - `MapBuilder`, `Localizer`: single-threaded state. Use each from one thread at a time (they
  *    may move between threads).
  *  - Error messages are per thread, so an `Error` always describes the failure of the call that
@@ -17,16 +41,21 @@
  * Moved-from and default-constructed owners are empty (`!owner`, `capi() == nullptr`); calling a
  * method on an empty owner throws `Error` with `TOPOLOC_ERR_NULL_ARGUMENT`.
  *
+ * Callbacks (the progress of map builds) are called from inside topoloc: they must not unwind,
+ * longjmp or otherwise jump through it. This layer wraps a C++ callback so that an exception it
+ * throws is caught before it reaches C, cancels the build, and is rethrown after the C call
+ * returns; code that gives topoloc a C callback itself must do the same.
+ *
  * Methods returning strings or id lists ask the library for the size first; such a sizing call
  * may leave a "buffer too small" text as the thread's `topoloc_last_error_message` even though
  * the method succeeds. Errors thrown by this layer always carry the right message.
  *
  * Images: `Image` is a borrowed view of pixels (the C `topoloc_image`; make one with
  * `image_view`). `Map::build_from_images` / `Map::build_from_image_files` build maps that store
- * their describer, with an optional progress callback; `Localizer::localize` takes image frames
- * (`Localizer::process` takes descriptors). The image statuses throw subclasses of `Error`
- * (`InvalidImageError`, `UninformativeImageError`, `BackendUnavailableError`, `ModelError`,
- * `NoDescriberError`, `CancelledError`), so a stream can skip frames with
+ * their describer, with an optional progress callback; `Localizer::process` takes image frames
+ * as well as descriptors. The image statuses throw subclasses of `Error` (`InvalidImageError`,
+ * `UninformativeImageError`, `BackendUnavailableError`, `ModelError`, `NoDescriberError`,
+ * `CancelledError`), so a stream can skip frames with
  * `catch (const topoloc::UninformativeImageError &)`.
  *
  * OpenCV: `cv::Mat` conveniences live in topoloc_opencv.hpp (which includes this header and
@@ -608,7 +637,7 @@ public:
 
   /// Builds a map from `count` images in memory (`topoloc_map_build_from_images`): every image
   /// is described (in parallel), the describer is fitted on all of them and stored in the map,
-  /// so localizers on it accept image frames (`Localizer::localize`). Without poses the map is
+  /// so localizers on it accept image frames (`Localizer::process` of an `Image`). Without poses the map is
   /// a sequence: `options.views_per_place` consecutive images per place, places chained in
   /// order; view `i` has keyframe id `i`. `progress` (may be empty) is called on this thread;
   /// returning false throws `CancelledError`, and an exception it throws cancels the build and
@@ -899,7 +928,7 @@ public:
 
   /// Creates a localizer on `map`. The candidate buffer holds min(options.top_k, places)
   /// entries. With `options.image_backend` `TOPOLOC_BACKEND_AUTO` (the default) and a map built
-  /// from images, the map's describer is loaded now, so that `localize` accepts images (for
+  /// from images, the map's describer is loaded now, so that `process` accepts images (for
   /// ONNX: the runtime and model, from `options.onnx_runtime_path` / `onnx_model_path` or the
   /// defaults); `TOPOLOC_BACKEND_NONE` never loads one (descriptor frames only).
   /// Throws `Error` (`TOPOLOC_ERR_INVALID_OPTION`, `_DESCRIPTOR_MISMATCH` also for another
@@ -963,7 +992,7 @@ public:
   }
 
   /// Localizes one frame, of a descriptor or of an image (see `Frame`): the general form of
-  /// `process` and `localize`, with the same result lifetime and errors as both.
+  /// the other `process` overloads, with the same result lifetime and errors as theirs.
   const Result &process(const Frame &input) {
     topoloc_frame frame = frame_template_;
     frame.timestamp = input.timestamp;
@@ -1002,16 +1031,16 @@ public:
     return process(descriptor.data(), descriptor.size(), timestamp, odometry.data());
   }
 
-
   /// Localizes one camera image (see `image_view`), described with the map's own backend; the
-  /// localizer needs a describer (see the constructor). Same result lifetime as `process`.
-  /// Throws `UninformativeImageError` for a blank, constant or featureless image (the frame is
-  /// skipped: state, frame count and last result unchanged, so just go on with the next
-  /// frame), `InvalidImageError` for an unusable buffer, `NoDescriberError`, `ModelError`, and
-  /// the `Error`s of `process` (`_TIMESTAMP`, `_INVALID_ARGUMENT` for non-rigid odometry, ...).
+  /// localizer needs a describer (see the constructor). Same result lifetime as the descriptor
+  /// `process`. Throws `UninformativeImageError` for a blank, constant or featureless image
+  /// (the frame is skipped: state, frame count and last result unchanged, so just go on with
+  /// the next frame), `InvalidImageError` for an unusable buffer, `NoDescriberError`,
+  /// `ModelError`, and the `Error`s of the descriptor `process` (`_TIMESTAMP`,
+  /// `_INVALID_ARGUMENT` for non-rigid odometry, ...).
   /// Cost: describing the image, then as `process`.
-  const Result &localize(const Image &image, double timestamp,
-                         const double *odometry = nullptr) {
+  const Result &process(const Image &image, double timestamp,
+                        const double *odometry = nullptr) {
     Frame frame;
     frame.timestamp = timestamp;
     frame.odometry = odometry;
@@ -1019,9 +1048,9 @@ public:
     return process(frame);
   }
 
-  /// `localize` with odometry as a `Pose` (`previous_T_current`).
-  const Result &localize(const Image &image, double timestamp, const Pose &odometry) {
-    return localize(image, timestamp, odometry.data());
+  /// `process` of an image with odometry as a `Pose` (`previous_T_current`).
+  const Result &process(const Image &image, double timestamp, const Pose &odometry) {
+    return process(image, timestamp, odometry.data());
   }
 
 

@@ -102,7 +102,7 @@ inline const Result &process_descriptor(Localizer &localizer, const cv::Mat &des
 /// Same result lifetime and errors as `Localizer::process` of an `Image`.
 inline const Result &process_image(Localizer &localizer, const cv::Mat &image, double timestamp,
                                    const double *odometry = nullptr) {
-  return localizer.localize(image_view(image), timestamp, odometry);
+  return localizer.process(image_view(image), timestamp, odometry);
 }
 
 /// `builder.add_view` with a descriptor in a cv::Mat (see `descriptor_view`); returns the view

@@ -33,7 +33,7 @@ TEST(opencv_images) {
   options.mode = TOPOLOC_MODE_SINGLE_FRAME;
   topoloc::Localizer localizer(image_map(), options);
   std::vector<uint8_t> revisit = revisit_pixels(places_pixels()[4], 11);
-  const topoloc::Result reference = localizer.localize(gray(revisit), 0.0);  // a copy
+  const topoloc::Result reference = localizer.process(gray(revisit), 0.0);  // a copy
   CHECK_EQ(reference.place, uint32_t{4});
   auto same_as_reference = [&](const topoloc::Result &r) {
     return r.place == reference.place && std::abs(r.similarity - reference.similarity) < 1e-4f;

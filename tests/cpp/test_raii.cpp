@@ -611,7 +611,7 @@ TEST(image_localizer) {
   int correct = 0;
   for (uint32_t p = 0; p < kImgPlaces; ++p) {
     const std::vector<uint8_t> revisit = revisit_pixels(places_pixels()[p], 100 + p);
-    const topoloc::Result &r = localizer.localize(gray(revisit), double(p));
+    const topoloc::Result &r = localizer.process(gray(revisit), double(p));
     CHECK_EQ(r.frame_index, uint64_t{p});
     if (r.place == p) ++correct;
   }
@@ -631,47 +631,47 @@ TEST(image_localizer) {
   // Filter mode with odometry given as a Pose.
   topoloc::Localizer filter(map);
   const topoloc::Pose still = pose_at(0.0, 0.0);
-  CHECK_EQ(filter.localize(gray(places_pixels()[3]), 0.0).place, uint32_t{3});
-  CHECK_EQ(filter.localize(gray(revisit_pixels(places_pixels()[3], 9)), 0.1, still).place,
+  CHECK_EQ(filter.process(gray(places_pixels()[3]), 0.0).place, uint32_t{3});
+  CHECK_EQ(filter.process(gray(revisit_pixels(places_pixels()[3], 9)), 0.1, still).place,
            uint32_t{3});
 
   // Bad and uninformative images: typed exceptions, localizer unchanged.
   const uint64_t before = filter.last_result().frame_index;
   const std::vector<uint8_t> constant(kImgW * kImgH, 90);
-  CHECK_THROWS_STATUS(filter.localize(gray(constant), 5.0), TOPOLOC_ERR_UNINFORMATIVE_IMAGE);
+  CHECK_THROWS_STATUS(filter.process(gray(constant), 5.0), TOPOLOC_ERR_UNINFORMATIVE_IMAGE);
   const uint8_t one = 128;
-  CHECK_THROWS_STATUS(filter.localize(topoloc::image_view(&one, 1, 1, TOPOLOC_PIXEL_GRAY8), 5.0),
+  CHECK_THROWS_STATUS(filter.process(topoloc::image_view(&one, 1, 1, TOPOLOC_PIXEL_GRAY8), 5.0),
                       TOPOLOC_ERR_UNINFORMATIVE_IMAGE);
   topoloc::Image short_buffer = gray(places_pixels()[0]);
   short_buffer.data_len -= 1;
   const std::string short_message =
-      CHECK_THROWS_STATUS(filter.localize(short_buffer, 5.0), TOPOLOC_ERR_INVALID_IMAGE);
+      CHECK_THROWS_STATUS(filter.process(short_buffer, 5.0), TOPOLOC_ERR_INVALID_IMAGE);
   CHECK(short_message.find("frame.image") != std::string::npos);
   CHECK_THROWS_STATUS(
-      filter.localize(topoloc::image_view(&one, 10000, 10000, TOPOLOC_PIXEL_GRAY8), 5.0),
+      filter.process(topoloc::image_view(&one, 10000, 10000, TOPOLOC_PIXEL_GRAY8), 5.0),
       TOPOLOC_ERR_INVALID_IMAGE);
   bool skipped = false;
   try {
-    filter.localize(gray(constant), 6.0);
+    filter.process(gray(constant), 6.0);
   } catch (const topoloc::UninformativeImageError &) {
     skipped = true;  // what a stream does: skip the frame
   }
   CHECK(skipped);
   CHECK_EQ(filter.last_result().frame_index, before);
   // An earlier timestamp than the skipped frames': they were never counted.
-  CHECK_EQ(filter.localize(gray(places_pixels()[4]), 0.2).frame_index, before + 1);
+  CHECK_EQ(filter.process(gray(places_pixels()[4]), 0.2).frame_index, before + 1);
 
   // Backends: the map's own works; another is a mismatch; NONE has no describer.
   options = topoloc::default_localizer_options();
   options.image_backend = TOPOLOC_BACKEND_VLAD_ORB;
-  CHECK_EQ(topoloc::Localizer(map, options).localize(gray(places_pixels()[6]), 0.0).place,
+  CHECK_EQ(topoloc::Localizer(map, options).process(gray(places_pixels()[6]), 0.0).place,
            uint32_t{6});
   options.image_backend = TOPOLOC_BACKEND_ONNX;
   CHECK_THROWS_STATUS((void)topoloc::Localizer(map, options), TOPOLOC_ERR_DESCRIPTOR_MISMATCH);
   options.image_backend = TOPOLOC_BACKEND_NONE;
   topoloc::Localizer descriptors_only(map, options);
   try {
-    descriptors_only.localize(gray(places_pixels()[0]), 0.0);
+    descriptors_only.process(gray(places_pixels()[0]), 0.0);
     report_failure(__FILE__, __LINE__, "NONE localizer described an image");
   } catch (const topoloc::NoDescriberError &e) {
     CHECK(e.status() == TOPOLOC_ERR_NO_DESCRIBER && !e.message().empty());
@@ -679,7 +679,7 @@ TEST(image_localizer) {
   CHECK_EQ(descriptors_only.process(view2, 0.0).place, uint32_t{2});
   // A map built from descriptors has no describer.
   topoloc::Localizer plain(chain_map());
-  CHECK_THROWS_STATUS(plain.localize(gray(places_pixels()[0]), 0.0), TOPOLOC_ERR_NO_DESCRIBER);
+  CHECK_THROWS_STATUS(plain.process(gray(places_pixels()[0]), 0.0), TOPOLOC_ERR_NO_DESCRIBER);
   options.image_backend = TOPOLOC_BACKEND_VLAD_ORB;
   CHECK_THROWS_STATUS((void)topoloc::Localizer(chain_map(), options), TOPOLOC_ERR_NO_DESCRIBER);
 
@@ -687,7 +687,7 @@ TEST(image_localizer) {
   options = topoloc::default_localizer_options();
   options.verify_candidates = 3;
   topoloc::Localizer verifying(map, options);
-  const topoloc::Result &checked = verifying.localize(gray(places_pixels()[6]), 0.0);
+  const topoloc::Result &checked = verifying.process(gray(places_pixels()[6]), 0.0);
   CHECK(checked.place == 6 && checked.verified && checked.inliers >= 20);
   CHECK_THROWS_STATUS((void)topoloc::Localizer(chain_map(), options), TOPOLOC_ERR_INVALID_OPTION);
 }
@@ -715,7 +715,7 @@ TEST(image_files) {
   CHECK_EQ(map.place_count(), std::size_t{4});
   for (uint32_t v = 0; v < 4; ++v) CHECK(map.view_image(v) == paths[v]);
   topoloc::Localizer localizer(map);
-  CHECK_EQ(localizer.localize(gray(revisit_pixels(places_pixels()[1], 3)), 0.0).place,
+  CHECK_EQ(localizer.process(gray(revisit_pixels(places_pixels()[1], 3)), 0.0).place,
            uint32_t{1});
 
   // No progress callback.
