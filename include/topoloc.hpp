@@ -91,6 +91,76 @@ inline const char *status_string(topoloc_status status) noexcept {
   return topoloc_status_str(static_cast<uint32_t>(status));
 }
 
+namespace detail {
+
+/// The exception class a status is thrown as (see `throw_error`).
+enum class ErrorClass {
+  None,                ///< `TOPOLOC_OK`: nothing is thrown.
+  Error,               ///< `topoloc::Error` itself.
+  InvalidImage,        ///< `InvalidImageError`.
+  UninformativeImage,  ///< `UninformativeImageError`.
+  BackendUnavailable,  ///< `BackendUnavailableError`.
+  Model,               ///< `ModelError`.
+  NoDescriber,         ///< `NoDescriberError`.
+  Cancelled,           ///< `CancelledError`.
+};
+
+/// One row of the status table: the C name of a status and its exception class.
+struct StatusInfo {
+  const char *name;  ///< "TOPOLOC_ERR_..." (null for a code this header does not know).
+  ErrorClass error;  ///< The exception class it is thrown as.
+};
+
+/// The status table: every `topoloc_status` of topoloc.h, its name and its exception class. The
+/// switch names every enumerator and has no default, so a code added to topoloc.h and not here
+/// is a -Wswitch warning (an error under -Werror); tests/cpp/run.sh also checks every
+/// `TOPOLOC_ERR_*` of the header against it. A code newer than this header (from a newer
+/// library) has no name and is thrown as `Error`.
+constexpr StatusInfo status_info(topoloc_status status) noexcept {
+#define TOPOLOC_HPP_STATUS(code, error_class)                                                  \
+  case code:                                                                                   \
+    return StatusInfo{#code, ErrorClass::error_class};
+  switch (status) {
+    TOPOLOC_HPP_STATUS(TOPOLOC_OK, None)
+    TOPOLOC_HPP_STATUS(TOPOLOC_ERR_NULL_ARGUMENT, Error)
+    TOPOLOC_HPP_STATUS(TOPOLOC_ERR_INVALID_ARGUMENT, Error)
+    TOPOLOC_HPP_STATUS(TOPOLOC_ERR_BUFFER_TOO_SMALL, Error)
+    TOPOLOC_HPP_STATUS(TOPOLOC_ERR_STRUCT_SIZE, Error)
+    TOPOLOC_HPP_STATUS(TOPOLOC_ERR_INVALID_UTF8, Error)
+    TOPOLOC_HPP_STATUS(TOPOLOC_ERR_IO, Error)
+    TOPOLOC_HPP_STATUS(TOPOLOC_ERR_NOT_A_MAP, Error)
+    TOPOLOC_HPP_STATUS(TOPOLOC_ERR_TRUNCATED, Error)
+    TOPOLOC_HPP_STATUS(TOPOLOC_ERR_CORRUPT, Error)
+    TOPOLOC_HPP_STATUS(TOPOLOC_ERR_UNSUPPORTED_VERSION, Error)
+    TOPOLOC_HPP_STATUS(TOPOLOC_ERR_DESCRIPTOR_MISMATCH, Error)
+    TOPOLOC_HPP_STATUS(TOPOLOC_ERR_EMPTY_MAP, Error)
+    TOPOLOC_HPP_STATUS(TOPOLOC_ERR_INVALID_MAP, Error)
+    TOPOLOC_HPP_STATUS(TOPOLOC_ERR_UNKNOWN_PLACE, Error)
+    TOPOLOC_HPP_STATUS(TOPOLOC_ERR_UNKNOWN_VIEW, Error)
+    TOPOLOC_HPP_STATUS(TOPOLOC_ERR_DIMENSION_MISMATCH, Error)
+    TOPOLOC_HPP_STATUS(TOPOLOC_ERR_NON_FINITE, Error)
+    TOPOLOC_HPP_STATUS(TOPOLOC_ERR_ZERO_DESCRIPTOR, Error)
+    TOPOLOC_HPP_STATUS(TOPOLOC_ERR_TIMESTAMP, Error)
+    TOPOLOC_HPP_STATUS(TOPOLOC_ERR_INVALID_OPTION, Error)
+    TOPOLOC_HPP_STATUS(TOPOLOC_ERR_INVALID_IMAGE, InvalidImage)
+    TOPOLOC_HPP_STATUS(TOPOLOC_ERR_UNINFORMATIVE_IMAGE, UninformativeImage)
+    TOPOLOC_HPP_STATUS(TOPOLOC_ERR_BACKEND_UNAVAILABLE, BackendUnavailable)
+    TOPOLOC_HPP_STATUS(TOPOLOC_ERR_MODEL, Model)
+    TOPOLOC_HPP_STATUS(TOPOLOC_ERR_NO_DESCRIBER, NoDescriber)
+    TOPOLOC_HPP_STATUS(TOPOLOC_ERR_CANCELLED, Cancelled)
+    TOPOLOC_HPP_STATUS(TOPOLOC_ERR_PANIC, Error)
+  }
+#undef TOPOLOC_HPP_STATUS
+  return StatusInfo{nullptr, ErrorClass::Error};
+}
+
+}  // namespace detail
+
+/// The C name of a status ("TOPOLOC_ERR_IO"), or null for a code this header does not know.
+[[nodiscard]] constexpr const char *status_name(topoloc_status status) noexcept {
+  return detail::status_info(status).name;
+}
+
 /// The message of the most recent failed C call on the calling thread ("" if none).
 /// Reads the size first and then the text, so messages of any length are returned whole.
 /// Does not change the stored message. Never throws except `std::bad_alloc`.
@@ -137,8 +207,16 @@ public:
   const std::string &message() const noexcept { return message_; }
 
 private:
+  // "<description> [<NAME> = <code>]: <message>", e.g.
+  // "I/O error [TOPOLOC_ERR_IO = 100]: cannot open /x.topoloc: No such file or directory".
   static std::string compose(topoloc_status status, const std::string &message) {
     std::string text = status_string(status);
+    text += " [";
+    const char *name = status_name(status);
+    text += name != nullptr ? name : "status";
+    text += " = ";
+    text += std::to_string(static_cast<uint32_t>(status));
+    text += "]";
     if (!message.empty()) {
       text += ": ";
       text += message;
@@ -190,25 +268,29 @@ public:
   using Error::Error;
 };
 
-/// Throws the exception for `status` with `message`: the subclass of `Error` for the image
-/// statuses above, `Error` itself for every other status.
+/// Throws the exception class of `status` (from the status table `detail::status_info`) with
+/// `message`: a subclass of `Error` for the image statuses, `Error` itself for every other
+/// status, including codes newer than this header. `status` must not be `TOPOLOC_OK` (it is
+/// thrown as `Error` too, which is a caller's bug).
 [[noreturn]] inline void throw_error(topoloc_status status, std::string message) {
-  switch (status) {
-  case TOPOLOC_ERR_INVALID_IMAGE:
+  switch (detail::status_info(status).error) {
+  case detail::ErrorClass::InvalidImage:
     throw InvalidImageError(status, std::move(message));
-  case TOPOLOC_ERR_UNINFORMATIVE_IMAGE:
+  case detail::ErrorClass::UninformativeImage:
     throw UninformativeImageError(status, std::move(message));
-  case TOPOLOC_ERR_BACKEND_UNAVAILABLE:
+  case detail::ErrorClass::BackendUnavailable:
     throw BackendUnavailableError(status, std::move(message));
-  case TOPOLOC_ERR_MODEL:
+  case detail::ErrorClass::Model:
     throw ModelError(status, std::move(message));
-  case TOPOLOC_ERR_NO_DESCRIBER:
+  case detail::ErrorClass::NoDescriber:
     throw NoDescriberError(status, std::move(message));
-  case TOPOLOC_ERR_CANCELLED:
+  case detail::ErrorClass::Cancelled:
     throw CancelledError(status, std::move(message));
-  default:
-    throw Error(status, std::move(message));
+  case detail::ErrorClass::None:
+  case detail::ErrorClass::Error:
+    break;
   }
+  throw Error(status, std::move(message));
 }
 
 /// Throws (see `throw_error`) with the thread's last error message unless `status` is

@@ -175,6 +175,7 @@ TEST(dimension_mismatch_throws) {
   } catch (const topoloc::Error &e) {
     const std::string what = e.what();
     CHECK(what.find("descriptor dimension mismatch") == 0);
+    CHECK(what.find(" [TOPOLOC_ERR_DIMENSION_MISMATCH = 200]: ") != std::string::npos);
     CHECK(what.find(e.message()) != std::string::npos);
   }
 
@@ -473,6 +474,16 @@ TEST(error_subclasses_for_image_statuses) {
     CHECK(e.status() == TOPOLOC_ERR_IO);
   }
   static_assert(std::is_base_of_v<topoloc::Error, topoloc::UninformativeImageError>);
+  // A code newer than this header (from a newer library) is still an Error carrying it.
+  const auto future = static_cast<topoloc_status>(4242u);
+  CHECK(topoloc::status_name(future) == nullptr);
+  try {
+    topoloc::throw_error(future, "from the future");
+  } catch (const topoloc::Error &e) {
+    CHECK(e.status() == future);
+    CHECK(std::string(e.what()).find("[status = 4242]: from the future") != std::string::npos);
+  }
+  CHECK(std::string(topoloc::status_name(TOPOLOC_ERR_PANIC)) == "TOPOLOC_ERR_PANIC");
   CHECK(std::string(topoloc::status_string(TOPOLOC_ERR_CANCELLED)) != "unknown status code");
 }
 
