@@ -87,7 +87,7 @@ namespace topoloc {
 // ---------------------------------------------------------------------------------------------
 
 /// Static English description of a status code (`topoloc_status_str`); never null, never freed.
-inline const char *status_string(topoloc_status status) noexcept {
+[[nodiscard]] inline const char *status_string(topoloc_status status) noexcept {
   return topoloc_status_str(static_cast<uint32_t>(status));
 }
 
@@ -164,7 +164,7 @@ constexpr StatusInfo status_info(topoloc_status status) noexcept {
 /// The message of the most recent failed C call on the calling thread ("" if none).
 /// Reads the size first and then the text, so messages of any length are returned whole.
 /// Does not change the stored message. Never throws except `std::bad_alloc`.
-inline std::string last_error_message() {
+[[nodiscard]] inline std::string last_error_message() {
   std::size_t needed = 0;
   // First ask for the size: with an empty buffer the call reports BUFFER_TOO_SMALL and `needed`.
   topoloc_last_error_message(nullptr, 0, &needed);
@@ -198,13 +198,13 @@ public:
 
   /// The error of the C call that just failed on this thread with `status`: reads the
   /// thread-local message. Call it before any other topoloc call on this thread.
-  static Error from_last(topoloc_status status) { return Error(status, last_error_message()); }
+  [[nodiscard]] static Error from_last(topoloc_status status) { return Error(status, last_error_message()); }
 
   /// The C status code (never `TOPOLOC_OK`).
-  topoloc_status status() const noexcept { return status_; }
+  [[nodiscard]] topoloc_status status() const noexcept { return status_; }
 
   /// The message alone, without the status description ("" if the library gave none).
-  const std::string &message() const noexcept { return message_; }
+  [[nodiscard]] const std::string &message() const noexcept { return message_; }
 
 private:
   // "<description> [<NAME> = <code>]: <message>", e.g.
@@ -307,17 +307,17 @@ inline void check(topoloc_status status) {
 
 /// Version of the loaded library, "MAJOR.MINOR.PATCH" (static; never free it). The header's
 /// version is `TOPOLOC_VERSION_STRING`.
-inline const char *version() noexcept { return topoloc_version(); }
+[[nodiscard]] inline const char *version() noexcept { return topoloc_version(); }
 
 /// ABI version of the loaded library.
-inline uint32_t abi_version() noexcept { return topoloc_abi_version(); }
+[[nodiscard]] inline uint32_t abi_version() noexcept { return topoloc_abi_version(); }
 
 /// ABI version of the header this program was compiled against.
 constexpr uint32_t header_abi_version = TOPOLOC_ABI_VERSION;
 
 /// True when the loaded library has the ABI of the header this program was compiled against.
 /// Check it once at start-up; on false, do not use the library.
-inline bool abi_matches() noexcept { return topoloc_abi_version() == TOPOLOC_ABI_VERSION; }
+[[nodiscard]] inline bool abi_matches() noexcept { return topoloc_abi_version() == TOPOLOC_ABI_VERSION; }
 
 // ---------------------------------------------------------------------------------------------
 // Options: the C structs themselves, filled by their _default() functions
@@ -352,7 +352,7 @@ using SkeletonOptions = topoloc_skeleton_options;
 
 /// Load options that accept any map (`topoloc_map_load_options_default`). Throws `Error`
 /// (`TOPOLOC_ERR_STRUCT_SIZE`) only on a header/library layout mismatch.
-inline LoadOptions default_load_options() {
+[[nodiscard]] inline LoadOptions default_load_options() {
   LoadOptions options;
   check(topoloc_map_load_options_default(&options));
   return options;
@@ -360,7 +360,7 @@ inline LoadOptions default_load_options() {
 
 /// Default localizer options (`topoloc_localizer_options_default`). Throws `Error`
 /// (`TOPOLOC_ERR_STRUCT_SIZE`) only on a header/library layout mismatch.
-inline LocalizerOptions default_localizer_options() {
+[[nodiscard]] inline LocalizerOptions default_localizer_options() {
   LocalizerOptions options;
   check(topoloc_localizer_options_default(&options));
   return options;
@@ -368,7 +368,7 @@ inline LocalizerOptions default_localizer_options() {
 
 /// Default keyframe options (`topoloc_keyframe_options_default`). Throws `Error`
 /// (`TOPOLOC_ERR_STRUCT_SIZE`) only on a header/library layout mismatch.
-inline KeyframeOptions default_keyframe_options() {
+[[nodiscard]] inline KeyframeOptions default_keyframe_options() {
   KeyframeOptions options;
   check(topoloc_keyframe_options_default(&options));
   return options;
@@ -376,7 +376,7 @@ inline KeyframeOptions default_keyframe_options() {
 
 /// Default image map options (`topoloc_image_map_options_default`). Throws `Error`
 /// (`TOPOLOC_ERR_STRUCT_SIZE`) only on a header/library layout mismatch.
-inline ImageMapOptions default_image_map_options() {
+[[nodiscard]] inline ImageMapOptions default_image_map_options() {
   ImageMapOptions options;
   check(topoloc_image_map_options_default(&options));
   return options;
@@ -384,7 +384,7 @@ inline ImageMapOptions default_image_map_options() {
 
 /// Default skeleton options (`topoloc_skeleton_options_default`). Throws `Error`
 /// (`TOPOLOC_ERR_STRUCT_SIZE`) only on a header/library layout mismatch.
-inline SkeletonOptions default_skeleton_options() {
+[[nodiscard]] inline SkeletonOptions default_skeleton_options() {
   SkeletonOptions options;
   check(topoloc_skeleton_options_default(&options));
   return options;
@@ -456,7 +456,7 @@ struct Result {
 using Image = topoloc_image;
 
 /// Bytes per pixel of a `TOPOLOC_PIXEL_*` format; 0 for `TOPOLOC_PIXEL_NONE` and unknown values.
-constexpr std::size_t pixel_bytes(uint32_t format) noexcept {
+[[nodiscard]] constexpr std::size_t pixel_bytes(uint32_t format) noexcept {
   return format == TOPOLOC_PIXEL_GRAY8                                    ? 1
          : format == TOPOLOC_PIXEL_RGB8 || format == TOPOLOC_PIXEL_BGR8   ? 3
          : format == TOPOLOC_PIXEL_RGBA8 || format == TOPOLOC_PIXEL_BGRA8 ? 4
@@ -465,7 +465,7 @@ constexpr std::size_t pixel_bytes(uint32_t format) noexcept {
 
 /// A view of `data_len` bytes holding `width` x `height` pixels of `format` in rows `stride`
 /// bytes apart (all checked by the library when the image is used).
-inline Image image_view(const void *data, std::size_t data_len, uint32_t width, uint32_t height,
+[[nodiscard]] inline Image image_view(const void *data, std::size_t data_len, uint32_t width, uint32_t height,
                         uint32_t format, std::size_t stride) noexcept {
   Image image{};
   image.data = static_cast<const uint8_t *>(data);
@@ -483,7 +483,7 @@ inline Image image_view(const void *data, std::size_t data_len, uint32_t width, 
 /// becomes `data_len`. Throws `InvalidImageError` for an unknown format or a size whose byte
 /// count overflows; everything else (zero sizes, a stride shorter than a row, sizes above the
 /// library's limit) is judged by the library when the image is used.
-inline Image image_view(const void *data, uint32_t width, uint32_t height, uint32_t format,
+[[nodiscard]] inline Image image_view(const void *data, uint32_t width, uint32_t height, uint32_t format,
                         std::size_t stride = 0) {
   const std::size_t bytes = pixel_bytes(format);
   if (bytes == 0) {
@@ -525,8 +525,11 @@ enum class Stage : uint32_t {
 };
 
 /// Progress of a map build, called on the building thread about ten times a second: return
-/// true to go on, false to cancel (`CancelledError`). An exception thrown by the callback
-/// cancels the build and is rethrown, unchanged, by the building function.
+/// true to go on, false to cancel (`CancelledError`). It runs inside topoloc, so it must not
+/// unwind, longjmp or otherwise jump through the C call; this layer guarantees that for
+/// exceptions: one thrown by the callback is caught before it reaches C, cancels the build
+/// (the callback is not called again), and is rethrown, unchanged, by the building function
+/// once the C call has returned. A `longjmp` out of the callback is never safe.
 using Progress = std::function<bool(Stage stage, std::size_t done, std::size_t total)>;
 
 namespace detail {
@@ -696,7 +699,7 @@ public:
   /// Loads and validates a map file (memory-mapped: do not modify the file while the map
   /// lives). Throws `Error` (`TOPOLOC_ERR_IO`, `_NOT_A_MAP`, `_TRUNCATED`, `_CORRUPT`,
   /// `_UNSUPPORTED_VERSION`, `_DESCRIPTOR_MISMATCH`, ...).
-  static Map load(const std::string &path, const LoadOptions &options = default_load_options()) {
+  [[nodiscard]] static Map load(const std::string &path, const LoadOptions &options = default_load_options()) {
     topoloc_map *raw = nullptr;
     check(topoloc_map_load(path.c_str(), &options, &raw));
     return Map(raw);
@@ -704,7 +707,7 @@ public:
 
   /// Loads and validates a map from `len` bytes in the map file format (copied: the buffer may
   /// be released afterwards). Same errors as `load`.
-  static Map from_memory(const void *data, std::size_t len,
+  [[nodiscard]] static Map from_memory(const void *data, std::size_t len,
                          const LoadOptions &options = default_load_options()) {
     topoloc_map *raw = nullptr;
     check(topoloc_map_load_from_memory(static_cast<const uint8_t *>(data), len, &options, &raw));
@@ -712,7 +715,7 @@ public:
   }
 
   /// `from_memory` over a byte vector.
-  static Map from_memory(const std::vector<uint8_t> &bytes,
+  [[nodiscard]] static Map from_memory(const std::vector<uint8_t> &bytes,
                          const LoadOptions &options = default_load_options()) {
     return from_memory(bytes.data(), bytes.size(), options);
   }
@@ -727,7 +730,7 @@ public:
   /// Throws `InvalidImageError` (a bad buffer; the message names `images[i]`),
   /// `BackendUnavailableError`, `ModelError`, `CancelledError`, `Error` (`_INVALID_ARGUMENT`:
   /// fewer than 2 images or bad options; `_IO`: poses file; `_STRUCT_SIZE`).
-  static Map build_from_images(const Image *images, std::size_t count,
+  [[nodiscard]] static Map build_from_images(const Image *images, std::size_t count,
                                const ImageMapOptions &options = default_image_map_options(),
                                const Progress &progress = Progress()) {
     return Map(detail::build_with_progress(
@@ -737,7 +740,7 @@ public:
   }
 
   /// `build_from_images` over a vector of image views.
-  static Map build_from_images(const std::vector<Image> &images,
+  [[nodiscard]] static Map build_from_images(const std::vector<Image> &images,
                                const ImageMapOptions &options = default_image_map_options(),
                                const Progress &progress = Progress()) {
     return build_from_images(images.data(), images.size(), options, progress);
@@ -747,7 +750,7 @@ public:
   /// Builds a map from image files (any format OpenCV reads), like `build_from_images`; views
   /// also record their file's path (`view_image`). Throws `InvalidImageError` for a missing or
   /// unreadable file (the message names it), and the errors of `build_from_images`.
-  static Map build_from_image_files(const std::vector<std::string> &paths,
+  [[nodiscard]] static Map build_from_image_files(const std::vector<std::string> &paths,
                                     const ImageMapOptions &options = default_image_map_options(),
                                     const Progress &progress = Progress()) {
     std::vector<const char *> c_paths;
@@ -767,56 +770,56 @@ public:
   void save(const std::string &path) const { check(topoloc_map_save(get(), path.c_str())); }
 
   /// Number of places.
-  std::size_t place_count() const {
+  [[nodiscard]] std::size_t place_count() const {
     std::size_t n = 0;
     check(topoloc_map_place_count(get(), &n));
     return n;
   }
 
   /// Number of views.
-  std::size_t view_count() const {
+  [[nodiscard]] std::size_t view_count() const {
     std::size_t n = 0;
     check(topoloc_map_view_count(get(), &n));
     return n;
   }
 
   /// Number of undirected edges.
-  std::size_t edge_count() const {
+  [[nodiscard]] std::size_t edge_count() const {
     std::size_t n = 0;
     check(topoloc_map_edge_count(get(), &n));
     return n;
   }
 
   /// Descriptor dimension D: every descriptor given to a localizer of this map has D floats.
-  uint32_t dim() const {
+  [[nodiscard]] uint32_t dim() const {
     uint32_t d = 0;
     check(topoloc_map_descriptor_dim(get(), &d));
     return d;
   }
 
   /// Descriptor kind the map was built with (e.g. the backend family).
-  std::string descriptor_kind() const {
+  [[nodiscard]] std::string descriptor_kind() const {
     return detail::read_string([this](char *buf, std::size_t len, std::size_t *needed) {
       return topoloc_map_descriptor_kind(get(), buf, len, needed);
     });
   }
 
   /// Descriptor model identity the map was built with ("" when none).
-  std::string descriptor_model() const {
+  [[nodiscard]] std::string descriptor_model() const {
     return detail::read_string([this](char *buf, std::size_t len, std::size_t *needed) {
       return topoloc_map_descriptor_model(get(), buf, len, needed);
     });
   }
 
   /// Places joined to `place` by an edge. Throws `Error` (`TOPOLOC_ERR_UNKNOWN_PLACE`).
-  std::vector<uint32_t> neighbours(uint32_t place) const {
+  [[nodiscard]] std::vector<uint32_t> neighbours(uint32_t place) const {
     return detail::read_ids([this, place](uint32_t *buf, std::size_t len, std::size_t *count) {
       return topoloc_map_neighbours(get(), place, buf, len, count);
     });
   }
 
   /// View ids of `place`. Throws `Error` (`TOPOLOC_ERR_UNKNOWN_PLACE`).
-  std::vector<uint32_t> place_views(uint32_t place) const {
+  [[nodiscard]] std::vector<uint32_t> place_views(uint32_t place) const {
     return detail::read_ids([this, place](uint32_t *buf, std::size_t len, std::size_t *count) {
       return topoloc_map_place_views(get(), place, buf, len, count);
     });
@@ -824,7 +827,7 @@ public:
 
   /// Position of `place` in metres, or nullopt when the map has none. Throws `Error`
   /// (`TOPOLOC_ERR_UNKNOWN_PLACE`).
-  std::optional<Position> place_position(uint32_t place) const {
+  [[nodiscard]] std::optional<Position> place_position(uint32_t place) const {
     Position xyz{};
     bool has = false;
     check(topoloc_map_place_position(get(), place, xyz.data(), &has));
@@ -836,14 +839,14 @@ public:
 
   /// Edge number `index` (0..edge_count(), sorted by (a, b)). Throws `Error`
   /// (`TOPOLOC_ERR_INVALID_ARGUMENT` when out of range).
-  Edge edge(std::size_t index) const {
+  [[nodiscard]] Edge edge(std::size_t index) const {
     Edge e;
     check(topoloc_map_edge(get(), index, &e.a, &e.b, &e.weight));
     return e;
   }
 
   /// All edges, sorted by (a, b).
-  std::vector<Edge> edges() const {
+  [[nodiscard]] std::vector<Edge> edges() const {
     std::vector<Edge> all(edge_count());
     for (std::size_t i = 0; i < all.size(); ++i) {
       all[i] = edge(i);
@@ -852,7 +855,7 @@ public:
   }
 
   /// Attributes of `view`. Throws `Error` (`TOPOLOC_ERR_UNKNOWN_VIEW`).
-  ViewInfo view_info(uint32_t view) const {
+  [[nodiscard]] ViewInfo view_info(uint32_t view) const {
     topoloc_view_info raw;
     check(topoloc_view_info_default(&raw));
     check(topoloc_map_view_info(get(), view, &raw));
@@ -870,14 +873,14 @@ public:
   }
 
   /// The unit-norm descriptor of `view` (D floats). Throws `Error` (`TOPOLOC_ERR_UNKNOWN_VIEW`).
-  std::vector<float> view_descriptor(uint32_t view) const {
+  [[nodiscard]] std::vector<float> view_descriptor(uint32_t view) const {
     std::vector<float> descriptor(dim());
     check(topoloc_map_view_descriptor(get(), view, descriptor.data(), descriptor.size()));
     return descriptor;
   }
 
   /// Image reference of `view` ("" when none). Throws `Error` (`TOPOLOC_ERR_UNKNOWN_VIEW`).
-  std::string view_image(uint32_t view) const {
+  [[nodiscard]] std::string view_image(uint32_t view) const {
     return detail::read_string([this, view](char *buf, std::size_t len, std::size_t *needed) {
       return topoloc_map_view_image(get(), view, buf, len, needed);
     });
@@ -951,7 +954,7 @@ public:
 
   /// Validates and returns a map of what was added; the builder stays usable. Throws `Error`
   /// (`TOPOLOC_ERR_EMPTY_MAP`, `_INVALID_MAP` e.g. for a place without views).
-  Map build() const {
+  [[nodiscard]] Map build() const {
     topoloc_map *raw = nullptr;
     check(topoloc_map_builder_build(get(), &raw));
     return Map(raw);
@@ -963,7 +966,7 @@ public:
 /// appearance novelty, edges between consecutive and nearby places. Either every keyframe has
 /// a pose or none has. Throws `Error` (`TOPOLOC_ERR_EMPTY_MAP`, `_INVALID_ARGUMENT` naming the
 /// bad keyframe or option).
-inline Map map_from_keyframes(const std::string &kind, const std::string &model, uint32_t dim,
+[[nodiscard]] inline Map map_from_keyframes(const std::string &kind, const std::string &model, uint32_t dim,
                               const std::vector<Keyframe> &keyframes,
                               const KeyframeOptions &options = default_keyframe_options()) {
   std::vector<topoloc_keyframe> raw(keyframes.size());
@@ -981,7 +984,7 @@ inline Map map_from_keyframes(const std::string &kind, const std::string &model,
 }
 
 /// `map_from_keyframes` over C keyframe records (borrowed for the duration of the call).
-inline Map map_from_keyframes(const std::string &kind, const std::string &model, uint32_t dim,
+[[nodiscard]] inline Map map_from_keyframes(const std::string &kind, const std::string &model, uint32_t dim,
                               const topoloc_keyframe *keyframes, std::size_t count,
                               const KeyframeOptions &options = default_keyframe_options()) {
   topoloc_map *out = nullptr;
@@ -1001,8 +1004,10 @@ inline Map map_from_keyframes(const std::string &kind, const std::string &model,
 ///
 /// Thread safety: single-threaded state; use from one thread at a time (it may move between
 /// threads). Many localizers may share one map on many threads.
-/// Errors: every method that calls the library throws `Error` on failure; a failed `process`
-/// leaves the localizer and its last result unchanged.
+/// Errors: every method that calls the library throws `Error` (or the subclass of its status,
+/// see `throw_error`) on failure; a failed `process` leaves the localizer and its last result
+/// unchanged. `process` is `[[nodiscard]]`: to feed a frame without reading its result, write
+/// `(void)localizer.process(...)`.
 class Localizer : public detail::Owner<topoloc_localizer, &topoloc_localizer_free> {
 public:
   /// An empty owner (`!localizer`).
@@ -1063,7 +1068,7 @@ public:
   /// Throws `Error` (`TOPOLOC_ERR_DIMENSION_MISMATCH`, `_NON_FINITE`, `_ZERO_DESCRIPTOR`,
   /// `_TIMESTAMP`, `_INVALID_ARGUMENT` for non-rigid odometry, `_NULL_ARGUMENT` when empty).
   /// Cost: one pass over the map's descriptors plus O(places + edges); no allocation.
-  const Result &process(const float *descriptor, std::size_t len, double timestamp,
+  [[nodiscard]] const Result &process(const float *descriptor, std::size_t len, double timestamp,
                         const double *odometry = nullptr) {
     Frame frame;
     frame.timestamp = timestamp;
@@ -1075,7 +1080,7 @@ public:
 
   /// Localizes one frame, of a descriptor or of an image (see `Frame`): the general form of
   /// the other `process` overloads, with the same result lifetime and errors as theirs.
-  const Result &process(const Frame &input) {
+  [[nodiscard]] const Result &process(const Frame &input) {
     topoloc_frame frame = frame_template_;
     frame.timestamp = input.timestamp;
     frame.descriptor = input.descriptor;
@@ -1102,13 +1107,13 @@ public:
   }
 
   /// `process` with a vector descriptor.
-  const Result &process(const std::vector<float> &descriptor, double timestamp,
+  [[nodiscard]] const Result &process(const std::vector<float> &descriptor, double timestamp,
                         const double *odometry = nullptr) {
     return process(descriptor.data(), descriptor.size(), timestamp, odometry);
   }
 
   /// `process` with odometry as a `Pose` (`previous_T_current`).
-  const Result &process(const std::vector<float> &descriptor, double timestamp,
+  [[nodiscard]] const Result &process(const std::vector<float> &descriptor, double timestamp,
                         const Pose &odometry) {
     return process(descriptor.data(), descriptor.size(), timestamp, odometry.data());
   }
@@ -1121,7 +1126,7 @@ public:
   /// `ModelError`, and the `Error`s of the descriptor `process` (`_TIMESTAMP`,
   /// `_INVALID_ARGUMENT` for non-rigid odometry, ...).
   /// Cost: describing the image, then as `process`.
-  const Result &process(const Image &image, double timestamp,
+  [[nodiscard]] const Result &process(const Image &image, double timestamp,
                         const double *odometry = nullptr) {
     Frame frame;
     frame.timestamp = timestamp;
@@ -1131,7 +1136,7 @@ public:
   }
 
   /// `process` of an image with odometry as a `Pose` (`previous_T_current`).
-  const Result &process(const Image &image, double timestamp, const Pose &odometry) {
+  [[nodiscard]] const Result &process(const Image &image, double timestamp, const Pose &odometry) {
     return process(image, timestamp, odometry.data());
   }
 
@@ -1144,10 +1149,10 @@ public:
 
   /// The result of the last successful `process` since creation or `reset` (all zero and
   /// without candidates before the first).
-  const Result &last_result() const noexcept { return last_; }
+  [[nodiscard]] const Result &last_result() const noexcept { return last_; }
 
-  /// Most candidates a result can hold: min(options.top_k, places).
-  std::size_t candidate_capacity() const noexcept { return buffer_.size(); }
+  /// Most candidates a result can hold: min(options.top_k, places). 0 when empty.
+  [[nodiscard]] std::size_t candidate_capacity() const noexcept { return buffer_.size(); }
 
   /// Gives up ownership: returns the handle (free it with `topoloc_localizer_free`) and leaves
   /// this object empty, its buffers released.
@@ -1222,7 +1227,7 @@ public:
   /// call only. Throws `Error` (`TOPOLOC_ERR_INVALID_ARGUMENT` naming the field: `dims`,
   /// `voxel_size`, `origin`, `cells_len`, `cells` when every voxel is occupied, `z_band`,
   /// `min_clearance_m` or another option; `_STRUCT_SIZE`).
-  static Graph from_occupancy(const std::array<std::size_t, 3> &dims, double voxel_size,
+  [[nodiscard]] static Graph from_occupancy(const std::array<std::size_t, 3> &dims, double voxel_size,
                               const Position &origin, const uint8_t *cells, std::size_t cells_len,
                               const SkeletonOptions &options = default_skeleton_options()) {
     topoloc_graph *raw = nullptr;
@@ -1232,21 +1237,21 @@ public:
   }
 
   /// `from_occupancy` over a byte vector.
-  static Graph from_occupancy(const std::array<std::size_t, 3> &dims, double voxel_size,
+  [[nodiscard]] static Graph from_occupancy(const std::array<std::size_t, 3> &dims, double voxel_size,
                               const Position &origin, const std::vector<uint8_t> &cells,
                               const SkeletonOptions &options = default_skeleton_options()) {
     return from_occupancy(dims, voxel_size, origin, cells.data(), cells.size(), options);
   }
 
   /// Number of places.
-  std::size_t place_count() const {
+  [[nodiscard]] std::size_t place_count() const {
     std::size_t n = 0;
     check(topoloc_graph_place_count(get(), &n));
     return n;
   }
 
   /// Number of undirected edges.
-  std::size_t edge_count() const {
+  [[nodiscard]] std::size_t edge_count() const {
     std::size_t n = 0;
     check(topoloc_graph_edge_count(get(), &n));
     return n;
@@ -1254,14 +1259,14 @@ public:
 
   /// Place `index` (branches first, then ends, corners, intermediate places). Throws `Error`
   /// (`TOPOLOC_ERR_UNKNOWN_PLACE`).
-  GraphPlace place(uint32_t index) const {
+  [[nodiscard]] GraphPlace place(uint32_t index) const {
     GraphPlace p;
     check(topoloc_graph_place(get(), index, p.position.data(), &p.kind));
     return p;
   }
 
   /// All places.
-  std::vector<GraphPlace> places() const {
+  [[nodiscard]] std::vector<GraphPlace> places() const {
     std::vector<GraphPlace> all(place_count());
     for (std::size_t i = 0; i < all.size(); ++i) {
       all[i] = place(static_cast<uint32_t>(i));
@@ -1271,14 +1276,14 @@ public:
 
   /// Edge number `index` (0..edge_count(), sorted by (a, b)). Throws `Error`
   /// (`TOPOLOC_ERR_INVALID_ARGUMENT` when out of range).
-  GraphEdge edge(std::size_t index) const {
+  [[nodiscard]] GraphEdge edge(std::size_t index) const {
     GraphEdge e;
     check(topoloc_graph_edge(get(), index, &e.a, &e.b, &e.length_m));
     return e;
   }
 
   /// All edges, sorted by (a, b).
-  std::vector<GraphEdge> edges() const {
+  [[nodiscard]] std::vector<GraphEdge> edges() const {
     std::vector<GraphEdge> all(edge_count());
     for (std::size_t i = 0; i < all.size(); ++i) {
       all[i] = edge(i);
@@ -1287,7 +1292,7 @@ public:
   }
 
   /// The skeleton the graph was built on: voxel indices x0, y0, z0, x1, y1, z1, ... in grid order.
-  std::vector<uint32_t> skeleton() const {
+  [[nodiscard]] std::vector<uint32_t> skeleton() const {
     return detail::read_ids([this](uint32_t *buf, std::size_t len, std::size_t *count) {
       return topoloc_graph_skeleton(get(), buf, len, count);
     });

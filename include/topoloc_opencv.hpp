@@ -91,7 +91,7 @@ namespace topoloc {
 /// `localizer.process` of a frame given by its descriptor in a cv::Mat (see `descriptor_view`;
 /// a bad Mat throws `Error` with `TOPOLOC_ERR_INVALID_ARGUMENT` and leaves the localizer
 /// unchanged). Same result lifetime and errors as `Localizer::process`.
-inline const Result &process_descriptor(Localizer &localizer, const cv::Mat &descriptor,
+[[nodiscard]] inline const Result &process_descriptor(Localizer &localizer, const cv::Mat &descriptor,
                                         double timestamp, const double *odometry = nullptr) {
   const auto d = descriptor_view(descriptor);
   return localizer.process(d.first, d.second, timestamp, odometry);
@@ -100,7 +100,7 @@ inline const Result &process_descriptor(Localizer &localizer, const cv::Mat &des
 /// `localizer.process` of a frame given by its 8-bit camera image in a cv::Mat (see
 /// `image_view`; another type throws `InvalidImageError` and leaves the localizer unchanged).
 /// Same result lifetime and errors as `Localizer::process` of an `Image`.
-inline const Result &process_image(Localizer &localizer, const cv::Mat &image, double timestamp,
+[[nodiscard]] inline const Result &process_image(Localizer &localizer, const cv::Mat &image, double timestamp,
                                    const double *odometry = nullptr) {
   return localizer.process(image_view(image), timestamp, odometry);
 }

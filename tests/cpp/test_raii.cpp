@@ -112,7 +112,7 @@ TEST(localizer_moves) {
   const topoloc::Map map = chain_map();
   topoloc::Localizer a(map);
   const topoloc_localizer *raw = a.capi();
-  a.process(observe(0, 0), 0.0);
+  (void)a.process(observe(0, 0), 0.0);
 
   topoloc::Localizer b(std::move(a));
   CHECK(!a);
@@ -171,7 +171,7 @@ TEST(dimension_mismatch_throws) {
 
   // what() = status description + message.
   try {
-    localizer.process(short_descriptor, 0.1);
+    (void)localizer.process(short_descriptor, 0.1);
   } catch (const topoloc::Error &e) {
     const std::string what = e.what();
     CHECK(what.find("descriptor dimension mismatch") == 0);
@@ -193,7 +193,7 @@ TEST(dimension_mismatch_throws) {
 TEST(other_statuses_throw) {
   const topoloc::Map map = chain_map();
   topoloc::Localizer localizer(map);
-  localizer.process(observe(0, 0), 1.0);
+  (void)localizer.process(observe(0, 0), 1.0);
   CHECK_THROWS_STATUS(localizer.process(observe(0, 1), 0.5), TOPOLOC_ERR_TIMESTAMP);
   CHECK_THROWS_STATUS(localizer.process(std::vector<float>(kDim, 0.f), 2.0),
                       TOPOLOC_ERR_ZERO_DESCRIPTOR);
@@ -546,7 +546,7 @@ TEST(image_map_progress_and_cancel) {
   CHECK(!message.empty());
   CHECK(calls >= 1);
   try {
-    topoloc::Map::build_from_images(images, vlad_options(kImgPlaces),
+    (void)topoloc::Map::build_from_images(images, vlad_options(kImgPlaces),
                                     [](topoloc::Stage, std::size_t, std::size_t) { return false; });
     report_failure(__FILE__, __LINE__, "a cancelled build returned a map");
   } catch (const topoloc::CancelledError &) {
@@ -559,7 +559,7 @@ TEST(image_map_progress_and_cancel) {
     int calls_after = 0;
     bool thrown = false;
     try {
-      topoloc::Map::build_from_images(
+      (void)topoloc::Map::build_from_images(
           images, vlad_options(kImgPlaces), [&](topoloc::Stage stage, std::size_t, std::size_t) {
             if (thrown) ++calls_after;
             if (stage == throw_at) {
@@ -579,7 +579,7 @@ TEST(image_map_progress_and_cancel) {
   // Not only std::exceptions.
   bool caught_int = false;
   try {
-    topoloc::Map::build_from_images(images, vlad_options(kImgPlaces),
+    (void)topoloc::Map::build_from_images(images, vlad_options(kImgPlaces),
                                     [](topoloc::Stage, std::size_t, std::size_t) -> bool {
                                       throw 42;
                                     });
@@ -663,7 +663,7 @@ TEST(image_localizer) {
       TOPOLOC_ERR_INVALID_IMAGE);
   bool skipped = false;
   try {
-    filter.process(gray(constant), 6.0);
+    (void)filter.process(gray(constant), 6.0);
   } catch (const topoloc::UninformativeImageError &) {
     skipped = true;  // what a stream does: skip the frame
   }
@@ -682,7 +682,7 @@ TEST(image_localizer) {
   options.image_backend = TOPOLOC_BACKEND_NONE;
   topoloc::Localizer descriptors_only(map, options);
   try {
-    descriptors_only.process(gray(places_pixels()[0]), 0.0);
+    (void)descriptors_only.process(gray(places_pixels()[0]), 0.0);
     report_failure(__FILE__, __LINE__, "NONE localizer described an image");
   } catch (const topoloc::NoDescriberError &e) {
     CHECK(e.status() == TOPOLOC_ERR_NO_DESCRIBER && !e.message().empty());
@@ -740,7 +740,7 @@ TEST(image_files) {
                           TOPOLOC_ERR_INVALID_IMAGE);
   CHECK(message.find(missing[3]) != std::string::npos);
   try {
-    topoloc::Map::build_from_image_files(missing, vlad_options(4));
+    (void)topoloc::Map::build_from_image_files(missing, vlad_options(4));
   } catch (const topoloc::InvalidImageError &) {
     CHECK(true);
   }
