@@ -1,14 +1,38 @@
 /*
  * topoloc.hpp: header-only C++17 RAII layer over the C ABI in topoloc.h.
  *
- * Every type here is a thin, move-only owner of one C handle: its destructor calls the matching
- * C `_free` function, `capi()` returns the raw handle for code that talks to the C API directly,
- * and every failing C call is turned into a `topoloc::Error` exception carrying the C status and
- * the thread-local message of `topoloc_last_error_message`. Nothing here adds behaviour the C
- * API does not have; the C header documents the semantics of each call.
+ * Every owner class (`Map`, `MapBuilder`, `Localizer`, `Graph`) is the one move-only owner
+ * template `detail::Owner` over one C handle: its destructor calls the matching C `_free`
+ * function, `capi()` / `get()` return the raw handle for code that talks to the C API directly,
+ * and `release()` gives it up. Every failing C call is turned into a `topoloc::Error` exception
+ * (or a subclass) carrying the C status and the thread-local message of
+ * `topoloc_last_error_message`; `throw_error` maps each status to its exception class in one
+ * switch. Nothing here adds behaviour the C API does not have; the C header documents the
+ * semantics of each call.
+ *
+ * One name per operation. The per-frame call is `process` in C, C++ and Python; the Rust core
+ * calls it `Localizer::localize(&Frame) -> Localization`.
+ *
+ *   operation                 C                                   C++                                Python
+ *   load a map file           topoloc_map_load                    Map::load                          Map.load
+ *   load a map from bytes     topoloc_map_load_from_memory        Map::from_memory                   Map.from_bytes
+ *   save a map                topoloc_map_save                    Map::save                          Map.save
+ *   build from descriptors    topoloc_map_builder_new/_add_*      MapBuilder, add_place/view/edge    MapBuilder
+ *                             topoloc_map_builder_build           MapBuilder::build                  MapBuilder.build
+ *   build from keyframes      topoloc_map_from_keyframes          map_from_keyframes                 map_from_keyframes
+ *   build from images         topoloc_map_build_from_images       Map::build_from_images             Map.build_from_images
+ *   build from image files    topoloc_map_build_from_image_files  Map::build_from_image_files        Map.build_from_image_files
+ *   graph from occupancy      topoloc_graph_from_occupancy        Graph::from_occupancy              skeleton_graph
+ *   new localizer             topoloc_localizer_new               Localizer(map, options)            Localizer(map, ...)
+ *   one frame (descriptor     topoloc_localizer_process           Localizer::process                 Localizer.process
+ *     or image)                                                   (+ process_descriptor,
+ *                                                                 process_image of a cv::Mat in
+ *                                                                 topoloc_opencv.hpp)
+ *   forget history            topoloc_localizer_reset             Localizer::reset                   Localizer.reset
  *
  * Thread safety (the C rules, restated):
- *  - `Map`, `Graph`: immutable. Their const methods may be called from many threads at once.
+ *  - `Map`, `Graph`: immutable. A const one may be shared by many threads, its const methods
+ *    called concurrently; many localizers on many threads may use one map.
  *  - `MapBuilder`, `Localizer`: single-threaded state. Use each from one thread at a time (they
  *    may move between threads).
  *  - Error messages are per thread, so an `Error` always describes the failure of the call that
@@ -17,23 +41,25 @@
  * Moved-from and default-constructed owners are empty (`!owner`, `capi() == nullptr`); calling a
  * method on an empty owner throws `Error` with `TOPOLOC_ERR_NULL_ARGUMENT`.
  *
+ * Callbacks (the progress of map builds) are called from inside topoloc: they must not unwind,
+ * longjmp or otherwise jump through it. This layer wraps a C++ callback so that an exception it
+ * throws is caught before it reaches C, cancels the build, and is rethrown after the C call
+ * returns; code that gives topoloc a C callback itself must do the same.
+ *
  * Methods returning strings or id lists ask the library for the size first; such a sizing call
  * may leave a "buffer too small" text as the thread's `topoloc_last_error_message` even though
  * the method succeeds. Errors thrown by this layer always carry the right message.
  *
  * Images: `Image` is a borrowed view of pixels (the C `topoloc_image`; make one with
  * `image_view`). `Map::build_from_images` / `Map::build_from_image_files` build maps that store
- * their describer, with an optional progress callback; `Localizer::localize` takes image frames
- * (`Localizer::process` takes descriptors). The image statuses throw subclasses of `Error`
- * (`InvalidImageError`, `UninformativeImageError`, `BackendUnavailableError`, `ModelError`,
- * `NoDescriberError`, `CancelledError`), so a stream can skip frames with
+ * their describer, with an optional progress callback; `Localizer::process` takes image frames
+ * as well as descriptors. The image statuses throw subclasses of `Error` (`InvalidImageError`,
+ * `UninformativeImageError`, `BackendUnavailableError`, `ModelError`, `NoDescriberError`,
+ * `CancelledError`), so a stream can skip frames with
  * `catch (const topoloc::UninformativeImageError &)`.
  *
- * OpenCV: when OpenCV's core header is included *before* this one (so that `CV_VERSION` is
- * defined), `Localizer::process` and `MapBuilder::add_view` gain `cv::Mat` descriptor
- * overloads, and `image_view(const cv::Mat &)`, `Localizer::localize(const cv::Mat &, ...)` and
- * `Map::build_from_images(const std::vector<cv::Mat> &, ...)` take 8-bit images (CV_8UC1 grey,
- * CV_8UC3 BGR, CV_8UC4 BGRA; any row step, so ROIs work).
+ * OpenCV: `cv::Mat` conveniences live in topoloc_opencv.hpp (which includes this header and
+ * OpenCV). Nothing in this header depends on what was included before it.
  */
 
 #ifndef TOPOLOC_HPP
@@ -48,7 +74,6 @@
 #include <exception>
 #include <functional>
 #include <limits>
-#include <memory>
 #include <optional>
 #include <stdexcept>
 #include <string>
@@ -62,14 +87,84 @@ namespace topoloc {
 // ---------------------------------------------------------------------------------------------
 
 /// Static English description of a status code (`topoloc_status_str`); never null, never freed.
-inline const char *status_string(topoloc_status status) noexcept {
+[[nodiscard]] inline const char *status_string(topoloc_status status) noexcept {
   return topoloc_status_str(static_cast<uint32_t>(status));
+}
+
+namespace detail {
+
+/// The exception class a status is thrown as (see `throw_error`).
+enum class ErrorClass {
+  None,                ///< `TOPOLOC_OK`: nothing is thrown.
+  Error,               ///< `topoloc::Error` itself.
+  InvalidImage,        ///< `InvalidImageError`.
+  UninformativeImage,  ///< `UninformativeImageError`.
+  BackendUnavailable,  ///< `BackendUnavailableError`.
+  Model,               ///< `ModelError`.
+  NoDescriber,         ///< `NoDescriberError`.
+  Cancelled,           ///< `CancelledError`.
+};
+
+/// One row of the status table: the C name of a status and its exception class.
+struct StatusInfo {
+  const char *name;  ///< "TOPOLOC_ERR_..." (null for a code this header does not know).
+  ErrorClass error;  ///< The exception class it is thrown as.
+};
+
+/// The status table: every `topoloc_status` of topoloc.h, its name and its exception class. The
+/// switch names every enumerator and has no default, so a code added to topoloc.h and not here
+/// is a -Wswitch warning (an error under -Werror); tests/cpp/run.sh also checks every
+/// `TOPOLOC_ERR_*` of the header against it. A code newer than this header (from a newer
+/// library) has no name and is thrown as `Error`.
+constexpr StatusInfo status_info(topoloc_status status) noexcept {
+#define TOPOLOC_HPP_STATUS(code, error_class)                                                  \
+  case code:                                                                                   \
+    return StatusInfo{#code, ErrorClass::error_class};
+  switch (status) {
+    TOPOLOC_HPP_STATUS(TOPOLOC_OK, None)
+    TOPOLOC_HPP_STATUS(TOPOLOC_ERR_NULL_ARGUMENT, Error)
+    TOPOLOC_HPP_STATUS(TOPOLOC_ERR_INVALID_ARGUMENT, Error)
+    TOPOLOC_HPP_STATUS(TOPOLOC_ERR_BUFFER_TOO_SMALL, Error)
+    TOPOLOC_HPP_STATUS(TOPOLOC_ERR_STRUCT_SIZE, Error)
+    TOPOLOC_HPP_STATUS(TOPOLOC_ERR_INVALID_UTF8, Error)
+    TOPOLOC_HPP_STATUS(TOPOLOC_ERR_IO, Error)
+    TOPOLOC_HPP_STATUS(TOPOLOC_ERR_NOT_A_MAP, Error)
+    TOPOLOC_HPP_STATUS(TOPOLOC_ERR_TRUNCATED, Error)
+    TOPOLOC_HPP_STATUS(TOPOLOC_ERR_CORRUPT, Error)
+    TOPOLOC_HPP_STATUS(TOPOLOC_ERR_UNSUPPORTED_VERSION, Error)
+    TOPOLOC_HPP_STATUS(TOPOLOC_ERR_DESCRIPTOR_MISMATCH, Error)
+    TOPOLOC_HPP_STATUS(TOPOLOC_ERR_EMPTY_MAP, Error)
+    TOPOLOC_HPP_STATUS(TOPOLOC_ERR_INVALID_MAP, Error)
+    TOPOLOC_HPP_STATUS(TOPOLOC_ERR_UNKNOWN_PLACE, Error)
+    TOPOLOC_HPP_STATUS(TOPOLOC_ERR_UNKNOWN_VIEW, Error)
+    TOPOLOC_HPP_STATUS(TOPOLOC_ERR_DIMENSION_MISMATCH, Error)
+    TOPOLOC_HPP_STATUS(TOPOLOC_ERR_NON_FINITE, Error)
+    TOPOLOC_HPP_STATUS(TOPOLOC_ERR_ZERO_DESCRIPTOR, Error)
+    TOPOLOC_HPP_STATUS(TOPOLOC_ERR_TIMESTAMP, Error)
+    TOPOLOC_HPP_STATUS(TOPOLOC_ERR_INVALID_OPTION, Error)
+    TOPOLOC_HPP_STATUS(TOPOLOC_ERR_INVALID_IMAGE, InvalidImage)
+    TOPOLOC_HPP_STATUS(TOPOLOC_ERR_UNINFORMATIVE_IMAGE, UninformativeImage)
+    TOPOLOC_HPP_STATUS(TOPOLOC_ERR_BACKEND_UNAVAILABLE, BackendUnavailable)
+    TOPOLOC_HPP_STATUS(TOPOLOC_ERR_MODEL, Model)
+    TOPOLOC_HPP_STATUS(TOPOLOC_ERR_NO_DESCRIBER, NoDescriber)
+    TOPOLOC_HPP_STATUS(TOPOLOC_ERR_CANCELLED, Cancelled)
+    TOPOLOC_HPP_STATUS(TOPOLOC_ERR_PANIC, Error)
+  }
+#undef TOPOLOC_HPP_STATUS
+  return StatusInfo{nullptr, ErrorClass::Error};
+}
+
+}  // namespace detail
+
+/// The C name of a status ("TOPOLOC_ERR_IO"), or null for a code this header does not know.
+[[nodiscard]] constexpr const char *status_name(topoloc_status status) noexcept {
+  return detail::status_info(status).name;
 }
 
 /// The message of the most recent failed C call on the calling thread ("" if none).
 /// Reads the size first and then the text, so messages of any length are returned whole.
 /// Does not change the stored message. Never throws except `std::bad_alloc`.
-inline std::string last_error_message() {
+[[nodiscard]] inline std::string last_error_message() {
   std::size_t needed = 0;
   // First ask for the size: with an empty buffer the call reports BUFFER_TOO_SMALL and `needed`.
   topoloc_last_error_message(nullptr, 0, &needed);
@@ -103,17 +198,25 @@ public:
 
   /// The error of the C call that just failed on this thread with `status`: reads the
   /// thread-local message. Call it before any other topoloc call on this thread.
-  static Error from_last(topoloc_status status) { return Error(status, last_error_message()); }
+  [[nodiscard]] static Error from_last(topoloc_status status) { return Error(status, last_error_message()); }
 
   /// The C status code (never `TOPOLOC_OK`).
-  topoloc_status status() const noexcept { return status_; }
+  [[nodiscard]] topoloc_status status() const noexcept { return status_; }
 
   /// The message alone, without the status description ("" if the library gave none).
-  const std::string &message() const noexcept { return message_; }
+  [[nodiscard]] const std::string &message() const noexcept { return message_; }
 
 private:
+  // "<description> [<NAME> = <code>]: <message>", e.g.
+  // "I/O error [TOPOLOC_ERR_IO = 100]: cannot open /x.topoloc: No such file or directory".
   static std::string compose(topoloc_status status, const std::string &message) {
     std::string text = status_string(status);
+    text += " [";
+    const char *name = status_name(status);
+    text += name != nullptr ? name : "status";
+    text += " = ";
+    text += std::to_string(static_cast<uint32_t>(status));
+    text += "]";
     if (!message.empty()) {
       text += ": ";
       text += message;
@@ -165,25 +268,29 @@ public:
   using Error::Error;
 };
 
-/// Throws the exception for `status` with `message`: the subclass of `Error` for the image
-/// statuses above, `Error` itself for every other status.
+/// Throws the exception class of `status` (from the status table `detail::status_info`) with
+/// `message`: a subclass of `Error` for the image statuses, `Error` itself for every other
+/// status, including codes newer than this header. `status` must not be `TOPOLOC_OK` (it is
+/// thrown as `Error` too, which is a caller's bug).
 [[noreturn]] inline void throw_error(topoloc_status status, std::string message) {
-  switch (status) {
-  case TOPOLOC_ERR_INVALID_IMAGE:
+  switch (detail::status_info(status).error) {
+  case detail::ErrorClass::InvalidImage:
     throw InvalidImageError(status, std::move(message));
-  case TOPOLOC_ERR_UNINFORMATIVE_IMAGE:
+  case detail::ErrorClass::UninformativeImage:
     throw UninformativeImageError(status, std::move(message));
-  case TOPOLOC_ERR_BACKEND_UNAVAILABLE:
+  case detail::ErrorClass::BackendUnavailable:
     throw BackendUnavailableError(status, std::move(message));
-  case TOPOLOC_ERR_MODEL:
+  case detail::ErrorClass::Model:
     throw ModelError(status, std::move(message));
-  case TOPOLOC_ERR_NO_DESCRIBER:
+  case detail::ErrorClass::NoDescriber:
     throw NoDescriberError(status, std::move(message));
-  case TOPOLOC_ERR_CANCELLED:
+  case detail::ErrorClass::Cancelled:
     throw CancelledError(status, std::move(message));
-  default:
-    throw Error(status, std::move(message));
+  case detail::ErrorClass::None:
+  case detail::ErrorClass::Error:
+    break;
   }
+  throw Error(status, std::move(message));
 }
 
 /// Throws (see `throw_error`) with the thread's last error message unless `status` is
@@ -200,17 +307,17 @@ inline void check(topoloc_status status) {
 
 /// Version of the loaded library, "MAJOR.MINOR.PATCH" (static; never free it). The header's
 /// version is `TOPOLOC_VERSION_STRING`.
-inline const char *version() noexcept { return topoloc_version(); }
+[[nodiscard]] inline const char *version() noexcept { return topoloc_version(); }
 
 /// ABI version of the loaded library.
-inline uint32_t abi_version() noexcept { return topoloc_abi_version(); }
+[[nodiscard]] inline uint32_t abi_version() noexcept { return topoloc_abi_version(); }
 
 /// ABI version of the header this program was compiled against.
 constexpr uint32_t header_abi_version = TOPOLOC_ABI_VERSION;
 
 /// True when the loaded library has the ABI of the header this program was compiled against.
 /// Check it once at start-up; on false, do not use the library.
-inline bool abi_matches() noexcept { return topoloc_abi_version() == TOPOLOC_ABI_VERSION; }
+[[nodiscard]] inline bool abi_matches() noexcept { return topoloc_abi_version() == TOPOLOC_ABI_VERSION; }
 
 // ---------------------------------------------------------------------------------------------
 // Options: the C structs themselves, filled by their _default() functions
@@ -245,7 +352,7 @@ using SkeletonOptions = topoloc_skeleton_options;
 
 /// Load options that accept any map (`topoloc_map_load_options_default`). Throws `Error`
 /// (`TOPOLOC_ERR_STRUCT_SIZE`) only on a header/library layout mismatch.
-inline LoadOptions default_load_options() {
+[[nodiscard]] inline LoadOptions default_load_options() {
   LoadOptions options;
   check(topoloc_map_load_options_default(&options));
   return options;
@@ -253,7 +360,7 @@ inline LoadOptions default_load_options() {
 
 /// Default localizer options (`topoloc_localizer_options_default`). Throws `Error`
 /// (`TOPOLOC_ERR_STRUCT_SIZE`) only on a header/library layout mismatch.
-inline LocalizerOptions default_localizer_options() {
+[[nodiscard]] inline LocalizerOptions default_localizer_options() {
   LocalizerOptions options;
   check(topoloc_localizer_options_default(&options));
   return options;
@@ -261,7 +368,7 @@ inline LocalizerOptions default_localizer_options() {
 
 /// Default keyframe options (`topoloc_keyframe_options_default`). Throws `Error`
 /// (`TOPOLOC_ERR_STRUCT_SIZE`) only on a header/library layout mismatch.
-inline KeyframeOptions default_keyframe_options() {
+[[nodiscard]] inline KeyframeOptions default_keyframe_options() {
   KeyframeOptions options;
   check(topoloc_keyframe_options_default(&options));
   return options;
@@ -269,7 +376,7 @@ inline KeyframeOptions default_keyframe_options() {
 
 /// Default image map options (`topoloc_image_map_options_default`). Throws `Error`
 /// (`TOPOLOC_ERR_STRUCT_SIZE`) only on a header/library layout mismatch.
-inline ImageMapOptions default_image_map_options() {
+[[nodiscard]] inline ImageMapOptions default_image_map_options() {
   ImageMapOptions options;
   check(topoloc_image_map_options_default(&options));
   return options;
@@ -277,7 +384,7 @@ inline ImageMapOptions default_image_map_options() {
 
 /// Default skeleton options (`topoloc_skeleton_options_default`). Throws `Error`
 /// (`TOPOLOC_ERR_STRUCT_SIZE`) only on a header/library layout mismatch.
-inline SkeletonOptions default_skeleton_options() {
+[[nodiscard]] inline SkeletonOptions default_skeleton_options() {
   SkeletonOptions options;
   check(topoloc_skeleton_options_default(&options));
   return options;
@@ -349,7 +456,7 @@ struct Result {
 using Image = topoloc_image;
 
 /// Bytes per pixel of a `TOPOLOC_PIXEL_*` format; 0 for `TOPOLOC_PIXEL_NONE` and unknown values.
-constexpr std::size_t pixel_bytes(uint32_t format) noexcept {
+[[nodiscard]] constexpr std::size_t pixel_bytes(uint32_t format) noexcept {
   return format == TOPOLOC_PIXEL_GRAY8                                    ? 1
          : format == TOPOLOC_PIXEL_RGB8 || format == TOPOLOC_PIXEL_BGR8   ? 3
          : format == TOPOLOC_PIXEL_RGBA8 || format == TOPOLOC_PIXEL_BGRA8 ? 4
@@ -358,7 +465,7 @@ constexpr std::size_t pixel_bytes(uint32_t format) noexcept {
 
 /// A view of `data_len` bytes holding `width` x `height` pixels of `format` in rows `stride`
 /// bytes apart (all checked by the library when the image is used).
-inline Image image_view(const void *data, std::size_t data_len, uint32_t width, uint32_t height,
+[[nodiscard]] inline Image image_view(const void *data, std::size_t data_len, uint32_t width, uint32_t height,
                         uint32_t format, std::size_t stride) noexcept {
   Image image{};
   image.data = static_cast<const uint8_t *>(data);
@@ -376,7 +483,7 @@ inline Image image_view(const void *data, std::size_t data_len, uint32_t width, 
 /// becomes `data_len`. Throws `InvalidImageError` for an unknown format or a size whose byte
 /// count overflows; everything else (zero sizes, a stride shorter than a row, sizes above the
 /// library's limit) is judged by the library when the image is used.
-inline Image image_view(const void *data, uint32_t width, uint32_t height, uint32_t format,
+[[nodiscard]] inline Image image_view(const void *data, uint32_t width, uint32_t height, uint32_t format,
                         std::size_t stride = 0) {
   const std::size_t bytes = pixel_bytes(format);
   if (bytes == 0) {
@@ -418,27 +525,70 @@ enum class Stage : uint32_t {
 };
 
 /// Progress of a map build, called on the building thread about ten times a second: return
-/// true to go on, false to cancel (`CancelledError`). An exception thrown by the callback
-/// cancels the build and is rethrown, unchanged, by the building function.
+/// true to go on, false to cancel (`CancelledError`). It runs inside topoloc, so it must not
+/// unwind, longjmp or otherwise jump through the C call; this layer guarantees that for
+/// exceptions: one thrown by the callback is caught before it reaches C, cancels the build
+/// (the callback is not called again), and is rethrown, unchanged, by the building function
+/// once the C call has returned. A `longjmp` out of the callback is never safe.
 using Progress = std::function<bool(Stage stage, std::size_t done, std::size_t total)>;
 
 namespace detail {
 
-struct MapFree {
-  void operator()(topoloc_map *map) const noexcept { topoloc_map_free(map); }
-};
-struct MapBuilderFree {
-  void operator()(topoloc_map_builder *builder) const noexcept {
-    topoloc_map_builder_free(builder);
+/// The one move-only owner of a C handle, shared by every owner class of this header (`Map`,
+/// `MapBuilder`, `Localizer`, `Graph` derive from it): it holds a `Handle *`, calls `Free` (the
+/// handle's C `_free` function, a no-op for null) when destroyed or assigned over, hands the
+/// handle out for interop (`capi()`, `get()`) or gives it up (`release()`), and cannot be
+/// copied. Moved-from owners are empty. Not thread-safe by itself; the derived classes state
+/// their own rules.
+template <typename Handle, void (*Free)(Handle *)> class Owner {
+public:
+  /// The C handle type.
+  using handle_type = Handle;
+
+  /// The raw handle, still owned by this object (null when empty).
+  [[nodiscard]] const Handle *capi() const noexcept { return handle_; }
+  /// The raw handle, still owned by this object (null when empty).
+  [[nodiscard]] Handle *capi() noexcept { return handle_; }
+  /// Same as `capi()`.
+  [[nodiscard]] const Handle *get() const noexcept { return handle_; }
+  /// Same as `capi()`.
+  [[nodiscard]] Handle *get() noexcept { return handle_; }
+
+  /// Gives up ownership: returns the handle (free it with the C `_free` function) and leaves
+  /// this object empty.
+  [[nodiscard]] Handle *release() noexcept {
+    Handle *raw = handle_;
+    handle_ = nullptr;
+    return raw;
   }
-};
-struct LocalizerFree {
-  void operator()(topoloc_localizer *localizer) const noexcept {
-    topoloc_localizer_free(localizer);
+
+  /// True when this object owns a handle.
+  explicit operator bool() const noexcept { return handle_ != nullptr; }
+
+protected:
+  Owner() noexcept = default;
+  /// Takes ownership of `raw` (null gives an empty owner).
+  explicit Owner(Handle *raw) noexcept : handle_(raw) {}
+  Owner(const Owner &) = delete;
+  Owner &operator=(const Owner &) = delete;
+  Owner(Owner &&other) noexcept : handle_(other.release()) {}
+  Owner &operator=(Owner &&other) noexcept {
+    if (this != &other) {
+      adopt(other.release());
+    }
+    return *this;
   }
-};
-struct GraphFree {
-  void operator()(topoloc_graph *graph) const noexcept { topoloc_graph_free(graph); }
+  ~Owner() { Free(handle_); }
+
+  /// Frees the current handle (if any) and owns `raw` instead.
+  void adopt(Handle *raw) noexcept {
+    Handle *old = handle_;
+    handle_ = raw;
+    Free(old);
+  }
+
+private:
+  Handle *handle_ = nullptr;
 };
 
 /// Optional string argument: "" becomes NULL (the C API treats both as "not given").
@@ -520,53 +670,9 @@ template <typename Call> topoloc_map *build_with_progress(const Progress &progre
   return raw;
 }
 
-#ifdef CV_VERSION
-/// A descriptor held in a cv::Mat: one row or one column of CV_32F, continuous, non-empty.
-inline std::pair<const float *, std::size_t> mat_descriptor(const cv::Mat &mat) {
-  if (mat.empty() || mat.dims != 2 || mat.type() != CV_32FC1 || !mat.isContinuous() ||
-      (mat.rows != 1 && mat.cols != 1)) {
-    throw Error(TOPOLOC_ERR_INVALID_ARGUMENT,
-                "descriptor cv::Mat must be a non-empty, continuous 1xD or Dx1 CV_32F matrix");
-  }
-  return {mat.ptr<float>(), mat.total()};
-}
-#endif
 
 }  // namespace detail
 
-#ifdef CV_VERSION
-/// A view of an 8-bit OpenCV image: CV_8UC1 (grey), CV_8UC3 (BGR, OpenCV's order) or CV_8UC4
-/// (BGRA), two-dimensional and non-empty; any row step (so ROIs of larger images work without
-/// a copy). The Mat must outlive the view's use. Other types throw `InvalidImageError`.
-inline Image image_view(const cv::Mat &mat) {
-  uint32_t format = TOPOLOC_PIXEL_NONE;
-  switch (mat.type()) {
-  case CV_8UC1:
-    format = TOPOLOC_PIXEL_GRAY8;
-    break;
-  case CV_8UC3:
-    format = TOPOLOC_PIXEL_BGR8;
-    break;
-  case CV_8UC4:
-    format = TOPOLOC_PIXEL_BGRA8;
-    break;
-  default:
-    break;
-  }
-  if (format == TOPOLOC_PIXEL_NONE || mat.dims != 2 || mat.empty()) {
-    throw InvalidImageError(
-        TOPOLOC_ERR_INVALID_IMAGE,
-        "image cv::Mat must be a non-empty 2-D CV_8UC1 (grey), CV_8UC3 (BGR) or CV_8UC4 (BGRA) "
-        "matrix, got type " + std::to_string(mat.type()) + " with " + std::to_string(mat.dims) +
-            " dimensions");
-  }
-  const std::size_t step = mat.step[0];
-  const std::size_t row = static_cast<std::size_t>(mat.cols) * mat.elemSize();
-  return image_view(mat.data, step * static_cast<std::size_t>(mat.rows - 1) + row,
-                    static_cast<uint32_t>(mat.cols), static_cast<uint32_t>(mat.rows), format,
-                    step);
-}
-#endif
 
 // ---------------------------------------------------------------------------------------------
 // Map
@@ -578,28 +684,22 @@ inline Image image_view(const cv::Mat &mat) {
 ///
 /// Thread safety: all const methods may be called concurrently from many threads.
 /// Errors: every method that calls the library throws `Error` on failure.
-class Map {
+class Map : public detail::Owner<topoloc_map, &topoloc_map_free> {
 public:
   /// An empty owner (`!map`).
   Map() noexcept = default;
 
   /// Takes ownership of `raw` (from a C call such as `topoloc_map_load`); null gives an empty
   /// owner.
-  explicit Map(topoloc_map *raw) noexcept : ptr_(raw) {}
+  explicit Map(topoloc_map *raw) noexcept : Owner(raw) {}
 
-  Map(const Map &) = delete;
-  Map &operator=(const Map &) = delete;
-  /// Moves ownership; `other` is left empty.
-  Map(Map &&other) noexcept = default;
-  /// Frees the current map (if any) and takes `other`'s; `other` is left empty.
-  Map &operator=(Map &&other) noexcept = default;
-  /// Frees the map (`topoloc_map_free`).
-  ~Map() = default;
+  // Moves (noexcept; the source is left empty) and the destructor (calls `topoloc_map_free`) come
+  // from `detail::Owner`; copies are deleted.
 
   /// Loads and validates a map file (memory-mapped: do not modify the file while the map
   /// lives). Throws `Error` (`TOPOLOC_ERR_IO`, `_NOT_A_MAP`, `_TRUNCATED`, `_CORRUPT`,
   /// `_UNSUPPORTED_VERSION`, `_DESCRIPTOR_MISMATCH`, ...).
-  static Map load(const std::string &path, const LoadOptions &options = default_load_options()) {
+  [[nodiscard]] static Map load(const std::string &path, const LoadOptions &options = default_load_options()) {
     topoloc_map *raw = nullptr;
     check(topoloc_map_load(path.c_str(), &options, &raw));
     return Map(raw);
@@ -607,7 +707,7 @@ public:
 
   /// Loads and validates a map from `len` bytes in the map file format (copied: the buffer may
   /// be released afterwards). Same errors as `load`.
-  static Map from_memory(const void *data, std::size_t len,
+  [[nodiscard]] static Map from_memory(const void *data, std::size_t len,
                          const LoadOptions &options = default_load_options()) {
     topoloc_map *raw = nullptr;
     check(topoloc_map_load_from_memory(static_cast<const uint8_t *>(data), len, &options, &raw));
@@ -615,14 +715,14 @@ public:
   }
 
   /// `from_memory` over a byte vector.
-  static Map from_memory(const std::vector<uint8_t> &bytes,
+  [[nodiscard]] static Map from_memory(const std::vector<uint8_t> &bytes,
                          const LoadOptions &options = default_load_options()) {
     return from_memory(bytes.data(), bytes.size(), options);
   }
 
   /// Builds a map from `count` images in memory (`topoloc_map_build_from_images`): every image
   /// is described (in parallel), the describer is fitted on all of them and stored in the map,
-  /// so localizers on it accept image frames (`Localizer::localize`). Without poses the map is
+  /// so localizers on it accept image frames (`Localizer::process` of an `Image`). Without poses the map is
   /// a sequence: `options.views_per_place` consecutive images per place, places chained in
   /// order; view `i` has keyframe id `i`. `progress` (may be empty) is called on this thread;
   /// returning false throws `CancelledError`, and an exception it throws cancels the build and
@@ -630,7 +730,7 @@ public:
   /// Throws `InvalidImageError` (a bad buffer; the message names `images[i]`),
   /// `BackendUnavailableError`, `ModelError`, `CancelledError`, `Error` (`_INVALID_ARGUMENT`:
   /// fewer than 2 images or bad options; `_IO`: poses file; `_STRUCT_SIZE`).
-  static Map build_from_images(const Image *images, std::size_t count,
+  [[nodiscard]] static Map build_from_images(const Image *images, std::size_t count,
                                const ImageMapOptions &options = default_image_map_options(),
                                const Progress &progress = Progress()) {
     return Map(detail::build_with_progress(
@@ -640,31 +740,17 @@ public:
   }
 
   /// `build_from_images` over a vector of image views.
-  static Map build_from_images(const std::vector<Image> &images,
+  [[nodiscard]] static Map build_from_images(const std::vector<Image> &images,
                                const ImageMapOptions &options = default_image_map_options(),
                                const Progress &progress = Progress()) {
     return build_from_images(images.data(), images.size(), options, progress);
   }
 
-#ifdef CV_VERSION
-  /// `build_from_images` over 8-bit OpenCV images (see `image_view(const cv::Mat &)`; another
-  /// type throws `InvalidImageError`).
-  static Map build_from_images(const std::vector<cv::Mat> &images,
-                               const ImageMapOptions &options = default_image_map_options(),
-                               const Progress &progress = Progress()) {
-    std::vector<Image> views;
-    views.reserve(images.size());
-    for (const cv::Mat &mat : images) {
-      views.push_back(image_view(mat));
-    }
-    return build_from_images(views.data(), views.size(), options, progress);
-  }
-#endif
 
   /// Builds a map from image files (any format OpenCV reads), like `build_from_images`; views
   /// also record their file's path (`view_image`). Throws `InvalidImageError` for a missing or
   /// unreadable file (the message names it), and the errors of `build_from_images`.
-  static Map build_from_image_files(const std::vector<std::string> &paths,
+  [[nodiscard]] static Map build_from_image_files(const std::vector<std::string> &paths,
                                     const ImageMapOptions &options = default_image_map_options(),
                                     const Progress &progress = Progress()) {
     std::vector<const char *> c_paths;
@@ -681,70 +767,70 @@ public:
 
   /// Saves the map to `path` atomically (temporary file, fsync, rename). Throws `Error`
   /// (`TOPOLOC_ERR_IO`, ...).
-  void save(const std::string &path) const { check(topoloc_map_save(ptr_.get(), path.c_str())); }
+  void save(const std::string &path) const { check(topoloc_map_save(get(), path.c_str())); }
 
   /// Number of places.
-  std::size_t place_count() const {
+  [[nodiscard]] std::size_t place_count() const {
     std::size_t n = 0;
-    check(topoloc_map_place_count(ptr_.get(), &n));
+    check(topoloc_map_place_count(get(), &n));
     return n;
   }
 
   /// Number of views.
-  std::size_t view_count() const {
+  [[nodiscard]] std::size_t view_count() const {
     std::size_t n = 0;
-    check(topoloc_map_view_count(ptr_.get(), &n));
+    check(topoloc_map_view_count(get(), &n));
     return n;
   }
 
   /// Number of undirected edges.
-  std::size_t edge_count() const {
+  [[nodiscard]] std::size_t edge_count() const {
     std::size_t n = 0;
-    check(topoloc_map_edge_count(ptr_.get(), &n));
+    check(topoloc_map_edge_count(get(), &n));
     return n;
   }
 
   /// Descriptor dimension D: every descriptor given to a localizer of this map has D floats.
-  uint32_t dim() const {
+  [[nodiscard]] uint32_t dim() const {
     uint32_t d = 0;
-    check(topoloc_map_descriptor_dim(ptr_.get(), &d));
+    check(topoloc_map_descriptor_dim(get(), &d));
     return d;
   }
 
   /// Descriptor kind the map was built with (e.g. the backend family).
-  std::string descriptor_kind() const {
+  [[nodiscard]] std::string descriptor_kind() const {
     return detail::read_string([this](char *buf, std::size_t len, std::size_t *needed) {
-      return topoloc_map_descriptor_kind(ptr_.get(), buf, len, needed);
+      return topoloc_map_descriptor_kind(get(), buf, len, needed);
     });
   }
 
   /// Descriptor model identity the map was built with ("" when none).
-  std::string descriptor_model() const {
+  [[nodiscard]] std::string descriptor_model() const {
     return detail::read_string([this](char *buf, std::size_t len, std::size_t *needed) {
-      return topoloc_map_descriptor_model(ptr_.get(), buf, len, needed);
+      return topoloc_map_descriptor_model(get(), buf, len, needed);
     });
   }
 
   /// Places joined to `place` by an edge. Throws `Error` (`TOPOLOC_ERR_UNKNOWN_PLACE`).
-  std::vector<uint32_t> neighbours(uint32_t place) const {
+  [[nodiscard]] std::vector<uint32_t> neighbours(uint32_t place) const {
     return detail::read_ids([this, place](uint32_t *buf, std::size_t len, std::size_t *count) {
-      return topoloc_map_neighbours(ptr_.get(), place, buf, len, count);
+      return topoloc_map_neighbours(get(), place, buf, len, count);
     });
   }
 
   /// View ids of `place`. Throws `Error` (`TOPOLOC_ERR_UNKNOWN_PLACE`).
-  std::vector<uint32_t> place_views(uint32_t place) const {
+  [[nodiscard]] std::vector<uint32_t> place_views(uint32_t place) const {
     return detail::read_ids([this, place](uint32_t *buf, std::size_t len, std::size_t *count) {
-      return topoloc_map_place_views(ptr_.get(), place, buf, len, count);
+      return topoloc_map_place_views(get(), place, buf, len, count);
     });
   }
 
   /// Position of `place` in metres, or nullopt when the map has none. Throws `Error`
   /// (`TOPOLOC_ERR_UNKNOWN_PLACE`).
-  std::optional<Position> place_position(uint32_t place) const {
+  [[nodiscard]] std::optional<Position> place_position(uint32_t place) const {
     Position xyz{};
     bool has = false;
-    check(topoloc_map_place_position(ptr_.get(), place, xyz.data(), &has));
+    check(topoloc_map_place_position(get(), place, xyz.data(), &has));
     if (!has) {
       return std::nullopt;
     }
@@ -753,14 +839,14 @@ public:
 
   /// Edge number `index` (0..edge_count(), sorted by (a, b)). Throws `Error`
   /// (`TOPOLOC_ERR_INVALID_ARGUMENT` when out of range).
-  Edge edge(std::size_t index) const {
+  [[nodiscard]] Edge edge(std::size_t index) const {
     Edge e;
-    check(topoloc_map_edge(ptr_.get(), index, &e.a, &e.b, &e.weight));
+    check(topoloc_map_edge(get(), index, &e.a, &e.b, &e.weight));
     return e;
   }
 
   /// All edges, sorted by (a, b).
-  std::vector<Edge> edges() const {
+  [[nodiscard]] std::vector<Edge> edges() const {
     std::vector<Edge> all(edge_count());
     for (std::size_t i = 0; i < all.size(); ++i) {
       all[i] = edge(i);
@@ -769,10 +855,10 @@ public:
   }
 
   /// Attributes of `view`. Throws `Error` (`TOPOLOC_ERR_UNKNOWN_VIEW`).
-  ViewInfo view_info(uint32_t view) const {
+  [[nodiscard]] ViewInfo view_info(uint32_t view) const {
     topoloc_view_info raw;
     check(topoloc_view_info_default(&raw));
-    check(topoloc_map_view_info(ptr_.get(), view, &raw));
+    check(topoloc_map_view_info(get(), view, &raw));
     ViewInfo info;
     info.place = raw.place;
     if (raw.has_keyframe_id) {
@@ -787,33 +873,19 @@ public:
   }
 
   /// The unit-norm descriptor of `view` (D floats). Throws `Error` (`TOPOLOC_ERR_UNKNOWN_VIEW`).
-  std::vector<float> view_descriptor(uint32_t view) const {
+  [[nodiscard]] std::vector<float> view_descriptor(uint32_t view) const {
     std::vector<float> descriptor(dim());
-    check(topoloc_map_view_descriptor(ptr_.get(), view, descriptor.data(), descriptor.size()));
+    check(topoloc_map_view_descriptor(get(), view, descriptor.data(), descriptor.size()));
     return descriptor;
   }
 
   /// Image reference of `view` ("" when none). Throws `Error` (`TOPOLOC_ERR_UNKNOWN_VIEW`).
-  std::string view_image(uint32_t view) const {
+  [[nodiscard]] std::string view_image(uint32_t view) const {
     return detail::read_string([this, view](char *buf, std::size_t len, std::size_t *needed) {
-      return topoloc_map_view_image(ptr_.get(), view, buf, len, needed);
+      return topoloc_map_view_image(get(), view, buf, len, needed);
     });
   }
 
-  /// The raw handle, still owned by this object (null when empty).
-  const topoloc_map *capi() const noexcept { return ptr_.get(); }
-  /// The raw handle, still owned by this object (null when empty).
-  topoloc_map *capi() noexcept { return ptr_.get(); }
-
-  /// Gives up ownership: returns the handle (free it with `topoloc_map_free`) and leaves this
-  /// object empty.
-  topoloc_map *release() noexcept { return ptr_.release(); }
-
-  /// True when this object owns a map.
-  explicit operator bool() const noexcept { return static_cast<bool>(ptr_); }
-
-private:
-  std::unique_ptr<topoloc_map, detail::MapFree> ptr_;
 };
 
 // ---------------------------------------------------------------------------------------------
@@ -826,7 +898,7 @@ private:
 /// Thread safety: not thread-safe; use from one thread at a time.
 /// Errors: every method that calls the library throws `Error` on failure; a failed call leaves
 /// the builder unchanged.
-class MapBuilder {
+class MapBuilder : public detail::Owner<topoloc_map_builder, &topoloc_map_builder_free> {
 public:
   /// An empty owner (`!builder`).
   MapBuilder() noexcept = default;
@@ -836,25 +908,19 @@ public:
   MapBuilder(const std::string &kind, const std::string &model, uint32_t dim) {
     topoloc_map_builder *raw = nullptr;
     check(topoloc_map_builder_new(kind.c_str(), detail::optional_c_str(model), dim, &raw));
-    ptr_.reset(raw);
+    adopt(raw);
   }
 
   /// Takes ownership of `raw`; null gives an empty owner.
-  explicit MapBuilder(topoloc_map_builder *raw) noexcept : ptr_(raw) {}
+  explicit MapBuilder(topoloc_map_builder *raw) noexcept : Owner(raw) {}
 
-  MapBuilder(const MapBuilder &) = delete;
-  MapBuilder &operator=(const MapBuilder &) = delete;
-  /// Moves ownership; `other` is left empty.
-  MapBuilder(MapBuilder &&other) noexcept = default;
-  /// Frees the current builder (if any) and takes `other`'s; `other` is left empty.
-  MapBuilder &operator=(MapBuilder &&other) noexcept = default;
-  /// Frees the builder (`topoloc_map_builder_free`).
-  ~MapBuilder() = default;
+  // Moves (noexcept; the source is left empty) and the destructor (calls `topoloc_map_builder_free`) come
+  // from `detail::Owner`; copies are deleted.
 
   /// Adds a place, optionally at `position` (metres); returns its id.
   uint32_t add_place(const std::optional<Position> &position = std::nullopt) {
     uint32_t id = 0;
-    check(topoloc_map_builder_add_place(ptr_.get(), position ? position->data() : nullptr, &id));
+    check(topoloc_map_builder_add_place(get(), position ? position->data() : nullptr, &id));
     return id;
   }
 
@@ -870,7 +936,7 @@ public:
     raw.world_T_camera = attributes.world_T_camera ? attributes.world_T_camera->data() : nullptr;
     raw.image = detail::optional_c_str(attributes.image);
     uint32_t id = 0;
-    check(topoloc_map_builder_add_view(ptr_.get(), place, descriptor, len, &raw, &id));
+    check(topoloc_map_builder_add_view(get(), place, descriptor, len, &raw, &id));
     return id;
   }
 
@@ -880,50 +946,27 @@ public:
     return add_view(place, descriptor.data(), descriptor.size(), attributes);
   }
 
-#ifdef CV_VERSION
-  /// `add_view` with a 1xD or Dx1 continuous CV_32F matrix (else throws `Error` with
-  /// `TOPOLOC_ERR_INVALID_ARGUMENT`).
-  uint32_t add_view(uint32_t place, const cv::Mat &descriptor,
-                    const ViewAttributes &attributes = ViewAttributes()) {
-    const auto d = detail::mat_descriptor(descriptor);
-    return add_view(place, d.first, d.second, attributes);
-  }
-#endif
 
   /// Joins places `a` and `b` (different, existing, not yet joined) with `weight` > 0.
   void add_edge(uint32_t a, uint32_t b, float weight = 1.0f) {
-    check(topoloc_map_builder_add_edge(ptr_.get(), a, b, weight));
+    check(topoloc_map_builder_add_edge(get(), a, b, weight));
   }
 
   /// Validates and returns a map of what was added; the builder stays usable. Throws `Error`
   /// (`TOPOLOC_ERR_EMPTY_MAP`, `_INVALID_MAP` e.g. for a place without views).
-  Map build() const {
+  [[nodiscard]] Map build() const {
     topoloc_map *raw = nullptr;
-    check(topoloc_map_builder_build(ptr_.get(), &raw));
+    check(topoloc_map_builder_build(get(), &raw));
     return Map(raw);
   }
 
-  /// The raw handle, still owned by this object (null when empty).
-  const topoloc_map_builder *capi() const noexcept { return ptr_.get(); }
-  /// The raw handle, still owned by this object (null when empty).
-  topoloc_map_builder *capi() noexcept { return ptr_.get(); }
-
-  /// Gives up ownership: returns the handle (free it with `topoloc_map_builder_free`) and
-  /// leaves this object empty.
-  topoloc_map_builder *release() noexcept { return ptr_.release(); }
-
-  /// True when this object owns a builder.
-  explicit operator bool() const noexcept { return static_cast<bool>(ptr_); }
-
-private:
-  std::unique_ptr<topoloc_map_builder, detail::MapBuilderFree> ptr_;
 };
 
 /// Builds a map from keyframes in order (`topoloc_map_from_keyframes`): places by spacing and
 /// appearance novelty, edges between consecutive and nearby places. Either every keyframe has
 /// a pose or none has. Throws `Error` (`TOPOLOC_ERR_EMPTY_MAP`, `_INVALID_ARGUMENT` naming the
 /// bad keyframe or option).
-inline Map map_from_keyframes(const std::string &kind, const std::string &model, uint32_t dim,
+[[nodiscard]] inline Map map_from_keyframes(const std::string &kind, const std::string &model, uint32_t dim,
                               const std::vector<Keyframe> &keyframes,
                               const KeyframeOptions &options = default_keyframe_options()) {
   std::vector<topoloc_keyframe> raw(keyframes.size());
@@ -941,7 +984,7 @@ inline Map map_from_keyframes(const std::string &kind, const std::string &model,
 }
 
 /// `map_from_keyframes` over C keyframe records (borrowed for the duration of the call).
-inline Map map_from_keyframes(const std::string &kind, const std::string &model, uint32_t dim,
+[[nodiscard]] inline Map map_from_keyframes(const std::string &kind, const std::string &model, uint32_t dim,
                               const topoloc_keyframe *keyframes, std::size_t count,
                               const KeyframeOptions &options = default_keyframe_options()) {
   topoloc_map *out = nullptr;
@@ -961,16 +1004,18 @@ inline Map map_from_keyframes(const std::string &kind, const std::string &model,
 ///
 /// Thread safety: single-threaded state; use from one thread at a time (it may move between
 /// threads). Many localizers may share one map on many threads.
-/// Errors: every method that calls the library throws `Error` on failure; a failed `process`
-/// leaves the localizer and its last result unchanged.
-class Localizer {
+/// Errors: every method that calls the library throws `Error` (or the subclass of its status,
+/// see `throw_error`) on failure; a failed `process` leaves the localizer and its last result
+/// unchanged. `process` is `[[nodiscard]]`: to feed a frame without reading its result, write
+/// `(void)localizer.process(...)`.
+class Localizer : public detail::Owner<topoloc_localizer, &topoloc_localizer_free> {
 public:
   /// An empty owner (`!localizer`).
   Localizer() noexcept = default;
 
   /// Creates a localizer on `map`. The candidate buffer holds min(options.top_k, places)
   /// entries. With `options.image_backend` `TOPOLOC_BACKEND_AUTO` (the default) and a map built
-  /// from images, the map's describer is loaded now, so that `localize` accepts images (for
+  /// from images, the map's describer is loaded now, so that `process` accepts images (for
   /// ONNX: the runtime and model, from `options.onnx_runtime_path` / `onnx_model_path` or the
   /// defaults); `TOPOLOC_BACKEND_NONE` never loads one (descriptor frames only).
   /// Throws `Error` (`TOPOLOC_ERR_INVALID_OPTION`, `_DESCRIPTOR_MISMATCH` also for another
@@ -981,7 +1026,7 @@ public:
                      const LocalizerOptions &options = default_localizer_options()) {
     topoloc_localizer *raw = nullptr;
     check(topoloc_localizer_new(map.capi(), &options, &raw));
-    ptr_.reset(raw);
+    adopt(raw);
     check(topoloc_frame_default(&frame_template_));
     check(topoloc_result_default(&result_template_));
     const std::size_t places = map.place_count();
@@ -991,12 +1036,12 @@ public:
     last_.candidates.reserve(capacity);
   }
 
-  Localizer(const Localizer &) = delete;
-  Localizer &operator=(const Localizer &) = delete;
+  // Copies are deleted and the destructor (calls `topoloc_localizer_free`) comes from
+  // `detail::Owner`; the moves below also move the result buffers.
 
-  /// Moves ownership and buffers; `other` is left empty.
+  /// Moves ownership and buffers; `other` is left empty (no handle, no buffers).
   Localizer(Localizer &&other) noexcept
-      : ptr_(std::move(other.ptr_)), frame_template_(other.frame_template_),
+      : Owner(std::move(other)), frame_template_(other.frame_template_),
         result_template_(other.result_template_), buffer_(std::move(other.buffer_)),
         last_(std::move(other.last_)) {
     other.clear_buffers();
@@ -1005,7 +1050,7 @@ public:
   /// Frees the current localizer (if any) and takes `other`'s; `other` is left empty.
   Localizer &operator=(Localizer &&other) noexcept {
     if (this != &other) {
-      ptr_ = std::move(other.ptr_);
+      Owner::operator=(std::move(other));
       frame_template_ = other.frame_template_;
       result_template_ = other.result_template_;
       buffer_ = std::move(other.buffer_);
@@ -1015,9 +1060,6 @@ public:
     return *this;
   }
 
-  /// Frees the localizer (`topoloc_localizer_free`).
-  ~Localizer() = default;
-
   /// Localizes one frame: `descriptor` holds `len` floats (the map's D; normalised by the
   /// library), `timestamp` is in seconds and must not decrease in filter mode, `odometry` is
   /// the motion since the previous frame `previous_T_current` (16 doubles, row-major 4x4) or
@@ -1026,7 +1068,7 @@ public:
   /// Throws `Error` (`TOPOLOC_ERR_DIMENSION_MISMATCH`, `_NON_FINITE`, `_ZERO_DESCRIPTOR`,
   /// `_TIMESTAMP`, `_INVALID_ARGUMENT` for non-rigid odometry, `_NULL_ARGUMENT` when empty).
   /// Cost: one pass over the map's descriptors plus O(places + edges); no allocation.
-  const Result &process(const float *descriptor, std::size_t len, double timestamp,
+  [[nodiscard]] const Result &process(const float *descriptor, std::size_t len, double timestamp,
                         const double *odometry = nullptr) {
     Frame frame;
     frame.timestamp = timestamp;
@@ -1037,8 +1079,8 @@ public:
   }
 
   /// Localizes one frame, of a descriptor or of an image (see `Frame`): the general form of
-  /// `process` and `localize`, with the same result lifetime and errors as both.
-  const Result &process(const Frame &input) {
+  /// the other `process` overloads, with the same result lifetime and errors as theirs.
+  [[nodiscard]] const Result &process(const Frame &input) {
     topoloc_frame frame = frame_template_;
     frame.timestamp = input.timestamp;
     frame.descriptor = input.descriptor;
@@ -1048,7 +1090,7 @@ public:
     topoloc_result raw = result_template_;
     raw.candidates = buffer_.empty() ? nullptr : buffer_.data();
     raw.candidates_capacity = buffer_.size();
-    check(topoloc_localizer_process(ptr_.get(), &frame, &raw));
+    check(topoloc_localizer_process(get(), &frame, &raw));
     last_.frame_index = raw.frame_index;
     last_.place = raw.place;
     last_.view = raw.view;
@@ -1065,36 +1107,27 @@ public:
   }
 
   /// `process` with a vector descriptor.
-  const Result &process(const std::vector<float> &descriptor, double timestamp,
+  [[nodiscard]] const Result &process(const std::vector<float> &descriptor, double timestamp,
                         const double *odometry = nullptr) {
     return process(descriptor.data(), descriptor.size(), timestamp, odometry);
   }
 
   /// `process` with odometry as a `Pose` (`previous_T_current`).
-  const Result &process(const std::vector<float> &descriptor, double timestamp,
+  [[nodiscard]] const Result &process(const std::vector<float> &descriptor, double timestamp,
                         const Pose &odometry) {
     return process(descriptor.data(), descriptor.size(), timestamp, odometry.data());
   }
 
-#ifdef CV_VERSION
-  /// `process` with a 1xD or Dx1 continuous CV_32F matrix (else throws `Error` with
-  /// `TOPOLOC_ERR_INVALID_ARGUMENT`).
-  const Result &process(const cv::Mat &descriptor, double timestamp,
-                        const double *odometry = nullptr) {
-    const auto d = detail::mat_descriptor(descriptor);
-    return process(d.first, d.second, timestamp, odometry);
-  }
-#endif
-
   /// Localizes one camera image (see `image_view`), described with the map's own backend; the
-  /// localizer needs a describer (see the constructor). Same result lifetime as `process`.
-  /// Throws `UninformativeImageError` for a blank, constant or featureless image (the frame is
-  /// skipped: state, frame count and last result unchanged, so just go on with the next
-  /// frame), `InvalidImageError` for an unusable buffer, `NoDescriberError`, `ModelError`, and
-  /// the `Error`s of `process` (`_TIMESTAMP`, `_INVALID_ARGUMENT` for non-rigid odometry, ...).
+  /// localizer needs a describer (see the constructor). Same result lifetime as the descriptor
+  /// `process`. Throws `UninformativeImageError` for a blank, constant or featureless image
+  /// (the frame is skipped: state, frame count and last result unchanged, so just go on with
+  /// the next frame), `InvalidImageError` for an unusable buffer, `NoDescriberError`,
+  /// `ModelError`, and the `Error`s of the descriptor `process` (`_TIMESTAMP`,
+  /// `_INVALID_ARGUMENT` for non-rigid odometry, ...).
   /// Cost: describing the image, then as `process`.
-  const Result &localize(const Image &image, double timestamp,
-                         const double *odometry = nullptr) {
+  [[nodiscard]] const Result &process(const Image &image, double timestamp,
+                        const double *odometry = nullptr) {
     Frame frame;
     frame.timestamp = timestamp;
     frame.odometry = odometry;
@@ -1102,48 +1135,31 @@ public:
     return process(frame);
   }
 
-  /// `localize` with odometry as a `Pose` (`previous_T_current`).
-  const Result &localize(const Image &image, double timestamp, const Pose &odometry) {
-    return localize(image, timestamp, odometry.data());
+  /// `process` of an image with odometry as a `Pose` (`previous_T_current`).
+  [[nodiscard]] const Result &process(const Image &image, double timestamp, const Pose &odometry) {
+    return process(image, timestamp, odometry.data());
   }
 
-#ifdef CV_VERSION
-  /// `localize` of an 8-bit OpenCV image: CV_8UC1 grey, CV_8UC3 BGR or CV_8UC4 BGRA, any row
-  /// step (ROIs work without a copy); other types throw `InvalidImageError`. (`process` with a
-  /// cv::Mat takes a CV_32F descriptor instead.)
-  const Result &localize(const cv::Mat &image, double timestamp,
-                         const double *odometry = nullptr) {
-    return localize(image_view(image), timestamp, odometry);
-  }
-#endif
 
   /// Forgets all history: the next frame is treated as the first (any timestamp accepted).
   void reset() {
-    check(topoloc_localizer_reset(ptr_.get()));
+    check(topoloc_localizer_reset(get()));
     clear_result();
   }
 
   /// The result of the last successful `process` since creation or `reset` (all zero and
   /// without candidates before the first).
-  const Result &last_result() const noexcept { return last_; }
+  [[nodiscard]] const Result &last_result() const noexcept { return last_; }
 
-  /// Most candidates a result can hold: min(options.top_k, places).
-  std::size_t candidate_capacity() const noexcept { return buffer_.size(); }
-
-  /// The raw handle, still owned by this object (null when empty).
-  const topoloc_localizer *capi() const noexcept { return ptr_.get(); }
-  /// The raw handle, still owned by this object (null when empty).
-  topoloc_localizer *capi() noexcept { return ptr_.get(); }
+  /// Most candidates a result can hold: min(options.top_k, places). 0 when empty.
+  [[nodiscard]] std::size_t candidate_capacity() const noexcept { return buffer_.size(); }
 
   /// Gives up ownership: returns the handle (free it with `topoloc_localizer_free`) and leaves
-  /// this object empty.
-  topoloc_localizer *release() noexcept {
+  /// this object empty, its buffers released.
+  [[nodiscard]] topoloc_localizer *release() noexcept {
     clear_buffers();
-    return ptr_.release();
+    return Owner::release();
   }
-
-  /// True when this object owns a localizer.
-  explicit operator bool() const noexcept { return static_cast<bool>(ptr_); }
 
 private:
   // Keeps the reserved capacity of the candidates: reset() must not cost an allocation later.
@@ -1166,7 +1182,6 @@ private:
     last_ = Result();
   }
 
-  std::unique_ptr<topoloc_localizer, detail::LocalizerFree> ptr_;
   topoloc_frame frame_template_{};    // filled once by topoloc_frame_default
   topoloc_result result_template_{};  // filled once by topoloc_result_default
   std::vector<Candidate> buffer_;  // handed to the C call as the candidate array
@@ -1195,22 +1210,16 @@ struct GraphEdge {
 ///
 /// Thread safety: immutable; const methods may be called from many threads at once.
 /// Errors: every method that calls the library throws `Error` on failure.
-class Graph {
+class Graph : public detail::Owner<topoloc_graph, &topoloc_graph_free> {
 public:
   /// An empty owner (`!graph`).
   Graph() noexcept = default;
 
   /// Takes ownership of `raw` (from `topoloc_graph_from_occupancy`); null gives an empty owner.
-  explicit Graph(topoloc_graph *raw) noexcept : ptr_(raw) {}
+  explicit Graph(topoloc_graph *raw) noexcept : Owner(raw) {}
 
-  Graph(const Graph &) = delete;
-  Graph &operator=(const Graph &) = delete;
-  /// Moves ownership; `other` is left empty.
-  Graph(Graph &&other) noexcept = default;
-  /// Frees the current graph (if any) and takes `other`'s; `other` is left empty.
-  Graph &operator=(Graph &&other) noexcept = default;
-  /// Frees the graph (`topoloc_graph_free`).
-  ~Graph() = default;
+  // Moves (noexcept; the source is left empty) and the destructor (calls `topoloc_graph_free`) come
+  // from `detail::Owner`; copies are deleted.
 
   /// Builds the graph of the free space of an occupancy grid of `dims` voxels (x, y, z) of
   /// `voxel_size` metres whose voxel (0, 0, 0) starts at `origin`; `cells` holds one byte per
@@ -1218,7 +1227,7 @@ public:
   /// call only. Throws `Error` (`TOPOLOC_ERR_INVALID_ARGUMENT` naming the field: `dims`,
   /// `voxel_size`, `origin`, `cells_len`, `cells` when every voxel is occupied, `z_band`,
   /// `min_clearance_m` or another option; `_STRUCT_SIZE`).
-  static Graph from_occupancy(const std::array<std::size_t, 3> &dims, double voxel_size,
+  [[nodiscard]] static Graph from_occupancy(const std::array<std::size_t, 3> &dims, double voxel_size,
                               const Position &origin, const uint8_t *cells, std::size_t cells_len,
                               const SkeletonOptions &options = default_skeleton_options()) {
     topoloc_graph *raw = nullptr;
@@ -1228,36 +1237,36 @@ public:
   }
 
   /// `from_occupancy` over a byte vector.
-  static Graph from_occupancy(const std::array<std::size_t, 3> &dims, double voxel_size,
+  [[nodiscard]] static Graph from_occupancy(const std::array<std::size_t, 3> &dims, double voxel_size,
                               const Position &origin, const std::vector<uint8_t> &cells,
                               const SkeletonOptions &options = default_skeleton_options()) {
     return from_occupancy(dims, voxel_size, origin, cells.data(), cells.size(), options);
   }
 
   /// Number of places.
-  std::size_t place_count() const {
+  [[nodiscard]] std::size_t place_count() const {
     std::size_t n = 0;
-    check(topoloc_graph_place_count(ptr_.get(), &n));
+    check(topoloc_graph_place_count(get(), &n));
     return n;
   }
 
   /// Number of undirected edges.
-  std::size_t edge_count() const {
+  [[nodiscard]] std::size_t edge_count() const {
     std::size_t n = 0;
-    check(topoloc_graph_edge_count(ptr_.get(), &n));
+    check(topoloc_graph_edge_count(get(), &n));
     return n;
   }
 
   /// Place `index` (branches first, then ends, corners, intermediate places). Throws `Error`
   /// (`TOPOLOC_ERR_UNKNOWN_PLACE`).
-  GraphPlace place(uint32_t index) const {
+  [[nodiscard]] GraphPlace place(uint32_t index) const {
     GraphPlace p;
-    check(topoloc_graph_place(ptr_.get(), index, p.position.data(), &p.kind));
+    check(topoloc_graph_place(get(), index, p.position.data(), &p.kind));
     return p;
   }
 
   /// All places.
-  std::vector<GraphPlace> places() const {
+  [[nodiscard]] std::vector<GraphPlace> places() const {
     std::vector<GraphPlace> all(place_count());
     for (std::size_t i = 0; i < all.size(); ++i) {
       all[i] = place(static_cast<uint32_t>(i));
@@ -1267,14 +1276,14 @@ public:
 
   /// Edge number `index` (0..edge_count(), sorted by (a, b)). Throws `Error`
   /// (`TOPOLOC_ERR_INVALID_ARGUMENT` when out of range).
-  GraphEdge edge(std::size_t index) const {
+  [[nodiscard]] GraphEdge edge(std::size_t index) const {
     GraphEdge e;
-    check(topoloc_graph_edge(ptr_.get(), index, &e.a, &e.b, &e.length_m));
+    check(topoloc_graph_edge(get(), index, &e.a, &e.b, &e.length_m));
     return e;
   }
 
   /// All edges, sorted by (a, b).
-  std::vector<GraphEdge> edges() const {
+  [[nodiscard]] std::vector<GraphEdge> edges() const {
     std::vector<GraphEdge> all(edge_count());
     for (std::size_t i = 0; i < all.size(); ++i) {
       all[i] = edge(i);
@@ -1283,26 +1292,12 @@ public:
   }
 
   /// The skeleton the graph was built on: voxel indices x0, y0, z0, x1, y1, z1, ... in grid order.
-  std::vector<uint32_t> skeleton() const {
+  [[nodiscard]] std::vector<uint32_t> skeleton() const {
     return detail::read_ids([this](uint32_t *buf, std::size_t len, std::size_t *count) {
-      return topoloc_graph_skeleton(ptr_.get(), buf, len, count);
+      return topoloc_graph_skeleton(get(), buf, len, count);
     });
   }
 
-  /// The raw handle, still owned by this object (null when empty).
-  const topoloc_graph *capi() const noexcept { return ptr_.get(); }
-  /// The raw handle, still owned by this object (null when empty).
-  topoloc_graph *capi() noexcept { return ptr_.get(); }
-
-  /// Gives up ownership: returns the handle (free it with `topoloc_graph_free`) and leaves this
-  /// object empty.
-  topoloc_graph *release() noexcept { return ptr_.release(); }
-
-  /// True when this object owns a graph.
-  explicit operator bool() const noexcept { return static_cast<bool>(ptr_); }
-
-private:
-  std::unique_ptr<topoloc_graph, detail::GraphFree> ptr_;
 };
 
 }  // namespace topoloc

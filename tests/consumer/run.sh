@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # Installs topoloc with CMake into a temporary prefix and builds a separate consumer project
-# against it with find_package(Topoloc): C (shared and static) and C++ (when topoloc.hpp is
-# installed). Also checks the installed layout, the SONAME, pkg-config, and that the installed
-# tree still works after being moved elsewhere.
+# against it with find_package(Topoloc): C (shared and static), C++ (when topoloc.hpp is
+# installed) and C++ with OpenCV (when topoloc_opencv.hpp is installed and OpenCV is found).
+# Also checks the installed layout, the SONAME, pkg-config, and that the installed tree still
+# works after being moved elsewhere.
 #
 #   bash tests/consumer/run.sh
 #
@@ -66,11 +67,13 @@ for f in "$libdir/libtopoloc.a" "$includedir/topoloc.h" \
     "$libdir/pkgconfig/topoloc.pc"; do
     [[ -f "$f" ]] || fail "$f is missing"
 done
-if [[ -f "$repo/include/topoloc.hpp" ]]; then
-    cmp -s "$repo/include/topoloc.hpp" "$includedir/topoloc.hpp" || fail "topoloc.hpp not installed"
-else
-    echo "note: include/topoloc.hpp does not exist in the source tree; not installed"
-fi
+for hpp in topoloc.hpp topoloc_opencv.hpp; do
+    if [[ -f "$repo/include/$hpp" ]]; then
+        cmp -s "$repo/include/$hpp" "$includedir/$hpp" || fail "$hpp not installed"
+    else
+        echo "note: include/$hpp does not exist in the source tree; not installed"
+    fi
+done
 cmp -s "$repo/include/topoloc.h" "$includedir/topoloc.h" || fail "installed topoloc.h differs"
 # Relocatable: no absolute path of the prefix or the source/build trees in the package files.
 if grep -rlF -e "$prefix" -e "$repo" "$libdir/cmake/Topoloc" "$libdir/pkgconfig"; then
