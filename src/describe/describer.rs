@@ -6,6 +6,7 @@
 //! descriptor. Localizing: [`Describer::new`] loads the backend named by a map's model, checks
 //! that it is the very same (model file hash, taps, preprocessing), and describes query images.
 
+use super::limits;
 use super::onnx::{OnnxMlf, OnnxOptions};
 use super::pca::Pca;
 use super::vlad::{Codebook, LocalExtractor, LocalFeature, LocalFeatures, VladOptions};
@@ -103,6 +104,39 @@ impl BackendSpec {
         }
     }
 
+    /// Checks every size and string the spec declares against the bounds of
+    /// [`super::limits`] (taps, grid, input size, model hash; VLAD options by
+    /// [`VladOptions::validate`]), before anything is allocated from them.
+    pub fn validate(&self) -> Result<(), VisionError> {
+        match self {
+            BackendSpec::Onnx {
+                model_sha256,
+                taps,
+                grid,
+                input_size,
+                preprocessing,
+            } => {
+                limits::check_onnx_config(taps, *grid, *input_size)?;
+                let hex = |c: char| c.is_ascii_digit() || ('a'..='f').contains(&c);
+                if model_sha256.len() != limits::SHA256_HEX_LEN || !model_sha256.chars().all(hex) {
+                    return Err(VisionError::InvalidArgument(format!(
+                        "ONNX model hash must be {} lower-case hex digits",
+                        limits::SHA256_HEX_LEN
+                    )));
+                }
+                if preprocessing.len() > limits::MAX_TAP_NAME_BYTES || preprocessing.contains('\0')
+                {
+                    return Err(VisionError::InvalidArgument(format!(
+                        "ONNX preprocessing must be at most {} bytes without NUL",
+                        limits::MAX_TAP_NAME_BYTES
+                    )));
+                }
+                Ok(())
+            }
+            BackendSpec::Vlad(o) => o.validate(),
+        }
+    }
+
     fn summary(&self) -> String {
         match self {
             BackendSpec::Onnx {
@@ -151,13 +185,28 @@ pub struct DescriberModel {
 }
 
 impl DescriberModel {
-    /// Checks that the parts fit together (codebook present exactly for VLAD, dimensions agree).
+    /// Checks that the parts fit together (codebook present exactly for VLAD, dimensions agree)
+    /// and that every declared size lies within [`super::limits`]: the spec
+    /// ([`BackendSpec::validate`]), the PCA dimensions (1..=[`limits::MAX_PCA_INPUT_DIM`] in,
+    /// 1..=[`limits::MAX_PCA_OUTPUT_DIM`] out), the codebook against the VLAD options, and for
+    /// ONNX a PCA input that is a whole number of pooled grids, at least one per tap.
     pub fn validate(&self) -> Result<(), VisionError> {
         let bad = |m: String| Err(VisionError::InvalidArgument(m));
+        self.spec.validate()?;
         let pca = &self.pca;
-        if pca.output_dim == 0
-            || pca.mean.len() != pca.input_dim
-            || pca.components.len() != pca.output_dim * pca.input_dim
+        if !(1..=limits::MAX_PCA_INPUT_DIM).contains(&pca.input_dim)
+            || !(1..=limits::MAX_PCA_OUTPUT_DIM).contains(&pca.output_dim)
+        {
+            return bad(format!(
+                "PCA is {}x{}, must be at most {}x{} and not empty",
+                pca.output_dim,
+                pca.input_dim,
+                limits::MAX_PCA_OUTPUT_DIM,
+                limits::MAX_PCA_INPUT_DIM
+            ));
+        }
+        if pca.mean.len() != pca.input_dim
+            || pca.output_dim.checked_mul(pca.input_dim) != Some(pca.components.len())
         {
             return bad(format!(
                 "PCA arrays do not match {}x{}",
@@ -174,10 +223,10 @@ impl DescriberModel {
         }
         match (&self.spec, &self.codebook) {
             (BackendSpec::Vlad(o), Some(c)) => {
-                o.validate()?;
                 if c.clusters != o.clusters
                     || c.dim != o.feature.dim()
-                    || c.clusters * c.dim != pca.input_dim
+                    || c.clusters.checked_mul(c.dim) != Some(pca.input_dim)
+                    || c.centres.len() != pca.input_dim
                 {
                     return bad(format!(
                         "codebook {}x{} does not match {} clusters of {}-d features and PCA input {}",
@@ -191,8 +240,15 @@ impl DescriberModel {
                 Ok(())
             }
             (BackendSpec::Onnx { taps, grid, .. }, None) => {
-                if taps.is_empty() || grid[0] == 0 || grid[1] == 0 {
-                    return bad("ONNX spec needs taps and a non-empty grid".into());
+                let cells = grid[0] * grid[1]; // both bounded by MAX_POOL_GRID above
+                if pca.input_dim % cells != 0 || pca.input_dim / cells < taps.len() {
+                    return bad(format!(
+                        "PCA input {} is not a whole number of {}x{} grids, at least one per tap ({})",
+                        pca.input_dim,
+                        grid[0],
+                        grid[1],
+                        taps.len()
+                    ));
                 }
                 Ok(())
             }
@@ -378,12 +434,15 @@ pub fn fit(
             raws.len()
         )));
     }
-    if options.dim == 0 || options.pca_samples < 2 {
+    if !(1..=limits::MAX_PCA_OUTPUT_DIM).contains(&options.dim) || options.pca_samples < 2 {
         return Err(VisionError::InvalidArgument(format!(
-            "descriptor dimension {} must be >= 1 and PCA samples {} >= 2",
-            options.dim, options.pca_samples
+            "descriptor dimension {} must lie in 1..={} and PCA samples {} >= 2",
+            options.dim,
+            limits::MAX_PCA_OUTPUT_DIM,
+            options.pca_samples
         )));
     }
+    spec.validate()?;
     let (codebook, vectors) = match spec {
         BackendSpec::Onnx { .. } => {
             let vectors = raws

@@ -6,6 +6,7 @@
 //! [`describer`] ties them together: fitting a map's model and describing query images with it.
 
 pub mod describer;
+pub mod limits;
 pub mod mlf;
 pub mod onnx;
 pub mod pca;

@@ -174,17 +174,11 @@ pub struct OnnxMlf {
 impl OnnxMlf {
     /// Loads the runtime and the model; fails with a typed error naming every path tried.
     pub fn new(options: OnnxOptions) -> Result<Self, VisionError> {
-        if options.taps.is_empty() || options.grid.0 == 0 || options.grid.1 == 0 {
-            return Err(VisionError::InvalidArgument(
-                "ONNX backend needs at least one tap and a non-empty grid".into(),
-            ));
-        }
-        let (w, h) = options.input_size;
-        if !(32..=2048).contains(&w) || !(32..=2048).contains(&h) {
-            return Err(VisionError::InvalidArgument(format!(
-                "input size {w}x{h} must lie in 32..2048 per side"
-            )));
-        }
+        super::limits::check_onnx_config(
+            &options.taps,
+            [options.grid.0, options.grid.1],
+            [options.input_size.0, options.input_size.1],
+        )?;
         let model = options
             .model
             .clone()

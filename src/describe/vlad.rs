@@ -109,13 +109,7 @@ impl VladOptions {
                 self.max_features
             ));
         }
-        let (w, h) = self.input_size;
-        if !(32..=2048).contains(&w) || !(32..=2048).contains(&h) {
-            return bad(format!(
-                "VLAD input size is {w}x{h}, each side must be in 32..=2048"
-            ));
-        }
-        Ok(())
+        super::limits::check_input_size([self.input_size.0, self.input_size.1], "VLAD")
     }
 }
 

@@ -1,6 +1,8 @@
 //! Incremental construction of a [`Map`] from places, views and edges.
 
-use super::{DescriptorStore, Edge, Map, MapError, PlaceId, ViewId, ViewRecord};
+use super::{
+    DescriptorStore, Edge, Map, MapError, PlaceId, ViewId, ViewRecord, MAX_DESCRIPTOR_DIM,
+};
 use crate::descriptor::{normalize_descriptor_into, DescriptorIdentity};
 use nalgebra::{Isometry3, Point3};
 use std::collections::HashSet;
@@ -105,6 +107,9 @@ impl MapBuilder {
                 return Err(MapError::NonFinite("view pose must be finite".into()));
             }
         }
+        if let Some(image) = &attributes.image {
+            refuse_nul(image, "view image reference")?;
+        }
         normalize_descriptor_into(descriptor, self.identity.dim as usize, &mut self.scratch)?;
         let id = ViewId::try_from(self.views.len())
             .map_err(|_| MapError::InvalidArgument("too many views".into()))?;
@@ -168,9 +173,20 @@ impl MapBuilder {
         &self.descriptors[view as usize * d..(view as usize + 1) * d]
     }
 
-    /// Validates and produces the map. Fails with [`MapError::EmptyMap`] without places and
-    /// [`MapError::Invalid`] when a place has no view.
+    /// Validates and produces the map. Fails with [`MapError::EmptyMap`] without places,
+    /// [`MapError::Invalid`] when a place has no view, and [`MapError::InvalidArgument`] when
+    /// the descriptor kind, model or creator holds a NUL byte (C getters would cut it short) or
+    /// the dimension exceeds [`MAX_DESCRIPTOR_DIM`] (the map file refuses larger ones).
     pub fn build(&self) -> Result<Map, MapError> {
+        refuse_nul(&self.identity.kind, "descriptor kind")?;
+        refuse_nul(&self.identity.model, "descriptor model")?;
+        refuse_nul(&self.creator, "creator")?;
+        if self.identity.dim > MAX_DESCRIPTOR_DIM {
+            return Err(MapError::InvalidArgument(format!(
+                "descriptor dimension {} exceeds {MAX_DESCRIPTOR_DIM}",
+                self.identity.dim
+            )));
+        }
         Map::from_parts(
             self.identity.clone(),
             self.creator.clone(),
@@ -180,4 +196,14 @@ impl MapBuilder {
             self.edges.clone(),
         )
     }
+}
+
+/// Refuses a string holding a NUL byte with [`MapError::InvalidArgument`] naming `what`.
+fn refuse_nul(value: &str, what: &str) -> Result<(), MapError> {
+    if value.contains('\0') {
+        return Err(MapError::InvalidArgument(format!(
+            "{what} holds a NUL byte"
+        )));
+    }
+    Ok(())
 }

@@ -15,7 +15,9 @@ mod file;
 
 pub use builder::{MapBuilder, ViewAttributes};
 pub use error::MapError;
-pub use file::{LoadOptions, FORMAT_NAME, FORMAT_VERSION_MAJOR, FORMAT_VERSION_MINOR};
+pub use file::{
+    LoadOptions, FORMAT_NAME, FORMAT_VERSION_MAJOR, FORMAT_VERSION_MINOR, MAX_DESCRIPTOR_DIM,
+};
 
 use crate::describe::DescriberModel;
 use crate::descriptor::{check_unit_descriptor, DescriptorIdentity, ExpectedDescriptor};

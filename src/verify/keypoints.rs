@@ -1,7 +1,7 @@
 //! ORB keypoints of one image, and the per-view store a map keeps them in.
 
 use crate::errors::VisionError;
-use crate::image::ImageView;
+use crate::image::{ImageView, MAX_IMAGE_SIDE};
 use opencv::core::{KeyPoint, Mat, Ptr, Size, Vector};
 use opencv::features2d::{ORB_ScoreType, ORB};
 use opencv::prelude::*;
@@ -10,6 +10,13 @@ use opencv::prelude::*;
 pub const DESCRIPTOR_BYTES: usize = 32;
 /// Most keypoints a detector may keep per image.
 pub const MAX_KEYPOINTS: usize = 5000;
+
+/// Smallest image width or height ORB can take. The detector builds an 8-level pyramid with
+/// scale factor 1.2; level 7 is `round(side / 1.2^7) = round(side / 3.58)` pixels, which is 0
+/// for a 1-pixel side, and OpenCV's resize then fails an assertion (`inv_scale_x > 0`).
+/// Measured: every side of 2 pixels or more (2 x 2 up to 2 x 8192) is accepted, and images
+/// narrower than 2 x 31 + 1 (twice the edge threshold) simply give no keypoints.
+pub const MIN_ORB_SIDE: u32 = 2;
 
 /// One ORB descriptor.
 pub type Descriptor = [u8; DESCRIPTOR_BYTES];
@@ -91,7 +98,16 @@ impl KeypointDetector {
 
     /// Validates the image, converts it to grey at its own size, detects and describes.
     /// A featureless image gives no keypoints, not an error.
+    /// Images narrower or lower than [`MIN_ORB_SIDE`] are refused with
+    /// [`VisionError::InvalidImage`] before OpenCV sees them.
     pub fn detect(&mut self, image: &ImageView<'_>) -> Result<Keypoints, VisionError> {
+        image.validate()?;
+        if image.width < MIN_ORB_SIDE || image.height < MIN_ORB_SIDE {
+            return Err(VisionError::InvalidImage(format!(
+                "image is {}x{}: keypoint detection needs at least {MIN_ORB_SIDE} pixels on a side",
+                image.width, image.height
+            )));
+        }
         let size = Size::new(image.width as i32, image.height as i32);
         let rgb = image.to_rgb_resized(size)?;
         let mut grey = Mat::default();
@@ -158,8 +174,9 @@ impl ViewKeypoints {
     }
 
     /// Rebuilds a store from its arrays (as a map file holds them); fails unless `offsets`
-    /// starts at 0, never decreases and ends at the number of points, and points and
-    /// descriptors have the same count.
+    /// starts at 0, never decreases and ends at the number of points, no view has more than
+    /// [`MAX_KEYPOINTS`], points and descriptors have the same count, and every position is
+    /// finite and inside the largest accepted image (0..=[`MAX_IMAGE_SIDE`] on both axes).
     pub fn from_parts(
         offsets: Vec<u64>,
         points: Vec<[f32; 2]>,
@@ -183,8 +200,24 @@ impl ViewKeypoints {
         if offsets.windows(2).any(|w| w[0] > w[1]) {
             return Err("keypoint offsets decrease".into());
         }
-        if !points.iter().flatten().all(|x| x.is_finite()) {
-            return Err("a keypoint position is not finite".into());
+        if let Some(v) = offsets
+            .windows(2)
+            .position(|w| w[1] - w[0] > MAX_KEYPOINTS as u64)
+        {
+            return Err(format!(
+                "view {v} has {} keypoints, more than {MAX_KEYPOINTS}",
+                offsets[v + 1] - offsets[v]
+            ));
+        }
+        let side = MAX_IMAGE_SIDE as f32;
+        if let Some(i) = points
+            .iter()
+            .position(|p| !p.iter().all(|x| (0.0..=side).contains(x)))
+        {
+            return Err(format!(
+                "keypoint {i} lies at {:?}: positions must be finite and in 0..={side}",
+                points[i]
+            ));
         }
         Ok(Self {
             offsets,
