@@ -206,6 +206,22 @@ fn a_describer_of_another_backend_or_model_is_refused() {
         Localizer::with_describer(map.clone(), Default::default(), &onnx),
         Err(LocalizeError::Describe(VisionError::Mismatch(_)))
     ));
+    // The same backend kind with another local feature is refused too (the family policy
+    // that C's TOPOLOC_BACKEND_VLAD_SIFT applies lives in the core).
+    let sift = DescriberOptions {
+        backend: Some(BackendKind::Vlad),
+        family: Some("vlad-sift".into()),
+        ..Default::default()
+    };
+    assert!(matches!(
+        Localizer::with_describer(map.clone(), Default::default(), &sift),
+        Err(LocalizeError::Describe(VisionError::Mismatch(_)))
+    ));
+    let orb = DescriberOptions {
+        family: Some("vlad-orb".into()),
+        ..Default::default()
+    };
+    assert!(Localizer::with_describer(map.clone(), Default::default(), &orb).is_ok());
     if !onnx_available() {
         return;
     }

@@ -518,6 +518,9 @@ fn train_codebook(
 pub struct DescriberOptions {
     /// Refuse maps built with another backend.
     pub backend: Option<BackendKind>,
+    /// Refuse maps built with another descriptor family ([`BackendSpec::family`]:
+    /// `"onnx-mlf"`, `"vlad-orb"`, `"vlad-sift"`), a finer demand than `backend`.
+    pub family: Option<String>,
     /// ONNX Runtime library (else `TOPOLOC_ORT_LIBRARY`, `ORT_DYLIB_PATH`, the cache).
     pub onnx_runtime: Option<PathBuf>,
     /// ONNX model file (else the cache's default); must be the very model the map was built with.
@@ -548,6 +551,14 @@ impl Describer {
                     "the map was built with the {} backend, the caller asked for {}",
                     model.spec.kind().name(),
                     kind.name()
+                )));
+            }
+        }
+        if let Some(family) = &options.family {
+            if family != model.spec.family() {
+                return Err(VisionError::Mismatch(format!(
+                    "the map was built with the {} backend, the caller asked for {family}",
+                    model.spec.family()
                 )));
             }
         }

@@ -218,17 +218,6 @@ pub extern "C" fn topoloc_localizer_new(
         };
         let has_describer = map.describer().is_some();
         let wanted = backend_kind(o.image_backend, None)?;
-        if let (Some(family), Some(model)) = (backend_family(o.image_backend), map.describer()) {
-            if model.spec.family() != family {
-                return Err(FfiError::new(
-                    topoloc_status::TOPOLOC_ERR_DESCRIPTOR_MISMATCH,
-                    format!(
-                        "the map was built with the {} backend, options.image_backend asks for {family}",
-                        model.spec.family()
-                    ),
-                ));
-            }
-        }
         let localizer = match (o.image_backend, has_describer) {
             (TOPOLOC_BACKEND_NONE, _) | (TOPOLOC_BACKEND_AUTO, false) => {
                 Localizer::new(map, options)?
@@ -236,6 +225,7 @@ pub extern "C" fn topoloc_localizer_new(
             _ => {
                 let describer = DescriberOptions {
                     backend: wanted,
+                    family: backend_family(o.image_backend).map(Into::into),
                     onnx_runtime: optional_string(
                         o.onnx_runtime_path,
                         "options.onnx_runtime_path",

@@ -60,6 +60,7 @@ impl RuntimeArgs {
     pub fn describer_options(&self, backend: Option<Backend>) -> DescriberOptions {
         DescriberOptions {
             backend: backend.map(Into::into),
+            family: None,
             onnx_runtime: self.onnx_runtime.clone(),
             onnx_model: self.onnx_model.clone(),
             threads: 1,
