@@ -10,6 +10,7 @@
 
 use super::keyframes::{from_keyframes, Keyframe, KeyframeOptions};
 use crate::describe::describer::{fit, BackendConfig, Extractor, FitOptions, RawFeatures};
+use crate::descriptor::DescriptorIdentity;
 use crate::errors::VisionError;
 use crate::image::{read_rgb, ImageView, PixelFormat};
 use crate::map::{Map, MapBuilder, MapError, PlaceId, ViewAttributes};
@@ -147,46 +148,7 @@ pub fn build_from_images(
     options: &ImageMapOptions,
     progress: &mut dyn FnMut(BuildStage, usize, usize) -> bool,
 ) -> Result<(Map, ImageMapReport), ImageMapError> {
-    if images.len() < 2 {
-        return Err(MapError::InvalidArgument(format!(
-            "a map from images needs at least 2 images, got {}",
-            images.len()
-        ))
-        .into());
-    }
-    let per_image = match layout {
-        ImageLayout::Sequence => None,
-        ImageLayout::Keyframes(poses) => Some((poses.len(), "poses")),
-        ImageLayout::Graph(graph) => Some((graph.views.len(), "layout views")),
-    };
-    if let Some((count, what)) = per_image.filter(|(count, _)| *count != images.len()) {
-        return Err(MapError::InvalidArgument(format!(
-            "{count} {what} for {} images: give one per image",
-            images.len()
-        ))
-        .into());
-    }
-    if options.threads > MAX_BUILD_THREADS {
-        return Err(MapError::InvalidArgument(format!(
-            "threads is {}, must lie in 0..={MAX_BUILD_THREADS} (0 = one per core)",
-            options.threads
-        ))
-        .into());
-    }
-    if !(1..=64).contains(&options.views_per_place) {
-        return Err(MapError::InvalidArgument(format!(
-            "views_per_place is {}, must lie in 1..=64",
-            options.views_per_place
-        ))
-        .into());
-    }
-    if options.keypoints > MAX_KEYPOINTS {
-        return Err(MapError::InvalidArgument(format!(
-            "keypoints is {}, must lie in 0..={MAX_KEYPOINTS} (0 = none)",
-            options.keypoints
-        ))
-        .into());
-    }
+    check_request(images.len(), &layout, options)?;
     // Load one extractor first so that a missing backend fails before any thread starts.
     let first = Extractor::new(&options.backend)?;
     let spec = first.spec().clone();
@@ -216,7 +178,83 @@ pub fn build_from_images(
             ImageSource::Pixels(_) => None,
         })
         .collect();
-    let map = match layout {
+    let map = assemble(identity, &descriptors, &sources, layout, options)?;
+    let map = map.with_describer(Arc::new(model))?;
+    let map = match keypoints {
+        Some(keypoints) => map.with_keypoints(keypoints)?,
+        None => map,
+    };
+    if !progress(BuildStage::Fitting, 1, 1) {
+        return Err(ImageMapError::Cancelled);
+    }
+    let report = ImageMapReport {
+        images: images.len(),
+        uninformative,
+        describe_seconds,
+        fit_seconds: start.elapsed().as_secs_f64(),
+    };
+    Ok((map, report))
+}
+
+/// The request is well-formed: enough images, one pose or layout view per image, options in
+/// range.
+fn check_request(
+    images: usize,
+    layout: &ImageLayout<'_>,
+    options: &ImageMapOptions,
+) -> Result<(), ImageMapError> {
+    if images < 2 {
+        return Err(MapError::InvalidArgument(format!(
+            "a map from images needs at least 2 images, got {}",
+            images
+        ))
+        .into());
+    }
+    let per_image = match layout {
+        ImageLayout::Sequence => None,
+        ImageLayout::Keyframes(poses) => Some((poses.len(), "poses")),
+        ImageLayout::Graph(graph) => Some((graph.views.len(), "layout views")),
+    };
+    if let Some((count, what)) = per_image.filter(|(count, _)| *count != images) {
+        return Err(MapError::InvalidArgument(format!(
+            "{count} {what} for {} images: give one per image",
+            images
+        ))
+        .into());
+    }
+    if options.threads > MAX_BUILD_THREADS {
+        return Err(MapError::InvalidArgument(format!(
+            "threads is {}, must lie in 0..={MAX_BUILD_THREADS} (0 = one per core)",
+            options.threads
+        ))
+        .into());
+    }
+    if !(1..=64).contains(&options.views_per_place) {
+        return Err(MapError::InvalidArgument(format!(
+            "views_per_place is {}, must lie in 1..=64",
+            options.views_per_place
+        ))
+        .into());
+    }
+    if options.keypoints > MAX_KEYPOINTS {
+        return Err(MapError::InvalidArgument(format!(
+            "keypoints is {}, must lie in 0..={MAX_KEYPOINTS} (0 = none)",
+            options.keypoints
+        ))
+        .into());
+    }
+    Ok(())
+}
+
+/// The map of the described images, placed as `layout` says.
+fn assemble(
+    identity: DescriptorIdentity,
+    descriptors: &[Vec<f32>],
+    sources: &[Option<String>],
+    layout: ImageLayout<'_>,
+    options: &ImageMapOptions,
+) -> Result<Map, MapError> {
+    Ok(match layout {
         ImageLayout::Keyframes(poses) => {
             let keyframes: Vec<Keyframe> = descriptors
                 .iter()
@@ -235,30 +273,15 @@ pub fn build_from_images(
             from_keyframes(identity, &keyframes, &keyframe_options)?
         }
         ImageLayout::Sequence => {
-            sequence_map(identity, &descriptors, &sources, options.views_per_place)?
+            sequence_map(identity, descriptors, sources, options.views_per_place)?
         }
-        ImageLayout::Graph(graph) => graph_map(identity, &descriptors, &sources, graph)?,
-    };
-    let map = map.with_describer(Arc::new(model))?;
-    let map = match keypoints {
-        Some(keypoints) => map.with_keypoints(keypoints)?,
-        None => map,
-    };
-    if !progress(BuildStage::Fitting, 1, 1) {
-        return Err(ImageMapError::Cancelled);
-    }
-    let report = ImageMapReport {
-        images: images.len(),
-        uninformative,
-        describe_seconds,
-        fit_seconds: start.elapsed().as_secs_f64(),
-    };
-    Ok((map, report))
+        ImageLayout::Graph(graph) => graph_map(identity, descriptors, sources, graph)?,
+    })
 }
 
 /// Consecutive groups of `per_place` images form places, chained in order.
 fn sequence_map(
-    identity: crate::descriptor::DescriptorIdentity,
+    identity: DescriptorIdentity,
     descriptors: &[Vec<f32>],
     sources: &[Option<String>],
     per_place: usize,
@@ -287,7 +310,7 @@ fn sequence_map(
 
 /// The places and edges of `graph`, each image a view of its place.
 fn graph_map(
-    identity: crate::descriptor::DescriptorIdentity,
+    identity: DescriptorIdentity,
     descriptors: &[Vec<f32>],
     sources: &[Option<String>],
     graph: &PlaceLayout,
@@ -326,6 +349,10 @@ struct Described {
 type Workers = (Extractor, Option<KeypointDetector>);
 
 /// Raw features (and keypoints) of every image; in input order.
+///
+/// Longer than most functions on purpose: the workers, the scoped pool and the progress loop
+/// share the `done` / `cancelled` counters and the spare extractor by borrow, and reading them
+/// in one place shows how cancellation reaches every thread.
 fn describe_in_parallel(
     images: &[ImageSource<'_>],
     first: Extractor,

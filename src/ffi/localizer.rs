@@ -176,46 +176,7 @@ pub extern "C" fn topoloc_localizer_new(
         } else {
             read_versioned(options, topoloc_localizer_options::default(), "options")?
         };
-        let mode = match o.mode {
-            TOPOLOC_MODE_FILTER => Mode::Filter,
-            TOPOLOC_MODE_SINGLE_FRAME => Mode::SingleFrame,
-            TOPOLOC_MODE_METRIC => Mode::Metric,
-            other => {
-                return Err(FfiError::new(
-                    topoloc_status::TOPOLOC_ERR_INVALID_OPTION,
-                    format!("unknown mode {other}"),
-                ))
-            }
-        };
-        let options = LocalizerOptions {
-            mode,
-            temperature: o.temperature,
-            stay_probability: o.stay_probability,
-            jump_probability: o.jump_probability,
-            off_map_probability: o.off_map_probability,
-            off_map_similarity: o.off_map_similarity,
-            off_map_margin: o.off_map_margin,
-            top_k: o.top_k as usize,
-            expected: expected_descriptor(
-                o.expected_descriptor_kind,
-                o.expected_descriptor_model,
-                0,
-            )?,
-            verification: VerificationOptions {
-                candidates: o.verify_candidates as usize,
-                views_per_candidate: o.verify_views_per_candidate as usize,
-                inlier_weight: o.verify_inlier_weight,
-                ..VerificationOptions::default()
-            },
-            metric: MetricOptions {
-                particles: o.metric_particles as usize,
-                temperature: o.metric_temperature,
-                seed: o.metric_seed,
-                ..MetricOptions::default()
-            },
-            // The motion model's speed classes are not in the C options yet: defaults.
-            ..LocalizerOptions::default()
-        };
+        let options = localizer_options(&o)?;
         let has_describer = map.describer().is_some();
         let wanted = backend_kind(o.image_backend, None)?;
         let localizer = match (o.image_backend, has_describer) {
@@ -246,6 +207,46 @@ pub extern "C" fn topoloc_localizer_new(
             }),
         );
         Ok(())
+    })
+}
+
+/// The Rust options a C caller's options stand for.
+fn localizer_options(o: &topoloc_localizer_options) -> Result<LocalizerOptions, FfiError> {
+    let mode = match o.mode {
+        TOPOLOC_MODE_FILTER => Mode::Filter,
+        TOPOLOC_MODE_SINGLE_FRAME => Mode::SingleFrame,
+        TOPOLOC_MODE_METRIC => Mode::Metric,
+        other => {
+            return Err(FfiError::new(
+                topoloc_status::TOPOLOC_ERR_INVALID_OPTION,
+                format!("unknown mode {other}"),
+            ))
+        }
+    };
+    Ok(LocalizerOptions {
+        mode,
+        temperature: o.temperature,
+        stay_probability: o.stay_probability,
+        jump_probability: o.jump_probability,
+        off_map_probability: o.off_map_probability,
+        off_map_similarity: o.off_map_similarity,
+        off_map_margin: o.off_map_margin,
+        top_k: o.top_k as usize,
+        expected: expected_descriptor(o.expected_descriptor_kind, o.expected_descriptor_model, 0)?,
+        verification: VerificationOptions {
+            candidates: o.verify_candidates as usize,
+            views_per_candidate: o.verify_views_per_candidate as usize,
+            inlier_weight: o.verify_inlier_weight,
+            ..VerificationOptions::default()
+        },
+        metric: MetricOptions {
+            particles: o.metric_particles as usize,
+            temperature: o.metric_temperature,
+            seed: o.metric_seed,
+            ..MetricOptions::default()
+        },
+        // The motion model's speed classes are not in the C options yet: defaults.
+        ..LocalizerOptions::default()
     })
 }
 

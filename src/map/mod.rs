@@ -141,91 +141,13 @@ impl Map {
                 "more than 2^32-1 places or views".into(),
             ));
         }
-        let data = descriptors.as_slice();
-        if data.len() != views.len() * dim {
-            return Err(MapError::Invalid(format!(
-                "descriptor matrix holds {} values, expected {} views x D={}",
-                data.len(),
-                views.len(),
-                dim
-            )));
-        }
-        for (v, row) in data.chunks_exact(dim).enumerate() {
-            check_unit_descriptor(row).map_err(|e| MapError::Invalid(format!("view {v}: {e}")))?;
-        }
-        let mut views_per_place = vec![0u32; places];
-        for (v, view) in views.iter().enumerate() {
-            let p = view.place as usize;
-            if p >= places {
-                return Err(MapError::Invalid(format!(
-                    "view {v} belongs to place {p}, but the map has {places} places"
-                )));
-            }
-            views_per_place[p] += 1;
-            if let Some(pose) = &view.world_t_camera {
-                check_pose(pose).map_err(|e| MapError::Invalid(format!("view {v}: {e}")))?;
-            }
-        }
-        if let Some(p) = views_per_place.iter().position(|&n| n == 0) {
-            return Err(MapError::Invalid(format!("place {p} has no view")));
-        }
-        for (p, pos) in place_positions.iter().enumerate() {
-            if let Some(pos) = pos {
-                if !pos.iter().all(|x| x.is_finite()) {
-                    return Err(MapError::Invalid(format!(
-                        "place {p} has a non-finite position"
-                    )));
-                }
-            }
-        }
+        check_descriptors(descriptors.as_slice(), views.len(), dim)?;
+        let views_per_place = count_views(&views, places)?;
+        check_positions(&place_positions)?;
         edges.sort_by_key(|e| (e.a, e.b));
-        for (i, e) in edges.iter().enumerate() {
-            if e.a >= e.b || e.b as usize >= places {
-                return Err(MapError::Invalid(format!(
-                    "edge ({}, {}) must join two different existing places (a < b < {places})",
-                    e.a, e.b
-                )));
-            }
-            if !(e.weight.is_finite() && e.weight > 0.0) {
-                return Err(MapError::Invalid(format!(
-                    "edge ({}, {}) has weight {}, must be finite and > 0",
-                    e.a, e.b, e.weight
-                )));
-            }
-            if i > 0 && (edges[i - 1].a, edges[i - 1].b) == (e.a, e.b) {
-                return Err(MapError::Invalid(format!(
-                    "edge ({}, {}) appears twice",
-                    e.a, e.b
-                )));
-            }
-        }
-
-        let place_view_offsets = prefix_offsets(&views_per_place);
-        let mut fill = place_view_offsets.clone();
-        let mut place_view_ids = vec![0; views.len()];
-        for (v, view) in views.iter().enumerate() {
-            let slot = &mut fill[view.place as usize];
-            place_view_ids[*slot as usize] = v as ViewId;
-            *slot += 1;
-        }
-
-        let mut degree = vec![0u32; places];
-        for e in &edges {
-            degree[e.a as usize] += 1;
-            degree[e.b as usize] += 1;
-        }
-        let neighbour_offsets = prefix_offsets(&degree);
-        let mut fill = neighbour_offsets.clone();
-        let mut neighbour_ids = vec![0; edges.len() * 2];
-        let mut neighbour_weights = vec![0.0; edges.len() * 2];
-        for e in &edges {
-            for (from, to) in [(e.a, e.b), (e.b, e.a)] {
-                let slot = &mut fill[from as usize];
-                neighbour_ids[*slot as usize] = to;
-                neighbour_weights[*slot as usize] = e.weight;
-                *slot += 1;
-            }
-        }
+        check_edges(&edges, places)?;
+        let (place_view_offsets, place_view_ids) = place_view_index(&views, &views_per_place);
+        let (neighbour_offsets, neighbour_ids, neighbour_weights) = adjacency(&edges, places);
 
         Ok(Self {
             identity,
@@ -451,6 +373,114 @@ impl Map {
             })
         }
     }
+}
+
+/// Every row of the `views x dim` descriptor matrix is finite with unit norm.
+fn check_descriptors(data: &[f32], views: usize, dim: usize) -> Result<(), MapError> {
+    if data.len() != views * dim {
+        return Err(MapError::Invalid(format!(
+            "descriptor matrix holds {} values, expected {views} views x D={dim}",
+            data.len()
+        )));
+    }
+    for (v, row) in data.chunks_exact(dim).enumerate() {
+        check_unit_descriptor(row).map_err(|e| MapError::Invalid(format!("view {v}: {e}")))?;
+    }
+    Ok(())
+}
+
+/// Views per place, after checking that every view names an existing place and has a finite
+/// pose, and that every place has a view.
+fn count_views(views: &[ViewRecord], places: usize) -> Result<Vec<u32>, MapError> {
+    let mut views_per_place = vec![0u32; places];
+    for (v, view) in views.iter().enumerate() {
+        let p = view.place as usize;
+        if p >= places {
+            return Err(MapError::Invalid(format!(
+                "view {v} belongs to place {p}, but the map has {places} places"
+            )));
+        }
+        views_per_place[p] += 1;
+        if let Some(pose) = &view.world_t_camera {
+            check_pose(pose).map_err(|e| MapError::Invalid(format!("view {v}: {e}")))?;
+        }
+    }
+    if let Some(p) = views_per_place.iter().position(|&n| n == 0) {
+        return Err(MapError::Invalid(format!("place {p} has no view")));
+    }
+    Ok(views_per_place)
+}
+
+fn check_positions(place_positions: &[Option<Point3<f64>>]) -> Result<(), MapError> {
+    for (p, pos) in place_positions.iter().enumerate() {
+        if pos.is_some_and(|pos| !pos.iter().all(|x| x.is_finite())) {
+            return Err(MapError::Invalid(format!(
+                "place {p} has a non-finite position"
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// Edges (sorted by `(a, b)`) join two different existing places, once, with a finite
+/// positive weight.
+fn check_edges(edges: &[Edge], places: usize) -> Result<(), MapError> {
+    for (i, e) in edges.iter().enumerate() {
+        if e.a >= e.b || e.b as usize >= places {
+            return Err(MapError::Invalid(format!(
+                "edge ({}, {}) must join two different existing places (a < b < {places})",
+                e.a, e.b
+            )));
+        }
+        if !(e.weight.is_finite() && e.weight > 0.0) {
+            return Err(MapError::Invalid(format!(
+                "edge ({}, {}) has weight {}, must be finite and > 0",
+                e.a, e.b, e.weight
+            )));
+        }
+        if i > 0 && (edges[i - 1].a, edges[i - 1].b) == (e.a, e.b) {
+            return Err(MapError::Invalid(format!(
+                "edge ({}, {}) appears twice",
+                e.a, e.b
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// CSR index of the views of every place: offsets and view ids.
+fn place_view_index(views: &[ViewRecord], views_per_place: &[u32]) -> (Vec<u32>, Vec<ViewId>) {
+    let offsets = prefix_offsets(views_per_place);
+    let mut fill = offsets.clone();
+    let mut ids = vec![0; views.len()];
+    for (v, view) in views.iter().enumerate() {
+        let slot = &mut fill[view.place as usize];
+        ids[*slot as usize] = v as ViewId;
+        *slot += 1;
+    }
+    (offsets, ids)
+}
+
+/// CSR adjacency of the places: offsets, neighbour ids and the matching edge weights.
+fn adjacency(edges: &[Edge], places: usize) -> (Vec<u32>, Vec<PlaceId>, Vec<f32>) {
+    let mut degree = vec![0u32; places];
+    for e in edges {
+        degree[e.a as usize] += 1;
+        degree[e.b as usize] += 1;
+    }
+    let offsets = prefix_offsets(&degree);
+    let mut fill = offsets.clone();
+    let mut ids = vec![0; edges.len() * 2];
+    let mut weights = vec![0.0; edges.len() * 2];
+    for e in edges {
+        for (from, to) in [(e.a, e.b), (e.b, e.a)] {
+            let slot = &mut fill[from as usize];
+            ids[*slot as usize] = to;
+            weights[*slot as usize] = e.weight;
+            *slot += 1;
+        }
+    }
+    (offsets, ids, weights)
 }
 
 fn prefix_offsets(counts: &[u32]) -> Vec<u32> {

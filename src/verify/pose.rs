@@ -140,6 +140,46 @@ pub fn locate(
             view.points.len()
         )));
     }
+    let (image_points, object_points) = scene_pairs(query, view, view_world_points, max_hamming)?;
+    let needed = (options.min_inliers as usize).max(MIN_PAIRS);
+    if object_points.len() < needed {
+        return Ok(None);
+    }
+    let k = camera.matrix()?;
+    let Some(fit) = ransac_pose(&object_points, &image_points, &k, options)? else {
+        return Ok(None);
+    };
+    let count = fit.object_inliers.len() as u32;
+    let Some((optical_r_world, t)) = refine_pose(&fit, &k)? else {
+        return Ok(None);
+    };
+    // A pose that puts an inlier behind the camera is a degenerate fit, not a place.
+    for p in &fit.object_inliers {
+        let scene = Vector3::new(f64::from(p.x), f64::from(p.y), f64::from(p.z));
+        if (optical_r_world * scene + t).z <= 0.0 {
+            return Ok(None);
+        }
+    }
+    // OpenCV gives optical_T_world; invert it.
+    let world_r_optical: Matrix3<f64> = optical_r_world.matrix().transpose();
+    let centre = -(world_r_optical * t);
+    Ok(Some(Located {
+        world_t_optical: Isometry3::from_parts(
+            Translation3::from(centre),
+            UnitQuaternion::from_matrix(&world_r_optical),
+        ),
+        inliers: count,
+    }))
+}
+
+/// The 2D-3D pairs of the mutual matches whose view keypoint has a known scene point: query
+/// pixels and scene points.
+fn scene_pairs(
+    query: KeypointsRef<'_>,
+    view: KeypointsRef<'_>,
+    view_world_points: &[[f32; 3]],
+    max_hamming: u32,
+) -> Result<(Vector<Point2f>, Vector<Point3f>), VisionError> {
     let matches = mutual_matches(query, view, max_hamming)?;
     let mut image_points = Vector::<Point2f>::new();
     let mut object_points = Vector::<Point3f>::new();
@@ -151,23 +191,34 @@ pub fn locate(
             object_points.push(Point3f::new(scene[0], scene[1], scene[2]));
         }
     }
-    let needed = (options.min_inliers as usize).max(MIN_PAIRS);
-    if object_points.len() < needed {
-        return Ok(None);
-    }
+    Ok((image_points, object_points))
+}
+
+/// A RANSAC PnP pose (optical_T_world as OpenCV's rotation and translation vectors) and the
+/// pairs that agree with it.
+struct PnpFit {
+    rvec: Mat,
+    tvec: Mat,
+    object_inliers: Vector<Point3f>,
+    image_inliers: Vector<Point2f>,
+}
+
+/// RANSAC PnP with AP3P minimal sets (OpenCV refits the inliers with EPnP): the pose and its
+/// inlier pairs, or `None` below
+/// `options.min_inliers` or on a solver error (degenerate samples).
+fn ransac_pose(
+    object_points: &Vector<Point3f>,
+    image_points: &Vector<Point2f>,
+    k: &Mat,
+    options: &LocateOptions,
+) -> Result<Option<PnpFit>, VisionError> {
     let mut rvec = Mat::default();
     let mut tvec = Mat::default();
     let mut inliers = Mat::default();
-    let k = camera.matrix()?;
-    // Minimal sets by AP3P (OpenCV refits the inliers with EPnP), then the inliers refitted
-    // by SQPnP (globally optimal; EPnP is poor on a single plane, a wall) and polished by
-    // Levenberg-Marquardt. OpenCV's solvers raise errors on degenerate samples (SQPnP asserts
-    // on nearly coincident points, hence not used for the minimal sets): degenerate geometry
-    // gives no pose, not a failed frame.
     let found = calib3d::solve_pnp_ransac(
-        &object_points,
-        &image_points,
-        &k,
+        object_points,
+        image_points,
+        k,
         &Mat::default(),
         &mut rvec,
         &mut tvec,
@@ -197,11 +248,30 @@ pub fn locate(
         .iter()
         .map(|&j| image_points.get(j))
         .collect::<opencv::Result<_>>()?;
+    Ok(Some(PnpFit {
+        rvec,
+        tvec,
+        object_inliers,
+        image_inliers,
+    }))
+}
+
+/// Refits the RANSAC pose on its inliers by SQPnP (globally optimal; EPnP is poor on a single
+/// plane, a wall; kept only when it succeeds) and polishes it by Levenberg-Marquardt. OpenCV's
+/// solvers raise errors on degenerate samples (SQPnP asserts on nearly coincident points,
+/// hence not used for the minimal sets): degenerate geometry gives `None`, not a failed frame.
+/// Returns optical_R_world and optical_t_world.
+fn refine_pose(
+    fit: &PnpFit,
+    k: &Mat,
+) -> Result<Option<(Rotation3<f64>, Vector3<f64>)>, VisionError> {
+    let (object_inliers, image_inliers) = (&fit.object_inliers, &fit.image_inliers);
+    let (mut rvec, mut tvec) = (fit.rvec.clone(), fit.tvec.clone());
     let (mut rvec_sq, mut tvec_sq) = (Mat::default(), Mat::default());
     let refit = calib3d::solve_pnp(
-        &object_inliers,
-        &image_inliers,
-        &k,
+        object_inliers,
+        image_inliers,
+        k,
         &Mat::default(),
         &mut rvec_sq,
         &mut tvec_sq,
@@ -213,9 +283,9 @@ pub fn locate(
     }
     let criteria = TermCriteria::new(TermCriteria_COUNT + TermCriteria_EPS, 20, 1e-8)?;
     if calib3d::solve_pnp_refine_lm(
-        &object_inliers,
-        &image_inliers,
-        &k,
+        object_inliers,
+        image_inliers,
+        k,
         &Mat::default(),
         &mut rvec,
         &mut tvec,
@@ -236,22 +306,5 @@ pub fn locate(
     if !(r.iter().chain(t.iter()).all(|x| x.is_finite())) {
         return Ok(None);
     }
-    // OpenCV gives optical_T_world; invert it.
-    let optical_r_world = Rotation3::from_scaled_axis(r);
-    // A pose that puts an inlier behind the camera is a degenerate fit, not a place.
-    for p in &object_inliers {
-        let scene = Vector3::new(f64::from(p.x), f64::from(p.y), f64::from(p.z));
-        if (optical_r_world * scene + t).z <= 0.0 {
-            return Ok(None);
-        }
-    }
-    let world_r_optical: Matrix3<f64> = optical_r_world.matrix().transpose();
-    let centre = -(world_r_optical * t);
-    Ok(Some(Located {
-        world_t_optical: Isometry3::from_parts(
-            Translation3::from(centre),
-            UnitQuaternion::from_matrix(&world_r_optical),
-        ),
-        inliers: count,
-    }))
+    Ok(Some((Rotation3::from_scaled_axis(r), t)))
 }
