@@ -405,8 +405,8 @@ pub struct FitOptions {
     pub codebook_samples: usize,
     /// Scale PCA components to unit variance. Default `false` for both backends: fitted on the
     /// map's own n images with D = n - 1 (small maps), whitening makes the map's views mutually
-    /// equidistant and throws their structure away (Gardens Point VLAD-ORB single-frame R@1
-    /// 0.580 whitened vs 0.645 not; BENCHMARKS.md).
+    /// equidistant and throws their structure away (it lowered single-frame R@1 on Gardens
+    /// Point; BENCHMARKS.md, "Real images").
     pub whiten: bool,
 }
 

@@ -66,9 +66,9 @@ pub struct VladOptions {
     /// Describe a regular grid of keypoints (every [`DENSE_STEP`] pixels, size
     /// [`DENSE_SIZE`]) instead of detected ones (dense VLAD): every image gets the same number
     /// of features wherever they lie, which helps on blurred, low-resolution or snowy images
-    /// where detectors find few stable corners. Default true: on Gardens Point single-frame R@1
-    /// is 0.775 dense vs 0.645 detected, on Nordland 0.016 vs 0.010, and it is as fast
-    /// (BENCHMARKS.md).
+    /// where detectors find few stable corners. Default true: better single-frame R@1 than
+    /// detected keypoints on Gardens Point and Nordland at the same cost (BENCHMARKS.md,
+    /// "Real images").
     #[serde(default)]
     pub dense: bool,
 }

@@ -88,7 +88,7 @@ pub struct topoloc_localizer_options {
     /// Most probable places verified geometrically per frame against the frame's image, 0..=64
     /// (ORB matches + RANSAC; the result's `verified` / `inliers`). 0 = off (default). Needs a
     /// map storing keypoints (maps built from images do; else `_INVALID_OPTION`) and frames
-    /// with images (else `_INVALID_IMAGE`). About 10 ms per checked view.
+    /// with images (else `_INVALID_IMAGE`). Costs a pair check per view checked (BENCHMARKS.md).
     pub verify_candidates: u32,
     /// Views checked per candidate place, those most similar to the frame, 1..=64. Default 2.
     pub verify_views_per_candidate: u32,
@@ -411,7 +411,7 @@ pub extern "C" fn topoloc_result_init(result: *mut topoloc_result, size: usize) 
 /// (`_INVALID_IMAGE`), beside its descriptor or instead of it.
 /// Cost: describing the image (if any), then one pass over the map's descriptors plus
 /// O(places + edges); no allocation for descriptor frames without verification; verification
-/// adds keypoint detection and about 10 ms per checked view.
+/// adds keypoint detection and a pair check per checked view (BENCHMARKS.md).
 #[no_mangle]
 pub extern "C" fn topoloc_localizer_process(
     localizer: *mut topoloc_localizer,

@@ -124,8 +124,8 @@ impl Castable for topoloc_graph {
 /// inputs are read during the call only. `options` may be NULL (defaults).
 ///
 /// On success `*out` owns a new graph (free it with `topoloc_graph_free`); the same inputs give
-/// the same graph. Thread-safe (no shared state); single-threaded, about 2 s for a
-/// 40 m x 30 m x 3 m world at 0.1 m. Errors: `_NULL_ARGUMENT`, `_STRUCT_SIZE`,
+/// the same graph. Thread-safe (no shared state); single-threaded, seconds for an office floor
+/// at 0.1 m (BENCHMARKS.md). Errors: `_NULL_ARGUMENT`, `_STRUCT_SIZE`,
 /// `_INVALID_ARGUMENT` (the message names the field: `dims`, `voxel_size`, `origin`,
 /// `cells_len`, `cells` when every voxel is occupied, `z_band` when the band holds no free
 /// voxel, `min_clearance_m` when the clearance leaves none, or another option out of range).

@@ -77,8 +77,8 @@ pub struct MetricOptions {
     /// Softmax temperature of the first frame's draw (after creation or reset): sharper than
     /// `temperature`, so that the cloud starts around the views that match the first frame
     /// best instead of spread over the whole map (a proposal; the odometry and the frames that
-    /// follow correct it). Default 0.3 (Test worlds with ring points: MNA 0.818 -> 0.854 over
-    /// five seeds; BENCHMARKS.md).
+    /// follow correct it). Default 0.3, chosen on the suite's Test worlds with ring points
+    /// (figures in BENCHMARKS.md, "Metric mode").
     pub initial_temperature: f32,
     /// Standard deviation of a pose fix's horizontal position ([`crate::verify::locate`],
     /// with verification and a camera), metres: each fix multiplies a particle's weight by
@@ -86,10 +86,9 @@ pub struct MetricOptions {
     /// Default 0.2.
     pub fix_sigma_m: f32,
     /// Weight a pose fix leaves to particles far from it, guarding against a wrong fix (a
-    /// look-alike place whose keypoints happen to agree, a degenerate fit): about one fix in
-    /// thirteen with 30-60 inliers was more than a metre off on the Test worlds. Default 0.3
-    /// (Test, seed 0: 0.885 / 0.986; 0.1 with a 40-inlier minimum, 0.727 / 0.888, wrong fixes
-    /// dragged the cloud away; BENCHMARKS.md).
+    /// look-alike place whose keypoints happen to agree, a degenerate fit). Default 0.3; a
+    /// lower floor let wrong fixes drag the cloud away (the comparison and the share of
+    /// far-off fixes are in BENCHMARKS.md, "Metric mode with pose fixes").
     pub fix_outlier: f32,
     /// Seed of the random generator. Default 0.
     pub seed: u64,

@@ -210,8 +210,7 @@ impl Map {
     /// The typical spread of similarities in this map's descriptor space: the median, over up to
     /// 64 evenly spaced views, of the standard deviation of a view's cosine similarity to the
     /// views of all other places. It sets the scale of the localizer's automatic temperature
-    /// (descriptors differ widely: 0.18 for MobileNetV2 multi-level features on Gardens Point,
-    /// far less for whitened VLAD). Computed on first use (at most ~2e8 multiply-adds: fewer
+    /// (descriptor spaces differ widely in spread; BENCHMARKS.md). Computed on first use (at most ~2e8 multiply-adds: fewer
     /// sample views on large maps), then cached; 0 for a map with a single place.
     pub fn similarity_spread(&self) -> f32 {
         *self.spread.get_or_init(|| self.compute_similarity_spread())

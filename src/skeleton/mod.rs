@@ -322,9 +322,8 @@ fn free_space(grid: &OccupancyGrid, options: &SkeletonOptions) -> Result<FreeSpa
 /// skeleton voxels in grid order (x fastest), before spur removal. Errors as [`skeleton_graph`].
 ///
 /// Cost: one pass over the free voxels per border direction and thinning iteration (about half
-/// the widest free region, in voxels), single-threaded: a 40 m x 30 m x 3 m office floor takes
-/// about 2 s at 0.1 m (3.6 million voxels) and 0.2 s at 0.2 m (`cargo bench --bench skeleton`).
-/// The graph stage after it costs a few milliseconds.
+/// the widest free region, in voxels), single-threaded; the graph stage after it costs far
+/// less. Timings: `cargo bench --bench skeleton`, BENCHMARKS.md.
 pub fn skeletonize(
     grid: &OccupancyGrid,
     options: &SkeletonOptions,

@@ -29,8 +29,8 @@ pub use pose::{locate, LocateOptions, Located, PinholeCamera, MIN_PAIRS};
 pub const DEFAULT_KEYPOINTS: usize = 500;
 
 /// When and how the localizer verifies candidates. Off by default (`candidates == 0`):
-/// verification needs the frame's image and a map holding keypoints, and costs about 10 ms per
-/// checked view on one core (BENCHMARKS.md).
+/// verification needs the frame's image and a map holding keypoints, and costs one ORB match and
+/// RANSAC fit per checked view (timings in BENCHMARKS.md).
 #[derive(Clone, Debug, PartialEq)]
 pub struct VerificationOptions {
     /// Most probable places checked per frame; 0 turns verification off. Default 0.

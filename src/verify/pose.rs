@@ -64,9 +64,9 @@ impl PinholeCamera {
 /// Options of [`locate`].
 #[derive(Clone, Debug, PartialEq)]
 pub struct LocateOptions {
-    /// Fewest RANSAC inliers for a pose to be accepted. Default 30 (on Test worlds of
-    /// `topoloc suite`, two in five fixes with 15-30 inliers were more than half a metre off,
-    /// one in ten with 30-60; BENCHMARKS.md).
+    /// Fewest RANSAC inliers for a pose to be accepted. Default 30: fixes with fewer inliers
+    /// were often far off on the suite's worlds (the shares by inlier count are in
+    /// BENCHMARKS.md, "Metric mode with pose fixes").
     pub min_inliers: u32,
     /// RANSAC inlier threshold: reprojection error, pixels. Default 2.0.
     pub reprojection_px: f32,
