@@ -55,6 +55,23 @@ fn small_map() -> *mut topoloc_map {
     map
 }
 
+/// Processes one descriptor frame of the small map, which must succeed.
+fn process_descriptor(
+    localizer: *mut topoloc_localizer,
+    query: [f32; 4],
+    result: *mut topoloc_result,
+) {
+    let frame = topoloc_frame {
+        descriptor: query.as_ptr(),
+        descriptor_len: 4,
+        ..Default::default()
+    };
+    assert_eq!(
+        topoloc_localizer_process(localizer, &frame, result),
+        TOPOLOC_OK
+    );
+}
+
 #[test]
 fn panics_become_status_codes_with_a_message() {
     assert_eq!(run(|| panic!("boom {}", 42)), TOPOLOC_ERR_PANIC);
@@ -283,16 +300,7 @@ fn a_newer_library_never_writes_past_an_older_callers_struct() {
     let mut storage = vec![0xABu8; full + 16];
     let result = storage.as_mut_ptr().cast::<topoloc_result>();
     assert_eq!(topoloc_result_init(result, full), TOPOLOC_OK);
-    let query = [1.0f32, 0.0, 0.0, 0.0];
-    let frame = topoloc_frame {
-        descriptor: query.as_ptr(),
-        descriptor_len: 4,
-        ..Default::default()
-    };
-    assert_eq!(
-        topoloc_localizer_process(localizer, &frame, result),
-        TOPOLOC_OK
-    );
+    process_descriptor(localizer, [1.0, 0.0, 0.0, 0.0], result);
     assert!(
         storage[full..].iter().all(|&b| b == 0xAB),
         "wrote past struct_size"
@@ -469,16 +477,7 @@ fn a_result_of_the_oldest_layout_is_read_and_written_within_its_size() {
         (*result).candidates = candidates.as_mut_ptr();
         (*result).candidates_capacity = 2;
     }
-    let query = [0.0f32, 0.0, 1.0, 0.0];
-    let frame = topoloc_frame {
-        descriptor: query.as_ptr(),
-        descriptor_len: 4,
-        ..Default::default()
-    };
-    assert_eq!(
-        topoloc_localizer_process(localizer, &frame, result),
-        TOPOLOC_OK
-    );
+    process_descriptor(localizer, [0.0, 0.0, 1.0, 0.0], result);
     assert!(
         storage[oldest..].iter().all(|&b| b == 0xCD),
         "wrote past struct_size"
