@@ -18,8 +18,8 @@ pub(super) enum Estimator {
     /// [`Mode::Metric`]: the particles give the place posterior; the graph filter runs beside
     /// them for the off-map probability only.
     Metric {
-        /// The cloud over camera poses.
-        particles: Particles,
+        /// The cloud over camera poses (boxed: far larger than the graph filter's handles).
+        particles: Box<Particles>,
         /// The graph filter, read for `off_map` only.
         graph: Belief,
     },
@@ -38,7 +38,7 @@ impl Estimator {
         Ok(match mode {
             Mode::Filter | Mode::SingleFrame => Estimator::Graph(graph),
             Mode::Metric => Estimator::Metric {
-                particles: Particles::new(map, metric).map_err(LocalizeError::Metric)?,
+                particles: Box::new(Particles::new(map, metric).map_err(LocalizeError::Metric)?),
                 graph,
             },
         })

@@ -194,6 +194,9 @@ fn scene_pairs(
     Ok((image_points, object_points))
 }
 
+/// A camera pose as OpenCV's PnP gives it: `optical_R_world` and `optical_t_world`.
+type OpticalFromWorld = (Rotation3<f64>, Vector3<f64>);
+
 /// A RANSAC PnP pose (optical_T_world as OpenCV's rotation and translation vectors) and the
 /// pairs that agree with it.
 struct PnpFit {
@@ -261,10 +264,7 @@ fn ransac_pose(
 /// solvers raise errors on degenerate samples (SQPnP asserts on nearly coincident points,
 /// hence not used for the minimal sets): degenerate geometry gives `None`, not a failed frame.
 /// Returns optical_R_world and optical_t_world.
-fn refine_pose(
-    fit: &PnpFit,
-    k: &Mat,
-) -> Result<Option<(Rotation3<f64>, Vector3<f64>)>, VisionError> {
+fn refine_pose(fit: &PnpFit, k: &Mat) -> Result<Option<OpticalFromWorld>, VisionError> {
     let (object_inliers, image_inliers) = (&fit.object_inliers, &fit.image_inliers);
     let (mut rvec, mut tvec) = (fit.rvec.clone(), fit.tvec.clone());
     let (mut rvec_sq, mut tvec_sq) = (Mat::default(), Mat::default());
