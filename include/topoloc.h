@@ -351,7 +351,7 @@ typedef struct topoloc_localizer_options {
    * Most probable places verified geometrically per frame against the frame's image, 0..=64
    * (ORB matches + RANSAC; the result's `verified` / `inliers`). 0 = off (default). Needs a
    * map storing keypoints (maps built from images do; else `_INVALID_OPTION`) and frames
-   * with images (else `_INVALID_IMAGE`). About 10 ms per checked view.
+   * with images (else `_INVALID_IMAGE`). Costs a pair check per view checked (BENCHMARKS.md).
    */
   uint32_t verify_candidates;
   /**
@@ -1058,7 +1058,7 @@ topoloc_status topoloc_result_init(struct topoloc_result *result, size_t size);
  * (`_INVALID_IMAGE`), beside its descriptor or instead of it.
  * Cost: describing the image (if any), then one pass over the map's descriptors plus
  * O(places + edges); no allocation for descriptor frames without verification; verification
- * adds keypoint detection and about 10 ms per checked view.
+ * adds keypoint detection and a pair check per checked view (BENCHMARKS.md).
  */
 topoloc_status topoloc_localizer_process(struct topoloc_localizer *localizer, const struct topoloc_frame *frame, struct topoloc_result *result);
 
@@ -1172,8 +1172,8 @@ topoloc_status topoloc_skeleton_options_init(struct topoloc_skeleton_options *op
  * inputs are read during the call only. `options` may be NULL (defaults).
  *
  * On success `*out` owns a new graph (free it with `topoloc_graph_free`); the same inputs give
- * the same graph. Thread-safe (no shared state); single-threaded, about 2 s for a
- * 40 m x 30 m x 3 m world at 0.1 m. Errors: `_NULL_ARGUMENT`, `_STRUCT_SIZE`,
+ * the same graph. Thread-safe (no shared state); single-threaded, seconds for an office floor
+ * at 0.1 m (BENCHMARKS.md). Errors: `_NULL_ARGUMENT`, `_STRUCT_SIZE`,
  * `_INVALID_ARGUMENT` (the message names the field: `dims`, `voxel_size`, `origin`,
  * `cells_len`, `cells` when every voxel is occupied, `z_band` when the band holds no free
  * voxel, `min_clearance_m` when the clearance leaves none, or another option out of range).
