@@ -4,6 +4,8 @@
 //!
 //! A leaf of the layer order (see the crate documentation): it imports nothing of the crate.
 
+use faer::linalg::matmul::matmul;
+use faer::{Accum, MatMut, MatRef, Par};
 use serde::{Deserialize, Serialize};
 
 /// Tolerance on `| ||x|| - 1 |` for a stored descriptor to count as L2-normalised.
@@ -180,4 +182,17 @@ pub enum DescriptorError {
     /// All values are (close to) zero, so it has no direction.
     #[error("descriptor is all zeros")]
     Zero,
+}
+
+/// Computes `out[r] = <rows[r], query>` for every row of the row-major `rows.len() / dim x dim`
+/// matrix with one faer matrix-vector product (single-threaded). With unit-norm rows and query
+/// this is the cosine similarity. Cost: one pass over the matrix (memory-bound).
+pub(crate) fn row_similarities(rows: &[f32], dim: usize, query: &[f32], out: &mut [f32]) {
+    let n = out.len();
+    debug_assert_eq!(query.len(), dim);
+    debug_assert_eq!(rows.len(), n * dim);
+    let lhs = MatRef::from_row_major_slice(rows, n, dim);
+    let rhs = MatRef::from_column_major_slice(query, dim, 1);
+    let dst = MatMut::from_column_major_slice_mut(out, n, 1);
+    matmul(dst, Accum::Replace, lhs, rhs, 1.0f32, Par::Seq);
 }

@@ -14,7 +14,7 @@
 //! | layer | modules | what |
 //! |---|---|---|
 //! | 8 | `ffi` | the C ABI: the only place with `extern "C"` items |
-//! | 7 | (`loops`) | keyframe database and loop-closure hints (to come) |
+//! | 7 | [`loops`] | keyframe database (online place graph, loop and relocalization queries) |
 //! | 6 | [`localize`] | per-frame localization: similarity, graph filter, particles, verification |
 //! | 5 | [`build`], [`skeleton`], [`eval`] | maps from images and keyframes; graphs from occupancy grids; metrics |
 //! | 4 | [`map`] | the graph of places and views, and its file format |
@@ -36,6 +36,7 @@ pub mod eval;
 pub mod ffi;
 pub mod image;
 pub mod localize;
+pub mod loops;
 pub mod map;
 pub mod skeleton;
 pub mod verify;

@@ -1,20 +1,12 @@
 //! Cosine similarity of a query to every view, and pooling of view scores into place scores.
 
+use crate::descriptor::row_similarities;
 use crate::map::Map;
-use faer::linalg::matmul::matmul;
-use faer::{Accum, MatMut, MatRef, Par};
 
-/// Computes `out[v] = <descriptors[v], query>` for every view with one faer matrix-vector
-/// product (single-threaded). Both sides are unit-norm, so this is the cosine similarity.
-/// Cost: one pass over the N x D descriptor matrix (memory-bound).
+/// Computes `out[v] = <descriptors[v], query>` for every view (see [`row_similarities`]).
 pub(crate) fn view_similarities(map: &Map, query: &[f32], out: &mut [f32]) {
-    let (n, d) = (map.view_count(), map.dim());
-    debug_assert_eq!(query.len(), d);
-    debug_assert_eq!(out.len(), n);
-    let lhs = MatRef::from_row_major_slice(map.descriptors(), n, d);
-    let rhs = MatRef::from_column_major_slice(query, d, 1);
-    let dst = MatMut::from_column_major_slice_mut(out, n, 1);
-    matmul(dst, Accum::Replace, lhs, rhs, 1.0f32, Par::Seq);
+    debug_assert_eq!(out.len(), map.view_count());
+    row_similarities(map.descriptors(), map.dim(), query, out);
 }
 
 /// Place score = best similarity over the place's views (the query looks one way; the view

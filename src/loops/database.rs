@@ -1,0 +1,508 @@
+//! The keyframe database: every keyframe the host adds is kept (loop queries name keyframes, as
+//! DBoW2 and ORB-SLAM's `KeyFrameDatabase` do) and assigned to a place of a graph that grows
+//! online.
+//!
+//! Place assignment, per keyframe in order: it joins the place of the previous keyframe unless
+//! it is *novel* there (its best cosine similarity to that place's keyframes is below
+//! [`DatabaseOptions::novelty_similarity`]) *and far* from it (with poses: farther than
+//! [`DatabaseOptions::place_spacing_m`] from the place's position; without poses appearance
+//! alone decides). A new place is linked to the previous one and, with poses, to every place
+//! within [`DatabaseOptions::neighbour_radius_m`]. Keyframes never merge into an old place by
+//! pose: the host's odometry drifts, and finding the old place again by appearance is what a
+//! loop query is for.
+
+use super::LoopsError;
+use crate::descriptor::{normalize_descriptor_into, row_similarities, DescriptorIdentity};
+use crate::map::{Map, MapBuilder, PlaceId, ViewAttributes};
+use nalgebra::{Isometry3, Point3};
+use std::collections::BTreeSet;
+use std::path::Path;
+
+/// How keyframes become places. `Default` gives the documented defaults (those of
+/// [`crate::build::KeyframeOptions`], so that a database and a keyframe-built map agree).
+#[derive(Clone, Debug, PartialEq)]
+pub struct DatabaseOptions {
+    /// Cosine similarity below which a keyframe is novel at the previous keyframe's place.
+    /// Default 0.9.
+    pub novelty_similarity: f32,
+    /// With poses, a novel keyframe starts a new place only farther than this from the
+    /// previous place's position (metres). Default 2.0.
+    pub place_spacing_m: f64,
+    /// With poses, a new place is linked to every place within this distance (metres; 0 links
+    /// consecutive places only). Default 3.0.
+    pub neighbour_radius_m: f64,
+}
+
+impl Default for DatabaseOptions {
+    fn default() -> Self {
+        Self {
+            novelty_similarity: 0.9,
+            place_spacing_m: 2.0,
+            neighbour_radius_m: 3.0,
+        }
+    }
+}
+
+impl DatabaseOptions {
+    fn validate(&self) -> Result<(), LoopsError> {
+        let bad = |m: &str| Err(LoopsError::InvalidOption(m.into()));
+        if !(-1.0..=1.0).contains(&self.novelty_similarity) {
+            return bad("novelty_similarity must lie in [-1, 1]");
+        }
+        if !(self.place_spacing_m.is_finite() && self.place_spacing_m >= 0.0) {
+            return bad("place_spacing_m must be finite and >= 0");
+        }
+        if !(self.neighbour_radius_m.is_finite() && self.neighbour_radius_m >= 0.0) {
+            return bad("neighbour_radius_m must be finite and >= 0");
+        }
+        Ok(())
+    }
+}
+
+/// One keyframe as the host gives it.
+#[derive(Clone, Debug, Default)]
+pub struct KeyframeEntry<'a> {
+    /// The host's keyframe id; must increase from one keyframe to the next.
+    pub id: u64,
+    /// Time in seconds; must not decrease.
+    pub timestamp: f64,
+    /// Global descriptor (D values of the database's descriptor; normalised here).
+    pub descriptor: &'a [f32],
+    /// Odometry pose of the body, `world_T_body` (metres). Either every keyframe has one or
+    /// none has.
+    pub world_t_body: Option<Isometry3<f64>>,
+    /// Camera in the body frame, `body_T_camera`; identity when `None`.
+    pub body_t_camera: Option<Isometry3<f64>>,
+}
+
+/// Where an added keyframe went.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Added {
+    /// Its place.
+    pub place: PlaceId,
+    /// Whether the keyframe started that place.
+    pub new_place: bool,
+}
+
+/// Which keyframes a loop query may return (DBoW2's `max_results`, `max_id`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LoopQuery {
+    /// Most candidates returned, best first.
+    pub max_results: usize,
+    /// Only keyframes with an id at most this (excludes the recent ones); `None` = any.
+    pub max_id: Option<u64>,
+    /// Only keyframes with a timestamp earlier than this; `None` = any. Keyframes reloaded
+    /// from a map count as earlier than every timestamp.
+    pub before_timestamp: Option<f64>,
+}
+
+impl Default for LoopQuery {
+    fn default() -> Self {
+        Self {
+            max_results: 5,
+            max_id: None,
+            before_timestamp: None,
+        }
+    }
+}
+
+/// One candidate keyframe of a query.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Match {
+    /// The keyframe's id.
+    pub keyframe_id: u64,
+    /// Its place.
+    pub place: PlaceId,
+    /// Cosine similarity of the query to the keyframe.
+    pub similarity: f32,
+}
+
+/// What the database keeps of a keyframe besides its descriptor row.
+#[derive(Clone, Debug)]
+struct Record {
+    id: u64,
+    /// `-inf` for keyframes reloaded from a map (their times belong to another session).
+    timestamp: f64,
+    place: PlaceId,
+    world_t_camera: Option<Isometry3<f64>>,
+}
+
+#[derive(Clone, Debug, Default)]
+struct Place {
+    position: Option<Point3<f64>>,
+    /// Ids of its keyframes, increasing.
+    members: Vec<u64>,
+}
+
+/// Keyframes of one SLAM run (or several, reloaded), grouped into places, queried by
+/// appearance. Not `Sync` for writing: one host thread adds and erases; queries take `&self`.
+///
+/// Memory: `4 D` bytes of descriptor plus about 100 bytes of record and membership per
+/// keyframe (see [`KeyframeDatabase::memory_bytes`]; figures in BENCHMARKS.md).
+#[derive(Clone, Debug)]
+pub struct KeyframeDatabase {
+    identity: DescriptorIdentity,
+    options: DatabaseOptions,
+    /// In id order; row `r` of `descriptors` belongs to `records[r]`.
+    records: Vec<Record>,
+    descriptors: Vec<f32>,
+    places: Vec<Place>,
+    /// Undirected place links `(a, b)`, `a < b`.
+    edges: BTreeSet<(PlaceId, PlaceId)>,
+    last_place: Option<PlaceId>,
+    last_timestamp: Option<f64>,
+    /// Whether keyframes carry poses; fixed by the first keyframe of a session.
+    with_poses: Option<bool>,
+    unit: Vec<f32>,
+}
+
+impl KeyframeDatabase {
+    /// An empty database for descriptors of `identity` (the graph grows from nothing).
+    pub fn new(identity: DescriptorIdentity, options: DatabaseOptions) -> Result<Self, LoopsError> {
+        options.validate()?;
+        identity.validate().map_err(crate::map::MapError::from)?;
+        Ok(Self {
+            unit: Vec::with_capacity(identity.dim as usize),
+            identity,
+            options,
+            records: Vec::new(),
+            descriptors: Vec::new(),
+            places: Vec::new(),
+            edges: BTreeSet::new(),
+            last_place: None,
+            last_timestamp: None,
+            with_poses: None,
+        })
+    }
+
+    /// A database holding a map's views as keyframes, for a later session that queries it
+    /// (localization only: add nothing) or extends it. Every view must carry a keyframe id,
+    /// increasing with the view index (maps saved by [`KeyframeDatabase::save`] do); new
+    /// keyframes need larger ids. The reloaded keyframes count as older than any timestamp.
+    pub fn from_map(map: &Map, options: DatabaseOptions) -> Result<Self, LoopsError> {
+        let mut db = Self::new(map.descriptor().clone(), options)?;
+        let mut previous: Option<u64> = None;
+        for (v, view) in map.views().iter().enumerate() {
+            let id = view.keyframe_id.ok_or_else(|| {
+                LoopsError::InvalidOption(format!(
+                    "view {v} has no keyframe id: a keyframe database reloads only maps it saved"
+                ))
+            })?;
+            if previous.is_some_and(|p| id <= p) {
+                return Err(LoopsError::OutOfOrder(format!(
+                    "view {v} has keyframe id {id}, not above the previous view's"
+                )));
+            }
+            previous = Some(id);
+            db.records.push(Record {
+                id,
+                timestamp: f64::NEG_INFINITY,
+                place: view.place,
+                world_t_camera: view.world_t_camera,
+            });
+        }
+        db.descriptors.extend_from_slice(map.descriptors());
+        db.places = (0..map.place_count() as PlaceId)
+            .map(|p| Place {
+                position: map.place_position(p).ok().flatten(),
+                members: Vec::new(),
+            })
+            .collect();
+        for r in &db.records {
+            db.places[r.place as usize].members.push(r.id);
+        }
+        db.edges = map.edges().iter().map(|e| (e.a, e.b)).collect();
+        db.last_place = db.records.last().map(|r| r.place);
+        db.with_poses = db.records.first().map(|r| r.world_t_camera.is_some());
+        Ok(db)
+    }
+
+    /// Adds a keyframe and assigns it to a place (module documentation). The whole entry is
+    /// checked first: on error the database is unchanged.
+    pub fn add(&mut self, keyframe: &KeyframeEntry<'_>) -> Result<Added, LoopsError> {
+        let camera = self.check_entry(keyframe)?;
+        let position = camera.map(|pose| Point3::from(pose.translation.vector));
+        let join = self
+            .last_place
+            .filter(|&last| !self.starts_place(last, position));
+        let added = match join {
+            Some(place) => Added {
+                place,
+                new_place: false,
+            },
+            None => Added {
+                place: self.new_place(position),
+                new_place: true,
+            },
+        };
+        self.records.push(Record {
+            id: keyframe.id,
+            timestamp: keyframe.timestamp,
+            place: added.place,
+            world_t_camera: camera,
+        });
+        self.descriptors.extend_from_slice(&self.unit);
+        self.places[added.place as usize].members.push(keyframe.id);
+        self.last_place = Some(added.place);
+        self.last_timestamp = Some(keyframe.timestamp);
+        self.with_poses = Some(camera.is_some());
+        Ok(added)
+    }
+
+    /// Validates an entry against the database's state; leaves its unit descriptor in
+    /// `self.unit` and returns the camera pose `world_T_camera`, if any.
+    fn check_entry(
+        &mut self,
+        keyframe: &KeyframeEntry<'_>,
+    ) -> Result<Option<Isometry3<f64>>, LoopsError> {
+        if self.index_of(keyframe.id).is_some() {
+            return Err(LoopsError::DuplicateId(keyframe.id));
+        }
+        if let Some(last) = self.records.last().filter(|r| r.id > keyframe.id) {
+            return Err(LoopsError::OutOfOrder(format!(
+                "id {} after id {}: ids must increase",
+                keyframe.id, last.id
+            )));
+        }
+        if !keyframe.timestamp.is_finite() {
+            return Err(LoopsError::NonFinite(format!(
+                "timestamp {}",
+                keyframe.timestamp
+            )));
+        }
+        if let Some(last) = self.last_timestamp.filter(|&t| keyframe.timestamp < t) {
+            return Err(LoopsError::OutOfOrder(format!(
+                "timestamp {} is earlier than the previous keyframe's {last}",
+                keyframe.timestamp
+            )));
+        }
+        for (name, pose) in [
+            ("world_t_body", &keyframe.world_t_body),
+            ("body_t_camera", &keyframe.body_t_camera),
+        ] {
+            if pose.as_ref().is_some_and(|p| !finite(p)) {
+                return Err(LoopsError::NonFinite(format!(
+                    "{name} has a NaN or infinite value"
+                )));
+            }
+        }
+        let has_pose = keyframe.world_t_body.is_some();
+        if self.with_poses.is_some_and(|w| w != has_pose) {
+            return Err(LoopsError::InvalidOption(
+                "either every keyframe has world_t_body or none has".into(),
+            ));
+        }
+        normalize_descriptor_into(keyframe.descriptor, self.dim(), &mut self.unit)?;
+        Ok(keyframe
+            .world_t_body
+            .map(|body| body * keyframe.body_t_camera.unwrap_or_else(Isometry3::identity)))
+    }
+
+    /// Whether the keyframe in `self.unit` (at `position`) leaves place `last` for a new one.
+    fn starts_place(&self, last: PlaceId, position: Option<Point3<f64>>) -> bool {
+        let place = &self.places[last as usize];
+        let best = place
+            .members
+            .iter()
+            .filter_map(|&id| self.index_of(id))
+            .map(|r| dot(self.row(r), &self.unit))
+            .fold(f32::NEG_INFINITY, f32::max);
+        let novel = best < self.options.novelty_similarity;
+        let far = match (position, place.position) {
+            (Some(p), Some(q)) => (p - q).norm() > self.options.place_spacing_m,
+            _ => true,
+        };
+        novel && far
+    }
+
+    /// Creates a place at `position`, linked to the previous place and to the places near it.
+    fn new_place(&mut self, position: Option<Point3<f64>>) -> PlaceId {
+        let place = self.places.len() as PlaceId;
+        if let Some(last) = self.last_place {
+            self.edges.insert((last, place));
+        }
+        if let Some(p) = position {
+            let radius = self.options.neighbour_radius_m;
+            for (other, q) in self.places.iter().enumerate() {
+                if q.position.is_some_and(|q| (q - p).norm() <= radius) {
+                    self.edges.insert((other as PlaceId, place));
+                }
+            }
+        }
+        self.places.push(Place {
+            position,
+            members: Vec::new(),
+        });
+        place
+    }
+
+    /// Loop candidates for `descriptor`: the keyframes `query` allows, most similar first (ties
+    /// by the lower id). Cost: one pass over the keyframes' descriptors; allocates the scores.
+    pub fn loop_candidates(
+        &self,
+        descriptor: &[f32],
+        query: &LoopQuery,
+    ) -> Result<Vec<Match>, LoopsError> {
+        let mut unit = Vec::with_capacity(self.dim());
+        normalize_descriptor_into(descriptor, self.dim(), &mut unit)?;
+        if let Some(t) = query.before_timestamp.filter(|t| t.is_nan()) {
+            return Err(LoopsError::NonFinite(format!("before_timestamp {t}")));
+        }
+        let mut scores = vec![0.0f32; self.records.len()];
+        row_similarities(&self.descriptors, self.dim(), &unit, &mut scores);
+        let mut found: Vec<Match> = self
+            .records
+            .iter()
+            .zip(&scores)
+            .filter(|(r, _)| query.max_id.is_none_or(|m| r.id <= m))
+            .filter(|(r, _)| query.before_timestamp.is_none_or(|t| r.timestamp < t))
+            .map(|(r, &similarity)| Match {
+                keyframe_id: r.id,
+                place: r.place,
+                similarity,
+            })
+            .collect();
+        let order = |a: &Match, b: &Match| {
+            b.similarity
+                .total_cmp(&a.similarity)
+                .then(a.keyframe_id.cmp(&b.keyframe_id))
+        };
+        if query.max_results < found.len() && query.max_results > 0 {
+            found.select_nth_unstable_by(query.max_results - 1, order);
+        }
+        found.truncate(query.max_results);
+        found.sort_unstable_by(order);
+        Ok(found)
+    }
+
+    /// Relocalization candidates for a frame that is not added: every keyframe may match.
+    pub fn relocalization_candidates(
+        &self,
+        descriptor: &[f32],
+        max_results: usize,
+    ) -> Result<Vec<Match>, LoopsError> {
+        self.loop_candidates(
+            descriptor,
+            &LoopQuery {
+                max_results,
+                ..LoopQuery::default()
+            },
+        )
+    }
+
+    /// Removes a keyframe (ORB-SLAM culls redundant keyframes). Its place stays in the graph
+    /// while it has other keyframes; an emptied place is left out when the database is saved.
+    pub fn erase(&mut self, id: u64) -> Result<(), LoopsError> {
+        let r = self.index_of(id).ok_or(LoopsError::UnknownKeyframe(id))?;
+        let record = self.records.remove(r);
+        let d = self.dim();
+        self.descriptors.drain(r * d..(r + 1) * d);
+        self.places[record.place as usize]
+            .members
+            .retain(|&member| member != id);
+        Ok(())
+    }
+
+    /// The database as a topoloc map: a view per keyframe (its id, its camera pose), places
+    /// with at least one keyframe (renumbered in order), their links. Fails on an empty
+    /// database ([`crate::map::MapError::EmptyMap`]).
+    pub fn to_map(&self) -> Result<Map, LoopsError> {
+        let mut builder = MapBuilder::new(self.identity.clone());
+        builder.set_creator(format!("topoloc {} keyframe database", crate::VERSION));
+        let mut renumbered: Vec<Option<PlaceId>> = vec![None; self.places.len()];
+        for (p, place) in self.places.iter().enumerate() {
+            if !place.members.is_empty() {
+                renumbered[p] = Some(builder.add_place(place.position)?);
+            }
+        }
+        for (r, record) in self.records.iter().enumerate() {
+            let place = renumbered[record.place as usize].expect("a keyframe's place has members");
+            let attributes = ViewAttributes {
+                keyframe_id: Some(record.id),
+                world_t_camera: record.world_t_camera,
+                image: None,
+            };
+            builder.add_view(place, self.row(r), attributes)?;
+        }
+        for &(a, b) in &self.edges {
+            if let (Some(a), Some(b)) = (renumbered[a as usize], renumbered[b as usize]) {
+                builder.add_edge(a.min(b), a.max(b), 1.0)?;
+            }
+        }
+        Ok(builder.build()?)
+    }
+
+    /// Saves the database as a topoloc map file (atomic, see [`Map::save`]); reload it with
+    /// [`Map::load`] and [`KeyframeDatabase::from_map`].
+    pub fn save(&self, path: impl AsRef<Path>) -> Result<(), LoopsError> {
+        Ok(self.to_map()?.save(path)?)
+    }
+
+    /// Keyframes held.
+    pub fn len(&self) -> usize {
+        self.records.len()
+    }
+
+    /// True when no keyframe is held.
+    pub fn is_empty(&self) -> bool {
+        self.records.is_empty()
+    }
+
+    /// Places created so far (emptied ones included).
+    pub fn place_count(&self) -> usize {
+        self.places.len()
+    }
+
+    /// The place of a keyframe.
+    pub fn place_of(&self, id: u64) -> Result<PlaceId, LoopsError> {
+        let r = self.index_of(id).ok_or(LoopsError::UnknownKeyframe(id))?;
+        Ok(self.records[r].place)
+    }
+
+    /// Place links `(a, b)`, `a < b`.
+    pub fn edges(&self) -> impl Iterator<Item = (PlaceId, PlaceId)> + '_ {
+        self.edges.iter().copied()
+    }
+
+    /// Heap bytes the database holds (descriptors, records, memberships, links), from the
+    /// capacities of its buffers.
+    pub fn memory_bytes(&self) -> usize {
+        use std::mem::size_of;
+        self.descriptors.capacity() * size_of::<f32>()
+            + self.records.capacity() * size_of::<Record>()
+            + self.places.capacity() * size_of::<Place>()
+            + self
+                .places
+                .iter()
+                .map(|p| p.members.capacity() * size_of::<u64>())
+                .sum::<usize>()
+            // A B-tree node per few links; about 3 words per link.
+            + self.edges.len() * 3 * size_of::<usize>()
+    }
+
+    fn dim(&self) -> usize {
+        self.identity.dim as usize
+    }
+
+    fn row(&self, r: usize) -> &[f32] {
+        let d = self.dim();
+        &self.descriptors[r * d..(r + 1) * d]
+    }
+
+    /// Index of keyframe `id` in `records` (kept in id order).
+    fn index_of(&self, id: u64) -> Option<usize> {
+        self.records.binary_search_by_key(&id, |r| r.id).ok()
+    }
+}
+
+fn dot(a: &[f32], b: &[f32]) -> f32 {
+    a.iter().zip(b).map(|(x, y)| x * y).sum()
+}
+
+fn finite(pose: &Isometry3<f64>) -> bool {
+    pose.translation
+        .vector
+        .iter()
+        .chain(pose.rotation.coords.iter())
+        .all(|x| x.is_finite())
+}

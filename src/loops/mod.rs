@@ -1,0 +1,14 @@
+//! Loop closure for SLAM hosts: a keyframe database that groups the host's keyframes into
+//! places online (the graph grows as the robot explores) and answers loop and relocalization
+//! queries by appearance, DBoW2-style (`query(descriptor, max_results, max_id)`), robust to
+//! light where bag-of-words is not because it compares the map's global descriptors.
+//!
+//! What is here: [`KeyframeDatabase`] (add, loop candidates excluding recent keyframes,
+//! relocalization candidates, erase, save as a topoloc map and reload it for a later session).
+//! Verified loop-closure hints (relative pose, covariance, gates) build on its candidates.
+
+mod database;
+mod error;
+
+pub use database::{Added, DatabaseOptions, KeyframeDatabase, KeyframeEntry, LoopQuery, Match};
+pub use error::LoopsError;
