@@ -23,6 +23,10 @@ fn database(n: usize) -> (KeyframeDatabase, Vec<Vec<f32>>) {
         })
         .unwrap();
     }
+    eprintln!(
+        "{n} keyframes of D = {DIM}: {} bytes per keyframe (KeyframeDatabase::memory_bytes)",
+        db.memory_bytes() / n
+    );
     (db, rows)
 }
 
