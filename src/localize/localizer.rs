@@ -10,7 +10,7 @@ use super::verification::Verifier;
 use super::{LocalizeError, TimestampError};
 use crate::describe::{Describer, DescriberOptions};
 use crate::descriptor::normalize_descriptor_into;
-use crate::map::{Map, MapError};
+use crate::map::{is_finite_pose, Map, MapError};
 use nalgebra::Isometry3;
 use std::sync::Arc;
 
@@ -296,13 +296,7 @@ impl Localizer {
 }
 
 fn check_odometry(pose: &Isometry3<f64>) -> Result<(), LocalizeError> {
-    let finite = pose
-        .translation
-        .vector
-        .iter()
-        .chain(pose.rotation.coords.iter())
-        .all(|x| x.is_finite());
-    if finite {
+    if is_finite_pose(pose) {
         Ok(())
     } else {
         Err(LocalizeError::Odometry(

@@ -13,7 +13,7 @@
 
 use super::LoopsError;
 use crate::descriptor::{normalize_descriptor_into, row_similarities, DescriptorIdentity};
-use crate::map::{Map, MapBuilder, PlaceId, ViewAttributes};
+use crate::map::{is_finite_pose, Map, MapBuilder, PlaceId, ViewAttributes};
 use nalgebra::{Isometry3, Point3};
 use std::collections::BTreeSet;
 use std::path::Path;
@@ -280,7 +280,7 @@ impl KeyframeDatabase {
             ("world_t_body", &keyframe.world_t_body),
             ("body_t_camera", &keyframe.body_t_camera),
         ] {
-            if pose.as_ref().is_some_and(|p| !finite(p)) {
+            if pose.as_ref().is_some_and(|p| !is_finite_pose(p)) {
                 return Err(LoopsError::NonFinite(format!(
                     "{name} has a NaN or infinite value"
                 )));
@@ -497,12 +497,4 @@ impl KeyframeDatabase {
 
 fn dot(a: &[f32], b: &[f32]) -> f32 {
     a.iter().zip(b).map(|(x, y)| x * y).sum()
-}
-
-fn finite(pose: &Isometry3<f64>) -> bool {
-    pose.translation
-        .vector
-        .iter()
-        .chain(pose.rotation.coords.iter())
-        .all(|x| x.is_finite())
 }

@@ -1,7 +1,8 @@
 //! Incremental construction of a [`Map`] from places, views and edges.
 
 use super::{
-    DescriptorStore, Edge, Map, MapError, PlaceId, ViewId, ViewRecord, MAX_DESCRIPTOR_DIM,
+    is_finite_pose, DescriptorStore, Edge, Map, MapError, PlaceId, ViewId, ViewRecord,
+    MAX_DESCRIPTOR_DIM,
 };
 use crate::descriptor::{normalize_descriptor_into, DescriptorIdentity};
 use nalgebra::{Isometry3, Point3};
@@ -96,16 +97,12 @@ impl MapBuilder {
                 places: self.place_positions.len(),
             });
         }
-        if let Some(pose) = &attributes.world_t_camera {
-            let finite = pose
-                .translation
-                .vector
-                .iter()
-                .chain(pose.rotation.coords.iter())
-                .all(|x| x.is_finite());
-            if !finite {
-                return Err(MapError::NonFinite("view pose must be finite".into()));
-            }
+        if attributes
+            .world_t_camera
+            .as_ref()
+            .is_some_and(|pose| !is_finite_pose(pose))
+        {
+            return Err(MapError::NonFinite("view pose must be finite".into()));
         }
         if let Some(image) = &attributes.image {
             refuse_nul(image, "view image reference")?;

@@ -494,10 +494,18 @@ fn prefix_offsets(counts: &[u32]) -> Vec<u32> {
 }
 
 fn check_pose(pose: &Isometry3<f64>) -> Result<(), String> {
-    let finite = pose.translation.vector.iter().all(|x| x.is_finite())
-        && pose.rotation.coords.iter().all(|x| x.is_finite());
-    if !finite {
+    if !is_finite_pose(pose) {
         return Err("pose has a non-finite value".into());
     }
     Ok(())
+}
+
+/// True when every value of a rigid transform (translation and rotation quaternion) is finite:
+/// the check every pose a caller gives (view poses, odometry, keyframe poses) passes.
+pub(crate) fn is_finite_pose(pose: &Isometry3<f64>) -> bool {
+    pose.translation
+        .vector
+        .iter()
+        .chain(pose.rotation.coords.iter())
+        .all(|x| x.is_finite())
 }
