@@ -55,6 +55,17 @@ fn small_map() -> *mut topoloc_map {
     map
 }
 
+/// The small map and a default localizer on it (free both).
+fn small_localizer() -> (*mut topoloc_map, *mut topoloc_localizer) {
+    let map = small_map();
+    let mut localizer = null_mut();
+    assert_eq!(
+        topoloc_localizer_new(map, null(), &mut localizer),
+        TOPOLOC_OK
+    );
+    (map, localizer)
+}
+
 /// Processes one descriptor frame of the small map, which must succeed.
 fn process_descriptor(
     localizer: *mut topoloc_localizer,
@@ -191,12 +202,7 @@ fn a_struct_size_between_published_layouts_is_refused() {
         assert_eq!(frame.struct_size, after, "size {size}");
     }
     // Reading follows the same rule: a cut layout is refused before any field is used.
-    let map = small_map();
-    let mut localizer = null_mut();
-    assert_eq!(
-        topoloc_localizer_new(map, null(), &mut localizer),
-        TOPOLOC_OK
-    );
+    let (map, localizer) = small_localizer();
     let mut result = topoloc_result::default();
     let descriptor = [1.0f32, 0.0, 0.0, 0.0];
     let frame = topoloc_frame {
@@ -228,12 +234,7 @@ fn a_struct_size_between_published_layouts_is_refused() {
 
 #[test]
 fn process_leaves_result_untouched_on_error_and_fills_candidates() {
-    let map = small_map();
-    let mut localizer = null_mut();
-    assert_eq!(
-        topoloc_localizer_new(map, null(), &mut localizer),
-        TOPOLOC_OK
-    );
+    let (map, localizer) = small_localizer();
     let mut candidates = [topoloc_candidate::default(); 1];
     let mut result = topoloc_result {
         candidates: candidates.as_mut_ptr(),
@@ -290,12 +291,7 @@ fn process_leaves_result_untouched_on_error_and_fills_candidates() {
 fn a_newer_library_never_writes_past_an_older_callers_struct() {
     // Simulate a caller whose header knew a 1-field-shorter result: the library must write at
     // most `struct_size` bytes and keep the caller's struct_size.
-    let map = small_map();
-    let mut localizer = null_mut();
-    assert_eq!(
-        topoloc_localizer_new(map, null(), &mut localizer),
-        TOPOLOC_OK
-    );
+    let (map, localizer) = small_localizer();
     let full = std::mem::size_of::<topoloc_result>();
     let mut storage = vec![0xABu8; full + 16];
     let result = storage.as_mut_ptr().cast::<topoloc_result>();
@@ -460,12 +456,7 @@ fn the_status_table_matches_the_header_and_names_every_code() {
 
 #[test]
 fn a_result_of_the_oldest_layout_is_read_and_written_within_its_size() {
-    let map = small_map();
-    let mut localizer = null_mut();
-    assert_eq!(
-        topoloc_localizer_new(map, null(), &mut localizer),
-        TOPOLOC_OK
-    );
+    let (map, localizer) = small_localizer();
     let oldest = <topoloc_result as super::versioned::Versioned>::LAYOUTS[0];
     assert!(oldest < std::mem::size_of::<topoloc_result>());
     // Guard bytes right after the caller's struct: nothing may change them.
