@@ -19,7 +19,7 @@
 //! | 5 | [`build`], [`skeleton`], [`eval`] | maps from images and keyframes; graphs from occupancy grids; metrics |
 //! | 4 | [`map`] | the graph of places and views, and its file format |
 //! | 3 | [`describe`], [`verify`] | descriptor backends; local features and geometric checks |
-//! | 2 | [`image`], [`descriptor`] | leaf vocabulary: image views and pixel formats, descriptor identity |
+//! | 2 | [`image`], [`descriptor`], [`onnx_runtime`] | leaf vocabulary: image views and pixel formats, descriptor identity; the ONNX Runtime library |
 //! | 1 | [`errors`] | the error kinds several image-work modules share |
 //!
 //! [`eval`] (metrics: MNA, OHA, R@N, precision-recall, calibration) reads maps and results and
@@ -38,6 +38,7 @@ pub mod image;
 pub mod localize;
 pub mod loops;
 pub mod map;
+pub mod onnx_runtime;
 pub mod skeleton;
 pub mod verify;
 

@@ -10,6 +10,7 @@ const LAYERS: &[(&str, u32)] = &[
     ("errors", 1),
     ("image", 2),
     ("descriptor", 2),
+    ("onnx_runtime", 2),
     ("describe", 3),
     ("verify", 3),
     ("map", 4),

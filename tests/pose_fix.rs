@@ -11,7 +11,7 @@ use nalgebra::{Point3, Vector3};
 use std::sync::Arc;
 use topoloc::map::ViewAttributes;
 use topoloc::verify::{
-    locate, KeypointDetector, Keypoints, LocateOptions, Located, PinholeCamera,
+    locate, FeatureKind, KeypointDetector, Keypoints, LocateOptions, Located, PinholeCamera,
     VerificationOptions, ViewKeypoints,
 };
 use topoloc::{
@@ -71,7 +71,8 @@ fn view_keypoints(image: &[u8]) -> ViewKeypoints {
             [(u * depth) as f32, (v * depth) as f32, depth as f32]
         })
         .collect();
-    ViewKeypoints::from_views([&keypoints])
+    ViewKeypoints::from_views(FeatureKind::Orb, [&keypoints])
+        .unwrap()
         .with_world_points(scene)
         .unwrap()
 }
@@ -165,7 +166,7 @@ fn map_with_scene_points(scene_points: bool) -> Map {
     builder.add_edge(0, 1, 1.0).unwrap();
     builder.add_edge(1, 2, 1.0).unwrap();
     let map = builder.build().unwrap();
-    let mut store = ViewKeypoints::from_views(&views);
+    let mut store = ViewKeypoints::from_views(FeatureKind::Orb, &views).unwrap();
     if scene_points {
         let plane = view_keypoints(&place_image(5));
         let mut scene = vec![[f32::NAN; 3]; store.total()];
@@ -237,7 +238,7 @@ fn scene_points_survive_the_map_file() {
 
 #[test]
 fn bad_scene_points_and_cameras_are_refused() {
-    let store = ViewKeypoints::from_views(&[detect(&place_image(1))]);
+    let store = ViewKeypoints::from_views(FeatureKind::Orb, &[detect(&place_image(1))]).unwrap();
     let n = store.total();
     assert!(store
         .clone()

@@ -11,7 +11,8 @@ use std::sync::Arc;
 use topoloc::errors::VisionError;
 use topoloc::map::ViewAttributes;
 use topoloc::verify::{
-    check_pair, KeypointDetector, Keypoints, PairOptions, VerificationOptions, ViewKeypoints,
+    check_pair, FeatureKind, KeypointDetector, Keypoints, PairOptions, VerificationOptions,
+    ViewKeypoints,
 };
 use topoloc::{
     DescriptorIdentity, Frame, LoadOptions, LocalizeError, Localizer, LocalizerOptions, Map,
@@ -54,7 +55,7 @@ fn twin_map(with_keypoints: bool) -> Map {
         return map;
     }
     let views: Vec<Keypoints> = (0..PLACES).map(|p| detect(&place_image(p))).collect();
-    map.with_keypoints(ViewKeypoints::from_views(&views))
+    map.with_keypoints(ViewKeypoints::from_views(FeatureKind::Orb, &views).unwrap())
         .unwrap()
 }
 
@@ -193,7 +194,7 @@ fn keypoints_survive_the_map_file() {
     assert!(loaded.keypoints().is_none());
 
     // Keypoints for another number of views are refused.
-    let one = ViewKeypoints::from_views(&[detect(&place_image(0))]);
+    let one = ViewKeypoints::from_views(FeatureKind::Orb, &[detect(&place_image(0))]).unwrap();
     assert!(twin_map(false).with_keypoints(one).is_err());
 }
 
@@ -204,7 +205,12 @@ fn inconsistent_keypoint_arrays_are_refused() {
     assert!(ViewKeypoints::from_parts(vec![0, 1], vec![point], vec![descriptor]).is_ok());
     assert!(ViewKeypoints::from_parts(vec![0, 2], vec![point], vec![descriptor]).is_err());
     assert!(ViewKeypoints::from_parts(vec![1, 1], vec![point], vec![descriptor]).is_err());
-    assert!(ViewKeypoints::from_parts(vec![0, 1], vec![point], vec![]).is_err());
+    assert!(ViewKeypoints::from_parts(
+        vec![0, 1],
+        vec![point],
+        Vec::<topoloc::verify::Descriptor>::new()
+    )
+    .is_err());
     assert!(ViewKeypoints::from_parts(vec![0, 1, 0, 1], vec![point], vec![descriptor]).is_err());
     assert!(
         ViewKeypoints::from_parts(vec![0, 1], vec![[f32::NAN, 0.0]], vec![descriptor]).is_err()

@@ -14,7 +14,10 @@ use crate::descriptor::DescriptorIdentity;
 use crate::errors::VisionError;
 use crate::image::{read_rgb, ImageView, PixelFormat};
 use crate::map::{Map, MapBuilder, MapError, PlaceId, ViewAttributes};
-use crate::verify::{KeypointDetector, Keypoints, ViewKeypoints, DEFAULT_KEYPOINTS, MAX_KEYPOINTS};
+use crate::verify::{
+    FeatureDetector, FeatureKind, Keypoints, ViewKeypoints, XFeatOptions, DEFAULT_KEYPOINTS,
+    MAX_KEYPOINTS,
+};
 use nalgebra::{Isometry3, Point3};
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
@@ -36,9 +39,14 @@ pub struct ImageMapOptions {
     /// Worker threads describing images; 0 means one per core, at most
     /// [`MAX_BUILD_THREADS`]. They are joined before the build returns.
     pub threads: usize,
-    /// ORB keypoints stored per view for geometric verification (`crate::verify`), at most
-    /// [`MAX_KEYPOINTS`]; 0 stores none. Default [`DEFAULT_KEYPOINTS`] (about 20 KB per view).
+    /// Keypoints stored per view for geometric verification (`crate::verify`), at most
+    /// [`MAX_KEYPOINTS`]; 0 stores none. Default [`DEFAULT_KEYPOINTS`] (about 20 KB per view
+    /// of ORB).
     pub keypoints: usize,
+    /// Which local features those keypoints are. Default ORB.
+    pub features: FeatureKind,
+    /// Where the XFeat network is, when `features` is XFeat.
+    pub xfeat: XFeatOptions,
 }
 
 impl Default for ImageMapOptions {
@@ -50,6 +58,8 @@ impl Default for ImageMapOptions {
             keyframes: KeyframeOptions::default(),
             threads: 0,
             keypoints: DEFAULT_KEYPOINTS,
+            features: FeatureKind::Orb,
+            xfeat: XFeatOptions::default(),
         }
     }
 }
@@ -167,7 +177,9 @@ pub fn build_from_images(
         .map(|(i, _)| i)
         .collect();
     let keypoints = (options.keypoints > 0)
-        .then(|| ViewKeypoints::from_views(raws.iter().map(|d| &d.keypoints)));
+        .then(|| ViewKeypoints::from_views(options.features, raws.iter().map(|d| &d.keypoints)))
+        .transpose()
+        .map_err(|e| VisionError::Model(format!("local features: {e}")))?;
     let raws: Vec<RawFeatures> = raws.into_iter().map(|d| d.raw).collect();
     let (model, descriptors) = fit(&spec, &raws, &options.fit)?;
     let identity = model.identity();
@@ -341,12 +353,12 @@ struct Described {
     raw: RawFeatures,
     /// False for an image without content (see [`ImageMapReport::uninformative`]).
     informative: bool,
-    /// Its ORB keypoints (empty when the options ask for none).
+    /// Its keypoints (empty when the options ask for none).
     keypoints: Keypoints,
 }
 
-/// One worker's tools: the backend's extractor and, when keypoints are stored, an ORB detector.
-type Workers = (Extractor, Option<KeypointDetector>);
+/// One worker's tools: the backend's extractor and, when keypoints are stored, a detector.
+type Workers = (Extractor, Option<FeatureDetector>);
 
 /// Raw features (and keypoints) of every image; in input order.
 ///
@@ -363,47 +375,48 @@ fn describe_in_parallel(
     let done = AtomicUsize::new(0);
     let cancelled = AtomicBool::new(false);
     let spare = std::sync::Mutex::new(Some(first));
-    let work =
-        |pool: &rayon::ThreadPool| {
-            pool.install(|| {
-                images
-                    .par_iter()
-                    .enumerate()
-                    .map_init(
-                        || -> Result<Workers, VisionError> {
-                            let extractor = match spare.lock().map(|mut s| s.take()) {
-                                Ok(Some(e)) => e,
-                                _ => Extractor::new(&options.backend)?,
-                            };
-                            let detector = match options.keypoints {
-                                0 => None,
-                                n => Some(KeypointDetector::new(n)?),
-                            };
-                            Ok((extractor, detector))
-                        },
-                        |workers, (index, source)| {
-                            if cancelled.load(Ordering::Relaxed) {
-                                return Err(ImageMapError::Cancelled);
-                            }
-                            let (extractor, detector) = workers.as_mut().map_err(|e| {
-                                ImageMapError::Describe(VisionError::Model(e.to_string()))
-                            })?;
-                            let result = describe_one(extractor, detector.as_mut(), source)
-                                .map_err(|error| ImageMapError::Image {
+    let work = |pool: &rayon::ThreadPool| {
+        pool.install(|| {
+            images
+                .par_iter()
+                .enumerate()
+                .map_init(
+                    || -> Result<Workers, VisionError> {
+                        let extractor = match spare.lock().map(|mut s| s.take()) {
+                            Ok(Some(e)) => e,
+                            _ => Extractor::new(&options.backend)?,
+                        };
+                        let detector = match options.keypoints {
+                            0 => None,
+                            n => Some(FeatureDetector::new(options.features, n, &options.xfeat)?),
+                        };
+                        Ok((extractor, detector))
+                    },
+                    |workers, (index, source)| {
+                        if cancelled.load(Ordering::Relaxed) {
+                            return Err(ImageMapError::Cancelled);
+                        }
+                        let (extractor, detector) = workers.as_mut().map_err(|e| {
+                            ImageMapError::Describe(VisionError::Model(e.to_string()))
+                        })?;
+                        let result =
+                            describe_one(extractor, detector.as_mut(), source).map_err(|error| {
+                                ImageMapError::Image {
                                     index,
                                     source_name: match source {
                                         ImageSource::File(p) => p.display().to_string(),
                                         ImageSource::Pixels(_) => "pixels".into(),
                                     },
                                     error,
-                                });
-                            done.fetch_add(1, Ordering::Relaxed);
-                            result
-                        },
-                    )
-                    .collect::<Result<Vec<_>, _>>()
-            })
-        };
+                                }
+                            });
+                        done.fetch_add(1, Ordering::Relaxed);
+                        result
+                    },
+                )
+                .collect::<Result<Vec<_>, _>>()
+        })
+    };
     // The pool is scoped: its workers are joined before `build_scoped` returns, so no thread of
     // ours outlives the build (a C host may unload the library right after it).
     let run_pool = || {
@@ -443,7 +456,7 @@ fn describe_in_parallel(
 /// anyway (a blank image's CNN features, or an empty set of local features) and `false`.
 fn describe_one(
     extractor: &mut Extractor,
-    detector: Option<&mut KeypointDetector>,
+    detector: Option<&mut FeatureDetector>,
     source: &ImageSource<'_>,
 ) -> Result<Described, VisionError> {
     let owned;

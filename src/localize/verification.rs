@@ -11,14 +11,15 @@ use crate::errors::VisionError;
 use crate::image::ImageView;
 use crate::map::{Map, PlaceId, ViewId};
 use crate::verify::{
-    check_pair, locate, KeypointDetector, Keypoints, VerificationOptions, ViewKeypoints,
+    check_pair, locate, FeatureDetector, Keypoints, VerificationOptions, ViewKeypoints,
 };
 use nalgebra::Point3;
 
 /// State of geometric verification: the query detector, the per-place results of the current
 /// frame, and a copy of the estimator to restore if a check fails half-way.
 pub(super) struct Verifier {
-    detector: KeypointDetector,
+    /// Detects the kind of features the map stores.
+    detector: FeatureDetector,
     query: Keypoints,
     /// Places checked in the current frame with their best inlier count and view.
     checked: Vec<(PlaceId, u32, ViewId)>,
@@ -47,7 +48,11 @@ impl Verifier {
             ));
         }
         Ok(Self {
-            detector: KeypointDetector::new(options.query_keypoints)?,
+            detector: FeatureDetector::new(
+                keypoints.kind(),
+                options.query_keypoints,
+                &options.xfeat,
+            )?,
             query: Keypoints::default(),
             checked: Vec::with_capacity(options.candidates),
             views: Vec::new(),

@@ -1,4 +1,5 @@
-//! ORB keypoints of one image, and the per-view store a map keeps them in.
+//! Keypoints of one image (ORB, or learned XFeat features), and the per-view store a map keeps
+//! them in.
 
 use crate::errors::VisionError;
 use crate::image::{ImageView, MAX_IMAGE_SIDE};
@@ -20,15 +21,172 @@ pub const MIN_ORB_SIDE: u32 = 2;
 
 /// One ORB descriptor.
 pub type Descriptor = [u8; DESCRIPTOR_BYTES];
+/// Dimensions of one XFeat descriptor.
+pub const XFEAT_DIM: usize = 64;
+/// One XFeat descriptor: the unit 64-vector quantised as `round(127 x d)` (64 bytes).
+pub type XFeatDescriptor = [i8; XFEAT_DIM];
+
+/// Which local features a set of keypoints carries.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum FeatureKind {
+    /// ORB: FAST corners with 256-bit binary descriptors, matched by Hamming distance.
+    #[default]
+    Orb,
+    /// XFeat (CVPR 2024): learned keypoints with 64-d descriptors, matched by cosine.
+    XFeat,
+}
+
+impl FeatureKind {
+    /// Lower-case name (`orb`, `xfeat`), as the CLI and reports spell it.
+    pub fn name(self) -> &'static str {
+        match self {
+            FeatureKind::Orb => "orb",
+            FeatureKind::XFeat => "xfeat",
+        }
+    }
+}
+
+/// The descriptors of a set of keypoints, all of one kind, one per point.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Descriptors {
+    /// ORB descriptors.
+    Orb(Vec<Descriptor>),
+    /// Quantised XFeat descriptors.
+    XFeat(Vec<XFeatDescriptor>),
+}
+
+impl Default for Descriptors {
+    fn default() -> Self {
+        Descriptors::Orb(Vec::new())
+    }
+}
+
+impl Descriptors {
+    /// No descriptors of `kind`.
+    pub fn empty(kind: FeatureKind) -> Self {
+        match kind {
+            FeatureKind::Orb => Descriptors::Orb(Vec::new()),
+            FeatureKind::XFeat => Descriptors::XFeat(Vec::new()),
+        }
+    }
+
+    /// The kind of feature.
+    pub fn kind(&self) -> FeatureKind {
+        self.as_ref().kind()
+    }
+
+    /// Number of descriptors.
+    pub fn len(&self) -> usize {
+        self.as_ref().len()
+    }
+
+    /// True when there are none.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// A borrowed view.
+    pub fn as_ref(&self) -> DescriptorsRef<'_> {
+        match self {
+            Descriptors::Orb(d) => DescriptorsRef::Orb(d),
+            Descriptors::XFeat(d) => DescriptorsRef::XFeat(d),
+        }
+    }
+
+    /// Appends `more`; fails (and appends nothing) when it is of another kind.
+    pub fn extend_from(&mut self, more: DescriptorsRef<'_>) -> Result<(), String> {
+        match (self, more) {
+            (Descriptors::Orb(d), DescriptorsRef::Orb(m)) => d.extend_from_slice(m),
+            (Descriptors::XFeat(d), DescriptorsRef::XFeat(m)) => d.extend_from_slice(m),
+            (own, more) => {
+                return Err(format!(
+                    "{} descriptors cannot join {} descriptors",
+                    more.kind().name(),
+                    own.kind().name()
+                ))
+            }
+        }
+        Ok(())
+    }
+
+    /// The descriptors' bytes, row after row, as a map file holds them (`i8` as two's
+    /// complement).
+    pub fn to_bytes(&self) -> std::borrow::Cow<'_, [u8]> {
+        match self {
+            Descriptors::Orb(d) => std::borrow::Cow::Borrowed(d.as_flattened()),
+            Descriptors::XFeat(d) => d.as_flattened().iter().map(|&v| v as u8).collect(),
+        }
+    }
+
+    /// Bytes of one descriptor of this kind.
+    pub fn row_bytes(&self) -> usize {
+        match self {
+            Descriptors::Orb(_) => DESCRIPTOR_BYTES,
+            Descriptors::XFeat(_) => XFEAT_DIM,
+        }
+    }
+}
+
+impl From<Vec<Descriptor>> for Descriptors {
+    fn from(d: Vec<Descriptor>) -> Self {
+        Descriptors::Orb(d)
+    }
+}
+
+impl From<Vec<XFeatDescriptor>> for Descriptors {
+    fn from(d: Vec<XFeatDescriptor>) -> Self {
+        Descriptors::XFeat(d)
+    }
+}
+
+/// Borrowed descriptors of one kind.
+#[derive(Clone, Copy, Debug)]
+pub enum DescriptorsRef<'a> {
+    /// ORB descriptors.
+    Orb(&'a [Descriptor]),
+    /// Quantised XFeat descriptors.
+    XFeat(&'a [XFeatDescriptor]),
+}
+
+impl<'a> DescriptorsRef<'a> {
+    /// The kind of feature.
+    pub fn kind(self) -> FeatureKind {
+        match self {
+            DescriptorsRef::Orb(_) => FeatureKind::Orb,
+            DescriptorsRef::XFeat(_) => FeatureKind::XFeat,
+        }
+    }
+
+    /// Number of descriptors.
+    pub fn len(self) -> usize {
+        match self {
+            DescriptorsRef::Orb(d) => d.len(),
+            DescriptorsRef::XFeat(d) => d.len(),
+        }
+    }
+
+    /// True when there are none.
+    pub fn is_empty(self) -> bool {
+        self.len() == 0
+    }
+
+    /// The descriptors in `range` (which must lie inside).
+    pub fn slice(self, range: std::ops::Range<usize>) -> DescriptorsRef<'a> {
+        match self {
+            DescriptorsRef::Orb(d) => DescriptorsRef::Orb(&d[range]),
+            DescriptorsRef::XFeat(d) => DescriptorsRef::XFeat(&d[range]),
+        }
+    }
+}
 
 /// Keypoints of one image: pixel positions (x right, y down, in the image as given) and their
-/// ORB descriptors, in the same order.
+/// descriptors, in the same order.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Keypoints {
     /// Pixel positions.
     pub points: Vec<[f32; 2]>,
-    /// ORB descriptors, one per point.
-    pub descriptors: Vec<Descriptor>,
+    /// Descriptors, one per point.
+    pub descriptors: Descriptors,
 }
 
 impl Keypoints {
@@ -46,7 +204,7 @@ impl Keypoints {
     pub fn as_ref(&self) -> KeypointsRef<'_> {
         KeypointsRef {
             points: &self.points,
-            descriptors: &self.descriptors,
+            descriptors: self.descriptors.as_ref(),
         }
     }
 }
@@ -56,8 +214,8 @@ impl Keypoints {
 pub struct KeypointsRef<'a> {
     /// Pixel positions.
     pub points: &'a [[f32; 2]],
-    /// ORB descriptors, one per point.
-    pub descriptors: &'a [Descriptor],
+    /// Descriptors, one per point.
+    pub descriptors: DescriptorsRef<'a>,
 }
 
 /// Detects ORB keypoints; one per thread (OpenCV detectors are not shared).
@@ -137,10 +295,12 @@ impl KeypointDetector {
         }
         Ok(Keypoints {
             points: found.iter().map(|k| [k.pt().x, k.pt().y]).collect(),
-            descriptors: bytes
-                .chunks_exact(DESCRIPTOR_BYTES)
-                .map(|c| c.try_into().expect("32 bytes"))
-                .collect(),
+            descriptors: Descriptors::Orb(
+                bytes
+                    .chunks_exact(DESCRIPTOR_BYTES)
+                    .map(|c| c.try_into().expect("32 bytes"))
+                    .collect(),
+            ),
         })
     }
 }
@@ -153,24 +313,41 @@ impl KeypointDetector {
 pub struct ViewKeypoints {
     offsets: Vec<u64>,
     points: Vec<[f32; 2]>,
-    descriptors: Vec<Descriptor>,
+    descriptors: Descriptors,
     /// Map-frame position of each keypoint's scene point; NaN where unknown.
     world_points: Option<Vec<[f32; 3]>>,
 }
 
 impl ViewKeypoints {
-    /// Concatenates the keypoints of each view, in view order.
-    pub fn from_views<'a>(views: impl IntoIterator<Item = &'a Keypoints>) -> Self {
+    /// Concatenates the keypoints of each view, in view order; fails when a view holding
+    /// keypoints has features of another kind than `kind` (views without any may be of any).
+    pub fn from_views<'a>(
+        kind: FeatureKind,
+        views: impl IntoIterator<Item = &'a Keypoints>,
+    ) -> Result<Self, String> {
         let mut store = Self {
             offsets: vec![0],
+            descriptors: Descriptors::empty(kind),
             ..Self::default()
         };
-        for view in views {
-            store.points.extend_from_slice(&view.points);
-            store.descriptors.extend_from_slice(&view.descriptors);
+        for (v, view) in views.into_iter().enumerate() {
+            if view.points.len() != view.descriptors.len() {
+                return Err(format!(
+                    "view {v} has {} keypoints but {} descriptors",
+                    view.points.len(),
+                    view.descriptors.len()
+                ));
+            }
+            if !view.is_empty() {
+                store
+                    .descriptors
+                    .extend_from(view.descriptors.as_ref())
+                    .map_err(|e| format!("view {v}: {e}"))?;
+                store.points.extend_from_slice(&view.points);
+            }
             store.offsets.push(store.points.len() as u64);
         }
-        store
+        Ok(store)
     }
 
     /// Rebuilds a store from its arrays (as a map file holds them); fails unless `offsets`
@@ -180,8 +357,9 @@ impl ViewKeypoints {
     pub fn from_parts(
         offsets: Vec<u64>,
         points: Vec<[f32; 2]>,
-        descriptors: Vec<Descriptor>,
+        descriptors: impl Into<Descriptors>,
     ) -> Result<Self, String> {
+        let descriptors = descriptors.into();
         if points.len() != descriptors.len() {
             return Err(format!(
                 "{} keypoints but {} descriptors",
@@ -277,7 +455,7 @@ impl ViewKeypoints {
         let range = a as usize..b as usize;
         Some(KeypointsRef {
             points: &self.points[range.clone()],
-            descriptors: &self.descriptors[range],
+            descriptors: self.descriptors.as_ref().slice(range),
         })
     }
 
@@ -292,7 +470,12 @@ impl ViewKeypoints {
     }
 
     /// All descriptors, view after view.
-    pub fn descriptors(&self) -> &[Descriptor] {
+    pub fn descriptors(&self) -> &Descriptors {
         &self.descriptors
+    }
+
+    /// The kind of features stored.
+    pub fn kind(&self) -> FeatureKind {
+        self.descriptors.kind()
     }
 }

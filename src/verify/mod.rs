@@ -14,16 +14,23 @@
 //! with the most inliers is used to place the camera metrically ([`locate`]): a pose fix for
 //! the host's pose graph and, in metric mode, a measurement of the particles' position.
 
+mod detector;
 mod geometry;
 mod keypoints;
 mod pose;
+pub mod xfeat;
 
-pub use geometry::{check_pair, PairCheck, PairOptions, MIN_MATCHES};
+pub use detector::FeatureDetector;
+pub use geometry::{
+    check_pair, spatial_check, FundamentalEstimator, PairCheck, PairOptions, SpatialCheck,
+    MIN_MATCHES,
+};
 pub use keypoints::{
-    Descriptor, KeypointDetector, Keypoints, KeypointsRef, ViewKeypoints, DESCRIPTOR_BYTES,
-    MAX_KEYPOINTS,
+    Descriptor, Descriptors, DescriptorsRef, FeatureKind, KeypointDetector, Keypoints,
+    KeypointsRef, ViewKeypoints, XFeatDescriptor, DESCRIPTOR_BYTES, MAX_KEYPOINTS, XFEAT_DIM,
 };
 pub use pose::{locate, LocateOptions, Located, PinholeCamera, MIN_PAIRS};
+pub use xfeat::{XFeatDetector, XFeatOptions, DEFAULT_XFEAT_KEYPOINTS};
 
 /// Keypoints per view a map built from images stores by default, and a query detects.
 pub const DEFAULT_KEYPOINTS: usize = 500;
@@ -41,8 +48,11 @@ pub struct VerificationOptions {
     /// `exp(inlier_weight * inliers)` before normalising. Default 0.05 (0.025-0.2 compared
     /// with `topoloc suite`, BENCHMARKS.md).
     pub inlier_weight: f32,
-    /// Keypoints detected in the query image. Default [`DEFAULT_KEYPOINTS`].
+    /// Keypoints detected in the query image, of the kind the map stores. Default
+    /// [`DEFAULT_KEYPOINTS`].
     pub query_keypoints: usize,
+    /// Where the XFeat network is, for maps storing XFeat keypoints.
+    pub xfeat: XFeatOptions,
     /// Matching and RANSAC.
     pub pair: PairOptions,
     /// Intrinsics of the query camera. With them, and a map storing keypoint scene points, the
@@ -59,6 +69,7 @@ impl Default for VerificationOptions {
             views_per_candidate: 2,
             inlier_weight: 0.05,
             query_keypoints: DEFAULT_KEYPOINTS,
+            xfeat: XFeatOptions::default(),
             pair: PairOptions::default(),
             camera: None,
             locate: LocateOptions::default(),

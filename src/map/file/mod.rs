@@ -21,7 +21,8 @@
 //! | `describer_codebook` | F32 | K x L | (1.1, VLAD only) codebook of K centres of local descriptors |
 //! | `view_keypoint_offsets` | U64 | N+1 | (1.2, optional) ranges of each view's keypoints |
 //! | `view_keypoint_points` | F32 | T x 2 | (1.2) keypoint pixel positions x, y |
-//! | `view_keypoint_descriptors` | U8 | T x 32 | (1.2) their ORB descriptors |
+//! | `view_keypoint_descriptors` | U8 | T x 32 | (1.2) their ORB descriptors, or |
+//! | `view_keypoint_xfeat` | I8 | T x 64 | (1.4) their XFeat descriptors, `round(127 x unit)`; exactly one of the two |
 //! | `view_keypoint_world_points` | F32 | T x 3 | (1.3, optional) map-frame scene point of each keypoint, NaN when unknown |
 //!
 //! The only metadata key, `topoloc`, holds a JSON object with `format` (`"topoloc-map"`),
@@ -31,7 +32,8 @@
 //! `describer` (the backend and its configuration, see [`BackendSpec`]), and the checksummed
 //! JSON is the metadata object re-serialised as a generic JSON value without `crc32`, so that
 //! fields added by newer minor versions stay covered (1.0 re-serialised its own struct). Readers accept any file of the
-//! same major version; a newer minor version may add tensors, which older readers ignore.
+//! same major version; a newer minor version may add tensors, which older readers ignore
+//! (a 1.3 reader refuses a 1.4 map with XFeat keypoints as missing `view_keypoint_descriptors`).
 //!
 //! One module per concern: [`header`] (framing, metadata, version, checksum), one reader/writer
 //! per section ([`descriptors`], [`views`], [`places`], [`edges`], [`describer`],
@@ -68,7 +70,7 @@ pub const FORMAT_NAME: &str = "topoloc-map";
 /// Major format version written and read by this build.
 pub const FORMAT_VERSION_MAJOR: u32 = 1;
 /// Minor format version written by this build.
-pub const FORMAT_VERSION_MINOR: u32 = 3;
+pub const FORMAT_VERSION_MINOR: u32 = 4;
 
 /// Largest descriptor dimension D a map may have (built or loaded): 65,536 floats are 256 KB
 /// per view, 128 times the default describer's 512 and far above any global descriptor in use

@@ -44,6 +44,24 @@ pub enum Keypoints {
     Detected,
 }
 
+/// Local features stored for verification (`--local-features`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum LocalFeatures {
+    /// ORB (OpenCV), 32-byte binary descriptors.
+    Orb,
+    /// XFeat (ONNX Runtime), 64-byte learned descriptors.
+    Xfeat,
+}
+
+impl From<LocalFeatures> for topoloc::verify::FeatureKind {
+    fn from(f: LocalFeatures) -> Self {
+        match f {
+            LocalFeatures::Orb => Self::Orb,
+            LocalFeatures::Xfeat => Self::XFeat,
+        }
+    }
+}
+
 /// Where the ONNX backend's files are (both commands).
 #[derive(Args, Clone, Debug)]
 pub struct RuntimeArgs {
@@ -56,6 +74,14 @@ pub struct RuntimeArgs {
 }
 
 impl RuntimeArgs {
+    /// Where XFeat is: the cache's export, on the same runtime library.
+    pub fn xfeat_options(&self) -> topoloc::verify::XFeatOptions {
+        topoloc::verify::XFeatOptions {
+            runtime: self.onnx_runtime.clone(),
+            ..Default::default()
+        }
+    }
+
     /// Options for describing query images with a map's stored describer.
     pub fn describer_options(&self, backend: Option<Backend>) -> DescriberOptions {
         DescriberOptions {

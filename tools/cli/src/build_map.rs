@@ -1,7 +1,7 @@
 //! `topoloc build-map`: a map from an image folder (optionally with a TUM trajectory), with the
 //! describer stored in it.
 
-use crate::backend_args::{image_files, progress_bar, BackendArgs};
+use crate::backend_args::{image_files, progress_bar, BackendArgs, LocalFeatures};
 use anyhow::{bail, Result};
 use clap::Args;
 use serde_json::json;
@@ -43,9 +43,12 @@ pub struct BuildMapArgs {
     /// Describing threads (0: one per core).
     #[arg(long, default_value_t = 0)]
     pub threads: usize,
-    /// ORB keypoints stored per view for geometric verification (0: none).
+    /// Keypoints stored per view for geometric verification (0: none).
     #[arg(long, default_value_t = topoloc::verify::DEFAULT_KEYPOINTS)]
     pub verification_keypoints: usize,
+    /// Which local features those keypoints are (xfeat runs the cache's XFeat export).
+    #[arg(long, value_enum, default_value_t = LocalFeatures::Orb)]
+    pub local_features: LocalFeatures,
     /// Output map file.
     #[arg(long)]
     pub out: PathBuf,
@@ -94,6 +97,8 @@ pub fn run(args: &BuildMapArgs) -> Result<()> {
         },
         threads: args.threads,
         keypoints: args.verification_keypoints,
+        features: args.local_features.into(),
+        xfeat: args.backend.runtime.xfeat_options(),
     };
     let sources: Vec<ImageSource> = files.iter().map(|f| ImageSource::File(f)).collect();
     let bar = progress_bar(files.len(), "describing");

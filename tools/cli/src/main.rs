@@ -15,6 +15,7 @@ mod simulate;
 mod suite;
 mod sweep;
 mod top_view;
+mod verify_eval;
 
 use anyhow::Result;
 use clap::{Parser, Subcommand};
@@ -73,6 +74,10 @@ enum Command {
     /// from images and report R@N, R@100P, latency (and MNA/OHA with ground-truth nodes or a
     /// dataset), single-frame and filtered.
     Eval(eval::EvalArgs),
+    /// Verify the appearance top places of every query image against a map with keypoints
+    /// and report how well inliers tell the true place from look-alikes (inlier medians,
+    /// R@1 before and after re-ranking, times).
+    EvalVerify(verify_eval::VerifyEvalArgs),
     /// Generate world K of a split, build its graph and map (saved as OUT/map.topoloc) and write
     /// query trajectories as dataset folders OUT/traj-00i for `eval --dataset`.
     Simulate(simulate::SimulateArgs),
@@ -97,6 +102,7 @@ fn main() -> Result<()> {
         Command::Scaling(args) => scaling::run(&args),
         Command::BuildMap(args) => build_map::run(&args),
         Command::Eval(args) => eval::run(&args),
+        Command::EvalVerify(args) => verify_eval::run(&args),
         Command::Simulate(args) => simulate::run(&args),
         Command::Suite(args) => suite::run(&args),
         Command::MeasureMap { map } => memory::measure(&map),

@@ -1,0 +1,147 @@
+//! The ONNX Runtime shared library, loaded once per process at run time (so the library works
+//! without it until a network is asked for), and the cache folder the set-up script fills.
+//! Both the descriptor backend ([`crate::describe::onnx`]) and the learned local features
+//! ([`crate::verify::xfeat`]) take their sessions' environment from here.
+
+use crate::errors::VisionError;
+use ort::session::Session;
+use sha2::{Digest, Sha256};
+use std::path::{Path, PathBuf};
+use std::sync::{Mutex, OnceLock};
+
+/// The cache folder of set-up files: `TOPOLOC_CACHE`, else `~/.cache/topoloc`.
+pub fn cache_dir() -> PathBuf {
+    std::env::var_os("TOPOLOC_CACHE")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| {
+            PathBuf::from(std::env::var_os("HOME").unwrap_or_default()).join(".cache/topoloc")
+        })
+}
+
+/// Candidate paths of the ONNX Runtime library, in the order they are tried. A configured path
+/// (the option, else `TOPOLOC_ORT_LIBRARY`, else `ORT_DYLIB_PATH`) is the only candidate: asking
+/// for a library and silently getting another would hide a set-up mistake. Without one, the
+/// libraries `scripts/setup-models.sh` put in the cache are tried.
+fn runtime_candidates(explicit: Option<&Path>) -> Vec<PathBuf> {
+    if let Some(path) = configured_runtime(explicit) {
+        return vec![path];
+    }
+    let dir = cache_dir().join("onnxruntime");
+    let mut cached: Vec<PathBuf> = std::fs::read_dir(&dir)
+        .into_iter()
+        .flatten()
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| {
+            p.file_name()
+                .and_then(|n| n.to_str())
+                .is_some_and(|n| n.starts_with("libonnxruntime.so"))
+        })
+        .collect();
+    cached.sort();
+    if cached.is_empty() {
+        cached.push(dir.join("libonnxruntime.so.<version>"));
+    }
+    cached
+}
+
+/// The runtime library the caller configured: the option, else `TOPOLOC_ORT_LIBRARY`, else
+/// `ORT_DYLIB_PATH`; `None` when none is set.
+fn configured_runtime(explicit: Option<&Path>) -> Option<PathBuf> {
+    explicit.map(Path::to_path_buf).or_else(|| {
+        ["TOPOLOC_ORT_LIBRARY", "ORT_DYLIB_PATH"]
+            .iter()
+            .find_map(|var| std::env::var_os(var).filter(|v| !v.is_empty()))
+            .map(PathBuf::from)
+    })
+}
+
+/// The ONNX Runtime loaded in this process, and from where.
+struct LoadedRuntime {
+    path: PathBuf,
+    environment: ort::environment::Environment,
+}
+
+/// The process-wide ONNX Runtime environment. The runtime library can be loaded once per
+/// process: a later request for a different configured library fails rather than silently
+/// using the first. Failed loads are not remembered, so a corrected path works on retry.
+pub(crate) fn environment(
+    explicit: Option<&Path>,
+) -> Result<&'static ort::environment::Environment, VisionError> {
+    static RUNTIME: OnceLock<LoadedRuntime> = OnceLock::new();
+    static LOADING: Mutex<()> = Mutex::new(());
+    let configured = configured_runtime(explicit);
+    let tried = runtime_candidates(explicit);
+    let unavailable = |hint: String| VisionError::BackendUnavailable {
+        what: "ONNX Runtime".into(),
+        tried: tried.clone(),
+        hint,
+    };
+    let Some(path) = tried.iter().find(|p| p.is_file()) else {
+        return Err(unavailable(if configured.is_some() {
+            "the configured ONNX Runtime library does not exist (option, TOPOLOC_ORT_LIBRARY or \
+             ORT_DYLIB_PATH, in that order)"
+                .into()
+        } else {
+            "run scripts/setup-models.sh, or pass the library path (option or TOPOLOC_ORT_LIBRARY)"
+                .into()
+        }));
+    };
+    let _serialised = LOADING
+        .lock()
+        .unwrap_or_else(|poisoned| poisoned.into_inner());
+    let loaded = match RUNTIME.get() {
+        Some(loaded) => loaded,
+        None => {
+            let environment = ort::init_from(path)
+                .map_err(|e| unavailable(format!("loading {}: {e}", path.display())))?
+                .build()
+                .map_err(|e| {
+                    unavailable(format!(
+                        "creating the ONNX Runtime environment from {}: {e}",
+                        path.display()
+                    ))
+                })?;
+            RUNTIME.get_or_init(|| LoadedRuntime {
+                path: path.clone(),
+                environment,
+            })
+        }
+    };
+    let same_library =
+        || std::fs::canonicalize(path).ok() == std::fs::canonicalize(&loaded.path).ok();
+    if configured.is_none() || same_library() {
+        Ok(&loaded.environment)
+    } else {
+        Err(unavailable(format!(
+            "this process already loaded ONNX Runtime from {}; it can be loaded only once per \
+             process, so {} cannot be used",
+            loaded.path.display(),
+            path.display()
+        )))
+    }
+}
+
+/// A session on `model` (read whole, so its SHA-256 names it) with `threads` intra-op threads,
+/// and that hash in hex. Missing files are [`VisionError::BackendUnavailable`] naming the path
+/// and `hint`; a file ONNX Runtime refuses is [`VisionError::Model`].
+pub(crate) fn session(
+    runtime: Option<&Path>,
+    model: &Path,
+    threads: usize,
+    hint: &str,
+) -> Result<(Session, String), VisionError> {
+    let bytes = std::fs::read(model).map_err(|e| VisionError::BackendUnavailable {
+        what: "ONNX model".into(),
+        tried: vec![model.to_path_buf()],
+        hint: format!("{e}; {hint}"),
+    })?;
+    let env = environment(runtime)?;
+    let onnx = |e: ort::Error| VisionError::Model(format!("{}: {e}", model.display()));
+    let session = Session::builder(env)
+        .map_err(onnx)?
+        .with_intra_threads(threads.max(1))
+        .map_err(|e| onnx(e.into()))?
+        .commit_from_memory(&bytes)
+        .map_err(onnx)?;
+    Ok((session, format!("{:x}", Sha256::digest(&bytes))))
+}
