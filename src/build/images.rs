@@ -15,8 +15,8 @@ use crate::errors::VisionError;
 use crate::image::{read_rgb, ImageView, PixelFormat};
 use crate::map::{Map, MapBuilder, MapError, PlaceId, ViewAttributes};
 use crate::verify::{
-    FeatureDetector, FeatureKind, Keypoints, ViewKeypoints, XFeatOptions, DEFAULT_KEYPOINTS,
-    MAX_KEYPOINTS,
+    cells_from_map, FeatureDetector, FeatureKind, Keypoints, ViewKeypoints, XFeatOptions, CELL_TAP,
+    DEFAULT_KEYPOINTS, MAX_KEYPOINTS,
 };
 use nalgebra::{Isometry3, Point3};
 use rayon::prelude::*;
@@ -248,6 +248,16 @@ fn check_request(
         ))
         .into());
     }
+    if options.keypoints > 0
+        && options.features == FeatureKind::Cells
+        && !matches!(options.backend, BackendConfig::Onnx(_))
+    {
+        return Err(MapError::InvalidArgument(
+            "features is cells: dense cells come from a CNN feature map and need the ONNX backend"
+                .into(),
+        )
+        .into());
+    }
     if options.keypoints > MAX_KEYPOINTS {
         return Err(MapError::InvalidArgument(format!(
             "keypoints is {}, must lie in 0..={MAX_KEYPOINTS} (0 = none)",
@@ -372,6 +382,8 @@ fn describe_in_parallel(
     progress: &mut dyn FnMut(BuildStage, usize, usize) -> bool,
 ) -> Result<Vec<Described>, ImageMapError> {
     let total = images.len();
+    let cells = (options.keypoints > 0 && options.features == FeatureKind::Cells)
+        .then_some(options.keypoints);
     let done = AtomicUsize::new(0);
     let cancelled = AtomicBool::new(false);
     let spare = std::sync::Mutex::new(Some(first));
@@ -386,9 +398,11 @@ fn describe_in_parallel(
                             Ok(Some(e)) => e,
                             _ => Extractor::new(&options.backend)?,
                         };
-                        let detector = match options.keypoints {
-                            0 => None,
-                            n => Some(FeatureDetector::new(options.features, n, &options.xfeat)?),
+                        let detector = match (options.keypoints, cells) {
+                            (0, _) | (_, Some(_)) => None,
+                            (n, None) => {
+                                Some(FeatureDetector::new(options.features, n, &options.xfeat)?)
+                            }
                         };
                         Ok((extractor, detector))
                     },
@@ -399,16 +413,14 @@ fn describe_in_parallel(
                         let (extractor, detector) = workers.as_mut().map_err(|e| {
                             ImageMapError::Describe(VisionError::Model(e.to_string()))
                         })?;
-                        let result =
-                            describe_one(extractor, detector.as_mut(), source).map_err(|error| {
-                                ImageMapError::Image {
-                                    index,
-                                    source_name: match source {
-                                        ImageSource::File(p) => p.display().to_string(),
-                                        ImageSource::Pixels(_) => "pixels".into(),
-                                    },
-                                    error,
-                                }
+                        let result = describe_one(extractor, detector.as_mut(), cells, source)
+                            .map_err(|error| ImageMapError::Image {
+                                index,
+                                source_name: match source {
+                                    ImageSource::File(p) => p.display().to_string(),
+                                    ImageSource::Pixels(_) => "pixels".into(),
+                                },
+                                error,
                             });
                         done.fetch_add(1, Ordering::Relaxed);
                         result
@@ -452,11 +464,13 @@ fn describe_in_parallel(
     })
 }
 
-/// Raw features and keypoints of one image; uninformative images give the backend's output
-/// anyway (a blank image's CNN features, or an empty set of local features) and `false`.
+/// Raw features and keypoints of one image (by `detector`, or the `cells` strongest dense cells
+/// of the same forward pass); uninformative images give the backend's output anyway (a blank
+/// image's CNN features, or an empty set of local features) and `false`.
 fn describe_one(
     extractor: &mut Extractor,
     detector: Option<&mut FeatureDetector>,
+    cells: Option<usize>,
     source: &ImageSource<'_>,
 ) -> Result<Described, VisionError> {
     let owned;
@@ -467,6 +481,20 @@ fn describe_one(
         }
         ImageSource::Pixels(view) => *view,
     };
+    if let Some(max_cells) = cells {
+        let (raw, informative, tap) = extractor.extract_with_tap(&view, CELL_TAP)?;
+        let keypoints = cells_from_map(
+            &tap.values,
+            [tap.channels, tap.height, tap.width],
+            tap.cell_size,
+            max_cells,
+        )?;
+        return Ok(Described {
+            raw,
+            informative,
+            keypoints,
+        });
+    }
     let (raw, informative) = extractor.extract_keeping_uninformative(&view)?;
     let keypoints = match detector {
         Some(d) => d.detect(&view)?,

@@ -7,7 +7,7 @@
 //! that it is the very same (model file hash, taps, preprocessing), and describes query images.
 
 use super::limits;
-use super::onnx::{OnnxMlf, OnnxOptions};
+use super::onnx::{DenseTap, OnnxMlf, OnnxOptions};
 use super::pca::Pca;
 use super::vlad::{Codebook, LocalExtractor, LocalFeature, LocalFeatures, VladOptions};
 use crate::descriptor::DescriptorIdentity;
@@ -365,6 +365,25 @@ impl Extractor {
         Ok((raw, informative))
     }
 
+    /// As [`Extractor::extract_keeping_uninformative`], and the feature map `tap` of the same
+    /// forward pass (dense cells for verification). Only the ONNX backend has feature maps:
+    /// VLAD gives [`VisionError::InvalidArgument`].
+    pub fn extract_with_tap(
+        &mut self,
+        image: &ImageView<'_>,
+        tap: &str,
+    ) -> Result<(RawFeatures, bool, DenseTap), VisionError> {
+        image.validate()?;
+        let Engine::Onnx(mlf) = &mut self.engine else {
+            return Err(VisionError::InvalidArgument(
+                "dense cells come from a CNN feature map: they need the ONNX backend".into(),
+            ));
+        };
+        let (raw, dense) = mlf.raw_features_and_tap(image, Some(tap))?;
+        let dense = dense.expect("a tap was asked for");
+        Ok((RawFeatures::Mlf(raw), !is_constant(image), dense))
+    }
+
     fn run(&mut self, image: &ImageView<'_>) -> Result<RawFeatures, VisionError> {
         Ok(match &mut self.engine {
             Engine::Onnx(mlf) => RawFeatures::Mlf(mlf.raw_features(image)?),
@@ -618,8 +637,32 @@ impl Describer {
         out: &mut Vec<f32>,
     ) -> Result<(), VisionError> {
         let raw = self.extractor.extract(image)?;
+        self.project(&raw, out)
+    }
+
+    /// Describes one image into `out` and returns the feature map `tap` of the same forward
+    /// pass (ONNX backend only; see [`Extractor::extract_with_tap`]). Images without content
+    /// are [`VisionError::Uninformative`], as for [`Describer::describe`].
+    pub fn describe_with_tap(
+        &mut self,
+        image: &ImageView<'_>,
+        out: &mut Vec<f32>,
+        tap: &str,
+    ) -> Result<DenseTap, VisionError> {
+        let (raw, informative, dense) = self.extractor.extract_with_tap(image, tap)?;
+        if !informative {
+            return Err(VisionError::Uninformative(format!(
+                "every pixel lies within {CONSTANT_IMAGE_RANGE} grey levels (blank or constant image)"
+            )));
+        }
+        self.project(&raw, out)?;
+        Ok(dense)
+    }
+
+    /// The model's descriptor of raw features.
+    fn project(&self, raw: &RawFeatures, out: &mut Vec<f32>) -> Result<(), VisionError> {
         let vlad;
-        let vector = match &raw {
+        let vector = match raw {
             RawFeatures::Mlf(v) => v,
             RawFeatures::Local(l) => {
                 let codebook = self

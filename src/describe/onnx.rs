@@ -51,6 +51,22 @@ impl Default for OnnxOptions {
     }
 }
 
+/// One feature map of the network for one image, channel-major (`values[c][y][x]`), and the
+/// size of one cell in the image's own pixels (the image was resized to the network input).
+#[derive(Clone, Debug, PartialEq)]
+pub struct DenseTap {
+    /// Channels C.
+    pub channels: usize,
+    /// Rows of cells.
+    pub height: usize,
+    /// Columns of cells.
+    pub width: usize,
+    /// Width and height of one cell in image pixels.
+    pub cell_size: [f32; 2],
+    /// C x height x width values.
+    pub values: Vec<f32>,
+}
+
 /// A loaded CNN that turns images into raw multi-level vectors (before PCA).
 pub struct OnnxMlf {
     session: Session,
@@ -118,6 +134,16 @@ impl OnnxMlf {
 
     /// Runs the network on one image and returns the raw multi-level vector.
     pub fn raw_features(&mut self, image: &ImageView<'_>) -> Result<Vec<f32>, VisionError> {
+        Ok(self.raw_features_and_tap(image, None)?.0)
+    }
+
+    /// Runs the network once and returns the raw multi-level vector and, when `tap` names an
+    /// output, that feature map whole (for dense cells: the same forward pass, never a second).
+    pub fn raw_features_and_tap(
+        &mut self,
+        image: &ImageView<'_>,
+        tap: Option<&str>,
+    ) -> Result<(Vec<f32>, Option<DenseTap>), VisionError> {
         let (w, h) = self.options.input_size;
         let rgb = image.to_rgb_resized(Size::new(w as i32, h as i32))?;
         let pixels = rgb.data_bytes()?;
@@ -137,32 +163,48 @@ impl OnnxMlf {
             .session
             .run(ort::inputs!["input" => tensor])
             .map_err(|e| VisionError::Model(e.to_string()))?;
-        let mut levels = Vec::with_capacity(self.options.taps.len());
-        for tap in &self.options.taps {
-            let (shape, values) = outputs[tap.as_str()]
+        let feature_map = |name: &str| -> Result<FeatureMap<'_>, VisionError> {
+            let value = outputs
+                .get(name)
+                .ok_or_else(|| VisionError::Model(format!("the model has no output '{name}'")))?;
+            let (shape, values) = value
                 .try_extract_tensor::<f32>()
                 .map_err(|e| VisionError::Model(e.to_string()))?;
             if shape.len() != 4 || shape[0] != 1 {
                 return Err(VisionError::Model(format!(
-                    "output '{tap}' has shape {shape:?}, expected [1, C, H, W]"
+                    "output '{name}' has shape {shape:?}, expected [1, C, H, W]"
                 )));
             }
-            levels.push((
-                shape[1] as usize,
-                shape[2] as usize,
-                shape[3] as usize,
-                values,
-            ));
-        }
-        let maps: Vec<FeatureMap> = levels
-            .iter()
-            .map(|&(channels, height, width, values)| FeatureMap {
-                channels,
-                height,
-                width,
+            Ok(FeatureMap {
+                channels: shape[1] as usize,
+                height: shape[2] as usize,
+                width: shape[3] as usize,
                 values,
             })
-            .collect();
-        Ok(multi_level(&maps, self.options.grid.0, self.options.grid.1))
+        };
+        let maps = self
+            .options
+            .taps
+            .iter()
+            .map(|tap| feature_map(tap))
+            .collect::<Result<Vec<_>, _>>()?;
+        let vector = multi_level(&maps, self.options.grid.0, self.options.grid.1);
+        let dense = match tap {
+            None => None,
+            Some(name) => {
+                let map = feature_map(name)?;
+                Some(DenseTap {
+                    channels: map.channels,
+                    height: map.height,
+                    width: map.width,
+                    cell_size: [
+                        image.width as f32 / map.width as f32,
+                        image.height as f32 / map.height as f32,
+                    ],
+                    values: map.values.to_vec(),
+                })
+            }
+        };
+        Ok((vector, dense))
     }
 }

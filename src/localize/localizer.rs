@@ -11,6 +11,7 @@ use super::{LocalizeError, TimestampError};
 use crate::describe::{Describer, DescriberOptions};
 use crate::descriptor::normalize_descriptor_into;
 use crate::map::{is_finite_pose, Map, MapError};
+use crate::verify::CELL_TAP;
 use nalgebra::Isometry3;
 use std::sync::Arc;
 
@@ -214,13 +215,22 @@ impl Localizer {
     /// and with verification on the query keypoints.
     fn describe(&mut self, frame: &Frame<'_>) -> Result<(), LocalizeError> {
         let scratch = &mut self.scratch;
+        let wants_cells = self.verifier.as_ref().is_some_and(Verifier::wants_cells);
+        let no_describer = || {
+            LocalizeError::NoDescriber(
+                "the frame has an image but no descriptor, and this localizer has no describer (Rust: Localizer::with_describer; C: image_backend TOPOLOC_BACKEND_AUTO on a map built from images)".into(),
+            )
+        };
+        let mut cells = None;
         let descriptor: &[f32] = match (frame.descriptor.is_empty(), &frame.image) {
+            (true, Some(image)) if wants_cells => {
+                let describer = self.describer.as_mut().ok_or_else(no_describer)?;
+                cells =
+                    Some(describer.describe_with_tap(image, &mut scratch.described, CELL_TAP)?);
+                &scratch.described
+            }
             (true, Some(image)) => {
-                let describer = self.describer.as_mut().ok_or_else(|| {
-                    LocalizeError::NoDescriber(
-                        "the frame has an image but no descriptor, and this localizer has no describer (Rust: Localizer::with_describer; C: image_backend TOPOLOC_BACKEND_AUTO on a map built from images)".into(),
-                    )
-                })?;
+                let describer = self.describer.as_mut().ok_or_else(no_describer)?;
                 describer.describe(image, &mut scratch.described)?;
                 &scratch.described
             }
@@ -228,7 +238,15 @@ impl Localizer {
         };
         normalize_descriptor_into(descriptor, self.map.dim(), &mut scratch.query)?;
         if let Some(verifier) = &mut self.verifier {
-            verifier.detect(frame.image.as_ref())?;
+            match (&cells, wants_cells) {
+                (Some(tap), _) => verifier.set_cells(tap, self.options.verification.query_keypoints)?,
+                (None, true) => {
+                    return Err(LocalizeError::Verification(
+                        "the map verifies with dense cells of the describer's CNN: frames need their image and no descriptor of their own, and the localizer a describer".into(),
+                    ))
+                }
+                (None, false) => verifier.detect(frame.image.as_ref())?,
+            }
         }
         Ok(())
     }

@@ -7,19 +7,22 @@ use super::filter::FilterParams;
 use super::localizer::{select_most_probable, Scratch};
 use super::result::PoseFix;
 use super::LocalizeError;
+use crate::describe::onnx::DenseTap;
 use crate::errors::VisionError;
 use crate::image::ImageView;
 use crate::map::{Map, PlaceId, ViewId};
 use crate::verify::{
-    check_pair, locate, FeatureDetector, Keypoints, VerificationOptions, ViewKeypoints,
+    cells_from_map, check_pair, locate, FeatureDetector, FeatureKind, Keypoints,
+    VerificationOptions, ViewKeypoints,
 };
 use nalgebra::Point3;
 
 /// State of geometric verification: the query detector, the per-place results of the current
 /// frame, and a copy of the estimator to restore if a check fails half-way.
 pub(super) struct Verifier {
-    /// Detects the kind of features the map stores.
-    detector: FeatureDetector,
+    /// Detects the kind of features the map stores; `None` for dense cells, which come from
+    /// the describer's forward pass ([`Verifier::set_cells`]).
+    detector: Option<FeatureDetector>,
     query: Keypoints,
     /// Places checked in the current frame with their best inlier count and view.
     checked: Vec<(PlaceId, u32, ViewId)>,
@@ -48,17 +51,26 @@ impl Verifier {
             ));
         }
         Ok(Self {
-            detector: FeatureDetector::new(
-                keypoints.kind(),
-                options.query_keypoints,
-                &options.xfeat,
-            )?,
+            detector: match keypoints.kind() {
+                FeatureKind::Cells => None,
+                kind => Some(FeatureDetector::new(
+                    kind,
+                    options.query_keypoints,
+                    &options.xfeat,
+                )?),
+            },
             query: Keypoints::default(),
             checked: Vec::with_capacity(options.candidates),
             views: Vec::new(),
             fix: None,
             backup: estimator.clone(),
         })
+    }
+
+    /// True when the map stores dense cells: the describer must run with the cell tap and
+    /// hand its map to [`Verifier::set_cells`].
+    pub fn wants_cells(&self) -> bool {
+        self.detector.is_none()
     }
 
     /// Detects the query keypoints; verification needs the frame's image.
@@ -69,7 +81,20 @@ impl Verifier {
                     .into(),
             )
         })?;
-        self.query = self.detector.detect(image)?;
+        if let Some(detector) = &mut self.detector {
+            self.query = detector.detect(image)?;
+        }
+        Ok(())
+    }
+
+    /// Takes the query's dense cells from the describer's feature map.
+    pub fn set_cells(&mut self, tap: &DenseTap, max_cells: usize) -> Result<(), LocalizeError> {
+        self.query = cells_from_map(
+            &tap.values,
+            [tap.channels, tap.height, tap.width],
+            tap.cell_size,
+            max_cells,
+        )?;
         Ok(())
     }
 

@@ -17,7 +17,7 @@ pub enum FeatureDetector {
 impl FeatureDetector {
     /// A detector of `kind` keeping at most `max_keypoints` per image; `xfeat` says where the
     /// XFeat network is (unused for ORB). Errors as [`KeypointDetector::new`] and
-    /// [`XFeatDetector::new`].
+    /// [`XFeatDetector::new`]; dense cells, made by the describer, are an invalid argument.
     pub fn new(
         kind: FeatureKind,
         max_keypoints: usize,
@@ -27,6 +27,11 @@ impl FeatureDetector {
             FeatureKind::Orb => FeatureDetector::Orb(KeypointDetector::new(max_keypoints)?),
             FeatureKind::XFeat => {
                 FeatureDetector::XFeat(Box::new(XFeatDetector::new(xfeat, max_keypoints)?))
+            }
+            FeatureKind::Cells => {
+                return Err(VisionError::InvalidArgument(
+                    "dense cells have no detector of their own: they come from the describer's forward pass (Describer::describe_with_tap, then cells_from_map)".into(),
+                ))
             }
         })
     }

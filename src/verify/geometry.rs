@@ -2,9 +2,7 @@
 //! then a fundamental matrix fitted with RANSAC; the inliers are the matches consistent with
 //! one rigid scene seen from two poses.
 
-use super::keypoints::{
-    Descriptor, DescriptorsRef, KeypointsRef, XFeatDescriptor, DESCRIPTOR_BYTES,
-};
+use super::keypoints::{Descriptor, DescriptorsRef, KeypointsRef, DESCRIPTOR_BYTES};
 use crate::errors::VisionError;
 use faer::linalg::matmul::matmul;
 use faer::{Accum, Mat as FaerMat, MatRef, Par};
@@ -109,7 +107,8 @@ pub(crate) fn mutual_matches(
     }
     match (query.descriptors, view.descriptors) {
         (DescriptorsRef::Orb(q), DescriptorsRef::Orb(v)) => orb_matches(q, v, max_hamming),
-        (DescriptorsRef::XFeat(q), DescriptorsRef::XFeat(v)) => Ok(xfeat_matches(q, v)),
+        (DescriptorsRef::XFeat(q), DescriptorsRef::XFeat(v)) => Ok(cosine_matches(q, v)),
+        (DescriptorsRef::Cells(q), DescriptorsRef::Cells(v)) => Ok(cosine_matches(q, v)),
         (q, v) => Err(VisionError::InvalidArgument(format!(
             "query keypoints are {} but the view's are {}: a map is verified with the features it stores",
             q.kind().name(),
@@ -118,20 +117,19 @@ pub(crate) fn mutual_matches(
     }
 }
 
-/// Mutual nearest neighbours of quantised XFeat descriptors: one faer product gives every
-/// cosine (the quantisation scale cancels in the argmax), then each query row's best view
-/// column is kept when that column's best row is the same.
-fn xfeat_matches(query: &[XFeatDescriptor], view: &[XFeatDescriptor]) -> Vec<DMatch> {
-    let to_f32 = |rows: &[XFeatDescriptor]| -> Vec<f32> {
+/// Mutual nearest neighbours of quantised unit descriptors (XFeat, cells): one faer product
+/// gives every cosine, then each query row's best view column is kept when that column's best
+/// row is the same.
+fn cosine_matches<const DIM: usize>(query: &[[i8; DIM]], view: &[[i8; DIM]]) -> Vec<DMatch> {
+    let to_f32 = |rows: &[[i8; DIM]]| -> Vec<f32> {
         rows.as_flattened()
             .iter()
             .map(|&v| f32::from(v) / 127.0)
             .collect()
     };
     let (q, v) = (to_f32(query), to_f32(view));
-    let dim = super::keypoints::XFEAT_DIM;
-    let lhs = MatRef::from_row_major_slice(&q, query.len(), dim);
-    let rhs = MatRef::from_row_major_slice(&v, view.len(), dim);
+    let lhs = MatRef::from_row_major_slice(&q, query.len(), DIM);
+    let rhs = MatRef::from_row_major_slice(&v, view.len(), DIM);
     let mut sim = FaerMat::<f32>::zeros(query.len(), view.len());
     matmul(
         sim.as_mut(),

@@ -25,6 +25,10 @@ pub type Descriptor = [u8; DESCRIPTOR_BYTES];
 pub const XFEAT_DIM: usize = 64;
 /// One XFeat descriptor: the unit 64-vector quantised as `round(127 x d)` (64 bytes).
 pub type XFeatDescriptor = [i8; XFEAT_DIM];
+/// Channels of one dense cell: MobileNetV2 block 13 (stride 16), the default ONNX model's `f13`.
+pub const CELL_DIM: usize = 96;
+/// One dense-cell descriptor, quantised as `round(127 x unit vector)` (96 bytes).
+pub type CellDescriptor = [i8; CELL_DIM];
 
 /// Which local features a set of keypoints carries.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
@@ -34,6 +38,10 @@ pub enum FeatureKind {
     Orb,
     /// XFeat (CVPR 2024): learned keypoints with 64-d descriptors, matched by cosine.
     XFeat,
+    /// Dense cells of the describer's own CNN (MobileNetV2 block 13, stride 16), from the
+    /// forward pass that makes the global descriptor (the Patch-NetVLAD idea); matched by
+    /// cosine. Positions are cell centres, so they verify places but are too coarse for poses.
+    Cells,
 }
 
 impl FeatureKind {
@@ -42,6 +50,7 @@ impl FeatureKind {
         match self {
             FeatureKind::Orb => "orb",
             FeatureKind::XFeat => "xfeat",
+            FeatureKind::Cells => "cells",
         }
     }
 }
@@ -53,6 +62,8 @@ pub enum Descriptors {
     Orb(Vec<Descriptor>),
     /// Quantised XFeat descriptors.
     XFeat(Vec<XFeatDescriptor>),
+    /// Quantised dense-cell descriptors.
+    Cells(Vec<CellDescriptor>),
 }
 
 impl Default for Descriptors {
@@ -67,6 +78,7 @@ impl Descriptors {
         match kind {
             FeatureKind::Orb => Descriptors::Orb(Vec::new()),
             FeatureKind::XFeat => Descriptors::XFeat(Vec::new()),
+            FeatureKind::Cells => Descriptors::Cells(Vec::new()),
         }
     }
 
@@ -90,6 +102,7 @@ impl Descriptors {
         match self {
             Descriptors::Orb(d) => DescriptorsRef::Orb(d),
             Descriptors::XFeat(d) => DescriptorsRef::XFeat(d),
+            Descriptors::Cells(d) => DescriptorsRef::Cells(d),
         }
     }
 
@@ -98,6 +111,7 @@ impl Descriptors {
         match (self, more) {
             (Descriptors::Orb(d), DescriptorsRef::Orb(m)) => d.extend_from_slice(m),
             (Descriptors::XFeat(d), DescriptorsRef::XFeat(m)) => d.extend_from_slice(m),
+            (Descriptors::Cells(d), DescriptorsRef::Cells(m)) => d.extend_from_slice(m),
             (own, more) => {
                 return Err(format!(
                     "{} descriptors cannot join {} descriptors",
@@ -115,6 +129,7 @@ impl Descriptors {
         match self {
             Descriptors::Orb(d) => std::borrow::Cow::Borrowed(d.as_flattened()),
             Descriptors::XFeat(d) => d.as_flattened().iter().map(|&v| v as u8).collect(),
+            Descriptors::Cells(d) => d.as_flattened().iter().map(|&v| v as u8).collect(),
         }
     }
 
@@ -123,6 +138,7 @@ impl Descriptors {
         match self {
             Descriptors::Orb(_) => DESCRIPTOR_BYTES,
             Descriptors::XFeat(_) => XFEAT_DIM,
+            Descriptors::Cells(_) => CELL_DIM,
         }
     }
 }
@@ -146,6 +162,8 @@ pub enum DescriptorsRef<'a> {
     Orb(&'a [Descriptor]),
     /// Quantised XFeat descriptors.
     XFeat(&'a [XFeatDescriptor]),
+    /// Quantised dense-cell descriptors.
+    Cells(&'a [CellDescriptor]),
 }
 
 impl<'a> DescriptorsRef<'a> {
@@ -154,6 +172,7 @@ impl<'a> DescriptorsRef<'a> {
         match self {
             DescriptorsRef::Orb(_) => FeatureKind::Orb,
             DescriptorsRef::XFeat(_) => FeatureKind::XFeat,
+            DescriptorsRef::Cells(_) => FeatureKind::Cells,
         }
     }
 
@@ -162,6 +181,7 @@ impl<'a> DescriptorsRef<'a> {
         match self {
             DescriptorsRef::Orb(d) => d.len(),
             DescriptorsRef::XFeat(d) => d.len(),
+            DescriptorsRef::Cells(d) => d.len(),
         }
     }
 
@@ -175,6 +195,7 @@ impl<'a> DescriptorsRef<'a> {
         match self {
             DescriptorsRef::Orb(d) => DescriptorsRef::Orb(&d[range]),
             DescriptorsRef::XFeat(d) => DescriptorsRef::XFeat(&d[range]),
+            DescriptorsRef::Cells(d) => DescriptorsRef::Cells(&d[range]),
         }
     }
 }

@@ -14,20 +14,23 @@
 //! with the most inliers is used to place the camera metrically ([`locate`]): a pose fix for
 //! the host's pose graph and, in metric mode, a measurement of the particles' position.
 
+mod cells;
 mod detector;
 mod geometry;
 mod keypoints;
 mod pose;
 pub mod xfeat;
 
+pub use cells::{cells_from_map, CELL_TAP, DEFAULT_CELLS};
 pub use detector::FeatureDetector;
 pub use geometry::{
     check_pair, spatial_check, FundamentalEstimator, PairCheck, PairOptions, SpatialCheck,
     MIN_MATCHES,
 };
 pub use keypoints::{
-    Descriptor, Descriptors, DescriptorsRef, FeatureKind, KeypointDetector, Keypoints,
-    KeypointsRef, ViewKeypoints, XFeatDescriptor, DESCRIPTOR_BYTES, MAX_KEYPOINTS, XFEAT_DIM,
+    CellDescriptor, Descriptor, Descriptors, DescriptorsRef, FeatureKind, KeypointDetector,
+    Keypoints, KeypointsRef, ViewKeypoints, XFeatDescriptor, CELL_DIM, DESCRIPTOR_BYTES,
+    MAX_KEYPOINTS, XFEAT_DIM,
 };
 pub use pose::{locate, LocateOptions, Located, PinholeCamera, MIN_PAIRS};
 pub use xfeat::{XFeatDetector, XFeatOptions, DEFAULT_XFEAT_KEYPOINTS};

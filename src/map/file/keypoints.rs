@@ -1,17 +1,20 @@
 //! Sections `view_keypoint_*` (1.2): each view's ORB keypoints, (1.3) their scene points, and
-//! (1.4) XFeat descriptors in place of ORB ones (`view_keypoint_xfeat`, I8, total x 64).
+//! (1.4) XFeat or dense-cell descriptors in place of ORB ones (`view_keypoint_xfeat`, I8,
+//! total x 64; `view_keypoint_cells`, I8, total x 96).
 
 use super::container::{le_bytes, OutTensor, OutTensors, TensorReader};
 use crate::map::{Map, MapError};
 use crate::verify::{
-    Descriptors, ViewKeypoints, XFeatDescriptor, DESCRIPTOR_BYTES, MAX_KEYPOINTS, XFEAT_DIM,
+    Descriptors, ViewKeypoints, CELL_DIM, DESCRIPTOR_BYTES, MAX_KEYPOINTS, XFEAT_DIM,
 };
 use safetensors::Dtype;
 
 /// Name of the ORB descriptor tensor (U8, total x 32).
 const ORB_TENSOR: &str = "view_keypoint_descriptors";
 /// Name of the XFeat descriptor tensor (I8, total x 64), since 1.4.
-pub(super) const XFEAT_TENSOR: &str = "view_keypoint_xfeat";
+const XFEAT_TENSOR: &str = "view_keypoint_xfeat";
+/// Name of the dense-cell descriptor tensor (I8, total x 96), since 1.4.
+const CELLS_TENSOR: &str = "view_keypoint_cells";
 
 /// Adds `view_keypoint_offsets`, `view_keypoint_points`, the descriptors (`_descriptors` for
 /// ORB, `_xfeat` for XFeat) and, when stored, `view_keypoint_world_points`.
@@ -22,6 +25,7 @@ pub(super) fn write<'a>(map: &'a Map, out: &mut OutTensors<'a>) {
     let (name, dtype) = match k.descriptors() {
         Descriptors::Orb(_) => (ORB_TENSOR, Dtype::U8),
         Descriptors::XFeat(_) => (XFEAT_TENSOR, Dtype::I8),
+        Descriptors::Cells(_) => (CELLS_TENSOR, Dtype::I8),
     };
     out.push((
         name,
@@ -92,38 +96,38 @@ pub(super) fn read(
         .map_err(corrupt)
 }
 
-/// The keypoint descriptors: exactly one of the ORB and the XFeat tensor, `total` rows.
+/// The keypoint descriptors: exactly one of the ORB, XFeat and cell tensors, `total` rows.
 fn read_descriptors(reader: &TensorReader<'_, '_>, total: usize) -> Result<Descriptors, MapError> {
-    match (reader.has(ORB_TENSOR), reader.has(XFEAT_TENSOR)) {
-        (true, false) => {
+    let present: Vec<&str> = [ORB_TENSOR, XFEAT_TENSOR, CELLS_TENSOR]
+        .into_iter()
+        .filter(|name| reader.has(name))
+        .collect();
+    match present[..] {
+        [ORB_TENSOR] => {
             let bytes = reader.get(ORB_TENSOR, Dtype::U8, &[total, DESCRIPTOR_BYTES])?;
-            Ok(Descriptors::Orb(
-                bytes
-                    .chunks_exact(DESCRIPTOR_BYTES)
-                    .map(|c| c.try_into().expect("32 bytes"))
-                    .collect(),
-            ))
+            Ok(Descriptors::Orb(rows(bytes, |b| b)))
         }
-        (false, true) => {
+        [XFEAT_TENSOR] => {
             let bytes = reader.get(XFEAT_TENSOR, Dtype::I8, &[total, XFEAT_DIM])?;
-            Ok(Descriptors::XFeat(
-                bytes
-                    .chunks_exact(XFEAT_DIM)
-                    .map(|c| {
-                        let mut row: XFeatDescriptor = [0; XFEAT_DIM];
-                        for (out, &b) in row.iter_mut().zip(c) {
-                            *out = b as i8;
-                        }
-                        row
-                    })
-                    .collect(),
-            ))
+            Ok(Descriptors::XFeat(rows(bytes, |b| b as i8)))
         }
-        (true, true) => Err(MapError::Corrupt(format!(
-            "view keypoints: both {ORB_TENSOR} and {XFEAT_TENSOR} are present; a map stores one kind"
+        [CELLS_TENSOR] => {
+            let bytes = reader.get(CELLS_TENSOR, Dtype::I8, &[total, CELL_DIM])?;
+            Ok(Descriptors::Cells(rows(bytes, |b| b as i8)))
+        }
+        [] => Err(MapError::Corrupt(format!(
+            "view keypoints: offsets but no descriptors ({ORB_TENSOR}, {XFEAT_TENSOR} or {CELLS_TENSOR})"
         ))),
-        (false, false) => Err(MapError::Corrupt(format!(
-            "view keypoints: offsets but neither {ORB_TENSOR} nor {XFEAT_TENSOR}"
+        _ => Err(MapError::Corrupt(format!(
+            "view keypoints: {present:?} are all present; a map stores one kind"
         ))),
     }
+}
+
+/// Rows of `N` values converted from the bytes of a tensor (whose shape was checked).
+fn rows<T: Copy + Default, const N: usize>(bytes: &[u8], convert: impl Fn(u8) -> T) -> Vec<[T; N]> {
+    bytes
+        .chunks_exact(N)
+        .map(|c| std::array::from_fn(|i| convert(c[i])))
+        .collect()
 }

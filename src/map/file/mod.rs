@@ -22,7 +22,8 @@
 //! | `view_keypoint_offsets` | U64 | N+1 | (1.2, optional) ranges of each view's keypoints |
 //! | `view_keypoint_points` | F32 | T x 2 | (1.2) keypoint pixel positions x, y |
 //! | `view_keypoint_descriptors` | U8 | T x 32 | (1.2) their ORB descriptors, or |
-//! | `view_keypoint_xfeat` | I8 | T x 64 | (1.4) their XFeat descriptors, `round(127 x unit)`; exactly one of the two |
+//! | `view_keypoint_xfeat` | I8 | T x 64 | (1.4) their XFeat descriptors, `round(127 x unit)`, or |
+//! | `view_keypoint_cells` | I8 | T x 96 | (1.4) dense cells of the describer's CNN (keypoints at cell centres); exactly one of the three |
 //! | `view_keypoint_world_points` | F32 | T x 3 | (1.3, optional) map-frame scene point of each keypoint, NaN when unknown |
 //!
 //! The only metadata key, `topoloc`, holds a JSON object with `format` (`"topoloc-map"`),

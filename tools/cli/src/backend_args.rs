@@ -51,6 +51,8 @@ pub enum LocalFeatures {
     Orb,
     /// XFeat (ONNX Runtime), 64-byte learned descriptors.
     Xfeat,
+    /// Dense cells of the describer's CNN (ONNX backend), from the same forward pass.
+    Cells,
 }
 
 impl From<LocalFeatures> for topoloc::verify::FeatureKind {
@@ -58,6 +60,7 @@ impl From<LocalFeatures> for topoloc::verify::FeatureKind {
         match f {
             LocalFeatures::Orb => Self::Orb,
             LocalFeatures::Xfeat => Self::XFeat,
+            LocalFeatures::Cells => Self::Cells,
         }
     }
 }

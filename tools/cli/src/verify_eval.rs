@@ -19,8 +19,8 @@ use std::time::Instant;
 use topoloc::describe::Describer;
 use topoloc::image::{read_rgb, ImageView, PixelFormat};
 use topoloc::verify::{
-    check_pair, spatial_check, FeatureDetector, FundamentalEstimator, PairOptions,
-    DEFAULT_KEYPOINTS,
+    cells_from_map, check_pair, spatial_check, FeatureDetector, FeatureKind, FundamentalEstimator,
+    PairOptions, CELL_TAP, DEFAULT_KEYPOINTS,
 };
 use topoloc::{LoadOptions, Map};
 
@@ -99,11 +99,15 @@ pub fn run(args: &VerifyEvalArgs) -> Result<()> {
         .cloned()
         .with_context(|| format!("{} stores no describer", args.map.display()))?;
     let mut describer = Describer::new(model, &args.runtime.describer_options(None))?;
-    let mut detector = FeatureDetector::new(
-        keypoints.kind(),
-        args.query_keypoints,
-        &args.runtime.xfeat_options(),
-    )?;
+    let kind = keypoints.kind();
+    let mut detector = match kind {
+        FeatureKind::Cells => None,
+        _ => Some(FeatureDetector::new(
+            kind,
+            args.query_keypoints,
+            &args.runtime.xfeat_options(),
+        )?),
+    };
     let view_image: Vec<usize> = map
         .views()
         .iter()
@@ -130,11 +134,29 @@ pub fn run(args: &VerifyEvalArgs) -> Result<()> {
         let image = ImageView::packed(w, h, PixelFormat::Rgb8, &rgb);
         let start = Instant::now();
         let mut descriptor = Vec::new();
-        describer.describe(&image, &mut descriptor)?;
-        times_describe.push(ms(start));
-        let start = Instant::now();
-        let query = detector.detect(&image)?;
-        times_detect.push(ms(start));
+        let query = match &mut detector {
+            Some(detector) => {
+                describer.describe(&image, &mut descriptor)?;
+                times_describe.push(ms(start));
+                let start = Instant::now();
+                let query = detector.detect(&image)?;
+                times_detect.push(ms(start));
+                query
+            }
+            None => {
+                let tap = describer.describe_with_tap(&image, &mut descriptor, CELL_TAP)?;
+                times_describe.push(ms(start));
+                let start = Instant::now();
+                let query = cells_from_map(
+                    &tap.values,
+                    [tap.channels, tap.height, tap.width],
+                    tap.cell_size,
+                    args.query_keypoints,
+                )?;
+                times_detect.push(ms(start));
+                query
+            }
+        };
         let mut scored: Vec<(usize, f32)> = (0..map.view_count())
             .map(|v| {
                 let row = map.view_descriptor(v as u32).expect("view in range");
