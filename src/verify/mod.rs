@@ -19,6 +19,7 @@ mod detector;
 mod geometry;
 mod keypoints;
 mod pose;
+mod relative;
 pub mod xfeat;
 
 pub use cells::{cells_from_map, CELL_TAP, DEFAULT_CELLS};
@@ -33,6 +34,7 @@ pub use keypoints::{
     MAX_KEYPOINTS, XFEAT_DIM,
 };
 pub use pose::{locate, LocateOptions, Located, PinholeCamera, MIN_PAIRS};
+pub use relative::{essential_pose, relative_pose, PoseRefusal, RelativePose, RelativePoseOptions};
 pub use xfeat::{XFeatDetector, XFeatOptions, DEFAULT_XFEAT_KEYPOINTS};
 
 /// Keypoints per view a map built from images stores by default, and a query detects.

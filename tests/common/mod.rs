@@ -88,3 +88,17 @@ pub fn smooth_chain_map(places: u32, dim: u32, step: f32) -> Map {
     }
     builder.build().unwrap()
 }
+
+/// A small deterministic generator (64-bit LCG), so tests need no RNG crate.
+pub struct Lcg(pub u64);
+
+impl Lcg {
+    /// The next value in [0, 1).
+    pub fn next(&mut self) -> f64 {
+        self.0 = self
+            .0
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (self.0 >> 11) as f64 / (1u64 << 53) as f64
+    }
+}

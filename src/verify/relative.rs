@@ -1,0 +1,431 @@
+//! Relative pose of a query camera against a matched keyframe's camera, with a covariance, for
+//! loop-closure hints.
+//!
+//! With the matched keyframe's scene points (in its camera frame) the pose is metric: a RANSAC
+//! perspective-n-point fit ([`super::locate`], the pose-fix solver) with `scale_known`. Without
+//! them it comes from an essential matrix (OpenCV's RANSAC five-point solver and its cheirality
+//! check, `recoverPose`): rotation and a unit translation direction, `scale_known == false`.
+//!
+//! The covariance is `sigma^2 (J^T J)^-1` at the solution, `J` the Jacobian of the inliers'
+//! residuals (reprojection error with points, Sampson distance without, both in pixels) with
+//! respect to a right perturbation `matched_T_query * Exp(xi)`, `xi = (rx, ry, rz, tx, ty, tz)`:
+//! GTSAM's Pose3 tangent order, rotation first (radians), then translation (metres, in the
+//! query camera frame); `sigma^2` is the inliers' mean squared residual. Without scale, the
+//! Sampson distance does not see the translation's length, so a unit-variance prior (1 m^2)
+//! is added along the translation direction: hosts estimate the scale themselves.
+
+use super::geometry::mutual_matches;
+use super::keypoints::KeypointsRef;
+use super::pose::{locate, LocateOptions, PinholeCamera};
+use crate::errors::VisionError;
+use nalgebra::{
+    Isometry3, Matrix3, Matrix6, Point3, Rotation3, Translation3, UnitQuaternion, Vector2, Vector3,
+    Vector6,
+};
+use opencv::calib3d;
+use opencv::core::{Mat, Point2d, Vector};
+use opencv::prelude::*;
+
+/// Options of [`relative_pose`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct RelativePoseOptions {
+    /// Fewest inliers for a pose. Default 30 (as pose fixes, [`LocateOptions`]).
+    pub min_inliers: u32,
+    /// Inlier threshold, pixels: reprojection error with points, epipolar distance without.
+    /// Default 1.5.
+    pub threshold_px: f64,
+    /// RANSAC iterations at most. Default 1000.
+    pub max_iterations: u32,
+    /// Without points: the smallest median angle between an inlier's two rays once the
+    /// rotation is removed; below it the views differ by a rotation only and the translation
+    /// direction is noise. Default 1 degree.
+    pub min_parallax_deg: f64,
+}
+
+impl Default for RelativePoseOptions {
+    fn default() -> Self {
+        Self {
+            min_inliers: 30,
+            threshold_px: 1.5,
+            max_iterations: 1000,
+            min_parallax_deg: 1.0,
+        }
+    }
+}
+
+impl RelativePoseOptions {
+    /// Fails with a message naming the field out of range.
+    pub fn validate(&self) -> Result<(), String> {
+        if !(8..=10_000).contains(&self.min_inliers) {
+            return Err(format!(
+                "min_inliers is {}, must lie in 8..=10000",
+                self.min_inliers
+            ));
+        }
+        if !(self.threshold_px.is_finite() && self.threshold_px > 0.0) {
+            return Err("threshold_px must be finite and > 0".into());
+        }
+        if !(1..=100_000).contains(&self.max_iterations) {
+            return Err("max_iterations must lie in 1..=100000".into());
+        }
+        if !(self.min_parallax_deg.is_finite() && (0.0..90.0).contains(&self.min_parallax_deg)) {
+            return Err("min_parallax_deg must lie in [0, 90)".into());
+        }
+        Ok(())
+    }
+}
+
+/// A relative pose found by [`relative_pose`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RelativePose {
+    /// The query camera in the matched camera's frame (optical frames: z forward, x right,
+    /// y down). Without scale its translation has unit length.
+    pub matched_t_query: Isometry3<f64>,
+    /// True when the translation is metric (the matched keyframe's scene points were used).
+    pub scale_known: bool,
+    /// Correspondences consistent with the pose.
+    pub inliers: u32,
+    /// Root mean square residual of the inliers, pixels.
+    pub rms_px: f64,
+    /// Covariance of the right perturbation, GTSAM Pose3 order (rotation rad, translation m).
+    pub covariance: Matrix6<f64>,
+}
+
+/// Why [`relative_pose`] gave no pose (a hint's gate status names it).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum PoseRefusal {
+    /// Fewer usable correspondences than `min_inliers`.
+    TooFewMatches {
+        /// Correspondences found (with a scene point, when points are used).
+        found: u32,
+    },
+    /// No pose with `min_inliers` inliers (RANSAC found no consensus, or a degenerate fit).
+    NoConsensus {
+        /// Inliers of the best fit.
+        inliers: u32,
+    },
+    /// The two views differ by a rotation only (no points): the direction is unobservable.
+    TooLittleParallax {
+        /// Median parallax of the inliers, degrees.
+        degrees: f64,
+    },
+}
+
+/// Matches `query` to `matched` (mutual nearest neighbours; ORB within `max_hamming` bits) and
+/// finds the relative pose, metric when `matched_points` gives each matched keypoint's scene
+/// point in the matched camera's frame (NaN when unknown). Camera and options are assumed
+/// valid; `matched_points` of another length than the keypoints is an invalid argument.
+pub fn relative_pose(
+    query: KeypointsRef<'_>,
+    matched: KeypointsRef<'_>,
+    matched_points: Option<&[[f32; 3]]>,
+    camera: &PinholeCamera,
+    max_hamming: u32,
+    options: &RelativePoseOptions,
+) -> Result<Result<RelativePose, PoseRefusal>, VisionError> {
+    if let Some(points) = matched_points {
+        return metric_pose(query, matched, points, camera, max_hamming, options);
+    }
+    let matches = mutual_matches(query, matched, max_hamming)?;
+    let query_px: Vec<[f32; 2]> = matches
+        .iter()
+        .map(|m| query.points[m.query_idx as usize])
+        .collect();
+    let matched_px: Vec<[f32; 2]> = matches
+        .iter()
+        .map(|m| matched.points[m.train_idx as usize])
+        .collect();
+    essential_pose(&query_px, &matched_px, camera, options)
+}
+
+/// The metric case: PnP against the matched keyframe's points, then the covariance from the
+/// reprojection residuals of the pairs within the threshold.
+fn metric_pose(
+    query: KeypointsRef<'_>,
+    matched: KeypointsRef<'_>,
+    points: &[[f32; 3]],
+    camera: &PinholeCamera,
+    max_hamming: u32,
+    options: &RelativePoseOptions,
+) -> Result<Result<RelativePose, PoseRefusal>, VisionError> {
+    let locate_options = LocateOptions {
+        min_inliers: options.min_inliers,
+        reprojection_px: options.threshold_px as f32,
+        max_iterations: options.max_iterations,
+    };
+    let matches = mutual_matches(query, matched, max_hamming)?;
+    let pairs: Vec<([f32; 2], [f32; 3])> = matches
+        .iter()
+        .map(|m| {
+            (
+                query.points[m.query_idx as usize],
+                points[m.train_idx as usize],
+            )
+        })
+        .filter(|(_, p)| p[0].is_finite())
+        .collect();
+    if pairs.len() < options.min_inliers as usize {
+        return Ok(Err(PoseRefusal::TooFewMatches {
+            found: pairs.len() as u32,
+        }));
+    }
+    let Some(located) = locate(query, matched, points, camera, max_hamming, &locate_options)?
+    else {
+        return Ok(Err(PoseRefusal::NoConsensus { inliers: 0 }));
+    };
+    let pose = located.world_t_optical;
+    let residual = |pose: &Isometry3<f64>, (pixel, scene): &([f32; 2], [f32; 3])| {
+        reprojection(camera, pose, pixel, scene)
+    };
+    let inliers: Vec<&([f32; 2], [f32; 3])> = pairs
+        .iter()
+        .filter(|pair| residual(&pose, pair).is_some_and(|r| r.norm() <= options.threshold_px))
+        .collect();
+    let covariance = covariance(
+        &pose,
+        &inliers,
+        |p, pair| residual(p, pair).map_or(vec![1e3, 1e3], |r| vec![r.x, r.y]),
+        None,
+    );
+    Ok(Ok(RelativePose {
+        matched_t_query: pose,
+        scale_known: true,
+        inliers: located.inliers,
+        rms_px: covariance.1,
+        covariance: covariance.0,
+    }))
+}
+
+/// Reprojection error (pixels) of `scene` (matched frame) in the query camera at
+/// `matched_t_query`; `None` behind the camera.
+fn reprojection(
+    camera: &PinholeCamera,
+    matched_t_query: &Isometry3<f64>,
+    pixel: &[f32; 2],
+    scene: &[f32; 3],
+) -> Option<Vector2<f64>> {
+    let p = matched_t_query.inverse_transform_point(&Point3::new(
+        f64::from(scene[0]),
+        f64::from(scene[1]),
+        f64::from(scene[2]),
+    ));
+    (p.z > 1e-9).then(|| {
+        Vector2::new(
+            camera.fx * p.x / p.z + camera.cx - f64::from(pixel[0]),
+            camera.fy * p.y / p.z + camera.cy - f64::from(pixel[1]),
+        )
+    })
+}
+
+/// The unscaled case from pixel correspondences (`query_px[i]` matches `matched_px[i]`).
+pub fn essential_pose(
+    query_px: &[[f32; 2]],
+    matched_px: &[[f32; 2]],
+    camera: &PinholeCamera,
+    options: &RelativePoseOptions,
+) -> Result<Result<RelativePose, PoseRefusal>, VisionError> {
+    let n = query_px.len().min(matched_px.len());
+    if n < options.min_inliers as usize {
+        return Ok(Err(PoseRefusal::TooFewMatches { found: n as u32 }));
+    }
+    let cv = |p: &[f32; 2]| Point2d::new(f64::from(p[0]), f64::from(p[1]));
+    let from: Vector<Point2d> = matched_px[..n].iter().map(cv).collect();
+    let to: Vector<Point2d> = query_px[..n].iter().map(cv).collect();
+    let k = Mat::from_slice_2d(&[
+        [camera.fx, 0.0, camera.cx],
+        [0.0, camera.fy, camera.cy],
+        [0.0, 0.0, 1.0],
+    ])?;
+    let mut mask = Mat::default();
+    let e = calib3d::find_essential_mat(
+        &from,
+        &to,
+        &k,
+        calib3d::RANSAC,
+        0.999,
+        options.threshold_px,
+        options.max_iterations as i32,
+        &mut mask,
+    )?;
+    if e.rows() != 3 || e.cols() != 3 {
+        // OpenCV stacks several solutions or none for degenerate input.
+        return Ok(Err(PoseRefusal::NoConsensus { inliers: 0 }));
+    }
+    let (mut r, mut t) = (Mat::default(), Mat::default());
+    let good = calib3d::recover_pose_estimated(&e, &from, &to, &k, &mut r, &mut t, &mut mask)?;
+    if good < options.min_inliers as i32 {
+        return Ok(Err(PoseRefusal::NoConsensus {
+            inliers: good.max(0) as u32,
+        }));
+    }
+    let rotation = matrix3(&r)?;
+    let direction = Vector3::new(
+        *t.at_2d::<f64>(0, 0)?,
+        *t.at_2d::<f64>(1, 0)?,
+        *t.at_2d::<f64>(2, 0)?,
+    );
+    // OpenCV: p_query = R p_matched + t, i.e. query_T_matched; invert it.
+    let query_t_matched = Isometry3::from_parts(
+        Translation3::from(direction.normalize()),
+        UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(rotation)),
+    );
+    let mut pose = query_t_matched.inverse();
+    pose.translation.vector = pose.translation.vector.normalize();
+    let inliers: Vec<([f32; 2], [f32; 2])> = (0..n)
+        .filter(|&i| mask.at::<u8>(i as i32).is_ok_and(|&m| m != 0))
+        .map(|i| (query_px[i], matched_px[i]))
+        .collect();
+    let parallax = median_parallax(camera, &pose, &inliers);
+    if parallax < options.min_parallax_deg {
+        return Ok(Err(PoseRefusal::TooLittleParallax { degrees: parallax }));
+    }
+    let refs: Vec<&([f32; 2], [f32; 2])> = inliers.iter().collect();
+    let along = pose.rotation.inverse() * pose.translation.vector;
+    let (covariance, rms) = covariance(
+        &pose,
+        &refs,
+        |p, (q, m)| vec![sampson_px(camera, p, q, m)],
+        Some(along.normalize()),
+    );
+    Ok(Ok(RelativePose {
+        matched_t_query: pose,
+        scale_known: false,
+        inliers: inliers.len() as u32,
+        rms_px: rms,
+        covariance,
+    }))
+}
+
+fn matrix3(m: &Mat) -> Result<Matrix3<f64>, VisionError> {
+    let mut out = Matrix3::zeros();
+    for r in 0..3 {
+        for c in 0..3 {
+            out[(r, c)] = *m.at_2d::<f64>(r as i32, c as i32)?;
+        }
+    }
+    Ok(out)
+}
+
+/// The bearing (unit ray in the camera frame) of a pixel.
+fn bearing(camera: &PinholeCamera, p: &[f32; 2]) -> Vector3<f64> {
+    Vector3::new(
+        (f64::from(p[0]) - camera.cx) / camera.fx,
+        (f64::from(p[1]) - camera.cy) / camera.fy,
+        1.0,
+    )
+    .normalize()
+}
+
+/// Median angle (degrees) between each inlier's matched ray and its query ray rotated into
+/// the matched frame: zero for a pure rotation.
+fn median_parallax(
+    camera: &PinholeCamera,
+    matched_t_query: &Isometry3<f64>,
+    inliers: &[([f32; 2], [f32; 2])],
+) -> f64 {
+    let mut angles: Vec<f64> = inliers
+        .iter()
+        .map(|(q, m)| {
+            let rotated = matched_t_query.rotation * bearing(camera, q);
+            rotated
+                .dot(&bearing(camera, m))
+                .clamp(-1.0, 1.0)
+                .acos()
+                .to_degrees()
+        })
+        .collect();
+    if angles.is_empty() {
+        return 0.0;
+    }
+    angles.sort_by(f64::total_cmp);
+    angles[angles.len() / 2]
+}
+
+/// Sampson distance (pixels) of a correspondence under the pose's fundamental matrix.
+fn sampson_px(
+    camera: &PinholeCamera,
+    matched_t_query: &Isometry3<f64>,
+    q: &[f32; 2],
+    m: &[f32; 2],
+) -> f64 {
+    let query_t_matched = matched_t_query.inverse();
+    let t = query_t_matched.translation.vector;
+    let e = t.cross_matrix() * query_t_matched.rotation.to_rotation_matrix().matrix();
+    let k_inv = Matrix3::new(
+        1.0 / camera.fx,
+        0.0,
+        -camera.cx / camera.fx,
+        0.0,
+        1.0 / camera.fy,
+        -camera.cy / camera.fy,
+        0.0,
+        0.0,
+        1.0,
+    );
+    let f = k_inv.transpose() * e * k_inv;
+    let x1 = Vector3::new(f64::from(m[0]), f64::from(m[1]), 1.0);
+    let x2 = Vector3::new(f64::from(q[0]), f64::from(q[1]), 1.0);
+    let fx1 = f * x1;
+    let ftx2 = f.transpose() * x2;
+    let denominator = fx1.x.powi(2) + fx1.y.powi(2) + ftx2.x.powi(2) + ftx2.y.powi(2);
+    if denominator <= 0.0 {
+        return 0.0;
+    }
+    x2.dot(&fx1) / denominator.sqrt()
+}
+
+/// `sigma^2 (J^T J)^-1` and the RMS residual, `J` by central differences of `residuals` under
+/// right perturbations of `pose`; with `prior_along`, a unit-information prior on the
+/// translation along that (unit, query-frame) direction. Singular information gives an
+/// infinite covariance.
+fn covariance<T>(
+    pose: &Isometry3<f64>,
+    items: &[&T],
+    residuals: impl Fn(&Isometry3<f64>, &T) -> Vec<f64>,
+    prior_along: Option<Vector3<f64>>,
+) -> (Matrix6<f64>, f64) {
+    const STEP: f64 = 1e-6;
+    let perturbed = |xi: &Vector6<f64>| {
+        let delta = Isometry3::from_parts(
+            Translation3::new(xi[3], xi[4], xi[5]),
+            UnitQuaternion::from_scaled_axis(Vector3::new(xi[0], xi[1], xi[2])),
+        );
+        pose * delta
+    };
+    let mut information = Matrix6::<f64>::zeros();
+    let (mut squared, mut count) = (0.0, 0usize);
+    for item in items {
+        let base = residuals(pose, item);
+        squared += base.iter().map(|r| r * r).sum::<f64>();
+        count += base.len();
+        let mut jacobian = vec![Vector6::<f64>::zeros(); base.len()];
+        for k in 0..6 {
+            let mut xi = Vector6::zeros();
+            xi[k] = STEP;
+            let plus = residuals(&perturbed(&xi), item);
+            xi[k] = -STEP;
+            let minus = residuals(&perturbed(&xi), item);
+            for (row, (p, m)) in jacobian.iter_mut().zip(plus.iter().zip(&minus)) {
+                row[k] = (p - m) / (2.0 * STEP);
+            }
+        }
+        for row in &jacobian {
+            information += row * row.transpose();
+        }
+    }
+    let variance = if count > 0 {
+        (squared / count as f64).max(1e-6)
+    } else {
+        1.0
+    };
+    let mut scaled = information / variance;
+    if let Some(d) = prior_along {
+        let mut v = Vector6::zeros();
+        v.fixed_rows_mut::<3>(3).copy_from(&d);
+        scaled += v * v.transpose();
+    }
+    let covariance = scaled
+        .try_inverse()
+        .unwrap_or_else(|| Matrix6::from_element(f64::INFINITY));
+    (covariance, variance.sqrt())
+}
