@@ -7,6 +7,7 @@ mod common;
 
 use common::Lcg;
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
+use topoloc::errors::VisionError;
 use topoloc::verify::{
     essential_pose, relative_pose, Descriptor, Keypoints, PinholeCamera, PoseRefusal, RelativePose,
     RelativePoseOptions,
@@ -191,5 +192,19 @@ fn pure_rotation_and_too_few_matches_are_refused() {
     assert_eq!(
         metric(20, 0, 5),
         Err(PoseRefusal::TooFewMatches { found: 20 })
+    );
+    let (q, m, s) = scene(40, 0, &truth(), 6);
+    let (query, matched) = (keypoints(&q), keypoints(&m));
+    let short = relative_pose(
+        query.as_ref(),
+        matched.as_ref(),
+        Some(&s[..39]),
+        &CAMERA,
+        64,
+        &RelativePoseOptions::default(),
+    );
+    assert!(
+        matches!(short, Err(VisionError::InvalidArgument(ref m)) if m.contains("39 scene points")),
+        "{short:?}"
     );
 }

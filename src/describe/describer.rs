@@ -339,9 +339,7 @@ impl Extractor {
     pub fn extract(&mut self, image: &ImageView<'_>) -> Result<RawFeatures, VisionError> {
         image.validate()?;
         if is_constant(image) {
-            return Err(VisionError::Uninformative(format!(
-                "every pixel lies within {CONSTANT_IMAGE_RANGE} grey levels (blank or constant image)"
-            )));
+            return Err(constant_image());
         }
         match self.run(image)? {
             RawFeatures::Local(l) if l.count() == 0 => Err(VisionError::Uninformative(
@@ -390,6 +388,13 @@ impl Extractor {
             Engine::Vlad(local) => RawFeatures::Local(local.extract(image)?),
         })
     }
+}
+
+/// The error for an image without content.
+fn constant_image() -> VisionError {
+    VisionError::Uninformative(format!(
+        "every pixel lies within {CONSTANT_IMAGE_RANGE} grey levels (blank or constant image)"
+    ))
 }
 
 /// Images whose pixel values all lie within this many grey levels carry no place information.
@@ -651,9 +656,7 @@ impl Describer {
     ) -> Result<DenseTap, VisionError> {
         let (raw, informative, dense) = self.extractor.extract_with_tap(image, tap)?;
         if !informative {
-            return Err(VisionError::Uninformative(format!(
-                "every pixel lies within {CONSTANT_IMAGE_RANGE} grey levels (blank or constant image)"
-            )));
+            return Err(constant_image());
         }
         self.project(&raw, out)?;
         Ok(dense)

@@ -141,12 +141,23 @@ pub fn locate(
         )));
     }
     let (image_points, object_points) = scene_pairs(query, view, view_world_points, max_hamming)?;
+    locate_pairs(&image_points, &object_points, camera, options)
+}
+
+/// The pose fit of [`locate`] on given 2D-3D pairs (query pixels, scene points); `None` when
+/// fewer than `options.min_inliers` pairs agree on one pose or the fit is degenerate.
+pub(super) fn locate_pairs(
+    image_points: &Vector<Point2f>,
+    object_points: &Vector<Point3f>,
+    camera: &PinholeCamera,
+    options: &LocateOptions,
+) -> Result<Option<Located>, VisionError> {
     let needed = (options.min_inliers as usize).max(MIN_PAIRS);
     if object_points.len() < needed {
         return Ok(None);
     }
     let k = camera.matrix()?;
-    let Some(fit) = ransac_pose(&object_points, &image_points, &k, options)? else {
+    let Some(fit) = ransac_pose(object_points, image_points, &k, options)? else {
         return Ok(None);
     };
     let count = fit.object_inliers.len() as u32;

@@ -2,7 +2,7 @@
 //! loop-closure hints.
 //!
 //! With the matched keyframe's scene points (in its camera frame) the pose is metric: a RANSAC
-//! perspective-n-point fit ([`super::locate`], the pose-fix solver) with `scale_known`. Without
+//! perspective-n-point fit (the pose-fix solver of [`super::locate`]) with `scale_known`. Without
 //! them it comes from an essential matrix (OpenCV's RANSAC five-point solver and its cheirality
 //! check, `recoverPose`): rotation and a unit translation direction, `scale_known == false`.
 //!
@@ -16,14 +16,14 @@
 
 use super::geometry::mutual_matches;
 use super::keypoints::KeypointsRef;
-use super::pose::{locate, LocateOptions, PinholeCamera};
+use super::pose::{locate_pairs, LocateOptions, PinholeCamera};
 use crate::errors::VisionError;
 use nalgebra::{
     Isometry3, Matrix3, Matrix6, Point3, Rotation3, Translation3, UnitQuaternion, Vector2, Vector3,
     Vector6,
 };
 use opencv::calib3d;
-use opencv::core::{Mat, Point2d, Vector};
+use opencv::core::{Mat, Point2d, Point2f, Point3f, Vector};
 use opencv::prelude::*;
 
 /// Options of [`relative_pose`].
@@ -138,8 +138,9 @@ pub fn relative_pose(
     essential_pose(&query_px, &matched_px, camera, options)
 }
 
-/// The metric case: PnP against the matched keyframe's points, then the covariance from the
-/// reprojection residuals of the pairs within the threshold.
+/// The metric case: PnP against the matched keyframe's points (matched once, the pairs
+/// handed to the pose-fix solver), then the covariance from the reprojection residuals of the
+/// pairs within the threshold.
 fn metric_pose(
     query: KeypointsRef<'_>,
     matched: KeypointsRef<'_>,
@@ -153,6 +154,13 @@ fn metric_pose(
         reprojection_px: options.threshold_px as f32,
         max_iterations: options.max_iterations,
     };
+    if points.len() != matched.points.len() {
+        return Err(VisionError::InvalidArgument(format!(
+            "{} scene points for {} matched keypoints",
+            points.len(),
+            matched.points.len()
+        )));
+    }
     let matches = mutual_matches(query, matched, max_hamming)?;
     let pairs: Vec<([f32; 2], [f32; 3])> = matches
         .iter()
@@ -169,7 +177,15 @@ fn metric_pose(
             found: pairs.len() as u32,
         }));
     }
-    let Some(located) = locate(query, matched, points, camera, max_hamming, &locate_options)?
+    let image_points: Vector<Point2f> = pairs
+        .iter()
+        .map(|(p, _)| Point2f::new(p[0], p[1]))
+        .collect();
+    let object_points: Vector<Point3f> = pairs
+        .iter()
+        .map(|(_, s)| Point3f::new(s[0], s[1], s[2]))
+        .collect();
+    let Some(located) = locate_pairs(&image_points, &object_points, camera, &locate_options)?
     else {
         return Ok(Err(PoseRefusal::NoConsensus { inliers: 0 }));
     };

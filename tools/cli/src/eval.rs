@@ -461,7 +461,7 @@ fn check_same_graph(map: &Map, map_path: &Path, dataset: &Dataset) -> Result<()>
 }
 
 /// Source image index of every view (its keyframe id; the view index when absent).
-fn view_image_indices(map: &Map) -> Vec<usize> {
+pub fn view_image_indices(map: &Map) -> Vec<usize> {
     map.views()
         .iter()
         .enumerate()

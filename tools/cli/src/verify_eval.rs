@@ -10,6 +10,7 @@
 //! - the medians of describe, detect and per-candidate check times (this thread alone).
 
 use crate::backend_args::{image_files, RuntimeArgs};
+use crate::eval::view_image_indices;
 use crate::process::median_and_p90;
 use anyhow::{bail, Context, Result};
 use clap::Args;
@@ -108,12 +109,7 @@ pub fn run(args: &VerifyEvalArgs) -> Result<()> {
             &args.runtime.xfeat_options(),
         )?),
     };
-    let view_image: Vec<usize> = map
-        .views()
-        .iter()
-        .enumerate()
-        .map(|(v, r)| r.keyframe_id.map_or(v, |k| k as usize))
-        .collect();
+    let view_image = view_image_indices(&map);
     let files = image_files(&args.images)?;
     let pair = PairOptions {
         estimator: if args.magsac {
@@ -210,12 +206,13 @@ fn dot(a: &[f32], b: &[f32]) -> f32 {
     a.iter().zip(b).map(|(x, y)| x * y).sum()
 }
 
-fn median(values: &mut [f64]) -> f64 {
+/// Median of counts, NaN when there are none.
+fn median(values: &[f64]) -> f64 {
     if values.is_empty() {
-        return f64::NAN;
+        f64::NAN
+    } else {
+        median_and_p90(values).0
     }
-    values.sort_by(f64::total_cmp);
-    values[values.len() / 2]
 }
 
 /// The candidate ranked first by `key` (ties: the earlier in appearance order).
@@ -277,8 +274,7 @@ fn report(
     }
     let n = results.len().max(1) as f64;
     let [r1_appearance, r1_gc, r1_sgc] = hits.map(|h| h as f64 / n);
-    let (right_median, wrong_median, far_median) =
-        (median(&mut right), median(&mut wrong), median(&mut far));
+    let (right_median, wrong_median, far_median) = (median(&right), median(&wrong), median(&far));
     let [describe, detect, check, spatial] = times.map(|t| median_and_p90(t).0);
     let kind = map.keypoints().map(|k| k.kind().name()).unwrap_or("none");
     let out = json!({
