@@ -365,6 +365,48 @@ fn keypoint_counts_and_positions_are_bounded() {
 }
 
 #[test]
+fn keypoint_descriptors_are_exactly_one_kind_of_the_right_shape() {
+    let bytes = image_map_bytes();
+    let views = load(bytes).unwrap().view_count();
+    let orb = with_keypoints(bytes, &vec![3u64; views], [10.0, 20.0]);
+    let n = 3 * views;
+    // XFeat and cell descriptors (1.4) load in place of ORB ones.
+    for (name, width) in [("view_keypoint_xfeat", 64), ("view_keypoint_cells", 96)] {
+        let learned = edited(&orb, |_, t| {
+            t.remove("view_keypoint_descriptors");
+            t.insert(
+                name.into(),
+                (Dtype::I8, vec![n, width], vec![3u8; n * width]),
+            );
+        });
+        assert!(load(&learned).is_ok(), "{name}");
+        // Two kinds at once, a wrong width, or a wrong dtype are corrupt.
+        let both = edited(&learned, |_, t| {
+            t.insert(
+                "view_keypoint_descriptors".into(),
+                (Dtype::U8, vec![n, 32], vec![7u8; n * 32]),
+            );
+        });
+        expect_corrupt(&both, "one kind");
+        let narrow = edited(&learned, |_, t| {
+            t.insert(name.into(), (Dtype::I8, vec![n, 32], vec![3u8; n * 32]));
+        });
+        expect_corrupt(&narrow, name);
+        let unsigned = edited(&learned, |_, t| {
+            t.insert(
+                name.into(),
+                (Dtype::U8, vec![n, width], vec![3u8; n * width]),
+            );
+        });
+        expect_corrupt(&unsigned, name);
+    }
+    let none = edited(&orb, |_, t| {
+        t.remove("view_keypoint_descriptors");
+    });
+    expect_corrupt(&none, "no descriptors");
+}
+
+#[test]
 fn nul_bytes_in_strings_are_refused() {
     let bytes = chain_map(3, 2, 8).to_bytes().unwrap();
     for (path, value) in [
