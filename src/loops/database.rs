@@ -459,6 +459,18 @@ impl KeyframeDatabase {
         Ok(self.records[r].place)
     }
 
+    /// The camera pose of a keyframe, `world_T_camera` (`world_T_body * body_T_camera`), when
+    /// keyframes carry poses.
+    pub fn world_t_camera(&self, id: u64) -> Result<Option<Isometry3<f64>>, LoopsError> {
+        let r = self.index_of(id).ok_or(LoopsError::UnknownKeyframe(id))?;
+        Ok(self.records[r].world_t_camera)
+    }
+
+    /// True when places `a` and `b` are the same or linked.
+    pub fn same_or_linked(&self, a: PlaceId, b: PlaceId) -> bool {
+        a == b || self.edges.contains(&(a.min(b), a.max(b)))
+    }
+
     /// Place links `(a, b)`, `a < b`.
     pub fn edges(&self) -> impl Iterator<Item = (PlaceId, PlaceId)> + '_ {
         self.edges.iter().copied()

@@ -25,6 +25,10 @@ pub enum LoopsError {
     /// A timestamp or pose is NaN or infinite; the message names the field.
     #[error("non-finite value: {0}")]
     NonFinite(String),
+    /// A keyframe's local features are unusable (counts, positions, kind, scene points); the
+    /// message names the field.
+    #[error("bad keyframe features: {0}")]
+    InvalidKeyframe(String),
     /// Building, saving or reading the map the database is stored as failed.
     #[error(transparent)]
     Map(#[from] MapError),

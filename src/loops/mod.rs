@@ -5,10 +5,15 @@
 //!
 //! What is here: [`KeyframeDatabase`] (add, loop candidates excluding recent keyframes,
 //! relocalization candidates, erase, save as a topoloc map and reload it for a later session).
-//! Verified loop-closure hints (relative pose, covariance, gates) build on its candidates.
+//! [`LoopDetector`] keeps each keyframe's local features beside it and turns the candidates
+//! into verified, gated loop-closure hints with relative poses and covariances.
 
 mod database;
 mod error;
+mod hints;
 
 pub use database::{Added, DatabaseOptions, KeyframeDatabase, KeyframeEntry, LoopQuery, Match};
 pub use error::LoopsError;
+pub use hints::{
+    Gate, HintOptions, KeyframeFeatures, LoopDetector, LoopHint, OdometryGate, Processed,
+};

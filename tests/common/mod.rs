@@ -2,6 +2,7 @@
 
 #![allow(dead_code)]
 
+pub mod correspondences;
 pub mod images;
 
 use nalgebra::{Isometry3, Point3, Vector3};

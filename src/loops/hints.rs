@@ -1,0 +1,504 @@
+//! Verified loop-closure hints: for each new keyframe, the database's loop candidates (recent
+//! keyframes excluded) are checked geometrically against the keyframe's local features, and
+//! the best one becomes a hint only when it passes every gate, in this order:
+//!
+//! 1. a candidate exists outside the exclusion window ([`Gate::NoCandidate`]);
+//! 2. it has at least `min_inliers` fundamental-matrix inliers ([`Gate::TooFewInliers`]);
+//! 3. the best candidates of the last `consistent_keyframes` keyframes lie in the same place or
+//!    linked places ([`Gate::Inconsistent`], ORB-SLAM's consistency groups on the place graph);
+//! 4. with camera intrinsics and point-accurate features, a relative pose is found
+//!    ([`Gate::NoPose`]; dense cells verify but give no pose);
+//! 5. with odometry poses on both keyframes, the hint's pose agrees with the odometry's
+//!    relative pose (VINS-Fusion's loop check: |delta yaw| and |delta t| bounds,
+//!    [`Gate::Odometry`]).
+//!
+//! At most one hint per keyframe. A refused candidate is reported with the gate that refused
+//! it, so the host can log why no loop was closed. Errors (bad features, keyframes out of
+//! order, duplicate ids) leave the detector exactly as it was.
+
+use super::database::{Added, KeyframeDatabase, KeyframeEntry, LoopQuery};
+use super::error::LoopsError;
+use crate::map::PlaceId;
+use crate::verify::{
+    check_pair, relative_pose, FeatureKind, FundamentalEstimator, Keypoints, PairOptions,
+    PinholeCamera, PoseRefusal, RelativePose, RelativePoseOptions,
+};
+use nalgebra::Isometry3;
+use std::collections::HashMap;
+
+/// The odometry agreement gate: bounds on the difference between the hint's relative pose and
+/// the host's odometry between the two keyframes.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct OdometryGate {
+    /// Largest rotation difference, degrees. Default 30 (VINS-Fusion's loop_fusion).
+    pub max_rotation_deg: f64,
+    /// Largest translation difference, metres (metric hints only). Default 20 (VINS-Fusion).
+    pub max_translation_m: f64,
+}
+
+impl Default for OdometryGate {
+    fn default() -> Self {
+        Self {
+            max_rotation_deg: 30.0,
+            max_translation_m: 20.0,
+        }
+    }
+}
+
+/// How hints are found and gated.
+#[derive(Clone, Debug, PartialEq)]
+pub struct HintOptions {
+    /// Loop candidates verified per keyframe, most similar first. Default 5.
+    pub candidates: usize,
+    /// Keyframes with an id within this many of the query's are never candidates (DBoW2's
+    /// `max_id = id - window`). Default 30.
+    pub exclude_recent_ids: u64,
+    /// Keyframes less than this many seconds older than the query are never candidates.
+    /// Default 10.
+    pub exclude_recent_s: f64,
+    /// Fewest inliers of an accepted candidate. Default 30.
+    pub min_inliers: u32,
+    /// Consecutive keyframes whose best candidates must agree (same or linked place),
+    /// the current one included. Default 3.
+    pub consistent_keyframes: usize,
+    /// The odometry agreement gate (applied when both keyframes have poses and the hint a pose).
+    pub odometry: Option<OdometryGate>,
+    /// Matching and fundamental-matrix fit: MAGSAC++ at 1.5 px, 1,000 iterations by default
+    /// (the fit that re-ranked Gardens Point best, BENCHMARKS.md).
+    pub pair: PairOptions,
+    /// Intrinsics of the camera (the same for every keyframe); without them hints have no pose.
+    pub camera: Option<PinholeCamera>,
+    /// The relative pose fit.
+    pub pose: RelativePoseOptions,
+}
+
+impl Default for HintOptions {
+    fn default() -> Self {
+        Self {
+            candidates: 5,
+            exclude_recent_ids: 30,
+            exclude_recent_s: 10.0,
+            min_inliers: 30,
+            consistent_keyframes: 3,
+            odometry: Some(OdometryGate::default()),
+            pair: PairOptions {
+                estimator: FundamentalEstimator::Magsac,
+                max_iterations: 1000,
+                ..PairOptions::default()
+            },
+            camera: None,
+            pose: RelativePoseOptions::default(),
+        }
+    }
+}
+
+impl HintOptions {
+    /// Fails with [`LoopsError::InvalidOption`] naming the field out of range.
+    pub fn validate(&self) -> Result<(), LoopsError> {
+        let bad = |m: String| Err(LoopsError::InvalidOption(m));
+        if !(1..=64).contains(&self.candidates) {
+            return bad(format!(
+                "candidates is {}, must lie in 1..=64",
+                self.candidates
+            ));
+        }
+        if !(self.exclude_recent_s.is_finite() && self.exclude_recent_s >= 0.0) {
+            return bad("exclude_recent_s must be finite and >= 0".into());
+        }
+        if !(8..=10_000).contains(&self.min_inliers) {
+            return bad(format!(
+                "min_inliers is {}, must lie in 8..=10000",
+                self.min_inliers
+            ));
+        }
+        if !(1..=100).contains(&self.consistent_keyframes) {
+            return bad(format!(
+                "consistent_keyframes is {}, must lie in 1..=100",
+                self.consistent_keyframes
+            ));
+        }
+        if let Some(g) = &self.odometry {
+            let positive = |v: f64| v.is_finite() && v > 0.0;
+            if !(positive(g.max_rotation_deg) && positive(g.max_translation_m)) {
+                return bad("odometry bounds must be finite and > 0".into());
+            }
+        }
+        if let Some(camera) = &self.camera {
+            camera.validate().map_err(LoopsError::InvalidOption)?;
+        }
+        self.pair
+            .validate()
+            .map_err(|e| LoopsError::InvalidOption(format!("pair: {e}")))?;
+        self.pose
+            .validate()
+            .map_err(|e| LoopsError::InvalidOption(format!("pose: {e}")))
+    }
+}
+
+/// A keyframe's local features: its keypoints and, when the host has them, the scene point of
+/// each in the keyframe's camera frame (metres; NaN in all three coordinates when unknown).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct KeyframeFeatures {
+    /// Keypoints with their descriptors (ORB from the host, XFeat, or dense cells).
+    pub keypoints: Keypoints,
+    /// Scene points, one per keypoint, in the camera frame.
+    pub camera_points: Option<Vec<[f32; 3]>>,
+}
+
+/// Which gate refused the best candidate, or that it was accepted.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Gate {
+    /// Accepted: the hint is a loop closure.
+    Accepted,
+    /// No keyframe outside the exclusion window (or none with features of this kind).
+    NoCandidate,
+    /// The best candidate had fewer inliers than `min_inliers`.
+    TooFewInliers,
+    /// Too few consecutive keyframes agreed on the place.
+    Inconsistent {
+        /// Consecutive agreeing keyframes so far, this one included.
+        agreeing: usize,
+    },
+    /// No relative pose could be fitted.
+    NoPose(PoseRefusal),
+    /// The pose disagrees with the host's odometry.
+    Odometry {
+        /// Rotation difference, degrees.
+        rotation_deg: f64,
+        /// Translation difference, metres (0 for unscaled hints).
+        translation_m: f64,
+    },
+}
+
+impl Gate {
+    /// Short lower-case name for logs (`accepted`, `no_candidate`, ...).
+    pub fn name(&self) -> &'static str {
+        match self {
+            Gate::Accepted => "accepted",
+            Gate::NoCandidate => "no_candidate",
+            Gate::TooFewInliers => "too_few_inliers",
+            Gate::Inconsistent { .. } => "inconsistent",
+            Gate::NoPose(_) => "no_pose",
+            Gate::Odometry { .. } => "odometry",
+        }
+    }
+}
+
+/// The best verified candidate of a keyframe, accepted or not.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LoopHint {
+    /// The query keyframe's id.
+    pub query_id: u64,
+    /// The matched keyframe's id.
+    pub matched_id: u64,
+    /// The matched keyframe's place.
+    pub place: PlaceId,
+    /// Fundamental-matrix inliers.
+    pub inliers: u32,
+    /// The candidate's share of the inliers of every verified candidate (0..=1): near 1 when
+    /// no other candidate agrees with the query, near 1/n among n look-alikes.
+    pub confidence: f32,
+    /// The relative pose, when intrinsics were given and it was fitted.
+    pub pose: Option<RelativePose>,
+    /// Which gate refused it, or [`Gate::Accepted`].
+    pub gate: Gate,
+}
+
+impl LoopHint {
+    /// True when every gate passed.
+    pub fn accepted(&self) -> bool {
+        self.gate == Gate::Accepted
+    }
+}
+
+/// What processing a keyframe did.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Processed {
+    /// Where the keyframe went in the place graph.
+    pub added: Added,
+    /// The best verified candidate; `None` when there was none ([`Gate::NoCandidate`]).
+    pub hint: Option<LoopHint>,
+}
+
+impl Processed {
+    /// The gate that decided: the hint's, or [`Gate::NoCandidate`].
+    pub fn gate(&self) -> Gate {
+        self.hint.map_or(Gate::NoCandidate, |h| h.gate)
+    }
+
+    /// The accepted hint, if any.
+    pub fn accepted(&self) -> Option<&LoopHint> {
+        self.hint.as_ref().filter(|h| h.accepted())
+    }
+}
+
+/// A keyframe database with each keyframe's local features, producing gated hints.
+pub struct LoopDetector {
+    database: KeyframeDatabase,
+    options: HintOptions,
+    features: HashMap<u64, KeyframeFeatures>,
+    kind: Option<FeatureKind>,
+    /// The place the last keyframes' best candidates agreed on, and how many in a row.
+    streak: Streak,
+}
+
+/// The place consecutive keyframes' best candidates agreed on, and how many in a row.
+type Streak = Option<(PlaceId, usize)>;
+
+/// What the gates decided for the best candidate.
+struct Gated {
+    gate: Gate,
+    pose: Option<RelativePose>,
+    /// The consistency streak including this keyframe.
+    streak: Streak,
+}
+
+impl LoopDetector {
+    /// A detector over `database` (empty, or reloaded from a map: its keyframes have no
+    /// features, so they are never verified candidates). Options are validated.
+    pub fn new(database: KeyframeDatabase, options: HintOptions) -> Result<Self, LoopsError> {
+        options.validate()?;
+        Ok(Self {
+            database,
+            options,
+            features: HashMap::new(),
+            kind: None,
+            streak: None,
+        })
+    }
+
+    /// The keyframe database.
+    pub fn database(&self) -> &KeyframeDatabase {
+        &self.database
+    }
+
+    /// The options.
+    pub fn options(&self) -> &HintOptions {
+        &self.options
+    }
+
+    /// Queries, verifies and gates the keyframe's loop candidates, then adds the keyframe.
+    /// Errors (inconsistent features, features of another kind than earlier keyframes', and
+    /// every error of [`KeyframeDatabase::add`]) change nothing.
+    pub fn process(
+        &mut self,
+        entry: &KeyframeEntry<'_>,
+        features: KeyframeFeatures,
+    ) -> Result<Processed, LoopsError> {
+        self.check_features(&features)?;
+        let best = self.best_candidate(entry, &features)?;
+        let (hint, streak) = match best {
+            None => (None, None),
+            Some(best) => {
+                let Gated { gate, pose, streak } = self.gate(entry, &features, &best)?;
+                let hint = LoopHint {
+                    query_id: entry.id,
+                    matched_id: best.id,
+                    place: best.place,
+                    inliers: best.inliers,
+                    confidence: best.confidence,
+                    pose,
+                    gate,
+                };
+                (Some(hint), streak)
+            }
+        };
+        let added = self.database.add(entry)?;
+        self.kind
+            .get_or_insert(features.keypoints.descriptors.kind());
+        self.features.insert(entry.id, features);
+        self.streak = streak;
+        Ok(Processed { added, hint })
+    }
+
+    /// Removes a keyframe and its features (ORB-SLAM culls keyframes).
+    pub fn erase(&mut self, id: u64) -> Result<(), LoopsError> {
+        self.database.erase(id)?;
+        self.features.remove(&id);
+        Ok(())
+    }
+
+    /// Features must be consistent and of the kind the earlier keyframes have.
+    fn check_features(&self, features: &KeyframeFeatures) -> Result<(), LoopsError> {
+        let k = &features.keypoints;
+        let bad = |m: String| Err(LoopsError::InvalidKeyframe(m));
+        if k.points.len() != k.descriptors.len() {
+            return bad(format!(
+                "{} keypoints but {} descriptors",
+                k.points.len(),
+                k.descriptors.len()
+            ));
+        }
+        if let Some(i) = k
+            .points
+            .iter()
+            .position(|p| !p.iter().all(|v| v.is_finite()))
+        {
+            return bad(format!("keypoint {i} is at {:?}", k.points[i]));
+        }
+        let kind = k.descriptors.kind();
+        if let Some(expected) = self.kind.filter(|&e| e != kind && !k.is_empty()) {
+            return bad(format!(
+                "keypoints are {} but earlier keyframes' are {}",
+                kind.name(),
+                expected.name()
+            ));
+        }
+        if let Some(points) = &features.camera_points {
+            if points.len() != k.points.len() {
+                return bad(format!(
+                    "{} camera points for {} keypoints",
+                    points.len(),
+                    k.points.len()
+                ));
+            }
+            let valid =
+                |p: &[f32; 3]| p.iter().all(|v| v.is_finite()) || p.iter().all(|v| v.is_nan());
+            if let Some(i) = points.iter().position(|p| !valid(p)) {
+                return bad(format!(
+                    "camera point {i} is {:?}: finite, or NaN in all three coordinates",
+                    points[i]
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// The candidate with the most inliers among the verified ones (ties: the more similar).
+    fn best_candidate(
+        &self,
+        entry: &KeyframeEntry<'_>,
+        features: &KeyframeFeatures,
+    ) -> Result<Option<Verified>, LoopsError> {
+        let Some(max_id) = entry.id.checked_sub(self.options.exclude_recent_ids.max(1)) else {
+            return Ok(None);
+        };
+        let query = LoopQuery {
+            max_results: self.options.candidates,
+            max_id: Some(max_id),
+            before_timestamp: Some(entry.timestamp - self.options.exclude_recent_s),
+        };
+        let mut verified: Vec<Verified> = Vec::new();
+        for candidate in self.database.loop_candidates(entry.descriptor, &query)? {
+            let Some(stored) = self.features.get(&candidate.keyframe_id) else {
+                continue;
+            };
+            if stored.keypoints.descriptors.kind() != features.keypoints.descriptors.kind() {
+                continue;
+            }
+            let check = check_pair(
+                features.keypoints.as_ref(),
+                stored.keypoints.as_ref(),
+                &self.options.pair,
+            )
+            .map_err(|e| LoopsError::InvalidKeyframe(e.to_string()))?;
+            verified.push(Verified {
+                id: candidate.keyframe_id,
+                place: candidate.place,
+                inliers: check.inliers,
+                confidence: 0.0,
+            });
+        }
+        let total: u32 = verified.iter().map(|v| v.inliers).sum();
+        let mut best: Option<Verified> = None;
+        for v in verified {
+            if best.is_none_or(|b| v.inliers > b.inliers) {
+                best = Some(v);
+            }
+        }
+        Ok(best.map(|b| Verified {
+            confidence: if total > 0 {
+                b.inliers as f32 / total as f32
+            } else {
+                0.0
+            },
+            ..b
+        }))
+    }
+
+    /// Gates 2-5 for the best candidate: the gate, the pose, and the new consistency streak.
+    fn gate(
+        &self,
+        entry: &KeyframeEntry<'_>,
+        features: &KeyframeFeatures,
+        best: &Verified,
+    ) -> Result<Gated, LoopsError> {
+        let gated = |gate, pose, streak| Ok(Gated { gate, pose, streak });
+        if best.inliers < self.options.min_inliers {
+            return gated(Gate::TooFewInliers, None, None);
+        }
+        let agreeing = match self.streak {
+            Some((place, n)) if self.database.same_or_linked(place, best.place) => n + 1,
+            _ => 1,
+        };
+        let streak = Some((best.place, agreeing));
+        if agreeing < self.options.consistent_keyframes {
+            return gated(Gate::Inconsistent { agreeing }, None, streak);
+        }
+        let stored = &self.features[&best.id];
+        let point_accurate = features.keypoints.descriptors.kind() != FeatureKind::Cells;
+        let Some(camera) = self.options.camera.filter(|_| point_accurate) else {
+            return gated(Gate::Accepted, None, streak);
+        };
+        let fitted = relative_pose(
+            features.keypoints.as_ref(),
+            stored.keypoints.as_ref(),
+            stored.camera_points.as_deref(),
+            &camera,
+            self.options.pair.max_hamming,
+            &self.options.pose,
+        )
+        .map_err(|e| LoopsError::InvalidKeyframe(e.to_string()))?;
+        let pose = match fitted {
+            Ok(pose) => pose,
+            Err(refusal) => return gated(Gate::NoPose(refusal), None, streak),
+        };
+        let odometry = (
+            self.options.odometry,
+            self.odometry_between(entry, best.id)?,
+        );
+        if let (Some(bounds), Some(odometry)) = odometry {
+            let delta = odometry.inverse() * pose.matched_t_query;
+            let rotation_deg = delta.rotation.angle().to_degrees();
+            let translation_m = if pose.scale_known {
+                delta.translation.vector.norm()
+            } else {
+                0.0
+            };
+            if rotation_deg > bounds.max_rotation_deg || translation_m > bounds.max_translation_m {
+                let gate = Gate::Odometry {
+                    rotation_deg,
+                    translation_m,
+                };
+                return gated(gate, Some(pose), streak);
+            }
+        }
+        gated(Gate::Accepted, Some(pose), streak)
+    }
+
+    /// The odometry's `matched_T_query` between the matched keyframe and the new one, when
+    /// both have poses.
+    fn odometry_between(
+        &self,
+        entry: &KeyframeEntry<'_>,
+        matched: u64,
+    ) -> Result<Option<Isometry3<f64>>, LoopsError> {
+        let Some(world_t_body) = entry.world_t_body else {
+            return Ok(None);
+        };
+        let query = world_t_body * entry.body_t_camera.unwrap_or_else(Isometry3::identity);
+        Ok(self
+            .database
+            .world_t_camera(matched)?
+            .map(|matched| matched.inverse() * query))
+    }
+}
+
+/// A verified candidate.
+#[derive(Clone, Copy, Debug)]
+struct Verified {
+    id: u64,
+    place: PlaceId,
+    inliers: u32,
+    confidence: f32,
+}

@@ -1,0 +1,255 @@
+//! Verified loop-closure hints: a route driven twice gives no hint on the first pass (nothing
+//! outside the exclusion window, or other places' inliers too few), refuses the first revisits as not yet consistent, then
+//! accepts one hint per keyframe naming the first visit; a look-alike (same descriptor,
+//! another scene) is refused for its inliers; a shift with no parallax gets no pose with the
+//! gate that says so; bad features and duplicate ids are typed errors that change nothing.
+
+mod common;
+
+use common::correspondences::{keypoints, scene, truth, CAMERA};
+use common::images::{gray, place_image, revisit};
+use common::{mix, unit_vector};
+use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
+use topoloc::descriptor::DescriptorIdentity;
+use topoloc::loops::{
+    DatabaseOptions, Gate, HintOptions, KeyframeDatabase, KeyframeEntry, KeyframeFeatures,
+    LoopDetector, LoopsError,
+};
+use topoloc::verify::{
+    CellDescriptor, Descriptors, KeypointDetector, Keypoints, PinholeCamera, PoseRefusal,
+};
+
+const DIM: usize = 16;
+const PLACES: u64 = 8;
+/// Ids of the second pass start here.
+const SECOND: u64 = 20;
+
+fn detector(options: HintOptions) -> LoopDetector {
+    let identity = DescriptorIdentity::new("test", "hints", DIM as u32).unwrap();
+    let db = KeyframeDatabase::new(identity, DatabaseOptions::default()).unwrap();
+    LoopDetector::new(db, options).unwrap()
+}
+
+fn options() -> HintOptions {
+    HintOptions {
+        exclude_recent_ids: 5,
+        exclude_recent_s: 5.0,
+        ..HintOptions::default()
+    }
+}
+
+fn features(image: &[u8]) -> KeyframeFeatures {
+    KeyframeFeatures {
+        keypoints: KeypointDetector::new(500)
+            .unwrap()
+            .detect(&gray(image))
+            .unwrap(),
+        camera_points: None,
+    }
+}
+
+fn entry(id: u64, descriptor: &[f32]) -> KeyframeEntry<'_> {
+    KeyframeEntry {
+        id,
+        timestamp: id as f64,
+        descriptor,
+        ..KeyframeEntry::default()
+    }
+}
+
+/// The first pass: keyframe p sees place p.
+fn first_pass(detector: &mut LoopDetector) {
+    for p in 0..PLACES {
+        let d = unit_vector(p, DIM);
+        let done = detector
+            .process(&entry(p, &d), features(&place_image(p)))
+            .unwrap();
+        // Early keyframes have nothing outside the window; later ones find earlier, other
+        // places, whose inliers refuse them.
+        assert!(
+            matches!(done.gate(), Gate::NoCandidate | Gate::TooFewInliers),
+            "first pass, keyframe {p}: {done:?}"
+        );
+    }
+}
+
+/// Keyframe `SECOND + p` revisits place p (shifted image, another exposure, noisy descriptor).
+fn revisit_keyframe(detector: &mut LoopDetector, p: u64) -> topoloc::loops::Processed {
+    let d = mix(&unit_vector(p, DIM), &unit_vector(p + 1000, DIM), 0.2);
+    let image = revisit(&place_image(p), p + 50);
+    detector
+        .process(&entry(SECOND + p, &d), features(&image))
+        .unwrap()
+}
+
+#[test]
+fn a_second_pass_gets_one_consistent_hint_per_keyframe() {
+    let mut detector = detector(options());
+    first_pass(&mut detector);
+    for p in 0..PLACES {
+        let done = revisit_keyframe(&mut detector, p);
+        let hint = done.hint.expect("a verified candidate");
+        assert_eq!(hint.matched_id, p, "revisit of place {p}");
+        assert!(hint.inliers >= 30, "{hint:?}");
+        assert!(hint.confidence > 0.5, "{hint:?}");
+        match p {
+            0 | 1 => assert_eq!(
+                hint.gate,
+                Gate::Inconsistent {
+                    agreeing: p as usize + 1
+                }
+            ),
+            _ => {
+                assert_eq!(hint.gate, Gate::Accepted, "keyframe {}", SECOND + p);
+                assert!(hint.pose.is_none(), "no intrinsics, no pose");
+                assert_eq!(done.accepted().map(|h| h.query_id), Some(SECOND + p));
+            }
+        }
+    }
+}
+
+#[test]
+fn a_look_alike_is_refused_for_its_inliers_and_breaks_the_streak() {
+    let mut detector = detector(options());
+    first_pass(&mut detector);
+    for p in 0..3 {
+        revisit_keyframe(&mut detector, p);
+    }
+    // Place 3's descriptor, another scene.
+    let d = unit_vector(3, DIM);
+    let done = detector
+        .process(&entry(SECOND + 3, &d), features(&place_image(777)))
+        .unwrap();
+    let hint = done.hint.expect("the descriptor finds candidates");
+    assert_eq!(hint.gate, Gate::TooFewInliers, "{hint:?}");
+    assert!(hint.inliers < 30 && hint.confidence < 0.5, "{hint:?}");
+    let after = revisit_keyframe(&mut detector, 4).hint.unwrap();
+    assert_eq!(
+        after.gate,
+        Gate::Inconsistent { agreeing: 1 },
+        "the streak restarted"
+    );
+}
+
+#[test]
+fn a_revisit_without_parallax_gets_no_pose_and_says_why() {
+    let mut detector = detector(HintOptions {
+        camera: Some(PinholeCamera {
+            fx: 300.0,
+            fy: 300.0,
+            cx: 160.0,
+            cy: 120.0,
+        }),
+        consistent_keyframes: 1,
+        ..options()
+    });
+    first_pass(&mut detector);
+    let hint = revisit_keyframe(&mut detector, 2).hint.unwrap();
+    assert!(
+        matches!(
+            hint.gate,
+            Gate::NoPose(PoseRefusal::TooLittleParallax { .. } | PoseRefusal::NoConsensus { .. })
+        ),
+        "a 3-pixel shift is a rotation, not a baseline: {hint:?}"
+    );
+    assert!(!hint.accepted());
+}
+
+#[test]
+fn bad_features_and_duplicate_ids_change_nothing() {
+    let mut detector = detector(options());
+    first_pass(&mut detector);
+    revisit_keyframe(&mut detector, 0);
+    let d = unit_vector(1, DIM);
+    let cells = KeyframeFeatures {
+        keypoints: Keypoints {
+            points: vec![[8.0, 8.0]],
+            descriptors: Descriptors::Cells(vec![[1i8; 96] as CellDescriptor]),
+        },
+        camera_points: None,
+    };
+    let before = detector.database().len();
+    let err = detector.process(&entry(SECOND + 1, &d), cells).unwrap_err();
+    assert!(
+        matches!(err, LoopsError::InvalidKeyframe(ref m) if m.contains("cells") && m.contains("orb")),
+        "{err}"
+    );
+    let mut short = features(&place_image(1));
+    short.camera_points = Some(vec![[0.0, 0.0, 1.0]; 3]);
+    let err = detector.process(&entry(SECOND + 1, &d), short).unwrap_err();
+    assert!(
+        matches!(err, LoopsError::InvalidKeyframe(ref m) if m.contains("camera points")),
+        "{err}"
+    );
+    let err = detector
+        .process(&entry(SECOND, &d), features(&place_image(1)))
+        .unwrap_err();
+    assert!(
+        matches!(err, LoopsError::DuplicateId(id) if id == SECOND),
+        "{err}"
+    );
+    assert_eq!(detector.database().len(), before, "nothing was added");
+    let next = revisit_keyframe(&mut detector, 1).hint.unwrap();
+    assert_eq!(
+        next.gate,
+        Gate::Inconsistent { agreeing: 2 },
+        "the streak is intact"
+    );
+}
+
+/// Keyframe 0 with its scene points in its camera frame, then keyframe 10 seeing the same
+/// points from `truth()`; the bodies' odometry poses are `matched_pose` and `query_pose`.
+fn metric_revisit(query_pose: Isometry3<f64>) -> topoloc::loops::LoopHint {
+    let mut detector = detector(HintOptions {
+        camera: Some(CAMERA),
+        consistent_keyframes: 1,
+        ..options()
+    });
+    let (q, m, s) = scene(120, 20, &truth(), 9);
+    let d = unit_vector(1, DIM);
+    let with_pose = |id, pose| KeyframeEntry {
+        world_t_body: Some(pose),
+        ..entry(id, &d)
+    };
+    let matched = KeyframeFeatures {
+        keypoints: keypoints(&m),
+        camera_points: Some(s),
+    };
+    detector
+        .process(&with_pose(0, Isometry3::identity()), matched)
+        .unwrap();
+    let query = KeyframeFeatures {
+        keypoints: keypoints(&q),
+        camera_points: None,
+    };
+    let done = detector.process(&with_pose(10, query_pose), query).unwrap();
+    done.hint.expect("keyframe 0 is the candidate")
+}
+
+#[test]
+fn a_metric_hint_carries_the_pose_and_must_agree_with_odometry() {
+    let hint = metric_revisit(truth());
+    assert_eq!(
+        (hint.gate, hint.matched_id),
+        (Gate::Accepted, 0),
+        "{hint:?}"
+    );
+    let pose = hint.pose.expect("intrinsics and scene points give a pose");
+    assert!(pose.scale_known);
+    let error = (pose.matched_t_query.translation.vector - truth().translation.vector).norm();
+    assert!(error < 0.05, "{error} m");
+    // Odometry that drifted 45 degrees in yaw and 30 m is not the same loop.
+    let drifted = Isometry3::from_parts(
+        Translation3::new(30.0, 0.0, 0.0),
+        UnitQuaternion::from_scaled_axis(Vector3::z() * 45f64.to_radians()),
+    ) * truth();
+    let refused = metric_revisit(drifted);
+    match refused.gate {
+        Gate::Odometry {
+            rotation_deg,
+            translation_m,
+        } => assert!(rotation_deg > 40.0 && translation_m > 25.0, "{refused:?}"),
+        other => panic!("expected the odometry gate, got {other:?}"),
+    }
+    assert!(refused.pose.is_some(), "the refused pose is still reported");
+}
