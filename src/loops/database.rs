@@ -471,6 +471,34 @@ impl KeyframeDatabase {
         a == b || self.edges.contains(&(a.min(b), a.max(b)))
     }
 
+    /// The keyframes of place `place` and of the places linked to it (its group), by id.
+    pub fn group_keyframes(&self, place: PlaceId) -> Vec<u64> {
+        let mut ids: Vec<u64> = self
+            .places
+            .iter()
+            .enumerate()
+            .filter(|&(p, _)| self.same_or_linked(place, p as PlaceId))
+            .flat_map(|(_, p)| p.members.iter().copied())
+            .collect();
+        ids.sort_unstable();
+        ids
+    }
+
+    /// True when the groups of `a` and `b` (each place with its linked places) share a place:
+    /// ORB-SLAM's consistency test, with the place graph in the role of covisibility.
+    pub fn groups_overlap(&self, a: PlaceId, b: PlaceId) -> bool {
+        self.same_or_linked(a, b)
+            || self
+                .edges
+                .iter()
+                .filter_map(|&(x, y)| match (x == a, y == a) {
+                    (true, _) => Some(y),
+                    (_, true) => Some(x),
+                    _ => None,
+                })
+                .any(|n| self.same_or_linked(n, b))
+    }
+
     /// Place links `(a, b)`, `a < b`.
     pub fn edges(&self) -> impl Iterator<Item = (PlaceId, PlaceId)> + '_ {
         self.edges.iter().copied()

@@ -4,8 +4,12 @@
 //!
 //! 1. a candidate exists outside the exclusion window ([`Gate::NoCandidate`]);
 //! 2. it has at least `min_inliers` fundamental-matrix inliers ([`Gate::TooFewInliers`]);
-//! 3. the best candidates of the last `consistent_keyframes` keyframes lie in the same place or
-//!    linked places ([`Gate::Inconsistent`], ORB-SLAM's consistency groups on the place graph);
+//!    then the keyframes of its place and the linked places are checked too, and the one with
+//!    the most inliers is the match (neighbouring keyframes look alike; geometry picks the
+//!    nearest);
+//! 3. the best candidates of the last `consistent_keyframes` keyframes agree: each one's group
+//!    (its place and the linked places) shares a place with the previous one's
+//!    ([`Gate::Inconsistent`], ORB-SLAM's consistency groups on the place graph);
 //! 4. with camera intrinsics and point-accurate features, a relative pose is found
 //!    ([`Gate::NoPose`]; dense cells verify but give no pose);
 //! 5. with odometry poses on both keyframes, the hint's pose agrees with the odometry's
@@ -16,14 +20,14 @@
 //! it, so the host can log why no loop was closed. Errors (bad features, keyframes out of
 //! order, duplicate ids) leave the detector exactly as it was.
 
-use super::database::{Added, KeyframeDatabase, KeyframeEntry, LoopQuery};
+use super::database::{Added, DatabaseOptions, KeyframeDatabase, KeyframeEntry, LoopQuery};
 use super::error::LoopsError;
-use crate::map::PlaceId;
+use crate::map::{Map, PlaceId};
 use crate::verify::{
     check_pair, relative_pose, FeatureKind, FundamentalEstimator, Keypoints, PairOptions,
     PinholeCamera, PoseRefusal, RelativePose, RelativePoseOptions,
 };
-use nalgebra::Isometry3;
+use nalgebra::{Isometry3, Point3};
 use std::collections::HashMap;
 
 /// The odometry agreement gate: bounds on the difference between the hint's relative pose and
@@ -58,8 +62,8 @@ pub struct HintOptions {
     pub exclude_recent_s: f64,
     /// Fewest inliers of an accepted candidate. Default 30.
     pub min_inliers: u32,
-    /// Consecutive keyframes whose best candidates must agree (same or linked place),
-    /// the current one included. Default 3.
+    /// Consecutive keyframes whose best candidates must agree (their place groups overlap),
+    /// the current one included. Default 3 (ORB-SLAM's).
     pub consistent_keyframes: usize,
     /// The odometry agreement gate (applied when both keyframes have poses and the hint a pose).
     pub odometry: Option<OdometryGate>,
@@ -240,6 +244,9 @@ pub struct LoopDetector {
     kind: Option<FeatureKind>,
     /// The place the last keyframes' best candidates agreed on, and how many in a row.
     streak: Streak,
+    /// The largest id of a previous session's keyframes ([`LoopDetector::from_map`]): they are
+    /// never inside the exclusion window, whatever this session's ids.
+    reloaded_max_id: Option<u64>,
 }
 
 /// The place consecutive keyframes' best candidates agreed on, and how many in a row.
@@ -264,7 +271,53 @@ impl LoopDetector {
             features: HashMap::new(),
             kind: None,
             streak: None,
+            reloaded_max_id: None,
         })
+    }
+
+    /// A detector over a map's views as keyframes ([`KeyframeDatabase::from_map`]) with the
+    /// keypoints the map stores as their features, and, where the map has both a view's pose
+    /// and its keypoints' scene points, those points in the view's camera frame: a second
+    /// session closes loops against the first.
+    pub fn from_map(
+        map: &Map,
+        database: DatabaseOptions,
+        options: HintOptions,
+    ) -> Result<Self, LoopsError> {
+        let mut detector = Self::new(KeyframeDatabase::from_map(map, database)?, options)?;
+        detector.reloaded_max_id = map.views().iter().filter_map(|v| v.keyframe_id).max();
+        let Some(stored) = map.keypoints() else {
+            return Ok(detector);
+        };
+        for (v, view) in map.views().iter().enumerate() {
+            let (Some(id), Some(keypoints)) = (view.keyframe_id, stored.view(v)) else {
+                continue;
+            };
+            let camera_points = match (view.world_t_camera, stored.view_world_points(v)) {
+                (Some(world_t_camera), Some(world)) => Some(
+                    world
+                        .iter()
+                        .map(|p| {
+                            let c = world_t_camera.inverse_transform_point(&Point3::new(
+                                f64::from(p[0]),
+                                f64::from(p[1]),
+                                f64::from(p[2]),
+                            ));
+                            [c.x as f32, c.y as f32, c.z as f32]
+                        })
+                        .collect(),
+                ),
+                _ => None,
+            };
+            let features = KeyframeFeatures {
+                keypoints: keypoints.to_keypoints(),
+                camera_points,
+            };
+            detector.check_features(&features)?;
+            detector.kind = Some(stored.kind());
+            detector.features.insert(id, features);
+        }
+        Ok(detector)
     }
 
     /// The keyframe database.
@@ -286,7 +339,12 @@ impl LoopDetector {
         features: KeyframeFeatures,
     ) -> Result<Processed, LoopsError> {
         self.check_features(&features)?;
-        let best = self.best_candidate(entry, &features)?;
+        let best = match self.best_candidate(entry, &features)? {
+            Some(best) if best.inliers >= self.options.min_inliers => {
+                Some(self.refine(entry, &features, best)?)
+            }
+            other => other,
+        };
         let (hint, streak) = match best {
             None => (None, None),
             Some(best) => {
@@ -370,7 +428,7 @@ impl LoopDetector {
         entry: &KeyframeEntry<'_>,
         features: &KeyframeFeatures,
     ) -> Result<Option<Verified>, LoopsError> {
-        let Some(max_id) = entry.id.checked_sub(self.options.exclude_recent_ids.max(1)) else {
+        let Some(max_id) = self.max_candidate_id(entry) else {
             return Ok(None);
         };
         let query = LoopQuery {
@@ -416,6 +474,54 @@ impl LoopDetector {
         }))
     }
 
+    /// The largest id outside the exclusion window (`None`: no keyframe is): this session's
+    /// keyframes `exclude_recent_ids` or more before the query, and every reloaded one.
+    fn max_candidate_id(&self, entry: &KeyframeEntry<'_>) -> Option<u64> {
+        let recent = entry.id.checked_sub(self.options.exclude_recent_ids.max(1));
+        recent.max(self.reloaded_max_id)
+    }
+
+    /// The keyframe of the best candidate's group (its place and the linked places) that the
+    /// query agrees with most: appearance ranks neighbouring keyframes of one stretch almost
+    /// alike, geometry tells the nearest. Keyframes inside the exclusion window are skipped.
+    fn refine(
+        &self,
+        entry: &KeyframeEntry<'_>,
+        features: &KeyframeFeatures,
+        best: Verified,
+    ) -> Result<Verified, LoopsError> {
+        let max_id = entry
+            .id
+            .saturating_sub(self.options.exclude_recent_ids.max(1));
+        let mut refined = best;
+        for id in self.database.group_keyframes(best.place) {
+            if id == best.id || id > max_id {
+                continue;
+            }
+            let Some(stored) = self.features.get(&id) else {
+                continue;
+            };
+            if stored.keypoints.descriptors.kind() != features.keypoints.descriptors.kind() {
+                continue;
+            }
+            let check = check_pair(
+                features.keypoints.as_ref(),
+                stored.keypoints.as_ref(),
+                &self.options.pair,
+            )
+            .map_err(|e| LoopsError::InvalidKeyframe(e.to_string()))?;
+            if check.inliers > refined.inliers {
+                refined = Verified {
+                    id,
+                    place: self.database.place_of(id)?,
+                    inliers: check.inliers,
+                    confidence: best.confidence,
+                };
+            }
+        }
+        Ok(refined)
+    }
+
     /// Gates 2-5 for the best candidate: the gate, the pose, and the new consistency streak.
     fn gate(
         &self,
@@ -428,7 +534,7 @@ impl LoopDetector {
             return gated(Gate::TooFewInliers, None, None);
         }
         let agreeing = match self.streak {
-            Some((place, n)) if self.database.same_or_linked(place, best.place) => n + 1,
+            Some((place, n)) if self.database.groups_overlap(place, best.place) => n + 1,
             _ => 1,
         };
         let streak = Some((best.place, agreeing));

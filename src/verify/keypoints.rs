@@ -190,6 +190,15 @@ impl<'a> DescriptorsRef<'a> {
         self.len() == 0
     }
 
+    /// An owned copy.
+    pub fn to_owned(self) -> Descriptors {
+        match self {
+            DescriptorsRef::Orb(d) => Descriptors::Orb(d.to_vec()),
+            DescriptorsRef::XFeat(d) => Descriptors::XFeat(d.to_vec()),
+            DescriptorsRef::Cells(d) => Descriptors::Cells(d.to_vec()),
+        }
+    }
+
     /// The descriptors in `range` (which must lie inside).
     pub fn slice(self, range: std::ops::Range<usize>) -> DescriptorsRef<'a> {
         match self {
@@ -237,6 +246,16 @@ pub struct KeypointsRef<'a> {
     pub points: &'a [[f32; 2]],
     /// Descriptors, one per point.
     pub descriptors: DescriptorsRef<'a>,
+}
+
+impl KeypointsRef<'_> {
+    /// An owned copy.
+    pub fn to_keypoints(self) -> Keypoints {
+        Keypoints {
+            points: self.points.to_vec(),
+            descriptors: self.descriptors.to_owned(),
+        }
+    }
 }
 
 /// Detects ORB keypoints; one per thread (OpenCV detectors are not shared).

@@ -5,6 +5,7 @@ mod backend_args;
 mod build_map;
 mod demo;
 mod eval;
+mod loops;
 mod memory;
 mod plot;
 mod process;
@@ -78,6 +79,9 @@ enum Command {
     /// and report how well inliers tell the true place from look-alikes (inlier medians,
     /// R@1 before and after re-ranking, times).
     EvalVerify(verify_eval::VerifyEvalArgs),
+    /// Loop-closure hints over an image sequence (online graph growth, or a second session
+    /// against --map): accepted hints to a CSV, gate counts and latency.
+    Loops(loops::LoopsArgs),
     /// Generate world K of a split, build its graph and map (saved as OUT/map.topoloc) and write
     /// query trajectories as dataset folders OUT/traj-00i for `eval --dataset`.
     Simulate(simulate::SimulateArgs),
@@ -103,6 +107,7 @@ fn main() -> Result<()> {
         Command::BuildMap(args) => build_map::run(&args),
         Command::Eval(args) => eval::run(&args),
         Command::EvalVerify(args) => verify_eval::run(&args),
+        Command::Loops(args) => loops::run(&args),
         Command::Simulate(args) => simulate::run(&args),
         Command::Suite(args) => suite::run(&args),
         Command::MeasureMap { map } => memory::measure(&map),

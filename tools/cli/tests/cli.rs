@@ -556,3 +556,144 @@ fn suite_refuses_unknown_or_empty_configuration_lists() {
         String::from_utf8_lossy(&out.stderr)
     );
 }
+
+/// The hints file and report of `topoloc loops`: `dir/map` holds 12 places, `dir/query` the
+/// same places again (shifted, brighter).
+fn loops_report(dir: &Path, args: &[&str]) -> (serde_json::Value, Vec<Vec<String>>) {
+    let out = dir.join(format!("hints-{}.csv", args.len()));
+    let s = |p: &Path| p.to_str().unwrap().to_string();
+    let mut all = vec![
+        "loops".to_string(),
+        "--out".into(),
+        s(&out),
+        "--json".into(),
+    ];
+    all.extend(args.iter().map(|a| a.to_string()));
+    let refs: Vec<&str> = all.iter().map(String::as_str).collect();
+    let report = json(&topoloc(&refs));
+    let rows = std::fs::read_to_string(&out)
+        .unwrap()
+        .lines()
+        .map(|l| l.split(',').map(str::to_string).collect())
+        .collect();
+    (report, rows)
+}
+
+#[test]
+fn loops_follows_the_contract_online_and_against_a_map() {
+    let dir = tempfile::tempdir().unwrap();
+    let (map_dir, query_dir, both) = (
+        dir.path().join("map"),
+        dir.path().join("query"),
+        dir.path().join("both"),
+    );
+    for d in [&map_dir, &query_dir, &both] {
+        std::fs::create_dir_all(d).unwrap();
+    }
+    let places = 12;
+    for i in 0..places {
+        let image = place(i);
+        let query: Vec<u8> = (0..W * H)
+            .map(|k| {
+                let (x, y) = (k % W, k / W);
+                (u16::from(image[y * W + (x + 4).min(W - 1)]) * 9 / 10 + 20) as u8
+            })
+            .collect();
+        write_pgm(&map_dir.join(format!("{i:03}.pgm")), &image);
+        write_pgm(&query_dir.join(format!("{i:03}.pgm")), &query);
+        write_pgm(&both.join(format!("a{i:03}.pgm")), &image);
+        write_pgm(&both.join(format!("b{i:03}.pgm")), &query);
+    }
+    let s = |p: &Path| p.to_str().unwrap().to_string();
+    let map = dir.path().join("places.topoloc");
+    json(&topoloc(&[
+        "build-map",
+        "--images",
+        &s(&map_dir),
+        "--backend",
+        "vlad",
+        "--out",
+        &s(&map),
+        "--json",
+    ]));
+    let header = "query_index,matched_index,inliers,confidence,scale_known,tx,ty,tz,qx,qy,qz,qw";
+    // A second session against the map: hints name the map's keyframe ids.
+    let (report, rows) = loops_report(
+        dir.path(),
+        &[
+            "--images",
+            &s(&query_dir),
+            "--map",
+            &s(&map),
+            "--aligned-tolerance",
+            "0",
+        ],
+    );
+    for key in [
+        "hints",
+        "gates",
+        "keyframe_ms_median",
+        "keyframe_ms_p90",
+        "precision",
+        "recall",
+        "accepted",
+    ] {
+        assert!(report.get(key).is_some(), "missing '{key}' in {report}");
+    }
+    assert_eq!(rows[0].join(","), header);
+    assert!(rows.len() > 1 + places as usize / 2, "{report}");
+    for row in &rows[1..] {
+        assert_eq!(row.len(), 12, "{row:?}");
+        assert_eq!(row[0], row[1], "query i matches map keyframe i: {row:?}");
+        assert!(
+            row[4..].iter().all(String::is_empty),
+            "no intrinsics, no pose: {row:?}"
+        );
+    }
+    assert_eq!(report["precision"], 1.0, "{report}");
+    // Online, no map: the second half of the folder revisits the first.
+    let (report, rows) = loops_report(
+        dir.path(),
+        &[
+            "--images",
+            &s(&both),
+            "--backend",
+            "vlad",
+            "--local-features",
+            "orb",
+            "--exclude-ids",
+            "6",
+            "--exclude-seconds",
+            "6",
+        ],
+    );
+    assert_eq!(report["keyframes"], 2 * places);
+    assert!(rows.len() > 1, "the revisits close loops: {report}");
+    for row in &rows[1..] {
+        let (q, m): (u64, u64) = (row[0].parse().unwrap(), row[1].parse().unwrap());
+        assert_eq!(
+            q,
+            m + places,
+            "revisit {q} matches first visit {m}: {row:?}"
+        );
+    }
+    // A bad intrinsics file is a clear failure.
+    let bad = dir.path().join("k.txt");
+    std::fs::write(&bad, "300 -1 160 120").unwrap();
+    let failed = topoloc(&[
+        "loops",
+        "--images",
+        &s(&query_dir),
+        "--map",
+        &s(&map),
+        "--intrinsics",
+        &s(&bad),
+        "--out",
+        &s(&dir.path().join("x.csv")),
+    ]);
+    assert!(!failed.status.success());
+    assert!(
+        String::from_utf8_lossy(&failed.stderr).contains("fy"),
+        "{failed:?}"
+    );
+}

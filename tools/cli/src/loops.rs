@@ -1,0 +1,361 @@
+//! `topoloc loops`: loop-closure hints over an image sequence, as a SLAM host would get them.
+//!
+//! ```text
+//! topoloc loops --images DIR [--poses TUM.txt] [--intrinsics FILE] [--map MAP] --out HINTS.csv [--json]
+//! ```
+//! Images are keyframes in file-name order (index = position in that list; timestamps from
+//! `--poses`, else the index in seconds). Without `--map` the graph grows from nothing: the
+//! describer (PCA) is fitted on the sequence's own images first, as `build-map` does, then the
+//! sequence is replayed online. With `--map` (a map built from images with keypoints) the
+//! map's views are the first session's keyframes and the hints name their keyframe ids.
+//!
+//! `HINTS.csv` has a header line, then one row per accepted hint:
+//! `query_index,matched_index,inliers,confidence,scale_known,tx,ty,tz,qx,qy,qz,qw` where the
+//! pose columns (`matched_T_query`: the query camera in the matched camera's optical frame,
+//! translation then unit quaternion) are empty for hints without a pose. `--intrinsics FILE`
+//! holds `fx fy cx cy` (pixels, whitespace-separated). `--json` prints the hints, the median
+//! and p90 time per keyframe and the count of each gate; with `--aligned-tolerance T` (a
+//! frame-aligned second session, such as Gardens Point) also precision and recall.
+
+use crate::backend_args::{image_files, progress_bar, BackendArgs, LocalFeatures};
+use crate::process::median_and_p90;
+use anyhow::{bail, Context, Result};
+use clap::Args;
+use serde_json::json;
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+use topoloc::build::{
+    build_from_images, read_tum, BuildStage, ImageLayout, ImageMapOptions, ImageSource,
+};
+use topoloc::describe::Describer;
+use topoloc::image::{read_rgb, ImageView, PixelFormat};
+use topoloc::loops::{
+    DatabaseOptions, HintOptions, KeyframeDatabase, KeyframeEntry, KeyframeFeatures, LoopDetector,
+    LoopHint,
+};
+use topoloc::verify::{
+    cells_from_map, FeatureDetector, FeatureKind, Keypoints, PinholeCamera, CELL_TAP,
+    DEFAULT_CELLS, DEFAULT_KEYPOINTS,
+};
+use topoloc::{LoadOptions, Map};
+
+/// Options of `loops`.
+#[derive(Args, Clone, Debug)]
+pub struct LoopsArgs {
+    /// Keyframe images, in file-name order.
+    #[arg(long)]
+    pub images: PathBuf,
+    /// TUM trajectory, one pose per image: odometry (world_T_camera) and timestamps.
+    #[arg(long)]
+    pub poses: Option<PathBuf>,
+    /// Camera intrinsics file: `fx fy cx cy`; hints then carry relative poses.
+    #[arg(long)]
+    pub intrinsics: Option<PathBuf>,
+    /// A map of a first session (built from images with keypoints).
+    #[arg(long)]
+    pub map: Option<PathBuf>,
+    /// Where the accepted hints are written (CSV).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Local features without `--map` (with one, the map's kind).
+    #[arg(long, value_enum, default_value_t = LocalFeatures::Cells)]
+    pub local_features: LocalFeatures,
+    /// Descriptor backend without `--map`.
+    #[command(flatten)]
+    pub backend: BackendArgs,
+    /// Keyframes this many ids before the query or closer are never loop candidates.
+    #[arg(long, default_value_t = HintOptions::default().exclude_recent_ids)]
+    pub exclude_ids: u64,
+    /// Keyframes less than this many seconds before the query are never loop candidates.
+    #[arg(long, default_value_t = HintOptions::default().exclude_recent_s)]
+    pub exclude_seconds: f64,
+    /// With `--map` on a frame-aligned second session: a hint is correct when its matched id
+    /// is within this many of the query index; precision and recall go in the report.
+    #[arg(long)]
+    pub aligned_tolerance: Option<u64>,
+    /// Print one JSON object instead of text.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Runs the command.
+pub fn run(args: &LoopsArgs) -> Result<()> {
+    let files = image_files(&args.images)?;
+    let poses = match &args.poses {
+        Some(path) => {
+            let poses = read_tum(path)?;
+            if poses.len() != files.len() {
+                bail!(
+                    "{} has {} poses for {} images: give one pose per image, in file-name order",
+                    path.display(),
+                    poses.len(),
+                    files.len()
+                );
+            }
+            Some(poses)
+        }
+        None => None,
+    };
+    let camera = args
+        .intrinsics
+        .as_deref()
+        .map(read_intrinsics)
+        .transpose()?;
+    let options = HintOptions {
+        camera,
+        exclude_recent_ids: args.exclude_ids,
+        exclude_recent_s: args.exclude_seconds,
+        ..HintOptions::default()
+    };
+    let (mut detector, map, first_id) = match &args.map {
+        Some(path) => {
+            let map = Map::load(path, &LoadOptions::default())
+                .with_context(|| format!("loading {}", path.display()))?;
+            let detector = LoopDetector::from_map(&map, DatabaseOptions::default(), options)?;
+            let first_id = map
+                .views()
+                .iter()
+                .filter_map(|v| v.keyframe_id)
+                .max()
+                .map_or(0, |m| m + 1);
+            (detector, map, first_id)
+        }
+        None => {
+            let map = fit_describer(args, &files)?;
+            let db = KeyframeDatabase::new(map.descriptor().clone(), DatabaseOptions::default())?;
+            (LoopDetector::new(db, options)?, map, 0)
+        }
+    };
+    let kind = match (&args.map, map.keypoints()) {
+        (Some(_), Some(k)) => k.kind(),
+        (Some(path), None) => bail!(
+            "{} stores no keypoints: build it with --verification-keypoints > 0",
+            path.display()
+        ),
+        (None, _) => args.local_features.into(),
+    };
+    let model = map
+        .describer()
+        .cloned()
+        .context("the map stores no describer")?;
+    let runtime = &args.backend.runtime;
+    let mut describer = Describer::new(model, &runtime.describer_options(None))?;
+    let mut features = Features::new(kind, &runtime.xfeat_options())?;
+    let bar = progress_bar(files.len(), "keyframes");
+    let (mut hints, mut gates, mut times) = (Vec::new(), BTreeMap::new(), Vec::new());
+    for (index, path) in files.iter().enumerate() {
+        let (w, h, rgb) = read_rgb(path)?;
+        let image = ImageView::packed(w, h, PixelFormat::Rgb8, &rgb);
+        let start = Instant::now();
+        let mut descriptor = Vec::new();
+        let keypoints = features
+            .describe(&mut describer, &image, &mut descriptor)
+            .with_context(|| path.display().to_string())?;
+        let entry = KeyframeEntry {
+            id: first_id + index as u64,
+            timestamp: poses.as_ref().map_or(index as f64, |p| p[index].timestamp),
+            descriptor: &descriptor,
+            world_t_body: poses.as_ref().map(|p| p[index].world_t_camera),
+            body_t_camera: None,
+        };
+        let done = detector.process(
+            &entry,
+            KeyframeFeatures {
+                keypoints,
+                camera_points: None,
+            },
+        )?;
+        times.push(start.elapsed().as_secs_f64() * 1e3);
+        *gates.entry(done.gate().name()).or_insert(0usize) += 1;
+        if let Some(hint) = done.accepted() {
+            hints.push((index, *hint));
+        }
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    write_csv(&args.out, &hints, first_id)?;
+    report(args, &hints, &gates, &times, files.len(), first_id)
+}
+
+/// The keyframes' local features: a detector, or dense cells from the describer's pass.
+enum Features {
+    Detector(FeatureDetector),
+    Cells,
+}
+
+impl Features {
+    fn new(kind: FeatureKind, xfeat: &topoloc::verify::XFeatOptions) -> Result<Self> {
+        Ok(match kind {
+            FeatureKind::Cells => Features::Cells,
+            kind => Features::Detector(FeatureDetector::new(kind, DEFAULT_KEYPOINTS, xfeat)?),
+        })
+    }
+
+    /// Describes the image into `descriptor` and returns its keypoints.
+    fn describe(
+        &mut self,
+        describer: &mut Describer,
+        image: &ImageView<'_>,
+        descriptor: &mut Vec<f32>,
+    ) -> Result<Keypoints> {
+        Ok(match self {
+            Features::Cells => {
+                let tap = describer.describe_with_tap(image, descriptor, CELL_TAP)?;
+                cells_from_map(
+                    &tap.values,
+                    [tap.channels, tap.height, tap.width],
+                    tap.cell_size,
+                    DEFAULT_CELLS,
+                )?
+            }
+            Features::Detector(detector) => {
+                describer.describe(image, descriptor)?;
+                detector.detect(image)?
+            }
+        })
+    }
+}
+
+/// The describer fitted on the sequence itself (no keypoints stored), for a run without map.
+fn fit_describer(args: &LoopsArgs, files: &[PathBuf]) -> Result<Map> {
+    let options = ImageMapOptions {
+        backend: args.backend.config()?,
+        keypoints: 0,
+        ..ImageMapOptions::default()
+    };
+    let sources: Vec<ImageSource> = files.iter().map(|f| ImageSource::File(f)).collect();
+    let bar = progress_bar(files.len(), "fitting the describer");
+    let mut progress = |stage: BuildStage, done: usize, _: usize| {
+        if stage == BuildStage::Describing {
+            bar.set_position(done as u64);
+        }
+        true
+    };
+    let (map, _) = build_from_images(&sources, ImageLayout::Sequence, &options, &mut progress)?;
+    bar.finish_and_clear();
+    Ok(map)
+}
+
+/// `fx fy cx cy` from a file, validated.
+fn read_intrinsics(path: &Path) -> Result<PinholeCamera> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    let values: Vec<f64> = text
+        .split_whitespace()
+        .map(|v| v.parse::<f64>())
+        .collect::<Result<_, _>>()
+        .with_context(|| format!("{}: expected four numbers fx fy cx cy", path.display()))?;
+    let [fx, fy, cx, cy] = values[..] else {
+        bail!(
+            "{}: expected four numbers fx fy cx cy, found {}",
+            path.display(),
+            values.len()
+        );
+    };
+    let camera = PinholeCamera { fx, fy, cx, cy };
+    camera
+        .validate()
+        .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+    Ok(camera)
+}
+
+/// The hints file: header, then one row per accepted hint.
+fn write_csv(path: &Path, hints: &[(usize, LoopHint)], first_id: u64) -> Result<()> {
+    let mut csv = String::from(
+        "query_index,matched_index,inliers,confidence,scale_known,tx,ty,tz,qx,qy,qz,qw\n",
+    );
+    for (index, hint) in hints {
+        let _ = write!(
+            csv,
+            "{index},{},{},{:.4}",
+            matched_index(hint, first_id),
+            hint.inliers,
+            hint.confidence
+        );
+        match &hint.pose {
+            Some(pose) => {
+                let t = pose.matched_t_query.translation.vector;
+                let q = pose.matched_t_query.rotation.coords;
+                let _ = writeln!(
+                    csv,
+                    ",{},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6}",
+                    u8::from(pose.scale_known),
+                    t.x,
+                    t.y,
+                    t.z,
+                    q.x,
+                    q.y,
+                    q.z,
+                    q.w
+                );
+            }
+            None => csv.push_str(",,,,,,,,\n"),
+        }
+    }
+    std::fs::write(path, csv).with_context(|| format!("writing {}", path.display()))
+}
+
+/// The matched keyframe as the CSV names it: a map's keyframe id, or an index of this run.
+fn matched_index(hint: &LoopHint, first_id: u64) -> u64 {
+    if hint.matched_id >= first_id {
+        hint.matched_id - first_id
+    } else {
+        hint.matched_id
+    }
+}
+
+fn report(
+    args: &LoopsArgs,
+    hints: &[(usize, LoopHint)],
+    gates: &BTreeMap<&str, usize>,
+    times: &[f64],
+    frames: usize,
+    first_id: u64,
+) -> Result<()> {
+    let (median, p90) = median_and_p90(times);
+    let mut out = json!({
+        "keyframes": frames,
+        "hints": hints.len(),
+        "gates": gates,
+        "keyframe_ms_median": median,
+        "keyframe_ms_p90": p90,
+        "out": args.out.display().to_string(),
+        "accepted": hints.iter().map(|(i, h)| json!({
+            "query_index": i,
+            "matched_index": matched_index(h, first_id),
+            "inliers": h.inliers,
+            "confidence": h.confidence,
+            "has_pose": h.pose.is_some(),
+        })).collect::<Vec<_>>(),
+    });
+    if let (Some(tolerance), Some(_)) = (args.aligned_tolerance, &args.map) {
+        let correct = hints
+            .iter()
+            .filter(|(i, h)| {
+                h.matched_id < first_id && h.matched_id.abs_diff(*i as u64) <= tolerance
+            })
+            .count();
+        out["precision"] = json!(correct as f64 / hints.len().max(1) as f64);
+        out["recall"] = json!(correct as f64 / frames.max(1) as f64);
+        out["correct"] = json!(correct);
+    }
+    if args.json {
+        println!("{out}");
+    } else {
+        println!(
+            "{} keyframes, {} hints (gates {:?}); {median:.1} ms per keyframe (p90 {p90:.1}){}; hints in {}",
+            frames,
+            hints.len(),
+            gates,
+            out.get("precision").map_or(String::new(), |p| format!(
+                "; precision {:.3}, recall {:.3}",
+                p.as_f64().unwrap_or(0.0),
+                out["recall"].as_f64().unwrap_or(0.0)
+            )),
+            args.out.display()
+        );
+    }
+    Ok(())
+}
