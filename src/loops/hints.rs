@@ -438,22 +438,13 @@ impl LoopDetector {
         };
         let mut verified: Vec<Verified> = Vec::new();
         for candidate in self.database.loop_candidates(entry.descriptor, &query)? {
-            let Some(stored) = self.features.get(&candidate.keyframe_id) else {
+            let Some(inliers) = self.inliers_with(features, candidate.keyframe_id)? else {
                 continue;
             };
-            if stored.keypoints.descriptors.kind() != features.keypoints.descriptors.kind() {
-                continue;
-            }
-            let check = check_pair(
-                features.keypoints.as_ref(),
-                stored.keypoints.as_ref(),
-                &self.options.pair,
-            )
-            .map_err(|e| LoopsError::InvalidKeyframe(e.to_string()))?;
             verified.push(Verified {
                 id: candidate.keyframe_id,
                 place: candidate.place,
-                inliers: check.inliers,
+                inliers,
                 confidence: 0.0,
             });
         }
@@ -474,6 +465,28 @@ impl LoopDetector {
         }))
     }
 
+    /// GC inliers of the query against keyframe `id`; `None` when it has no features of the
+    /// query's kind (reloaded without keypoints, or another kind).
+    fn inliers_with(
+        &self,
+        features: &KeyframeFeatures,
+        id: u64,
+    ) -> Result<Option<u32>, LoopsError> {
+        let Some(stored) = self.features.get(&id) else {
+            return Ok(None);
+        };
+        if stored.keypoints.descriptors.kind() != features.keypoints.descriptors.kind() {
+            return Ok(None);
+        }
+        check_pair(
+            features.keypoints.as_ref(),
+            stored.keypoints.as_ref(),
+            &self.options.pair,
+        )
+        .map(|check| Some(check.inliers))
+        .map_err(|e| LoopsError::InvalidKeyframe(e.to_string()))
+    }
+
     /// The largest id outside the exclusion window (`None`: no keyframe is): this session's
     /// keyframes `exclude_recent_ids` or more before the query, and every reloaded one.
     fn max_candidate_id(&self, entry: &KeyframeEntry<'_>) -> Option<u64> {
@@ -490,31 +503,20 @@ impl LoopDetector {
         features: &KeyframeFeatures,
         best: Verified,
     ) -> Result<Verified, LoopsError> {
-        let max_id = entry
-            .id
-            .saturating_sub(self.options.exclude_recent_ids.max(1));
+        let max_id = self.max_candidate_id(entry).unwrap_or(0);
         let mut refined = best;
         for id in self.database.group_keyframes(best.place) {
             if id == best.id || id > max_id {
                 continue;
             }
-            let Some(stored) = self.features.get(&id) else {
+            let Some(inliers) = self.inliers_with(features, id)? else {
                 continue;
             };
-            if stored.keypoints.descriptors.kind() != features.keypoints.descriptors.kind() {
-                continue;
-            }
-            let check = check_pair(
-                features.keypoints.as_ref(),
-                stored.keypoints.as_ref(),
-                &self.options.pair,
-            )
-            .map_err(|e| LoopsError::InvalidKeyframe(e.to_string()))?;
-            if check.inliers > refined.inliers {
+            if inliers > refined.inliers {
                 refined = Verified {
                     id,
                     place: self.database.place_of(id)?,
-                    inliers: check.inliers,
+                    inliers,
                     confidence: best.confidence,
                 };
             }

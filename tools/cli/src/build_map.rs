@@ -1,14 +1,15 @@
 //! `topoloc build-map`: a map from an image folder (optionally with a TUM trajectory), with the
 //! describer stored in it.
 
-use crate::backend_args::{image_files, progress_bar, BackendArgs, LocalFeatures};
-use anyhow::{bail, Result};
+use crate::backend_args::{
+    image_files, poses_for_images, progress_bar, BackendArgs, LocalFeatures,
+};
+use anyhow::Result;
 use clap::Args;
 use serde_json::json;
 use std::path::PathBuf;
 use topoloc::build::{
-    build_from_images, read_tum, BuildStage, ImageLayout, ImageMapOptions, ImageSource,
-    KeyframeOptions,
+    build_from_images, BuildStage, ImageLayout, ImageMapOptions, ImageSource, KeyframeOptions,
 };
 use topoloc::describe::FitOptions;
 
@@ -61,24 +62,12 @@ pub struct BuildMapArgs {
 pub fn run(args: &BuildMapArgs) -> Result<()> {
     let files = image_files(&args.images)?;
     let poses = match &args.poses {
-        Some(path) => {
-            let poses = read_tum(path)?;
-            if poses.len() != files.len() {
-                bail!(
-                    "{} has {} poses for {} images in {}: give one pose per image, in file-name order",
-                    path.display(),
-                    poses.len(),
-                    files.len(),
-                    args.images.display()
-                );
-            }
-            Some(
-                poses
-                    .into_iter()
-                    .map(|p| p.world_t_camera)
-                    .collect::<Vec<_>>(),
-            )
-        }
+        Some(path) => Some(
+            poses_for_images(path, &files, &args.images)?
+                .into_iter()
+                .map(|p| p.world_t_camera)
+                .collect::<Vec<_>>(),
+        ),
         None => None,
     };
     let options = ImageMapOptions {

@@ -17,7 +17,9 @@
 //! and p90 time per keyframe and the count of each gate; with `--aligned-tolerance T` (a
 //! frame-aligned second session, such as Gardens Point) also precision and recall.
 
-use crate::backend_args::{image_files, progress_bar, BackendArgs, LocalFeatures};
+use crate::backend_args::{
+    image_files, poses_for_images, progress_bar, BackendArgs, LocalFeatures,
+};
 use crate::process::median_and_p90;
 use anyhow::{bail, Context, Result};
 use clap::Args;
@@ -26,9 +28,7 @@ use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
-use topoloc::build::{
-    build_from_images, read_tum, BuildStage, ImageLayout, ImageMapOptions, ImageSource,
-};
+use topoloc::build::{build_from_images, BuildStage, ImageLayout, ImageMapOptions, ImageSource};
 use topoloc::describe::Describer;
 use topoloc::image::{read_rgb, ImageView, PixelFormat};
 use topoloc::loops::{
@@ -83,21 +83,11 @@ pub struct LoopsArgs {
 /// Runs the command.
 pub fn run(args: &LoopsArgs) -> Result<()> {
     let files = image_files(&args.images)?;
-    let poses = match &args.poses {
-        Some(path) => {
-            let poses = read_tum(path)?;
-            if poses.len() != files.len() {
-                bail!(
-                    "{} has {} poses for {} images: give one pose per image, in file-name order",
-                    path.display(),
-                    poses.len(),
-                    files.len()
-                );
-            }
-            Some(poses)
-        }
-        None => None,
-    };
+    let poses = args
+        .poses
+        .as_deref()
+        .map(|path| poses_for_images(path, &files, &args.images))
+        .transpose()?;
     let camera = args
         .intrinsics
         .as_deref()
