@@ -43,6 +43,9 @@
 #define topoloc_view_info_default(p) topoloc_view_info_init((p), sizeof *(p))
 #define topoloc_image_map_options_default(p) topoloc_image_map_options_init((p), sizeof *(p))
 #define topoloc_skeleton_options_default(p) topoloc_skeleton_options_init((p), sizeof *(p))
+#define topoloc_loop_options_default(p) topoloc_loop_options_init((p), sizeof *(p))
+#define topoloc_loop_keyframe_default(p) topoloc_loop_keyframe_init((p), sizeof *(p))
+#define topoloc_loop_hint_default(p) topoloc_loop_hint_init((p), sizeof *(p))
 
 
 /**
@@ -56,9 +59,9 @@
  * marks additions "ABI 1.N"; a host that uses one checks `topoloc_abi_version_minor() >= N`
  * at run time (the library it loaded may be older than the header it was built with).
  * 1.1: image maps; 1.2: verification; 1.3: metric mode; 1.4: `topoloc_abi_version_minor`,
- * `topoloc_status_name`.
+ * `topoloc_status_name`; 1.5: loop closure (`topoloc_loop_detector_*`).
  */
-#define TOPOLOC_ABI_VERSION_MINOR 4
+#define TOPOLOC_ABI_VERSION_MINOR 5
 
 /**
  * Result of every fallible C function. Values are grouped in ranges and never renumbered;
@@ -202,6 +205,13 @@ typedef struct topoloc_graph topoloc_graph;
  * move between threads). It keeps its own reference to the map.
  */
 typedef struct topoloc_localizer topoloc_localizer;
+
+/**
+ * Finds loop closures for one SLAM run (and, from a map, against an earlier one). Created by
+ * `topoloc_loop_detector_new` or `_from_map`, released by `topoloc_loop_detector_free`.
+ * Single-threaded state: one thread at a time (it may move between threads).
+ */
+typedef struct topoloc_loop_detector topoloc_loop_detector;
 
 /**
  * An immutable map. Created by `topoloc_map_load`, `topoloc_map_load_from_memory`,
@@ -736,6 +746,224 @@ typedef struct topoloc_skeleton_options {
 typedef uint32_t topoloc_node_kind;
 
 /**
+ * Loop detector parameters. Initialise with `topoloc_loop_options_default`; the defaults
+ * and meaning of each field are those of the Rust `HintOptions` and `DatabaseOptions`.
+ */
+typedef struct topoloc_loop_options {
+  /**
+   * `sizeof(topoloc_loop_options)`, set by the `_default` function.
+   */
+  size_t struct_size;
+  /**
+   * Loop candidates verified per keyframe, 1..=64. Default 5.
+   */
+  uint32_t candidates;
+  /**
+   * Keyframes with an id within this many of the new one's are never candidates (DBoW2's
+   * `max_id`; an earlier session's keyframes always may be). Default 30.
+   */
+  uint64_t exclude_recent_ids;
+  /**
+   * Keyframes less than this many seconds older than the new one are never candidates.
+   * Default 10.
+   */
+  double exclude_recent_s;
+  /**
+   * Fewest fundamental-matrix inliers of an accepted hint, 8..=10000. Default 30.
+   */
+  uint32_t min_inliers;
+  /**
+   * Consecutive keyframes whose best candidates must agree on the place, 1..=100. Default 3.
+   */
+  uint32_t consistent_keyframes;
+  /**
+   * Check hints with a pose against the host's odometry when both keyframes have poses.
+   * Default true.
+   */
+  bool odometry_gate;
+  /**
+   * Largest rotation difference to the odometry, degrees (> 0). Default 30.
+   */
+  double odometry_max_rotation_deg;
+  /**
+   * Largest translation difference to the odometry, metres (> 0; metric hints). Default 20.
+   */
+  double odometry_max_translation_m;
+  /**
+   * Pinhole intrinsics of the camera (undistorted images, pixels); `fx == 0` = none: hints
+   * then carry no pose. Default none.
+   */
+  double fx;
+  /**
+   * Focal length y, pixels.
+   */
+  double fy;
+  /**
+   * Principal point x, pixels.
+   */
+  double cx;
+  /**
+   * Principal point y, pixels.
+   */
+  double cy;
+  /**
+   * A keyframe starts a new place when its similarity to its predecessor's place is below
+   * this, in (-1, 1]. Default 0.9.
+   */
+  float novelty_similarity;
+  /**
+   * With poses, a keyframe closer than this to the previous place joins it (metres). Default 2.
+   */
+  double place_spacing_m;
+  /**
+   * With poses, a new place is linked to places within this distance (metres). Default 3.
+   */
+  double neighbour_radius_m;
+} topoloc_loop_options;
+
+/**
+ * One keyframe as the host gives it. Initialise with `topoloc_loop_keyframe_default`.
+ */
+typedef struct topoloc_loop_keyframe {
+  /**
+   * `sizeof(topoloc_loop_keyframe)`, set by the `_default` function.
+   */
+  size_t struct_size;
+  /**
+   * The host's keyframe id; must increase from one keyframe to the next.
+   */
+  uint64_t id;
+  /**
+   * Time in seconds; must not decrease.
+   */
+  double timestamp;
+  /**
+   * Global descriptor (normalised internally).
+   */
+  const float *descriptor;
+  /**
+   * Floats at `descriptor`: the detector's D.
+   */
+  size_t descriptor_len;
+  /**
+   * Odometry pose of the body `world_T_body`, 16 doubles row-major 4x4; NULL = none (either
+   * every keyframe has one or none has).
+   */
+  const double *world_T_body;
+  /**
+   * Camera in the body frame `body_T_camera`, 16 doubles row-major; NULL = identity.
+   */
+  const double *body_T_camera;
+  /**
+   * Number of keypoints (0..=5000).
+   */
+  size_t keypoint_count;
+  /**
+   * Keypoint pixel positions, `2 * keypoint_count` floats (x right, y down).
+   */
+  const float *keypoints;
+  /**
+   * Their 32-byte binary descriptors (ORB, BRIEF), `32 * keypoint_count` bytes.
+   */
+  const uint8_t *keypoint_descriptors;
+  /**
+   * Each keypoint's scene point in this keyframe's camera frame (metres; NaN x3 when
+   * unknown), `3 * keypoint_count` floats; NULL = none. With intrinsics, a later hint
+   * matched to this keyframe is metric.
+   */
+  const float *camera_points;
+} topoloc_loop_keyframe;
+
+/**
+ * Which gate decided a hint: one of the `TOPOLOC_GATE_*` values.
+ */
+typedef uint32_t topoloc_gate;
+
+/**
+ * The best verified candidate of a keyframe, written by `topoloc_loop_detector_add`. The
+ * caller sets `struct_size` with `topoloc_loop_hint_default`; topoloc writes the rest.
+ */
+typedef struct topoloc_loop_hint {
+  /**
+   * `sizeof(topoloc_loop_hint)`, set by the `_default` function.
+   */
+  size_t struct_size;
+  /**
+   * The added keyframe's id.
+   */
+  uint64_t query_id;
+  /**
+   * The place the added keyframe joined.
+   */
+  uint32_t query_place;
+  /**
+   * True when a candidate was verified (the fields below describe it).
+   */
+  bool has_match;
+  /**
+   * True when every gate passed: a loop closure for the pose graph.
+   */
+  bool accepted;
+  /**
+   * The gate that decided (`TOPOLOC_GATE_*`): why a candidate was refused, for logs.
+   */
+  topoloc_gate gate;
+  /**
+   * The matched keyframe's id.
+   */
+  uint64_t matched_id;
+  /**
+   * The matched keyframe's place.
+   */
+  uint32_t place;
+  /**
+   * Fundamental-matrix inliers between the two keyframes.
+   */
+  uint32_t inliers;
+  /**
+   * The candidate's share of the inliers of all verified candidates (0..=1).
+   */
+  float confidence;
+  /**
+   * True when `matched_T_query` and `covariance` are set (intrinsics given, pose fitted).
+   */
+  bool has_pose;
+  /**
+   * True when the translation is metric (the matched keyframe had scene points); else it
+   * has unit length (a direction).
+   */
+  bool scale_known;
+  /**
+   * The query camera in the matched camera's optical frame (z forward, x right, y down),
+   * 16 doubles row-major 4x4.
+   */
+  double matched_T_query[16];
+  /**
+   * Covariance of `matched_T_query` for a right perturbation, 36 doubles row-major, in
+   * GTSAM Pose3 tangent order: rotation (rad) x y z, then translation (m) x y z.
+   */
+  double covariance[36];
+} topoloc_loop_hint;
+
+/**
+ * One relocalization candidate. Array element: its layout never changes.
+ */
+typedef struct topoloc_loop_candidate {
+  /**
+   * Keyframe id.
+   */
+  uint64_t keyframe_id;
+  /**
+   * Its place.
+   */
+  uint32_t place;
+  /**
+   * Cosine similarity of the query to the keyframe.
+   */
+  float similarity;
+} topoloc_loop_candidate;
+
+/**
  * Filter mode: forward filter over the graph (default).
  */
 #define TOPOLOC_MODE_FILTER 0
@@ -837,6 +1065,37 @@ typedef uint32_t topoloc_node_kind;
  * Place kind: inserted on a skeleton path to keep edges straight, obstacle-free and short.
  */
 #define TOPOLOC_NODE_INTERMEDIATE 3
+
+/**
+ * Every gate passed: the hint is a loop closure.
+ */
+#define TOPOLOC_GATE_ACCEPTED 0
+
+/**
+ * No keyframe outside the exclusion window had features to verify.
+ */
+#define TOPOLOC_GATE_NO_CANDIDATE 1
+
+/**
+ * The best candidate had fewer inliers than `min_inliers`.
+ */
+#define TOPOLOC_GATE_TOO_FEW_INLIERS 2
+
+/**
+ * Too few consecutive keyframes agreed on the place (`consistent_keyframes`).
+ */
+#define TOPOLOC_GATE_INCONSISTENT 3
+
+/**
+ * Intrinsics were given but no relative pose could be fitted (too few matches, no
+ * consensus, or a pure rotation).
+ */
+#define TOPOLOC_GATE_NO_POSE 4
+
+/**
+ * The pose disagrees with the host's odometry beyond the bounds.
+ */
+#define TOPOLOC_GATE_ODOMETRY 5
 
 #ifdef __cplusplus
 extern "C" {
@@ -1217,6 +1476,95 @@ topoloc_status topoloc_graph_edge(const struct topoloc_graph *graph, size_t inde
  * to ask. Errors: `_NULL_ARGUMENT`, `_BUFFER_TOO_SMALL`.
  */
 topoloc_status topoloc_graph_skeleton(const struct topoloc_graph *graph, uint32_t *xyz, size_t len, size_t *count);
+
+/* ======================================================================================
+ * Loop closure: keyframes in, gated hints with relative poses out (one thread at a time)
+ * ====================================================================================== */
+
+/**
+ * Fills the first `size` bytes of `*options` with defaults and sets `struct_size`; call it
+ * through the header macro `topoloc_loop_options_default(options)`, which passes `sizeof *(options)`.
+ * Errors: `_NULL_ARGUMENT`, `_STRUCT_SIZE`.
+ */
+topoloc_status topoloc_loop_options_init(struct topoloc_loop_options *options, size_t size);
+
+/**
+ * Creates an empty loop detector for descriptors of `descriptor_kind` / `descriptor_model`
+ * (non-empty strings) and dimension `dim`: the place graph grows from nothing. `options`
+ * may be NULL for defaults. On success `*out` owns the detector.
+ * Errors: `_INVALID_OPTION`, `_INVALID_ARGUMENT` (empty kind or model, dim 0), `_STRUCT_SIZE`,
+ * `_NULL_ARGUMENT`, `_INVALID_UTF8`.
+ */
+topoloc_status topoloc_loop_detector_new(const char *descriptor_kind, const char *descriptor_model, uint32_t dim, const struct topoloc_loop_options *options, struct topoloc_loop_detector **out);
+
+/**
+ * Creates a loop detector whose first session is `map`'s views (with their stored keypoints
+ * and, where known, scene points): new keyframes (ids above the map's) close loops against
+ * it. The map handle is not kept. On success `*out` owns the detector.
+ * Errors: `_INVALID_OPTION` (also a view without keyframe id), `_INVALID_ARGUMENT` (ids not
+ * increasing), `_STRUCT_SIZE`, `_NULL_ARGUMENT`.
+ */
+topoloc_status topoloc_loop_detector_from_map(const struct topoloc_map *map, const struct topoloc_loop_options *options, struct topoloc_loop_detector **out);
+
+/**
+ * Releases a loop detector. `NULL` is a no-op.
+ */
+void topoloc_loop_detector_free(struct topoloc_loop_detector *detector);
+
+/**
+ * Fills the first `size` bytes of `*keyframe` with defaults and sets `struct_size`; call it
+ * through the header macro `topoloc_loop_keyframe_default(keyframe)`, which passes `sizeof *(keyframe)`.
+ * Errors: `_NULL_ARGUMENT`, `_STRUCT_SIZE`.
+ */
+topoloc_status topoloc_loop_keyframe_init(struct topoloc_loop_keyframe *keyframe, size_t size);
+
+/**
+ * Fills the first `size` bytes of `*hint` with defaults and sets `struct_size`; call it
+ * through the header macro `topoloc_loop_hint_default(hint)`, which passes `sizeof *(hint)`.
+ * Errors: `_NULL_ARGUMENT`, `_STRUCT_SIZE`.
+ */
+topoloc_status topoloc_loop_hint_init(struct topoloc_loop_hint *hint, size_t size);
+
+/**
+ * Adds a keyframe: its loop candidates (outside the exclusion window) are verified against
+ * its keypoints and gated, then it joins the place graph. `*hint` receives the best verified
+ * candidate with the gate that decided (`has_match` 0 when there was none); at most one hint
+ * per keyframe. The whole keyframe is validated first: on any error the detector and `*hint`
+ * are unchanged.
+ * Errors: `_DIMENSION_MISMATCH`, `_NON_FINITE` (descriptor, timestamp, poses),
+ * `_ZERO_DESCRIPTOR`, `_INVALID_ARGUMENT` (duplicate or decreasing id, earlier timestamp,
+ * poses on some keyframes only, bad keypoints or scene points, non-rigid poses),
+ * `_STRUCT_SIZE`, `_NULL_ARGUMENT`. Cost: one pass over the keyframes' descriptors and a pair
+ * check per verified candidate (BENCHMARKS.md).
+ */
+topoloc_status topoloc_loop_detector_add(struct topoloc_loop_detector *detector, const struct topoloc_loop_keyframe *keyframe, struct topoloc_loop_hint *hint);
+
+/**
+ * Relocalization candidates for a descriptor that is not added (every keyframe may match),
+ * most similar first, into the caller's array `(out, capacity)`; `*count` receives how many
+ * were written (at most `capacity`). Errors: `_DIMENSION_MISMATCH`, `_NON_FINITE`,
+ * `_ZERO_DESCRIPTOR`, `_NULL_ARGUMENT`.
+ */
+topoloc_status topoloc_loop_detector_query(const struct topoloc_loop_detector *detector, const float *descriptor, size_t descriptor_len, struct topoloc_loop_candidate *out, size_t capacity, size_t *count);
+
+/**
+ * Removes a keyframe and its features (ORB-SLAM culls keyframes).
+ * Errors: `_INVALID_ARGUMENT` (no keyframe with that id), `_NULL_ARGUMENT`.
+ */
+topoloc_status topoloc_loop_detector_erase(struct topoloc_loop_detector *detector, uint64_t id);
+
+/**
+ * Saves the keyframes and their place graph as a topoloc map file (a view per keyframe,
+ * keyframe ids kept), for a later session: `topoloc_map_load`, then
+ * `topoloc_loop_detector_from_map`. Atomic (a temporary file renamed over `path`).
+ * Errors: `_IO`, `_EMPTY_MAP`, `_NULL_ARGUMENT`, `_INVALID_UTF8`.
+ */
+topoloc_status topoloc_loop_detector_save(const struct topoloc_loop_detector *detector, const char *path);
+
+/**
+ * Number of keyframes held (`*out`). Errors: `_NULL_ARGUMENT`.
+ */
+topoloc_status topoloc_loop_detector_len(const struct topoloc_loop_detector *detector, size_t *out);
 
 #ifdef __cplusplus
 }  // extern "C"

@@ -6,6 +6,7 @@ use crate::build::ImageMapError;
 use crate::descriptor::{DescriptorError, IdentityError};
 use crate::errors::VisionError;
 use crate::localize::{LocalizeError, TimestampError};
+use crate::loops::LoopsError;
 use crate::map::MapError;
 use crate::skeleton::SkeletonError;
 
@@ -131,5 +132,20 @@ impl From<ImageMapError> for FfiError {
             ImageMapError::Cancelled => TOPOLOC_ERR_CANCELLED,
         };
         Self::new(status, message)
+    }
+}
+
+impl From<LoopsError> for FfiError {
+    fn from(e: LoopsError) -> Self {
+        match e {
+            LoopsError::Descriptor(d) => d.into(),
+            LoopsError::Map(m) => m.into(),
+            LoopsError::InvalidOption(_) => Self::new(TOPOLOC_ERR_INVALID_OPTION, e.to_string()),
+            LoopsError::NonFinite(_) => Self::new(TOPOLOC_ERR_NON_FINITE, e.to_string()),
+            LoopsError::DuplicateId(_)
+            | LoopsError::OutOfOrder(_)
+            | LoopsError::UnknownKeyframe(_)
+            | LoopsError::InvalidKeyframe(_) => Self::invalid(e.to_string()),
+        }
     }
 }

@@ -9,7 +9,7 @@
 //! `*_default()`; no panic crosses the boundary (`TOPOLOC_ERR_PANIC`).
 //!
 //! Thread safety: `const topoloc_map*` and `const topoloc_graph*` may be used from many threads
-//! at once; builders and localizers are single-threaded state (one thread at a time; they may
+//! at once; builders, localizers and loop detectors are single-threaded state (one thread at a time; they may
 //! move between threads).
 
 #![deny(missing_docs)]
@@ -28,7 +28,8 @@ mod status;
 mod versioned;
 
 // The entry points, declared in the order include/topoloc.h presents them (cbindgen follows
-// this order): versions and errors, maps, the localizer, builders, skeleton graphs.
+// this order): versions and errors, maps, the localizer, builders, skeleton graphs, loop
+// closure.
 mod version;
 
 mod map;
@@ -41,9 +42,12 @@ mod images;
 
 mod skeleton;
 
+mod loops;
+
 pub use builder::*;
 pub use images::*;
 pub use localizer::*;
+pub use loops::*;
 pub use map::*;
 pub use skeleton::*;
 pub use status::topoloc_status;

@@ -3415,6 +3415,162 @@ static bool make_tmpdir(void)
     return true;
 }
 
+
+/* Loop closure (ABI 1.5): keyframes in, gated hints out. Two keyframes see the same 60
+ * keypoints (same binary descriptors), so the second's candidate verifies with all of them;
+ * bad keyframes are refused with the state unchanged. */
+#define LOOP_DIM 8
+#define LOOP_POINTS 60
+/* LOOP_POINTS scene points 3-8 m in front of a 300-pixel pinhole camera, seen from it
+ * (`first`) and from a camera 0.3 m to the right and 0.1 m ahead, turned 3 degrees
+ * (`second`); each point has the same random 32-byte descriptor in both views. */
+static void loop_keypoints(float *first, float *second, uint8_t *descriptors)
+{
+    uint32_t state = 12345u;
+    const double c = 0.99862953475, s = 0.05233595624; /* cos, sin of 3 degrees */
+    int i = 0;
+    while (i < LOOP_POINTS) {
+        double x, y, z, qx, qz, u1, v1, u2, v2;
+        state = state * 1664525u + 1013904223u;
+        z = 3.0 + 5.0 * (double)(state >> 8) / 16777216.0;
+        state = state * 1664525u + 1013904223u;
+        x = ((double)(state >> 8) / 16777216.0 - 0.5) * z;
+        state = state * 1664525u + 1013904223u;
+        y = ((double)(state >> 8) / 16777216.0 - 0.5) * 0.7 * z;
+        /* The second camera: p' = R^T (p - t), R a yaw about y. */
+        qx = c * (x - 0.3) - s * (z - 0.1);
+        qz = s * (x - 0.3) + c * (z - 0.1);
+        u1 = 300.0 * x / z + 160.0;
+        v1 = 300.0 * y / z + 120.0;
+        u2 = 300.0 * qx / qz + 160.0;
+        v2 = 300.0 * y / qz + 120.0;
+        if (qz < 0.5 || u1 < 0 || u1 > 319 || v1 < 0 || v1 > 239 || u2 < 0 || u2 > 319 ||
+            v2 < 0 || v2 > 239)
+            continue;
+        first[2 * i] = (float)u1;
+        first[2 * i + 1] = (float)v1;
+        second[2 * i] = (float)u2;
+        second[2 * i + 1] = (float)v2;
+        for (int b = 0; b < 32; b++) {
+            state = state * 1664525u + 1013904223u;
+            descriptors[32 * i + b] = (uint8_t)(state >> 24);
+        }
+        i++;
+    }
+}
+
+static void loop_descriptor(float *d, int scene)
+{
+    for (int i = 0; i < LOOP_DIM; i++)
+        d[i] = (i == scene % LOOP_DIM) ? 1.0f : 0.05f * (float)i;
+}
+
+static void test_loop_closure(void)
+{
+    topoloc_loop_options options;
+    topoloc_loop_detector *det = NULL;
+    topoloc_loop_keyframe kf;
+    topoloc_loop_hint hint;
+    float points[2 * LOOP_POINTS], seen_again[2 * LOOP_POINTS], d[LOOP_DIM];
+    uint8_t descriptors[32 * LOOP_POINTS];
+    topoloc_loop_candidate found[4];
+    size_t count = 0, len = 0;
+    char path[4200];
+
+    CHECK(topoloc_abi_version_minor() >= 5);
+    CHECK_STATUS(topoloc_loop_options_default(&options), TOPOLOC_OK);
+    CHECK(options.struct_size == sizeof options && options.candidates == 5 &&
+          options.min_inliers == 30 && options.consistent_keyframes == 3 && options.fx == 0.0);
+    options.exclude_recent_ids = 5;
+    options.exclude_recent_s = 0.0;
+    options.consistent_keyframes = 1;
+    CHECK_NULL(topoloc_loop_detector_new("test", "loops", LOOP_DIM, &options, NULL), "out");
+    CHECK_STATUS(topoloc_loop_detector_new("", "loops", LOOP_DIM, &options, &det),
+                 TOPOLOC_ERR_INVALID_ARGUMENT);
+    CHECK(det == NULL);
+    options.candidates = 0;
+    CHECK_STATUS(topoloc_loop_detector_new("test", "loops", LOOP_DIM, &options, &det),
+                 TOPOLOC_ERR_INVALID_OPTION);
+    options.candidates = 5;
+    CHECK_STATUS(topoloc_loop_detector_new("test", "loops", LOOP_DIM, &options, &det), TOPOLOC_OK);
+    if (det == NULL)
+        return;
+
+    loop_keypoints(points, seen_again, descriptors);
+    CHECK_STATUS(topoloc_loop_keyframe_default(&kf), TOPOLOC_OK);
+    CHECK_STATUS(topoloc_loop_hint_default(&hint), TOPOLOC_OK);
+    loop_descriptor(d, 1);
+    kf.id = 0;
+    kf.timestamp = 0.0;
+    kf.descriptor = d;
+    kf.descriptor_len = LOOP_DIM;
+    kf.keypoint_count = LOOP_POINTS;
+    kf.keypoints = points;
+    kf.keypoint_descriptors = descriptors;
+    CHECK_STATUS(topoloc_loop_detector_add(det, &kf, &hint), TOPOLOC_OK);
+    CHECK(hint.query_id == 0 && !hint.has_match && !hint.accepted &&
+          hint.gate == TOPOLOC_GATE_NO_CANDIDATE);
+
+    /* Bad keyframes: the detector keeps one keyframe and the hint is untouched. */
+    kf.id = 10;
+    kf.timestamp = 10.0;
+    kf.descriptor_len = LOOP_DIM - 1;
+    CHECK_STATUS(topoloc_loop_detector_add(det, &kf, &hint), TOPOLOC_ERR_DIMENSION_MISMATCH);
+    kf.descriptor_len = LOOP_DIM;
+    kf.keypoint_descriptors = NULL;
+    CHECK_NULL(topoloc_loop_detector_add(det, &kf, &hint), "keyframe.keypoint_descriptors");
+    kf.keypoint_descriptors = descriptors;
+    kf.id = 0;
+    CHECK_STATUS(topoloc_loop_detector_add(det, &kf, &hint), TOPOLOC_ERR_INVALID_ARGUMENT);
+    CHECK_HAS_MESSAGE();
+    kf.id = 10;
+    kf.timestamp = make_nan();
+    CHECK_STATUS(topoloc_loop_detector_add(det, &kf, &hint), TOPOLOC_ERR_NON_FINITE);
+    kf.timestamp = 10.0;
+    kf.struct_size = 3;
+    CHECK_STATUS(topoloc_loop_detector_add(det, &kf, &hint), TOPOLOC_ERR_STRUCT_SIZE);
+    kf.struct_size = sizeof kf;
+    CHECK_STATUS(topoloc_loop_detector_len(det, &len), TOPOLOC_OK);
+    CHECK(len == 1 && hint.query_id == 0);
+
+    /* The revisit from another pose: every keypoint matches, the hint names keyframe 0. */
+    kf.keypoints = seen_again;
+    CHECK_STATUS(topoloc_loop_detector_add(det, &kf, &hint), TOPOLOC_OK);
+    CHECK(hint.query_id == 10 && hint.has_match && hint.accepted);
+    CHECK(hint.gate == TOPOLOC_GATE_ACCEPTED && hint.matched_id == 0);
+    CHECK(hint.inliers >= 30 && hint.confidence > 0.99f && !hint.has_pose);
+
+    CHECK_STATUS(topoloc_loop_detector_query(det, d, LOOP_DIM, found, 4, &count), TOPOLOC_OK);
+    CHECK(count == 2 && found[0].similarity > 0.99f);
+    CHECK_NULL(topoloc_loop_detector_query(det, d, LOOP_DIM, found, 4, NULL), "count");
+
+    tmp_path(path, sizeof path, "loops.topoloc");
+    CHECK_STATUS(topoloc_loop_detector_save(det, path), TOPOLOC_OK);
+    CHECK_STATUS(topoloc_loop_detector_erase(det, 77), TOPOLOC_ERR_INVALID_ARGUMENT);
+    CHECK_STATUS(topoloc_loop_detector_erase(det, 10), TOPOLOC_OK);
+    CHECK_STATUS(topoloc_loop_detector_len(det, &len), TOPOLOC_OK);
+    CHECK(len == 1);
+    topoloc_loop_detector_free(det);
+    topoloc_loop_detector_free(NULL);
+
+    /* A second session from the saved map: its keyframes are there, without features. */
+    {
+        topoloc_map *saved = NULL;
+        topoloc_loop_detector *again = NULL;
+        CHECK_STATUS(topoloc_map_load(path, NULL, &saved), TOPOLOC_OK);
+        CHECK_STATUS(topoloc_loop_detector_from_map(saved, NULL, &again), TOPOLOC_OK);
+        CHECK_STATUS(topoloc_loop_detector_len(again, &len), TOPOLOC_OK);
+        CHECK(len == 2);
+        kf.id = 20;
+        kf.timestamp = 20.0;
+        CHECK_STATUS(topoloc_loop_detector_add(again, &kf, &hint), TOPOLOC_OK);
+        CHECK(hint.query_id == 20 && hint.gate == TOPOLOC_GATE_NO_CANDIDATE);
+        topoloc_loop_detector_free(again);
+        topoloc_map_free(saved);
+    }
+    CHECK(remove(path) == 0);
+}
+
 int main(void)
 {
     topoloc_map *map;
@@ -3436,6 +3592,7 @@ int main(void)
     test_builder_errors();
     test_files();
     test_skeleton_graphs();
+    test_loop_closure();
 
     map = build_world_map();
     CHECK(map != NULL);

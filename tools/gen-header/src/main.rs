@@ -48,6 +48,9 @@ const DEFAULT_MACROS: &str = "
 #define topoloc_view_info_default(p) topoloc_view_info_init((p), sizeof *(p))
 #define topoloc_image_map_options_default(p) topoloc_image_map_options_init((p), sizeof *(p))
 #define topoloc_skeleton_options_default(p) topoloc_skeleton_options_init((p), sizeof *(p))
+#define topoloc_loop_options_default(p) topoloc_loop_options_init((p), sizeof *(p))
+#define topoloc_loop_keyframe_default(p) topoloc_loop_keyframe_init((p), sizeof *(p))
+#define topoloc_loop_hint_default(p) topoloc_loop_hint_init((p), sizeof *(p))
 ";
 
 /// The header's sections of functions, in reading order: a banner and the functions' name
@@ -95,6 +98,10 @@ const SECTIONS: &[(&str, &[&str])] = &[
     (
         "Skeleton graphs from occupancy grids",
         &["topoloc_skeleton_options_", "topoloc_graph_"],
+    ),
+    (
+        "Loop closure: keyframes in, gated hints with relative poses out (one thread at a time)",
+        &["topoloc_loop_"],
     ),
 ];
 

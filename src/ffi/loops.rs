@@ -1,0 +1,558 @@
+//! C functions of loop closure (ABI 1.5): a loop detector (keyframe database with each
+//! keyframe's local features) that turns every added keyframe into at most one gated hint.
+
+use super::boundary::{check_out, run, slice, string, write_array, write_out};
+use super::convert::{optional_pose, pose_to_row_major};
+use super::error::FfiError;
+use super::handles::{free_box, new_box, try_mut, try_ref, Castable, Opaque, OwnedBox};
+use super::map::topoloc_map;
+use super::topoloc_status;
+use super::versioned::{init_versioned, read_versioned, write_versioned, Versioned};
+use crate::descriptor::DescriptorIdentity;
+use crate::loops::{
+    DatabaseOptions, Gate, HintOptions, KeyframeDatabase, KeyframeEntry, KeyframeFeatures,
+    LoopDetector, LoopHint, OdometryGate,
+};
+use crate::verify::{Descriptor, Keypoints, PinholeCamera, DESCRIPTOR_BYTES, MAX_KEYPOINTS};
+use std::ffi::c_char;
+
+/// Finds loop closures for one SLAM run (and, from a map, against an earlier one). Created by
+/// `topoloc_loop_detector_new` or `_from_map`, released by `topoloc_loop_detector_free`.
+/// Single-threaded state: one thread at a time (it may move between threads).
+pub struct topoloc_loop_detector {
+    _opaque: Opaque,
+}
+
+impl Castable for topoloc_loop_detector {
+    type Ownership = OwnedBox;
+    type RustType = LoopDetector;
+}
+
+/// Which gate decided a hint: one of the `TOPOLOC_GATE_*` values.
+pub type topoloc_gate = u32;
+/// Every gate passed: the hint is a loop closure.
+pub const TOPOLOC_GATE_ACCEPTED: topoloc_gate = 0;
+/// No keyframe outside the exclusion window had features to verify.
+pub const TOPOLOC_GATE_NO_CANDIDATE: topoloc_gate = 1;
+/// The best candidate had fewer inliers than `min_inliers`.
+pub const TOPOLOC_GATE_TOO_FEW_INLIERS: topoloc_gate = 2;
+/// Too few consecutive keyframes agreed on the place (`consistent_keyframes`).
+pub const TOPOLOC_GATE_INCONSISTENT: topoloc_gate = 3;
+/// Intrinsics were given but no relative pose could be fitted (too few matches, no
+/// consensus, or a pure rotation).
+pub const TOPOLOC_GATE_NO_POSE: topoloc_gate = 4;
+/// The pose disagrees with the host's odometry beyond the bounds.
+pub const TOPOLOC_GATE_ODOMETRY: topoloc_gate = 5;
+
+/// Loop detector parameters. Initialise with `topoloc_loop_options_default`; the defaults
+/// and meaning of each field are those of the Rust `HintOptions` and `DatabaseOptions`.
+#[repr(C)]
+#[derive(Clone, Copy)]
+pub struct topoloc_loop_options {
+    /// `sizeof(topoloc_loop_options)`, set by the `_default` function.
+    pub struct_size: usize,
+    /// Loop candidates verified per keyframe, 1..=64. Default 5.
+    pub candidates: u32,
+    /// Keyframes with an id within this many of the new one's are never candidates (DBoW2's
+    /// `max_id`; an earlier session's keyframes always may be). Default 30.
+    pub exclude_recent_ids: u64,
+    /// Keyframes less than this many seconds older than the new one are never candidates.
+    /// Default 10.
+    pub exclude_recent_s: f64,
+    /// Fewest fundamental-matrix inliers of an accepted hint, 8..=10000. Default 30.
+    pub min_inliers: u32,
+    /// Consecutive keyframes whose best candidates must agree on the place, 1..=100. Default 3.
+    pub consistent_keyframes: u32,
+    /// Check hints with a pose against the host's odometry when both keyframes have poses.
+    /// Default true.
+    pub odometry_gate: bool,
+    /// Largest rotation difference to the odometry, degrees (> 0). Default 30.
+    pub odometry_max_rotation_deg: f64,
+    /// Largest translation difference to the odometry, metres (> 0; metric hints). Default 20.
+    pub odometry_max_translation_m: f64,
+    /// Pinhole intrinsics of the camera (undistorted images, pixels); `fx == 0` = none: hints
+    /// then carry no pose. Default none.
+    pub fx: f64,
+    /// Focal length y, pixels.
+    pub fy: f64,
+    /// Principal point x, pixels.
+    pub cx: f64,
+    /// Principal point y, pixels.
+    pub cy: f64,
+    /// A keyframe starts a new place when its similarity to its predecessor's place is below
+    /// this, in (-1, 1]. Default 0.9.
+    pub novelty_similarity: f32,
+    /// With poses, a keyframe closer than this to the previous place joins it (metres). Default 2.
+    pub place_spacing_m: f64,
+    /// With poses, a new place is linked to places within this distance (metres). Default 3.
+    pub neighbour_radius_m: f64,
+}
+
+impl Versioned for topoloc_loop_options {
+    const LAYOUTS: &'static [usize] = &[std::mem::size_of::<Self>()];
+}
+
+impl Default for topoloc_loop_options {
+    fn default() -> Self {
+        let (h, d) = (HintOptions::default(), DatabaseOptions::default());
+        let gate = h.odometry.unwrap_or_default();
+        Self {
+            struct_size: std::mem::size_of::<Self>(),
+            candidates: h.candidates as u32,
+            exclude_recent_ids: h.exclude_recent_ids,
+            exclude_recent_s: h.exclude_recent_s,
+            min_inliers: h.min_inliers,
+            consistent_keyframes: h.consistent_keyframes as u32,
+            odometry_gate: h.odometry.is_some(),
+            odometry_max_rotation_deg: gate.max_rotation_deg,
+            odometry_max_translation_m: gate.max_translation_m,
+            fx: 0.0,
+            fy: 0.0,
+            cx: 0.0,
+            cy: 0.0,
+            novelty_similarity: d.novelty_similarity,
+            place_spacing_m: d.place_spacing_m,
+            neighbour_radius_m: d.neighbour_radius_m,
+        }
+    }
+}
+
+/// Fills the first `size` bytes of `*options` with defaults and sets `struct_size`; call it
+/// through the header macro `topoloc_loop_options_default(options)`, which passes `sizeof *(options)`.
+/// Errors: `_NULL_ARGUMENT`, `_STRUCT_SIZE`.
+#[no_mangle]
+pub extern "C" fn topoloc_loop_options_init(
+    options: *mut topoloc_loop_options,
+    size: usize,
+) -> topoloc_status {
+    init_versioned(options, size, "options")
+}
+
+/// The Rust options a C caller's options stand for (NULL: defaults).
+fn loop_options(
+    options: *const topoloc_loop_options,
+) -> Result<(HintOptions, DatabaseOptions), FfiError> {
+    let o = if options.is_null() {
+        topoloc_loop_options::default()
+    } else {
+        read_versioned(options, topoloc_loop_options::default(), "options")?
+    };
+    let camera = (o.fx != 0.0).then_some(PinholeCamera {
+        fx: o.fx,
+        fy: o.fy,
+        cx: o.cx,
+        cy: o.cy,
+    });
+    let hints = HintOptions {
+        candidates: o.candidates as usize,
+        exclude_recent_ids: o.exclude_recent_ids,
+        exclude_recent_s: o.exclude_recent_s,
+        min_inliers: o.min_inliers,
+        consistent_keyframes: o.consistent_keyframes as usize,
+        odometry: o.odometry_gate.then_some(OdometryGate {
+            max_rotation_deg: o.odometry_max_rotation_deg,
+            max_translation_m: o.odometry_max_translation_m,
+        }),
+        camera,
+        ..HintOptions::default()
+    };
+    let database = DatabaseOptions {
+        novelty_similarity: o.novelty_similarity,
+        place_spacing_m: o.place_spacing_m,
+        neighbour_radius_m: o.neighbour_radius_m,
+    };
+    Ok((hints, database))
+}
+
+/// Creates an empty loop detector for descriptors of `descriptor_kind` / `descriptor_model`
+/// (non-empty strings) and dimension `dim`: the place graph grows from nothing. `options`
+/// may be NULL for defaults. On success `*out` owns the detector.
+/// Errors: `_INVALID_OPTION`, `_INVALID_ARGUMENT` (empty kind or model, dim 0), `_STRUCT_SIZE`,
+/// `_NULL_ARGUMENT`, `_INVALID_UTF8`.
+#[no_mangle]
+pub extern "C" fn topoloc_loop_detector_new(
+    descriptor_kind: *const c_char,
+    descriptor_model: *const c_char,
+    dim: u32,
+    options: *const topoloc_loop_options,
+    out: *mut *mut topoloc_loop_detector,
+) -> topoloc_status {
+    run(|| {
+        check_out(out, "out")?;
+        let identity = DescriptorIdentity::new(
+            string(descriptor_kind, "descriptor_kind")?,
+            string(descriptor_model, "descriptor_model")?,
+            dim,
+        )?;
+        let (hints, database) = loop_options(options)?;
+        let detector = LoopDetector::new(KeyframeDatabase::new(identity, database)?, hints)?;
+        write_out(out, new_box::<topoloc_loop_detector>(detector));
+        Ok(())
+    })
+}
+
+/// Creates a loop detector whose first session is `map`'s views (with their stored keypoints
+/// and, where known, scene points): new keyframes (ids above the map's) close loops against
+/// it. The map handle is not kept. On success `*out` owns the detector.
+/// Errors: `_INVALID_OPTION` (also a view without keyframe id), `_INVALID_ARGUMENT` (ids not
+/// increasing), `_STRUCT_SIZE`, `_NULL_ARGUMENT`.
+#[no_mangle]
+pub extern "C" fn topoloc_loop_detector_from_map(
+    map: *const topoloc_map,
+    options: *const topoloc_loop_options,
+    out: *mut *mut topoloc_loop_detector,
+) -> topoloc_status {
+    run(|| {
+        let map = try_ref(map, "map")?;
+        check_out(out, "out")?;
+        let (hints, database) = loop_options(options)?;
+        let detector = LoopDetector::from_map(map, database, hints)?;
+        write_out(out, new_box::<topoloc_loop_detector>(detector));
+        Ok(())
+    })
+}
+
+/// Releases a loop detector. `NULL` is a no-op.
+#[no_mangle]
+pub extern "C" fn topoloc_loop_detector_free(detector: *mut topoloc_loop_detector) {
+    free_box(detector)
+}
+
+/// One keyframe as the host gives it. Initialise with `topoloc_loop_keyframe_default`.
+#[allow(non_snake_case)]
+#[repr(C)]
+#[derive(Clone, Copy)]
+pub struct topoloc_loop_keyframe {
+    /// `sizeof(topoloc_loop_keyframe)`, set by the `_default` function.
+    pub struct_size: usize,
+    /// The host's keyframe id; must increase from one keyframe to the next.
+    pub id: u64,
+    /// Time in seconds; must not decrease.
+    pub timestamp: f64,
+    /// Global descriptor (normalised internally).
+    pub descriptor: *const f32,
+    /// Floats at `descriptor`: the detector's D.
+    pub descriptor_len: usize,
+    /// Odometry pose of the body `world_T_body`, 16 doubles row-major 4x4; NULL = none (either
+    /// every keyframe has one or none has).
+    pub world_T_body: *const f64,
+    /// Camera in the body frame `body_T_camera`, 16 doubles row-major; NULL = identity.
+    pub body_T_camera: *const f64,
+    /// Number of keypoints (0..=5000).
+    pub keypoint_count: usize,
+    /// Keypoint pixel positions, `2 * keypoint_count` floats (x right, y down).
+    pub keypoints: *const f32,
+    /// Their 32-byte binary descriptors (ORB, BRIEF), `32 * keypoint_count` bytes.
+    pub keypoint_descriptors: *const u8,
+    /// Each keypoint's scene point in this keyframe's camera frame (metres; NaN x3 when
+    /// unknown), `3 * keypoint_count` floats; NULL = none. With intrinsics, a later hint
+    /// matched to this keyframe is metric.
+    pub camera_points: *const f32,
+}
+
+impl Versioned for topoloc_loop_keyframe {
+    const LAYOUTS: &'static [usize] = &[std::mem::size_of::<Self>()];
+}
+
+impl Default for topoloc_loop_keyframe {
+    fn default() -> Self {
+        Self {
+            struct_size: std::mem::size_of::<Self>(),
+            id: 0,
+            timestamp: 0.0,
+            descriptor: std::ptr::null(),
+            descriptor_len: 0,
+            world_T_body: std::ptr::null(),
+            body_T_camera: std::ptr::null(),
+            keypoint_count: 0,
+            keypoints: std::ptr::null(),
+            keypoint_descriptors: std::ptr::null(),
+            camera_points: std::ptr::null(),
+        }
+    }
+}
+
+/// Fills the first `size` bytes of `*keyframe` with defaults and sets `struct_size`; call it
+/// through the header macro `topoloc_loop_keyframe_default(keyframe)`, which passes `sizeof *(keyframe)`.
+/// Errors: `_NULL_ARGUMENT`, `_STRUCT_SIZE`.
+#[no_mangle]
+pub extern "C" fn topoloc_loop_keyframe_init(
+    keyframe: *mut topoloc_loop_keyframe,
+    size: usize,
+) -> topoloc_status {
+    init_versioned(keyframe, size, "keyframe")
+}
+
+/// The best verified candidate of a keyframe, written by `topoloc_loop_detector_add`. The
+/// caller sets `struct_size` with `topoloc_loop_hint_default`; topoloc writes the rest.
+#[allow(non_snake_case)]
+#[repr(C)]
+#[derive(Clone, Copy)]
+pub struct topoloc_loop_hint {
+    /// `sizeof(topoloc_loop_hint)`, set by the `_default` function.
+    pub struct_size: usize,
+    /// The added keyframe's id.
+    pub query_id: u64,
+    /// The place the added keyframe joined.
+    pub query_place: u32,
+    /// True when a candidate was verified (the fields below describe it).
+    pub has_match: bool,
+    /// True when every gate passed: a loop closure for the pose graph.
+    pub accepted: bool,
+    /// The gate that decided (`TOPOLOC_GATE_*`): why a candidate was refused, for logs.
+    pub gate: topoloc_gate,
+    /// The matched keyframe's id.
+    pub matched_id: u64,
+    /// The matched keyframe's place.
+    pub place: u32,
+    /// Fundamental-matrix inliers between the two keyframes.
+    pub inliers: u32,
+    /// The candidate's share of the inliers of all verified candidates (0..=1).
+    pub confidence: f32,
+    /// True when `matched_T_query` and `covariance` are set (intrinsics given, pose fitted).
+    pub has_pose: bool,
+    /// True when the translation is metric (the matched keyframe had scene points); else it
+    /// has unit length (a direction).
+    pub scale_known: bool,
+    /// The query camera in the matched camera's optical frame (z forward, x right, y down),
+    /// 16 doubles row-major 4x4.
+    pub matched_T_query: [f64; 16],
+    /// Covariance of `matched_T_query` for a right perturbation, 36 doubles row-major, in
+    /// GTSAM Pose3 tangent order: rotation (rad) x y z, then translation (m) x y z.
+    pub covariance: [f64; 36],
+}
+
+impl Versioned for topoloc_loop_hint {
+    const LAYOUTS: &'static [usize] = &[std::mem::size_of::<Self>()];
+}
+
+impl Default for topoloc_loop_hint {
+    fn default() -> Self {
+        Self {
+            struct_size: std::mem::size_of::<Self>(),
+            query_id: 0,
+            query_place: 0,
+            has_match: false,
+            accepted: false,
+            gate: TOPOLOC_GATE_NO_CANDIDATE,
+            matched_id: 0,
+            place: 0,
+            inliers: 0,
+            confidence: 0.0,
+            has_pose: false,
+            scale_known: false,
+            matched_T_query: pose_to_row_major(&nalgebra::Isometry3::identity()),
+            covariance: [0.0; 36],
+        }
+    }
+}
+
+/// Fills the first `size` bytes of `*hint` with defaults and sets `struct_size`; call it
+/// through the header macro `topoloc_loop_hint_default(hint)`, which passes `sizeof *(hint)`.
+/// Errors: `_NULL_ARGUMENT`, `_STRUCT_SIZE`.
+#[no_mangle]
+pub extern "C" fn topoloc_loop_hint_init(
+    hint: *mut topoloc_loop_hint,
+    size: usize,
+) -> topoloc_status {
+    init_versioned(hint, size, "hint")
+}
+
+/// The C code of a gate.
+fn gate_code(gate: &Gate) -> topoloc_gate {
+    match gate {
+        Gate::Accepted => TOPOLOC_GATE_ACCEPTED,
+        Gate::NoCandidate => TOPOLOC_GATE_NO_CANDIDATE,
+        Gate::TooFewInliers => TOPOLOC_GATE_TOO_FEW_INLIERS,
+        Gate::Inconsistent { .. } => TOPOLOC_GATE_INCONSISTENT,
+        Gate::NoPose(_) => TOPOLOC_GATE_NO_POSE,
+        Gate::Odometry { .. } => TOPOLOC_GATE_ODOMETRY,
+    }
+}
+
+/// The keyframe's features from the C arrays.
+fn keyframe_features(k: &topoloc_loop_keyframe) -> Result<KeyframeFeatures, FfiError> {
+    let n = k.keypoint_count;
+    if n > MAX_KEYPOINTS {
+        return Err(FfiError::invalid(format!(
+            "keyframe.keypoint_count is {n}, at most {MAX_KEYPOINTS}"
+        )));
+    }
+    let points = slice(k.keypoints, 2 * n, "keyframe.keypoints")?;
+    let bytes = slice(
+        k.keypoint_descriptors,
+        DESCRIPTOR_BYTES * n,
+        "keyframe.keypoint_descriptors",
+    )?;
+    let descriptors: Vec<Descriptor> = bytes
+        .chunks_exact(DESCRIPTOR_BYTES)
+        .map(|c| c.try_into().expect("32 bytes"))
+        .collect();
+    let camera_points = if k.camera_points.is_null() {
+        None
+    } else {
+        let p = slice(k.camera_points, 3 * n, "keyframe.camera_points")?;
+        Some(p.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect())
+    };
+    Ok(KeyframeFeatures {
+        keypoints: Keypoints {
+            points: points.chunks_exact(2).map(|c| [c[0], c[1]]).collect(),
+            descriptors: descriptors.into(),
+        },
+        camera_points,
+    })
+}
+
+/// The C hint of a processed keyframe.
+fn c_hint(query_id: u64, query_place: u32, hint: Option<&LoopHint>) -> topoloc_loop_hint {
+    let mut out = topoloc_loop_hint {
+        query_id,
+        query_place,
+        ..topoloc_loop_hint::default()
+    };
+    let Some(h) = hint else {
+        return out;
+    };
+    out.has_match = true;
+    out.accepted = h.accepted();
+    out.gate = gate_code(&h.gate);
+    out.matched_id = h.matched_id;
+    out.place = h.place;
+    out.inliers = h.inliers;
+    out.confidence = h.confidence;
+    if let Some(pose) = &h.pose {
+        out.has_pose = true;
+        out.scale_known = pose.scale_known;
+        out.matched_T_query = pose_to_row_major(&pose.matched_t_query);
+        for r in 0..6 {
+            for c in 0..6 {
+                out.covariance[r * 6 + c] = pose.covariance[(r, c)];
+            }
+        }
+    }
+    out
+}
+
+/// Adds a keyframe: its loop candidates (outside the exclusion window) are verified against
+/// its keypoints and gated, then it joins the place graph. `*hint` receives the best verified
+/// candidate with the gate that decided (`has_match` 0 when there was none); at most one hint
+/// per keyframe. The whole keyframe is validated first: on any error the detector and `*hint`
+/// are unchanged.
+/// Errors: `_DIMENSION_MISMATCH`, `_NON_FINITE` (descriptor, timestamp, poses),
+/// `_ZERO_DESCRIPTOR`, `_INVALID_ARGUMENT` (duplicate or decreasing id, earlier timestamp,
+/// poses on some keyframes only, bad keypoints or scene points, non-rigid poses),
+/// `_STRUCT_SIZE`, `_NULL_ARGUMENT`. Cost: one pass over the keyframes' descriptors and a pair
+/// check per verified candidate (BENCHMARKS.md).
+#[no_mangle]
+pub extern "C" fn topoloc_loop_detector_add(
+    detector: *mut topoloc_loop_detector,
+    keyframe: *const topoloc_loop_keyframe,
+    hint: *mut topoloc_loop_hint,
+) -> topoloc_status {
+    run(|| {
+        let detector = try_mut(detector, "detector")?;
+        let k = read_versioned(keyframe, topoloc_loop_keyframe::default(), "keyframe")?;
+        // Checks the caller's hint struct before anything changes.
+        read_versioned(hint as *const _, topoloc_loop_hint::default(), "hint")?;
+        let entry = KeyframeEntry {
+            id: k.id,
+            timestamp: k.timestamp,
+            descriptor: slice(k.descriptor, k.descriptor_len, "keyframe.descriptor")?,
+            world_t_body: optional_pose(k.world_T_body, "keyframe.world_T_body")?,
+            body_t_camera: optional_pose(k.body_T_camera, "keyframe.body_T_camera")?,
+        };
+        let features = keyframe_features(&k)?;
+        let done = detector.process(&entry, features)?;
+        write_versioned(
+            hint,
+            c_hint(k.id, done.added.place, done.hint.as_ref()),
+            "hint",
+        )
+    })
+}
+
+/// One relocalization candidate. Array element: its layout never changes.
+#[repr(C)]
+#[derive(Clone, Copy, Default)]
+pub struct topoloc_loop_candidate {
+    /// Keyframe id.
+    pub keyframe_id: u64,
+    /// Its place.
+    pub place: u32,
+    /// Cosine similarity of the query to the keyframe.
+    pub similarity: f32,
+}
+
+/// Relocalization candidates for a descriptor that is not added (every keyframe may match),
+/// most similar first, into the caller's array `(out, capacity)`; `*count` receives how many
+/// were written (at most `capacity`). Errors: `_DIMENSION_MISMATCH`, `_NON_FINITE`,
+/// `_ZERO_DESCRIPTOR`, `_NULL_ARGUMENT`.
+#[no_mangle]
+pub extern "C" fn topoloc_loop_detector_query(
+    detector: *const topoloc_loop_detector,
+    descriptor: *const f32,
+    descriptor_len: usize,
+    out: *mut topoloc_loop_candidate,
+    capacity: usize,
+    count: *mut usize,
+) -> topoloc_status {
+    run(|| {
+        let detector = try_ref(detector, "detector")?;
+        check_out(count, "count")?;
+        let descriptor = slice(descriptor, descriptor_len, "descriptor")?;
+        let found: Vec<topoloc_loop_candidate> = detector
+            .database()
+            .relocalization_candidates(descriptor, capacity)?
+            .iter()
+            .map(|m| topoloc_loop_candidate {
+                keyframe_id: m.keyframe_id,
+                place: m.place,
+                similarity: m.similarity,
+            })
+            .collect();
+        write_array(&found, out, capacity, count)
+    })
+}
+
+/// Removes a keyframe and its features (ORB-SLAM culls keyframes).
+/// Errors: `_INVALID_ARGUMENT` (no keyframe with that id), `_NULL_ARGUMENT`.
+#[no_mangle]
+pub extern "C" fn topoloc_loop_detector_erase(
+    detector: *mut topoloc_loop_detector,
+    id: u64,
+) -> topoloc_status {
+    run(|| {
+        try_mut(detector, "detector")?.erase(id)?;
+        Ok(())
+    })
+}
+
+/// Saves the keyframes and their place graph as a topoloc map file (a view per keyframe,
+/// keyframe ids kept), for a later session: `topoloc_map_load`, then
+/// `topoloc_loop_detector_from_map`. Atomic (a temporary file renamed over `path`).
+/// Errors: `_IO`, `_EMPTY_MAP`, `_NULL_ARGUMENT`, `_INVALID_UTF8`.
+#[no_mangle]
+pub extern "C" fn topoloc_loop_detector_save(
+    detector: *const topoloc_loop_detector,
+    path: *const c_char,
+) -> topoloc_status {
+    run(|| {
+        let detector = try_ref(detector, "detector")?;
+        detector.database().save(string(path, "path")?)?;
+        Ok(())
+    })
+}
+
+/// Number of keyframes held (`*out`). Errors: `_NULL_ARGUMENT`.
+#[no_mangle]
+pub extern "C" fn topoloc_loop_detector_len(
+    detector: *const topoloc_loop_detector,
+    out: *mut usize,
+) -> topoloc_status {
+    run(|| {
+        let detector = try_ref(detector, "detector")?;
+        check_out(out, "out")?;
+        write_out(out, detector.database().len());
+        Ok(())
+    })
+}
