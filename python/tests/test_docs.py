@@ -31,7 +31,7 @@ def test_every_public_name_has_a_docstring():
 
 def test_thread_safety_and_ownership_are_documented():
     assert "threads" in topoloc.Map.__doc__ and "Ownership" in topoloc.Map.__doc__
-    for cls in (topoloc.Localizer, topoloc.MapBuilder):
+    for cls in (topoloc.Localizer, topoloc.MapBuilder, topoloc.LoopDetector):
         doc = " ".join(cls.__doc__.split())
         assert "one thread at a time" in doc and "Ownership" in doc
 

@@ -74,6 +74,8 @@ CONSTANT_GROUPS = {
     "BACKEND": ["BACKEND_AUTO", "BACKEND_NONE", "BACKEND_ONNX", "BACKEND_VLAD_ORB", "BACKEND_VLAD_SIFT"],
     "STAGE": ["STAGE_DESCRIBING", "STAGE_FITTING"],
     "NODE": ["NODE_END", "NODE_CORNER", "NODE_BRANCH", "NODE_INTERMEDIATE"],
+    "GATE": ["GATE_ACCEPTED", "GATE_NO_CANDIDATE", "GATE_TOO_FEW_INLIERS", "GATE_INCONSISTENT",
+             "GATE_NO_POSE", "GATE_ODOMETRY"],
 }
 
 
@@ -122,11 +124,14 @@ DEFAULT_FUNCTIONS = {
     "topoloc_map_load_options": "topoloc_map_load_options_init",
     "topoloc_image_map_options": "topoloc_image_map_options_init",
     "topoloc_skeleton_options": "topoloc_skeleton_options_init",
+    "topoloc_loop_options": "topoloc_loop_options_init",
+    "topoloc_loop_keyframe": "topoloc_loop_keyframe_init",
+    "topoloc_loop_hint": "topoloc_loop_hint_init",
 }
 
 #: Structs the library never fills with defaults: plain data the caller writes (array elements,
 #: or ``topoloc_image``, embedded in ``topoloc_frame`` and zero for "no image").
-NO_DEFAULT_FUNCTION = {"topoloc_keyframe", "topoloc_candidate", "topoloc_image"}
+NO_DEFAULT_FUNCTION = {"topoloc_keyframe", "topoloc_candidate", "topoloc_image", "topoloc_loop_candidate"}
 
 
 @pytest.mark.parametrize("struct_name", sorted(DEFAULT_FUNCTIONS))
@@ -527,7 +532,7 @@ def test_status_names_match_the_librarys_table():
 
 
 def test_abi_minor_version():
-    assert topoloc.abi_version_minor() >= _lib.ABI_VERSION_MINOR == 4
+    assert topoloc.abi_version_minor() >= _lib.ABI_VERSION_MINOR == 5
 
 
 EXPECTED_CLASSES = {

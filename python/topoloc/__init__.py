@@ -28,8 +28,13 @@ Maps can also be built from camera images (``Map.build_from_images`` with uint8 
 ``Map.build_from_image_files`` with files or a folder); such maps store their describer, and
 a localizer on them accepts images: ``loc.process(image=frame, timestamp=t)``.
 
+Loop closure (ABI 1.5): a :class:`LoopDetector` takes SLAM keyframes (global descriptor,
+keypoints with binary descriptors, optional poses) and returns one gated :class:`LoopHint` per
+keyframe, with the relative pose when camera intrinsics are given.
+
 Objects and threads: a :class:`Map` is immutable and may be shared by many threads; a
-:class:`Localizer` (one camera) and a :class:`MapBuilder` are single-threaded state. Every
+:class:`Localizer` (one camera), a :class:`LoopDetector` and a :class:`MapBuilder` are
+single-threaded state. Every
 object owning a C handle is a context manager, has ``close()``, and is released when garbage
 collected. Failures raise subclasses of :class:`TopolocError` (see :mod:`topoloc._errors`).
 
@@ -82,8 +87,12 @@ from ._lib import (
 )
 from ._core import (
     Candidate,
+    Gate,
     Graph,
     Localizer,
+    LoopCandidate,
+    LoopDetector,
+    LoopHint,
     Map,
     MapBuilder,
     Result,
@@ -92,6 +101,7 @@ from ._core import (
     abi_version_minor,
     keyframe_options_default,
     localizer_options_default,
+    loop_options_default,
     map_from_keyframes,
     skeleton_graph,
     skeleton_options_default,
@@ -126,6 +136,12 @@ __all__ = [
     "MODE_FILTER",
     "MODE_SINGLE_FRAME",
     "MODE_METRIC",
+    # loop closure (ABI 1.5)
+    "LoopDetector",
+    "loop_options_default",
+    "LoopHint",
+    "LoopCandidate",
+    "Gate",
     # versions and library
     "version",
     "abi_version",

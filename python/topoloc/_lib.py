@@ -48,7 +48,7 @@ ABI_VERSION = 1
 
 #: ABI minor version these bindings were written for (``TOPOLOC_ABI_VERSION_MINOR``): they use
 #: items up to "ABI 1.N" of the header.
-ABI_VERSION_MINOR = 4
+ABI_VERSION_MINOR = 5
 
 #: Environment variable naming the shared library to load.
 ENV_VAR = "TOPOLOC_LIBRARY"
@@ -82,6 +82,14 @@ NODE_END = 0
 NODE_CORNER = 1
 NODE_BRANCH = 2
 NODE_INTERMEDIATE = 3
+
+#: ``TOPOLOC_GATE_*`` (ABI 1.5): the gate that decided a loop hint.
+GATE_ACCEPTED = 0
+GATE_NO_CANDIDATE = 1
+GATE_TOO_FEW_INLIERS = 2
+GATE_INCONSISTENT = 3
+GATE_NO_POSE = 4
+GATE_ODOMETRY = 5
 
 TOPOLOC_OK = 0
 TOPOLOC_ERR_BUFFER_TOO_SMALL = 3
@@ -131,8 +139,13 @@ class topoloc_graph(Structure):
     """Opaque ``topoloc_graph``."""
 
 
+class topoloc_loop_detector(Structure):
+    """Opaque ``topoloc_loop_detector`` (ABI 1.5)."""
+
+
 LocalizerPtr = POINTER(topoloc_localizer)
 GraphPtr = POINTER(topoloc_graph)
+LoopDetectorPtr = POINTER(topoloc_loop_detector)
 
 
 class topoloc_view_attributes(Structure):
@@ -296,6 +309,70 @@ class topoloc_skeleton_options(Structure):
     ]
 
 
+class topoloc_loop_options(Structure):
+    _fields_ = [
+        ("struct_size", c_size_t),
+        ("candidates", c_uint32),
+        ("exclude_recent_ids", c_uint64),
+        ("exclude_recent_s", c_double),
+        ("min_inliers", c_uint32),
+        ("consistent_keyframes", c_uint32),
+        ("odometry_gate", c_bool),
+        ("odometry_max_rotation_deg", c_double),
+        ("odometry_max_translation_m", c_double),
+        ("fx", c_double),
+        ("fy", c_double),
+        ("cx", c_double),
+        ("cy", c_double),
+        ("novelty_similarity", c_float),
+        ("place_spacing_m", c_double),
+        ("neighbour_radius_m", c_double),
+    ]
+
+
+class topoloc_loop_keyframe(Structure):
+    _fields_ = [
+        ("struct_size", c_size_t),
+        ("id", c_uint64),
+        ("timestamp", c_double),
+        ("descriptor", POINTER(c_float)),
+        ("descriptor_len", c_size_t),
+        ("world_T_body", POINTER(c_double)),
+        ("body_T_camera", POINTER(c_double)),
+        ("keypoint_count", c_size_t),
+        ("keypoints", POINTER(c_float)),
+        ("keypoint_descriptors", POINTER(c_uint8)),
+        ("camera_points", POINTER(c_float)),
+    ]
+
+
+class topoloc_loop_hint(Structure):
+    _fields_ = [
+        ("struct_size", c_size_t),
+        ("query_id", c_uint64),
+        ("query_place", c_uint32),
+        ("has_match", c_bool),
+        ("accepted", c_bool),
+        ("gate", c_uint32),
+        ("matched_id", c_uint64),
+        ("place", c_uint32),
+        ("inliers", c_uint32),
+        ("confidence", c_float),
+        ("has_pose", c_bool),
+        ("scale_known", c_bool),
+        ("matched_T_query", c_double * 16),
+        ("covariance", c_double * 36),
+    ]
+
+
+class topoloc_loop_candidate(Structure):
+    _fields_ = [
+        ("keyframe_id", c_uint64),
+        ("place", c_uint32),
+        ("similarity", c_float),
+    ]
+
+
 #: Every struct of the header, by C name.
 STRUCTS = {
     cls.__name__: cls
@@ -312,12 +389,17 @@ STRUCTS = {
         topoloc_map_load_options,
         topoloc_view_info,
         topoloc_skeleton_options,
+        topoloc_loop_options,
+        topoloc_loop_keyframe,
+        topoloc_loop_hint,
+        topoloc_loop_candidate,
     )
 }
 
 #: Opaque handle types, by C name.
 HANDLES = {
-    cls.__name__: cls for cls in (topoloc_map, topoloc_map_builder, topoloc_localizer, topoloc_graph)
+    cls.__name__: cls
+    for cls in (topoloc_map, topoloc_map_builder, topoloc_localizer, topoloc_graph, topoloc_loop_detector)
 }
 
 # --------------------------------------------------------------------------------------------
@@ -403,6 +485,27 @@ SIGNATURES = {
     "topoloc_graph_place": (status_t, [GraphPtr, c_uint32, _p(c_double), _p(c_uint32)]),
     "topoloc_graph_edge": (status_t, [GraphPtr, c_size_t, _p(c_uint32), _p(c_uint32), _p(c_double)]),
     "topoloc_graph_skeleton": (status_t, [GraphPtr, _p(c_uint32), c_size_t, _p(c_size_t)]),
+    # Loop closure (ABI 1.5)
+    "topoloc_loop_options_init": (status_t, [_p(topoloc_loop_options), c_size_t]),
+    "topoloc_loop_detector_new": (
+        status_t,
+        [c_char_p, c_char_p, c_uint32, _p(topoloc_loop_options), _p(LoopDetectorPtr)],
+    ),
+    "topoloc_loop_detector_from_map": (status_t, [MapPtr, _p(topoloc_loop_options), _p(LoopDetectorPtr)]),
+    "topoloc_loop_detector_free": (None, [LoopDetectorPtr]),
+    "topoloc_loop_keyframe_init": (status_t, [_p(topoloc_loop_keyframe), c_size_t]),
+    "topoloc_loop_hint_init": (status_t, [_p(topoloc_loop_hint), c_size_t]),
+    "topoloc_loop_detector_add": (
+        status_t,
+        [LoopDetectorPtr, _p(topoloc_loop_keyframe), _p(topoloc_loop_hint)],
+    ),
+    "topoloc_loop_detector_query": (
+        status_t,
+        [LoopDetectorPtr, _p(c_float), c_size_t, _p(topoloc_loop_candidate), c_size_t, _p(c_size_t)],
+    ),
+    "topoloc_loop_detector_erase": (status_t, [LoopDetectorPtr, c_uint64]),
+    "topoloc_loop_detector_save": (status_t, [LoopDetectorPtr, c_char_p]),
+    "topoloc_loop_detector_len": (status_t, [LoopDetectorPtr, _p(c_size_t)]),
     "topoloc_version": (c_char_p, []),
     "topoloc_abi_version": (c_uint32, []),
     "topoloc_abi_version_minor": (c_uint32, []),
