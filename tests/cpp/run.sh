@@ -1,9 +1,9 @@
 #!/usr/bin/env bash
-# C++ layer tests: builds tests/cpp/test_raii.cpp against include/topoloc.hpp and the release
-# library, runs it normally and under ASan+UBSan (leak checking on); with OpenCV 4, builds and
-# runs tests/cpp/test_opencv.cpp against include/topoloc_opencv.hpp; checks that topoloc.hpp
-# does not depend on include order and that each C++ header compiles alone; and compiles and
-# runs the C++ examples so that they cannot rot.
+# C++ layer tests: builds tests/cpp/test_raii.cpp and tests/cpp/test_loops.cpp (loop closure)
+# against include/topoloc.hpp and the release library, runs each normally and under ASan+UBSan
+# (leak checking on); with OpenCV 4, builds and runs tests/cpp/test_opencv.cpp against
+# include/topoloc_opencv.hpp; checks that topoloc.hpp does not depend on include order and that
+# each C++ header compiles alone; and compiles and runs the C++ examples so that they cannot rot.
 #
 #   TOPOLOC_TARGET_DIR   directory holding libtopoloc.so (default: <repo>/target/release;
 #                        build it with `cargo build --release --lib`)
@@ -125,23 +125,25 @@ fi
 "$cxx" "${cxxflags[@]}" "$out/status_codes.cpp" -o "$out/status_codes" "${ldflags[@]}"
 "$out/status_codes"
 
-step "compile test_raii (plain)"
-"$cxx" "${cxxflags[@]}" -O1 "$here/test_raii.cpp" -o "$out/test_raii" "${ldflags[@]}"
+for test in test_raii test_loops; do
+    step "compile $test (plain)"
+    "$cxx" "${cxxflags[@]}" -O1 "$here/$test.cpp" -o "$out/$test" "${ldflags[@]}"
 
-step "compile test_raii (ASan+UBSan)"
-"$cxx" "${cxxflags[@]}" -O1 "${sanitize[@]}" "$here/test_raii.cpp" -o "$out/test_raii_asan" \
-    "${ldflags[@]}"
+    step "compile $test (ASan+UBSan)"
+    "$cxx" "${cxxflags[@]}" -O1 "${sanitize[@]}" "$here/$test.cpp" -o "$out/${test}_asan" \
+        "${ldflags[@]}"
 
-step "run test_raii (plain)"
-"$out/test_raii"
+    step "run $test (plain)"
+    "$out/$test"
 
-# No LSan suppression file is needed: with this library LeakSanitizer reports nothing from the
-# Rust runtime (its one-time allocations, e.g. the per-thread error message, are freed at thread
-# exit or still reachable), so any leak it reports is a real one.
-step "run test_raii (ASan+UBSan, leak check)"
-ASAN_OPTIONS="detect_leaks=1:abort_on_error=0:halt_on_error=1${ASAN_OPTIONS:+:$ASAN_OPTIONS}" \
-UBSAN_OPTIONS="print_stacktrace=1:halt_on_error=1${UBSAN_OPTIONS:+:$UBSAN_OPTIONS}" \
-    "$out/test_raii_asan"
+    # No LSan suppression file is needed: with this library LeakSanitizer reports nothing from
+    # the Rust runtime (its one-time allocations, e.g. the per-thread error message, are freed at
+    # thread exit or still reachable), so any leak it reports is a real one.
+    step "run $test (ASan+UBSan, leak check)"
+    ASAN_OPTIONS="detect_leaks=1:abort_on_error=0:halt_on_error=1${ASAN_OPTIONS:+:$ASAN_OPTIONS}" \
+    UBSAN_OPTIONS="print_stacktrace=1:halt_on_error=1${UBSAN_OPTIONS:+:$UBSAN_OPTIONS}" \
+        "$out/${test}_asan"
+done
 
 if ((${#opencv_cflags[@]})); then
     step "compile and run test_opencv (topoloc_opencv.hpp, ASan+UBSan)"
