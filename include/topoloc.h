@@ -1072,7 +1072,8 @@ typedef struct topoloc_loop_candidate {
 #define TOPOLOC_GATE_ACCEPTED 0
 
 /**
- * No keyframe outside the exclusion window had features to verify.
+ * No keyframe outside the exclusion window had keypoints (of the new keyframe's kind) to
+ * verify, or the new keyframe has none.
  */
 #define TOPOLOC_GATE_NO_CANDIDATE 1
 
@@ -1489,10 +1490,10 @@ topoloc_status topoloc_graph_skeleton(const struct topoloc_graph *graph, uint32_
 topoloc_status topoloc_loop_options_init(struct topoloc_loop_options *options, size_t size);
 
 /**
- * Creates an empty loop detector for descriptors of `descriptor_kind` / `descriptor_model`
- * (non-empty strings) and dimension `dim`: the place graph grows from nothing. `options`
- * may be NULL for defaults. On success `*out` owns the detector.
- * Errors: `_INVALID_OPTION`, `_INVALID_ARGUMENT` (empty kind or model, dim 0), `_STRUCT_SIZE`,
+ * Creates an empty loop detector for descriptors of `descriptor_kind` (a non-empty string),
+ * `descriptor_model` (may be empty) and dimension `dim`: the place graph grows from nothing.
+ * `options` may be NULL for defaults. On success `*out` owns the detector.
+ * Errors: `_INVALID_OPTION`, `_INVALID_ARGUMENT` (empty kind, dim 0), `_STRUCT_SIZE`,
  * `_NULL_ARGUMENT`, `_INVALID_UTF8`.
  */
 topoloc_status topoloc_loop_detector_new(const char *descriptor_kind, const char *descriptor_model, uint32_t dim, const struct topoloc_loop_options *options, struct topoloc_loop_detector **out);
@@ -1533,7 +1534,8 @@ topoloc_status topoloc_loop_hint_init(struct topoloc_loop_hint *hint, size_t siz
  * are unchanged.
  * Errors: `_DIMENSION_MISMATCH`, `_NON_FINITE` (descriptor, timestamp, poses),
  * `_ZERO_DESCRIPTOR`, `_INVALID_ARGUMENT` (duplicate or decreasing id, earlier timestamp,
- * poses on some keyframes only, bad keypoints or scene points, non-rigid poses),
+ * bad keypoints or scene points, non-rigid poses), `_INVALID_OPTION` (a pose on some
+ * keyframes only: the first keyframe decides whether all have one),
  * `_STRUCT_SIZE`, `_NULL_ARGUMENT`. Cost: one pass over the keyframes' descriptors and a pair
  * check per verified candidate (BENCHMARKS.md).
  */

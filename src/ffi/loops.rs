@@ -32,7 +32,8 @@ impl Castable for topoloc_loop_detector {
 pub type topoloc_gate = u32;
 /// Every gate passed: the hint is a loop closure.
 pub const TOPOLOC_GATE_ACCEPTED: topoloc_gate = 0;
-/// No keyframe outside the exclusion window had features to verify.
+/// No keyframe outside the exclusion window had keypoints (of the new keyframe's kind) to
+/// verify, or the new keyframe has none.
 pub const TOPOLOC_GATE_NO_CANDIDATE: topoloc_gate = 1;
 /// The best candidate had fewer inliers than `min_inliers`.
 pub const TOPOLOC_GATE_TOO_FEW_INLIERS: topoloc_gate = 2;
@@ -164,10 +165,10 @@ fn loop_options(
     Ok((hints, database))
 }
 
-/// Creates an empty loop detector for descriptors of `descriptor_kind` / `descriptor_model`
-/// (non-empty strings) and dimension `dim`: the place graph grows from nothing. `options`
-/// may be NULL for defaults. On success `*out` owns the detector.
-/// Errors: `_INVALID_OPTION`, `_INVALID_ARGUMENT` (empty kind or model, dim 0), `_STRUCT_SIZE`,
+/// Creates an empty loop detector for descriptors of `descriptor_kind` (a non-empty string),
+/// `descriptor_model` (may be empty) and dimension `dim`: the place graph grows from nothing.
+/// `options` may be NULL for defaults. On success `*out` owns the detector.
+/// Errors: `_INVALID_OPTION`, `_INVALID_ARGUMENT` (empty kind, dim 0), `_STRUCT_SIZE`,
 /// `_NULL_ARGUMENT`, `_INVALID_UTF8`.
 #[no_mangle]
 pub extern "C" fn topoloc_loop_detector_new(
@@ -440,7 +441,8 @@ fn c_hint(query_id: u64, query_place: u32, hint: Option<&LoopHint>) -> topoloc_l
 /// are unchanged.
 /// Errors: `_DIMENSION_MISMATCH`, `_NON_FINITE` (descriptor, timestamp, poses),
 /// `_ZERO_DESCRIPTOR`, `_INVALID_ARGUMENT` (duplicate or decreasing id, earlier timestamp,
-/// poses on some keyframes only, bad keypoints or scene points, non-rigid poses),
+/// bad keypoints or scene points, non-rigid poses), `_INVALID_OPTION` (a pose on some
+/// keyframes only: the first keyframe decides whether all have one),
 /// `_STRUCT_SIZE`, `_NULL_ARGUMENT`. Cost: one pass over the keyframes' descriptors and a pair
 /// check per verified candidate (BENCHMARKS.md).
 #[no_mangle]

@@ -154,7 +154,8 @@ pub struct KeyframeFeatures {
 pub enum Gate {
     /// Accepted: the hint is a loop closure.
     Accepted,
-    /// No keyframe outside the exclusion window (or none with features of this kind).
+    /// No keyframe outside the exclusion window with keypoints of this kind (or the new
+    /// keyframe has none).
     NoCandidate,
     /// The best candidate had fewer inliers than `min_inliers`.
     TooFewInliers,
@@ -496,7 +497,9 @@ impl LoopDetector {
 
     /// The keyframe of the best candidate's group (its place and the linked places) that the
     /// query agrees with most: appearance ranks neighbouring keyframes of one stretch almost
-    /// alike, geometry tells the nearest. Keyframes inside the exclusion window are skipped.
+    /// alike, geometry tells the nearest. Checks at most `candidates` of them, the nearest in
+    /// id to the best candidate (a place grown online may hold many); keyframes inside the
+    /// exclusion window are skipped.
     fn refine(
         &self,
         entry: &KeyframeEntry<'_>,
@@ -505,10 +508,15 @@ impl LoopDetector {
     ) -> Result<Verified, LoopsError> {
         let max_id = self.max_candidate_id(entry).unwrap_or(0);
         let mut refined = best;
-        for id in self.database.group_keyframes(best.place) {
-            if id == best.id || id > max_id {
-                continue;
-            }
+        let mut group: Vec<u64> = self
+            .database
+            .group_keyframes(best.place)
+            .into_iter()
+            .filter(|&id| id != best.id && id <= max_id)
+            .collect();
+        group.sort_by_key(|&id| (id.abs_diff(best.id), id));
+        group.truncate(self.options.candidates);
+        for id in group {
             let Some(inliers) = self.inliers_with(features, id)? else {
                 continue;
             };

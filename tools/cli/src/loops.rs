@@ -23,6 +23,7 @@ use crate::backend_args::{
 use crate::process::median_and_p90;
 use anyhow::{bail, Context, Result};
 use clap::Args;
+use nalgebra::{Isometry3, Matrix3, Translation3, UnitQuaternion};
 use serde_json::json;
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
@@ -65,6 +66,18 @@ pub struct LoopsArgs {
     /// Descriptor backend without `--map`.
     #[command(flatten)]
     pub backend: BackendArgs,
+    /// How `--poses` and `--truth` name the camera: `optical` (z forward, x right, y down, as
+    /// TUM RGB-D and OpenCV) or `x-forward` (x forward, y left, z up, as ROS bodies and
+    /// topoloc-sim).
+    #[arg(long, value_enum, default_value_t = CameraFrame::Optical)]
+    pub camera_frame: CameraFrame,
+    /// Ground-truth camera poses (TUM, one per image) for evaluation: precision, recall and
+    /// the hints' pose error go in the report.
+    #[arg(long)]
+    pub truth: Option<PathBuf>,
+    /// With `--truth`: a hint is correct when the two cameras are this close (metres).
+    #[arg(long, default_value_t = 2.0)]
+    pub truth_radius_m: f64,
     /// Keyframes this many ids before the query or closer are never loop candidates.
     #[arg(long, default_value_t = HintOptions::default().exclude_recent_ids)]
     pub exclude_ids: u64,
@@ -80,6 +93,30 @@ pub struct LoopsArgs {
     pub json: bool,
 }
 
+/// The frame convention of given camera poses.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum CameraFrame {
+    /// z forward, x right, y down.
+    Optical,
+    /// x forward, y left, z up.
+    XForward,
+}
+
+impl CameraFrame {
+    /// `given_T_optical`: the optical frame in the given camera frame.
+    fn to_optical(self) -> Isometry3<f64> {
+        match self {
+            CameraFrame::Optical => Isometry3::identity(),
+            CameraFrame::XForward => Isometry3::from_parts(
+                Translation3::identity(),
+                UnitQuaternion::from_matrix(&Matrix3::new(
+                    0.0, 0.0, 1.0, -1.0, 0.0, 0.0, 0.0, -1.0, 0.0,
+                )),
+            ),
+        }
+    }
+}
+
 /// Runs the command.
 pub fn run(args: &LoopsArgs) -> Result<()> {
     let files = image_files(&args.images)?;
@@ -93,6 +130,18 @@ pub fn run(args: &LoopsArgs) -> Result<()> {
         .as_deref()
         .map(read_intrinsics)
         .transpose()?;
+    let truth: Option<Vec<Isometry3<f64>>> = args
+        .truth
+        .as_deref()
+        .map(|path| poses_for_images(path, &files, &args.images))
+        .transpose()?
+        .map(|poses| {
+            let to_optical = args.camera_frame.to_optical();
+            poses
+                .iter()
+                .map(|p| p.world_t_camera * to_optical)
+                .collect()
+        });
     let options = HintOptions {
         camera,
         exclude_recent_ids: args.exclude_ids,
@@ -148,7 +197,7 @@ pub fn run(args: &LoopsArgs) -> Result<()> {
             timestamp: poses.as_ref().map_or(index as f64, |p| p[index].timestamp),
             descriptor: &descriptor,
             world_t_body: poses.as_ref().map(|p| p[index].world_t_camera),
-            body_t_camera: None,
+            body_t_camera: Some(args.camera_frame.to_optical()),
         };
         let done = detector.process(
             &entry,
@@ -166,7 +215,71 @@ pub fn run(args: &LoopsArgs) -> Result<()> {
     }
     bar.finish_and_clear();
     write_csv(&args.out, &hints, first_id)?;
-    report(args, &hints, &gates, &times, files.len(), first_id)
+    let mut out = report(args, &hints, &gates, &times, files.len(), first_id);
+    if let Some(truth) = &truth {
+        add_truth(&mut out, args, &hints, truth, first_id);
+    }
+    print_report(args, &out);
+    Ok(())
+}
+
+/// Precision and recall against ground-truth camera poses, and the hints' pose errors.
+/// A keyframe could have closed a loop when an earlier keyframe outside the exclusion window
+/// lies within the radius; a hint is correct when its matched keyframe does.
+fn add_truth(
+    out: &mut serde_json::Value,
+    args: &LoopsArgs,
+    hints: &[(usize, LoopHint)],
+    truth: &[Isometry3<f64>],
+    first_id: u64,
+) {
+    let near = |a: usize, b: usize| {
+        (truth[a].translation.vector - truth[b].translation.vector).norm() <= args.truth_radius_m
+    };
+    let window = args.exclude_ids.max(1) as usize;
+    let possible = (0..truth.len())
+        .filter(|&q| (0..q.saturating_sub(window - 1)).any(|m| near(q, m) && m + window <= q))
+        .count();
+    let mut correct = 0;
+    let (mut rotation, mut translation, mut direction) = (vec![], vec![], vec![]);
+    for (q, hint) in hints {
+        let m = matched_index(hint, first_id) as usize;
+        if m >= truth.len() || !near(*q, m) {
+            continue;
+        }
+        correct += 1;
+        let Some(pose) = &hint.pose else { continue };
+        let true_rel = truth[m].inverse() * truth[*q];
+        let error = true_rel.inverse() * pose.matched_t_query;
+        rotation.push(error.rotation.angle().to_degrees());
+        let (t, t_true) = (
+            pose.matched_t_query.translation.vector,
+            true_rel.translation.vector,
+        );
+        if pose.scale_known {
+            translation.push((t - t_true).norm());
+        } else if t_true.norm() > 1e-6 {
+            direction.push(t.angle(&t_true).to_degrees());
+        }
+    }
+    let median = |v: &[f64]| {
+        if v.is_empty() {
+            f64::NAN
+        } else {
+            median_and_p90(v).0
+        }
+    };
+    out["truth"] = json!({
+        "radius_m": args.truth_radius_m,
+        "possible": possible,
+        "correct": correct,
+        "precision": correct as f64 / hints.len().max(1) as f64,
+        "recall": correct as f64 / possible.max(1) as f64,
+        "rotation_error_deg_median": median(&rotation),
+        "translation_error_m_median": median(&translation),
+        "direction_error_deg_median": median(&direction),
+        "posed_hints": rotation.len(),
+    });
 }
 
 /// The keyframes' local features: a detector, or dense cells from the describer's pass.
@@ -303,7 +416,7 @@ fn report(
     times: &[f64],
     frames: usize,
     first_id: u64,
-) -> Result<()> {
+) -> serde_json::Value {
     let (median, p90) = median_and_p90(times);
     let mut out = json!({
         "keyframes": frames,
@@ -331,21 +444,36 @@ fn report(
         out["recall"] = json!(correct as f64 / frames.max(1) as f64);
         out["correct"] = json!(correct);
     }
+    out
+}
+
+fn print_report(args: &LoopsArgs, out: &serde_json::Value) {
     if args.json {
         println!("{out}");
-    } else {
-        println!(
-            "{} keyframes, {} hints (gates {:?}); {median:.1} ms per keyframe (p90 {p90:.1}){}; hints in {}",
-            frames,
-            hints.len(),
-            gates,
-            out.get("precision").map_or(String::new(), |p| format!(
-                "; precision {:.3}, recall {:.3}",
-                p.as_f64().unwrap_or(0.0),
-                out["recall"].as_f64().unwrap_or(0.0)
-            )),
-            args.out.display()
-        );
+        return;
     }
-    Ok(())
+    let figures = |v: &serde_json::Value| {
+        format!(
+            "; precision {:.3}, recall {:.3}",
+            v["precision"].as_f64().unwrap_or(0.0),
+            v["recall"].as_f64().unwrap_or(0.0)
+        )
+    };
+    println!(
+        "{} keyframes, {} hints (gates {}); {:.1} ms per keyframe (p90 {:.1}){}{}; hints in {}",
+        out["keyframes"],
+        out["hints"],
+        out["gates"],
+        out["keyframe_ms_median"].as_f64().unwrap_or(0.0),
+        out["keyframe_ms_p90"].as_f64().unwrap_or(0.0),
+        out.get("precision").map_or(String::new(), |_| figures(out)),
+        out.get("truth").map_or(String::new(), |t| format!(
+            "{}, rotation error {:.2} deg, translation {:.3} m, direction {:.1} deg (medians)",
+            figures(t),
+            t["rotation_error_deg_median"].as_f64().unwrap_or(f64::NAN),
+            t["translation_error_m_median"].as_f64().unwrap_or(f64::NAN),
+            t["direction_error_deg_median"].as_f64().unwrap_or(f64::NAN)
+        )),
+        args.out.display()
+    );
 }
