@@ -59,9 +59,10 @@
  * marks additions "ABI 1.N"; a host that uses one checks `topoloc_abi_version_minor() >= N`
  * at run time (the library it loaded may be older than the header it was built with).
  * 1.1: image maps; 1.2: verification; 1.3: metric mode; 1.4: `topoloc_abi_version_minor`,
- * `topoloc_status_name`; 1.5: loop closure (`topoloc_loop_detector_*`).
+ * `topoloc_status_name`; 1.5: loop closure (`topoloc_loop_detector_*`); 1.6: pose fixes
+ * (camera intrinsics in the localizer options, `topoloc_map_with_keypoint_points`).
  */
-#define TOPOLOC_ABI_VERSION_MINOR 5
+#define TOPOLOC_ABI_VERSION_MINOR 6
 
 /**
  * Result of every fallible C function. Values are grouped in ranges and never renumbered;
@@ -385,6 +386,30 @@ typedef struct topoloc_localizer_options {
    * Seed of metric mode's random generator (results are deterministic). Default 0.
    */
   uint64_t metric_seed;
+  /**
+   * Pinhole intrinsics of the frames' camera (undistorted images, pixels of the image as
+   * passed); `camera_fx == 0` = none (default). With them, verification on
+   * (`verify_candidates` > 0) and a map whose keypoints carry scene points
+   * (`topoloc_map_with_keypoint_points`; else `_INVALID_OPTION`), each result may carry a
+   * pose fix. Focal lengths must be finite and > 0, the principal point finite.
+   */
+  double camera_fx;
+  /**
+   * Focal length y, pixels.
+   */
+  double camera_fy;
+  /**
+   * Principal point x, pixels.
+   */
+  double camera_cx;
+  /**
+   * Principal point y, pixels.
+   */
+  double camera_cy;
+  /**
+   * Fewest PnP RANSAC inliers for a pose fix (>= 6). Default 30.
+   */
+  uint32_t pose_min_inliers;
 } topoloc_localizer_options;
 
 /**
@@ -535,6 +560,26 @@ typedef struct topoloc_result {
    * `view`, the evidence for a loop closure.
    */
   uint32_t inliers;
+  /**
+   * True when `world_T_camera` holds a pose fix of this frame (camera intrinsics in the
+   * options, a map with keypoint scene points, and at least `pose_min_inliers` agreeing
+   * keypoints against the best-verified view).
+   */
+  bool has_pose_fix;
+  /**
+   * The view the camera was placed against (0 unless `has_pose_fix`).
+   */
+  uint32_t pose_fix_view;
+  /**
+   * PnP inliers of the pose fix (0 unless `has_pose_fix`).
+   */
+  uint32_t pose_fix_inliers;
+  /**
+   * The camera in the map frame, `world_T_camera`, 16 doubles row-major 4x4, camera axes
+   * optical (z forward, x right, y down); identity unless `has_pose_fix`. A pose graph adds
+   * it as a prior or loop constraint on the frame's pose.
+   */
+  double world_T_camera[16];
 } topoloc_result;
 
 /**
@@ -1258,6 +1303,36 @@ topoloc_status topoloc_map_view_image(const struct topoloc_map *map, uint32_t vi
  * Errors: `_UNKNOWN_VIEW`, `_BUFFER_TOO_SMALL` when `len < D`.
  */
 topoloc_status topoloc_map_view_descriptor(const struct topoloc_map *map, uint32_t view, float *buf, size_t len);
+
+/**
+ * Writes into `*total` the number of keypoints of all views together (0 when the map stores
+ * none): the length, in points, of the array `topoloc_map_with_keypoint_points` takes.
+ * Thread safety: as every `const topoloc_map*` accessor. Errors: `_NULL_ARGUMENT`.
+ */
+topoloc_status topoloc_map_keypoint_total(const struct topoloc_map *map, size_t *total);
+
+/**
+ * Copies the pixel positions of `view`'s keypoints, `x y` pairs (OpenCV convention: the centre
+ * of the top-left pixel is (0, 0)), into `xy` of capacity `len` floats. `*count` (if non-NULL)
+ * always receives the number of keypoints; `len` must be at least `2 * count`. Keypoints are in
+ * the order `topoloc_map_with_keypoint_points` expects their scene points.
+ * Errors: `_UNKNOWN_VIEW`, `_INVALID_ARGUMENT` (the map stores no keypoints),
+ * `_BUFFER_TOO_SMALL`, `_NULL_ARGUMENT`.
+ */
+topoloc_status topoloc_map_view_keypoints(const struct topoloc_map *map, uint32_t view, float *xy, size_t len, size_t *count);
+
+/**
+ * Makes a copy of `map` whose keypoints carry their scene points: `xyz` holds `3 * total`
+ * floats (`topoloc_map_keypoint_total`), the map-frame position (the frame of the place
+ * positions and view poses, metres) of each keypoint, view after view in the order of
+ * `topoloc_map_view_keypoints`; all three NaN where unknown. With such a map and camera
+ * intrinsics in its options, a localizer reports pose fixes (`topoloc_result.has_pose_fix`).
+ * On success `*out` owns the new map (release it with `topoloc_map_free`); `map` is unchanged
+ * and remains the caller's. The copy holds its descriptors in memory, even when `map` was
+ * memory-mapped from a file. Errors: `_INVALID_ARGUMENT` (no keypoints, wrong length, a point
+ * neither finite nor all NaN), `_NULL_ARGUMENT`.
+ */
+topoloc_status topoloc_map_with_keypoint_points(const struct topoloc_map *map, const float *xyz, size_t len, struct topoloc_map **out);
 
 /* ============================================
  * Localizer (one camera, one thread at a time)

@@ -22,6 +22,7 @@
  *   build from keyframes      topoloc_map_from_keyframes          map_from_keyframes                 map_from_keyframes
  *   build from images         topoloc_map_build_from_images       Map::build_from_images             Map.build_from_images
  *   build from image files    topoloc_map_build_from_image_files  Map::build_from_image_files        Map.build_from_image_files
+ *   attach scene points       topoloc_map_with_keypoint_points    Map::with_keypoint_points          Map.with_keypoint_points
  *   graph from occupancy      topoloc_graph_from_occupancy        Graph::from_occupancy              skeleton_graph
  *   new localizer             topoloc_localizer_new               Localizer(map, options)            Localizer(map, ...)
  *   one frame (descriptor     topoloc_localizer_process           Localizer::process                 Localizer.process
@@ -341,7 +342,10 @@ constexpr uint32_t header_abi_version = TOPOLOC_ABI_VERSION;
 using LoadOptions = topoloc_map_load_options;
 
 /// Localizer parameters (the C struct). Start from `default_localizer_options()`; see topoloc.h
-/// for each field's meaning and default. The string fields are borrowed only during the
+/// for each field's meaning and default (no intrinsics: set `camera_fx`, `camera_fy`,
+/// `camera_cx`, `camera_cy`, with `verify_candidates` > 0 and a map from
+/// `Map::with_keypoint_points`, for results with a pose fix of at least `pose_min_inliers`,
+/// default 30, PnP inliers; ABI 1.6). The string fields are borrowed only during the
 /// `Localizer` constructor.
 using LocalizerOptions = topoloc_localizer_options;
 
@@ -453,6 +457,16 @@ struct Keyframe {
   std::optional<Pose> world_T_camera;  ///< Camera pose; all keyframes have one or none has.
 };
 
+/// A metric pose of the camera of one frame, found against one map view whose keypoints carry
+/// scene points (`Result::pose_fix`; the pose-fix fields of `topoloc_result`, ABI 1.6).
+struct PoseFix {
+  uint32_t view = 0;     ///< The view the camera was placed against.
+  uint32_t inliers = 0;  ///< PnP inliers of the fix (at least the options' `pose_min_inliers`).
+  /// The camera in the map frame, row-major 4x4, camera axes optical (z forward, x right,
+  /// y down). A pose graph adds it as a prior or loop constraint on the frame's pose.
+  Pose world_T_camera{};
+};
+
 /// The answer for one frame (the fields of `topoloc_result`), with its candidates.
 struct Result {
   uint64_t frame_index = 0;         ///< 0-based frame count since creation or reset.
@@ -465,6 +479,9 @@ struct Result {
   std::vector<Candidate> candidates;  ///< Top candidates, best first; `candidates[0].place == place`.
   bool verified = false;  ///< `place` verified geometrically this frame (`verify_candidates` > 0).
   uint32_t inliers = 0;   ///< RANSAC inliers between the frame and `view` (0 unless verified).
+  /// The camera's pose against the best-verified view (ABI 1.6), when the options have camera
+  /// intrinsics, the map's keypoints carry scene points and enough keypoints agree; else none.
+  std::optional<PoseFix> pose_fix;
 };
 
 // ---------------------------------------------------------------------------------------------
@@ -636,21 +653,28 @@ template <typename Call> std::string read_string(Call call) {
   throw Error(TOPOLOC_ERR_BUFFER_TOO_SMALL, "string kept growing while being read");
 }
 
-/// Reads an id array through a C function of the (buf, len, &count) contract.
-template <typename Call> std::vector<uint32_t> read_ids(Call call) {
-  std::vector<uint32_t> ids;
+/// Reads an array through a C function of the (buf, len, &count) contract whose `count` items
+/// are `per_item` values of `T` each (`len` counts values): returns the `count * per_item`
+/// values.
+template <typename T, typename Call> std::vector<T> read_array(Call call, std::size_t per_item = 1) {
+  std::vector<T> values;
   std::size_t count = 0;
   topoloc_status status = call(nullptr, 0, &count);
   if (status == TOPOLOC_OK) {
-    return ids;  // empty
+    return values;  // empty
   }
   if (status != TOPOLOC_ERR_BUFFER_TOO_SMALL) {
     check(status);
   }
-  ids.resize(count);
-  check(call(ids.data(), ids.size(), &count));
-  ids.resize(count);
-  return ids;
+  values.resize(count * per_item);
+  check(call(values.data(), values.size(), &count));
+  values.resize(count * per_item);
+  return values;
+}
+
+/// Reads an id array through a C function of the (buf, len, &count) contract.
+template <typename Call> std::vector<uint32_t> read_ids(Call call) {
+  return read_array<uint32_t>(call);
 }
 
 /// What the progress trampoline carries through the C `user_data`.
@@ -908,6 +932,48 @@ public:
     });
   }
 
+  // Keypoints (ABI 1.6): read each view's keypoints, attach their scene points for pose fixes.
+
+  /// Number of keypoints of all views together (0 when the map stores none; maps built from
+  /// images store them): `with_keypoint_points` takes 3 floats per keypoint.
+  [[nodiscard]] std::size_t keypoint_total() const {
+    std::size_t n = 0;
+    check(topoloc_map_keypoint_total(get(), &n));
+    return n;
+  }
+
+  /// Pixel positions of `view`'s keypoints: x, y (x right, y down; the centre of the top-left
+  /// pixel is (0, 0)), 2 floats per keypoint, in the order `with_keypoint_points` expects
+  /// their scene points (empty when the view has none). Throws `Error`
+  /// (`TOPOLOC_ERR_UNKNOWN_VIEW`, `_INVALID_ARGUMENT` when the map stores no keypoints).
+  [[nodiscard]] std::vector<float> view_keypoints(uint32_t view) const {
+    return detail::read_array<float>(
+        [this, view](float *buf, std::size_t len, std::size_t *count) {
+          return topoloc_map_view_keypoints(get(), view, buf, len, count);
+        },
+        2);
+  }
+
+  /// A new map, a copy of this one whose keypoints carry their scene points: `xyz` holds `len`
+  /// = 3 * `keypoint_total()` floats, the map-frame position (metres; the frame of the place
+  /// positions and view poses) of each keypoint, view after view in the order of
+  /// `view_keypoints`; all three NaN where unknown. Read during the call only. With the copy
+  /// and camera intrinsics in its options, a `Localizer` reports pose fixes
+  /// (`Result::pose_fix`). This map is unchanged (and stays usable, also when the call
+  /// throws); the copy is an independent owner that holds its descriptors in memory. Throws
+  /// `Error` (`TOPOLOC_ERR_INVALID_ARGUMENT`: no keypoints, the wrong length, a point neither
+  /// finite nor all NaN).
+  [[nodiscard]] Map with_keypoint_points(const float *xyz, std::size_t len) const {
+    topoloc_map *raw = nullptr;
+    check(topoloc_map_with_keypoint_points(get(), xyz, len, &raw));
+    return Map(raw);
+  }
+
+  /// `with_keypoint_points` over a vector (3 floats per keypoint).
+  [[nodiscard]] Map with_keypoint_points(const std::vector<float> &xyz) const {
+    return with_keypoint_points(xyz.data(), xyz.size());
+  }
+
 };
 
 // ---------------------------------------------------------------------------------------------
@@ -1040,8 +1106,11 @@ public:
   /// from images, the map's describer is loaded now, so that `process` accepts images (for
   /// ONNX: the runtime and model, from `options.onnx_runtime_path` / `onnx_model_path` or the
   /// defaults); `TOPOLOC_BACKEND_NONE` never loads one (descriptor frames only).
-  /// Throws `Error` (`TOPOLOC_ERR_INVALID_OPTION`, `_DESCRIPTOR_MISMATCH` also for another
-  /// backend or model than the map's, `_STRUCT_SIZE`, `_NULL_ARGUMENT` for an empty map),
+  /// Camera intrinsics in `options` (ABI 1.6) need verification on and a map whose keypoints
+  /// carry scene points (`Map::with_keypoint_points`).
+  /// Throws `Error` (`TOPOLOC_ERR_INVALID_OPTION`, also for bad intrinsics or intrinsics on a
+  /// map without scene points; `_DESCRIPTOR_MISMATCH` also for another backend or model than
+  /// the map's, `_STRUCT_SIZE`, `_NULL_ARGUMENT` for an empty map),
   /// `BackendUnavailableError` (paths tried in the message), `ModelError`, `NoDescriberError`
   /// (a backend was required but the map stores none).
   explicit Localizer(const Map &map,
@@ -1122,6 +1191,15 @@ public:
     last_.off_map = raw.off_map;
     last_.verified = raw.verified;
     last_.inliers = raw.inliers;
+    if (raw.has_pose_fix) {
+      PoseFix fix;
+      fix.view = raw.pose_fix_view;
+      fix.inliers = raw.pose_fix_inliers;
+      std::memcpy(fix.world_T_camera.data(), raw.world_T_camera, sizeof raw.world_T_camera);
+      last_.pose_fix = fix;
+    } else {
+      last_.pose_fix.reset();
+    }
     // Within the reserved capacity: no allocation.
     last_.candidates.assign(buffer_.begin(), buffer_.begin() + static_cast<std::ptrdiff_t>(
                                                                    raw.candidates_len));
@@ -1195,6 +1273,7 @@ private:
     last_.off_map = false;
     last_.verified = false;
     last_.inliers = 0;
+    last_.pose_fix.reset();
     last_.candidates.clear();
   }
 

@@ -1,7 +1,7 @@
 //! C functions of the localizer: create, process a frame, reset, free.
 
 use super::boundary::{check_out, optional_string, run, slice, write_out};
-use super::convert::{expected_descriptor, optional_pose};
+use super::convert::{expected_descriptor, optional_pose, pose_to_row_major};
 use super::error::FfiError;
 use super::handles::{clone_arc, free_box, new_box, try_mut, Castable, Opaque, OwnedBox};
 use super::images::{
@@ -13,7 +13,8 @@ use super::topoloc_status;
 use super::versioned::{init_versioned, read_versioned, write_versioned, Versioned};
 use crate::describe::DescriberOptions;
 use crate::localize::{Frame, Localization, Localizer, LocalizerOptions, MetricOptions, Mode};
-use crate::verify::VerificationOptions;
+use crate::verify::{LocateOptions, PinholeCamera, VerificationOptions};
+use nalgebra::Isometry3;
 use std::ffi::c_char;
 
 /// How a localizer estimates the place: one of the `TOPOLOC_MODE_*` values.
@@ -102,15 +103,31 @@ pub struct topoloc_localizer_options {
     pub metric_temperature: f32,
     /// Seed of metric mode's random generator (results are deterministic). Default 0.
     pub metric_seed: u64,
+    // ABI 1.6 (topoloc 0.1): pose fixes.
+    /// Pinhole intrinsics of the frames' camera (undistorted images, pixels of the image as
+    /// passed); `camera_fx == 0` = none (default). With them, verification on
+    /// (`verify_candidates` > 0) and a map whose keypoints carry scene points
+    /// (`topoloc_map_with_keypoint_points`; else `_INVALID_OPTION`), each result may carry a
+    /// pose fix. Focal lengths must be finite and > 0, the principal point finite.
+    pub camera_fx: f64,
+    /// Focal length y, pixels.
+    pub camera_fy: f64,
+    /// Principal point x, pixels.
+    pub camera_cx: f64,
+    /// Principal point y, pixels.
+    pub camera_cy: f64,
+    /// Fewest PnP RANSAC inliers for a pose fix (>= 6). Default 30.
+    pub pose_min_inliers: u32,
 }
 
 impl Versioned for topoloc_localizer_options {
     /// ABI 1.0 ended before `image_backend`; 1.1 added the image fields, 1.2 verification,
-    /// 1.3 metric mode.
+    /// 1.3 metric mode, 1.6 pose fixes.
     const LAYOUTS: &'static [usize] = &[
         std::mem::offset_of!(Self, image_backend),
         std::mem::offset_of!(Self, verify_candidates),
         std::mem::offset_of!(Self, metric_particles),
+        std::mem::offset_of!(Self, camera_fx),
         std::mem::size_of::<Self>(),
     ];
 }
@@ -139,6 +156,11 @@ impl Default for topoloc_localizer_options {
             metric_particles: d.metric.particles as u32,
             metric_temperature: d.metric.temperature,
             metric_seed: d.metric.seed,
+            camera_fx: 0.0,
+            camera_fy: 0.0,
+            camera_cx: 0.0,
+            camera_cy: 0.0,
+            pose_min_inliers: d.verification.locate.min_inliers,
         }
     }
 }
@@ -237,6 +259,16 @@ fn localizer_options(o: &topoloc_localizer_options) -> Result<LocalizerOptions, 
             candidates: o.verify_candidates as usize,
             views_per_candidate: o.verify_views_per_candidate as usize,
             inlier_weight: o.verify_inlier_weight,
+            camera: (o.camera_fx != 0.0).then_some(PinholeCamera {
+                fx: o.camera_fx,
+                fy: o.camera_fy,
+                cx: o.camera_cx,
+                cy: o.camera_cy,
+            }),
+            locate: LocateOptions {
+                min_inliers: o.pose_min_inliers,
+                ..LocateOptions::default()
+            },
             ..VerificationOptions::default()
         },
         metric: MetricOptions {
@@ -333,6 +365,7 @@ pub struct topoloc_candidate {
 /// `candidates_capacity`; topoloc writes the other fields.
 #[repr(C)]
 #[derive(Clone, Copy)]
+#[allow(non_snake_case)]
 pub struct topoloc_result {
     /// `sizeof(topoloc_result)`, set by the `_default` function.
     pub struct_size: usize,
@@ -362,12 +395,26 @@ pub struct topoloc_result {
     /// RANSAC inliers between the frame and `view` (0 unless `verified`): with `place` and
     /// `view`, the evidence for a loop closure.
     pub inliers: u32,
+    // ABI 1.6 (topoloc 0.1): pose fixes.
+    /// True when `world_T_camera` holds a pose fix of this frame (camera intrinsics in the
+    /// options, a map with keypoint scene points, and at least `pose_min_inliers` agreeing
+    /// keypoints against the best-verified view).
+    pub has_pose_fix: bool,
+    /// The view the camera was placed against (0 unless `has_pose_fix`).
+    pub pose_fix_view: u32,
+    /// PnP inliers of the pose fix (0 unless `has_pose_fix`).
+    pub pose_fix_inliers: u32,
+    /// The camera in the map frame, `world_T_camera`, 16 doubles row-major 4x4, camera axes
+    /// optical (z forward, x right, y down); identity unless `has_pose_fix`. A pose graph adds
+    /// it as a prior or loop constraint on the frame's pose.
+    pub world_T_camera: [f64; 16],
 }
 
 impl Versioned for topoloc_result {
-    /// ABI 1.0 and 1.1 ended before `verified`; 1.2 added verification.
+    /// ABI 1.0 and 1.1 ended before `verified`; 1.2 added verification, 1.6 pose fixes.
     const LAYOUTS: &'static [usize] = &[
         std::mem::offset_of!(Self, verified),
+        std::mem::offset_of!(Self, has_pose_fix),
         std::mem::size_of::<Self>(),
     ];
 }
@@ -388,6 +435,10 @@ impl Default for topoloc_result {
             candidates_len: 0,
             verified: false,
             inliers: 0,
+            has_pose_fix: false,
+            pose_fix_view: 0,
+            pose_fix_inliers: 0,
+            world_T_camera: pose_to_row_major(&Isometry3::identity()),
         }
     }
 }
@@ -466,6 +517,13 @@ pub extern "C" fn topoloc_localizer_process(
                 candidates_len: written,
                 verified: out.candidates[0].verified,
                 inliers: out.candidates[0].inliers,
+                has_pose_fix: out.pose_fix.is_some(),
+                pose_fix_view: out.pose_fix.map_or(0, |f| f.view),
+                pose_fix_inliers: out.pose_fix.map_or(0, |f| f.inliers),
+                world_T_camera: pose_to_row_major(
+                    &out.pose_fix
+                        .map_or_else(Isometry3::identity, |f| f.world_t_optical),
+                ),
             },
             "result",
         )

@@ -28,11 +28,13 @@ mod status;
 mod versioned;
 
 // The entry points, declared in the order include/topoloc.h presents them (cbindgen follows
-// this order): versions and errors, maps, the localizer, builders, skeleton graphs, loop
+// this order): versions and errors, maps, map keypoints, the localizer, builders, skeleton graphs, loop
 // closure.
 mod version;
 
 mod map;
+
+mod map_keypoints;
 
 mod localizer;
 
@@ -49,6 +51,7 @@ pub use images::*;
 pub use localizer::*;
 pub use loops::*;
 pub use map::*;
+pub use map_keypoints::*;
 pub use skeleton::*;
 pub use status::topoloc_status;
 pub use version::*;

@@ -202,6 +202,41 @@ impl Map {
         Ok(self)
     }
 
+    /// A copy of this map whose keypoints carry the map-frame scene point of each keypoint
+    /// (view after view, in the order of [`ViewKeypoints::points`]; all three coordinates NaN
+    /// where unknown): what a host with depth or SLAM map points attaches so that the
+    /// localizer can place the camera metrically. The copy owns its descriptors (a memory-mapped
+    /// map is read into memory). Fails, leaving this map as it is, when the map stores no
+    /// keypoints or the points do not match them one to one.
+    pub fn with_keypoint_world_points(&self, world_points: Vec<[f32; 3]>) -> Result<Map, MapError> {
+        let keypoints = self.keypoints.as_ref().ok_or_else(|| {
+            MapError::InvalidArgument(
+                "the map stores no keypoints to attach scene points to (build it from images)"
+                    .into(),
+            )
+        })?;
+        let keypoints = keypoints
+            .clone()
+            .with_world_points(world_points)
+            .map_err(MapError::InvalidArgument)?;
+        Ok(Self {
+            identity: self.identity.clone(),
+            creator: self.creator.clone(),
+            descriptors: DescriptorStore::Owned(self.descriptors.as_slice().to_vec()),
+            views: self.views.clone(),
+            place_positions: self.place_positions.clone(),
+            place_view_offsets: self.place_view_offsets.clone(),
+            place_view_ids: self.place_view_ids.clone(),
+            edges: self.edges.clone(),
+            neighbour_offsets: self.neighbour_offsets.clone(),
+            neighbour_ids: self.neighbour_ids.clone(),
+            neighbour_weights: self.neighbour_weights.clone(),
+            describer: self.describer.clone(),
+            keypoints: Some(keypoints),
+            spread: self.spread.clone(),
+        })
+    }
+
     /// The ORB keypoints of every view, if the map stores them (maps built from images do).
     pub fn keypoints(&self) -> Option<&ViewKeypoints> {
         self.keypoints.as_ref()

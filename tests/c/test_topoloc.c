@@ -25,6 +25,7 @@
 #include "topoloc.h"
 
 #include <errno.h>
+#include <math.h>
 #include <pthread.h>
 #include <stdbool.h>
 #include <stddef.h>
@@ -3061,6 +3062,138 @@ static void test_verification(const topoloc_map *map, const topoloc_map *world)
     topoloc_localizer_free(loc);
 }
 
+/* Pose fixes (ABI 1.6): the host reads each view's keypoints, attaches their scene points (here:
+ * the view's optical frame is the map frame, points 1 m away left of the centre and 4 m right of
+ * it, pinhole focal 400 px) and gets the camera of a revisit placed metrically; the revisit moved
+ * the content 2 px left, so the fixed pose reprojects the view's scene points 2 px left of their
+ * keypoints. Bad lengths, bad intrinsics and a camera without scene points are refused. */
+#define PF_FOCAL 400.0
+static double pf_depth(float u)
+{
+    return (double)u < (IMG_W - 1) / 2.0 ? 1.0 : 4.0;
+}
+
+static int compare_double(const void *a, const void *b)
+{
+    double x = *(const double *)a, y = *(const double *)b;
+    return (x > y) - (x < y);
+}
+
+static void test_pose_fix(const topoloc_map *map)
+{
+    static uint8_t revisit[IMG_PIXELS];
+    static float xy[2 * 4096], xyz[3 * 65536];
+    static double error[4096];
+    const double cx = (IMG_W - 1) / 2.0, cy = (IMG_H - 1) / 2.0;
+    topoloc_localizer_options options;
+    topoloc_localizer *loc = NULL;
+    topoloc_map *posed = NULL;
+    topoloc_image image;
+    topoloc_result r;
+    size_t total = 0, filled = 0, count = 0, i, n = 0, views = 0;
+    uint32_t v;
+
+    section("pose fixes: keypoint scene points from the host, a metric camera pose");
+    CHECK_OK(topoloc_map_keypoint_total(map, &total));
+    CHECK_OK(topoloc_map_view_count(map, &views));
+    CHECK(total > 0 && total <= 65536);
+    if (total == 0 || total > 65536) {
+        return;
+    }
+    for (v = 0; v < views; v++) {
+        CHECK_OK(topoloc_map_view_keypoints(map, v, xy, sizeof xy / sizeof xy[0], &count));
+        for (i = 0; i < count; i++) {
+            double d = pf_depth(xy[2 * i]);
+            xyz[3 * (filled + i)] = (float)((xy[2 * i] - cx) / PF_FOCAL * d);
+            xyz[3 * (filled + i) + 1] = (float)((xy[2 * i + 1] - cy) / PF_FOCAL * d);
+            xyz[3 * (filled + i) + 2] = (float)d;
+        }
+        filled += count;
+    }
+    CHECK(filled == total);
+    CHECK_STATUS(topoloc_map_view_keypoints(map, 0, xy, 1, &count), TOPOLOC_ERR_BUFFER_TOO_SMALL);
+    CHECK(count > 0);
+    CHECK_STATUS(topoloc_map_view_keypoints(map, (uint32_t)views, xy, 2, &count),
+                 TOPOLOC_ERR_UNKNOWN_VIEW);
+    CHECK_STATUS(topoloc_map_with_keypoint_points(map, xyz, 3 * total - 3, &posed),
+                 TOPOLOC_ERR_INVALID_ARGUMENT);
+    CHECK_MESSAGE_HAS("keypoints need");
+    CHECK(posed == NULL);
+    xyz[1] = NAN; /* neither finite nor all NaN */
+    CHECK_STATUS(topoloc_map_with_keypoint_points(map, xyz, 3 * total, &posed),
+                 TOPOLOC_ERR_INVALID_ARGUMENT);
+    xyz[1] = (float)((xy[1] - cy) / PF_FOCAL); /* overwritten below anyway */
+    xyz[0] = xyz[1] = xyz[2] = NAN;             /* unknown: allowed */
+    CHECK_OK(topoloc_map_with_keypoint_points(map, xyz, 3 * total, &posed));
+    if (posed == NULL) {
+        return;
+    }
+
+    /* A camera on the map without scene points, or a bad focal length: refused. */
+    CHECK_OK(topoloc_localizer_options_default(&options));
+    CHECK(options.camera_fx == 0.0 && options.pose_min_inliers == 30u);
+    options.verify_candidates = 3;
+    options.camera_fx = options.camera_fy = PF_FOCAL;
+    options.camera_cx = cx;
+    options.camera_cy = cy;
+    options.pose_min_inliers = 12;
+    CHECK_STATUS(topoloc_localizer_new(map, &options, &loc), TOPOLOC_ERR_INVALID_OPTION);
+    CHECK_MESSAGE_HAS("scene points");
+    options.camera_fy = -1.0;
+    CHECK_STATUS(topoloc_localizer_new(posed, &options, &loc), TOPOLOC_ERR_INVALID_OPTION);
+    CHECK_MESSAGE_HAS("fy");
+    CHECK(loc == NULL);
+    options.camera_fy = PF_FOCAL;
+
+    CHECK_OK(topoloc_localizer_new(posed, &options, &loc));
+    if (loc != NULL) {
+        double *T = r.world_T_camera;
+        make_revisit(g_place_px[4], 204u, revisit);
+        image = gray_image(revisit);
+        CHECK_OK(topoloc_result_default(&r));
+        CHECK(!r.has_pose_fix && T[0] == 1.0 && T[5] == 1.0 && T[3] == 0.0);
+        CHECK_OK(localize_image(loc, &image, 0.0, &r));
+        printf("   revisit of place 4: pose fix %d against view %u, %u inliers, t = %.3f %.3f %.3f\n",
+               (int)r.has_pose_fix, (unsigned)r.pose_fix_view, (unsigned)r.pose_fix_inliers, T[3],
+               T[7], T[11]);
+        CHECK(r.place == 4 && r.has_pose_fix && r.pose_fix_inliers >= 12u);
+        CHECK_OK(topoloc_map_view_keypoints(posed, r.pose_fix_view, xy, sizeof xy / sizeof xy[0],
+                                            &count));
+        /* camera_T_world = inverse of world_T_camera: R^T (X - t). */
+        for (i = 1; i < count && r.has_pose_fix; i++) {
+            double d = pf_depth(xy[2 * i]), X[3], c[3];
+            int k;
+            X[0] = (xy[2 * i] - cx) / PF_FOCAL * d - T[3];
+            X[1] = (xy[2 * i + 1] - cy) / PF_FOCAL * d - T[7];
+            X[2] = d - T[11];
+            for (k = 0; k < 3; k++) {
+                c[k] = T[k] * X[0] + T[4 + k] * X[1] + T[8 + k] * X[2];
+            }
+            if (c[2] > 0.1) {
+                double du = cx + PF_FOCAL * c[0] / c[2] - (xy[2 * i] - 2.0);
+                double dv = cy + PF_FOCAL * c[1] / c[2] - xy[2 * i + 1];
+                error[n++] = du * du + dv * dv; /* squared: no libm */
+            }
+        }
+        CHECK(n > 0);
+        if (n > 0) {
+            qsort(error, n, sizeof error[0], compare_double);
+            printf("   median squared reprojection against the 2 px shift: %.2f px^2 over %zu points\n",
+                   error[n / 2], n);
+            CHECK(error[n / 2] < 1.5 * 1.5);
+        }
+
+        /* A caller of ABI 1.5 gets its result without the pose-fix fields. */
+        CHECK_OK(topoloc_result_default(&r));
+        r.struct_size = offsetof(topoloc_result, has_pose_fix);
+        r.pose_fix_inliers = 777u;
+        CHECK_OK(localize_image(loc, &image, 1.0, &r));
+        CHECK(r.place == 4 && r.pose_fix_inliers == 777u);
+        topoloc_localizer_free(loc);
+    }
+    topoloc_map_free(posed);
+}
+
 static void test_metric_mode(const topoloc_map *world)
 {
     topoloc_localizer_options options;
@@ -3131,6 +3264,7 @@ static void test_images(const topoloc_map *world)
     if (map != NULL) {
         test_image_localize(map, world);
         test_verification(map, world);
+        test_pose_fix(map);
         test_bad_images(map);
     }
     topoloc_map_free(map);

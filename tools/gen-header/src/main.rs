@@ -78,6 +78,8 @@ const SECTIONS: &[(&str, &[&str])] = &[
             "topoloc_map_descriptor",
             "topoloc_map_neighbours",
             "topoloc_view_info",
+            "topoloc_map_keypoint_total",
+            "topoloc_map_with_keypoint_points",
         ],
     ),
     (
