@@ -342,11 +342,11 @@ constexpr uint32_t header_abi_version = TOPOLOC_ABI_VERSION;
 using LoadOptions = topoloc_map_load_options;
 
 /// Localizer parameters (the C struct). Start from `default_localizer_options()`; see topoloc.h
-/// for each field's meaning and default (no intrinsics: set `camera_fx`, `camera_fy`,
-/// `camera_cx`, `camera_cy`, with `verify_candidates` > 0 and a map from
-/// `Map::with_keypoint_points`, for results with a pose fix of at least `pose_min_inliers`,
-/// default 30, PnP inliers; ABI 1.6). The string fields are borrowed only during the
-/// `Localizer` constructor.
+/// for each field's meaning and default (no camera intrinsics: set `camera_fx`, `camera_fy`,
+/// `camera_cx`, `camera_cy` for results with a pose fix, which also need `verify_candidates` > 0
+/// and a map from `Map::with_keypoint_points`; `pose_min_inliers`, default 30, is the fewest
+/// PnP inliers of a fix; ABI 1.6). The string fields are borrowed only during the `Localizer`
+/// constructor.
 using LocalizerOptions = topoloc_localizer_options;
 
 /// Parameters of `map_from_keyframes` (the C struct). Start from `default_keyframe_options()`.

@@ -1,11 +1,13 @@
 """Images in: maps built from numpy images and image files store their describer (also through
 save/load), localizers describe image frames with it, progress callbacks report, cancel and
 re-raise, bad images give typed errors before or inside the library and leave the localizer
-unchanged, strided arrays are read in place. The VLAD backend needs nothing and always runs; the
-ONNX cases run when scripts/setup-models.sh has filled ~/.cache/topoloc (skipped otherwise)."""
+unchanged, strided arrays are read in place; image maps' keypoints, their scene points and the
+pose fixes they give (ABI 1.6). The VLAD backend needs nothing and always runs; the ONNX cases
+run when scripts/setup-models.sh has filled ~/.cache/topoloc (skipped otherwise)."""
 
 from __future__ import annotations
 
+import ctypes
 import dataclasses
 import threading
 import traceback
@@ -16,7 +18,7 @@ import numpy as np
 import pytest
 
 import topoloc
-from topoloc import _core
+from topoloc import _core, _lib
 
 W, H = 320, 240
 PLACES = 12
@@ -551,6 +553,199 @@ def test_localizer_outlives_the_map_for_image_frames(images):
     m.close()
     assert loc.process(image=images[3], timestamp=0.0).place == 3
     loc.close()
+
+
+# ---------------------------------------------------------------------------------------------
+# Keypoints, their scene points and pose fixes (ABI 1.6)
+# ---------------------------------------------------------------------------------------------
+
+# A pinhole camera for the place images; the map frame is each view's optical frame.
+FX = FY = 400.0
+CX, CY = (W - 1) / 2, (H - 1) / 2
+CAMERA = dict(camera_fx=FX, camera_fy=FY, camera_cx=CX, camera_cy=CY)
+NEAR, FAR = 1.0, 4.0  # depths of the scene left and right of the principal point, metres
+SHIFT = 2  # pixels the query's content moves left
+
+
+def scene_points(m: topoloc.Map) -> List[np.ndarray]:
+    """Per view, the (N, 3) scene point of each keypoint: keypoints with x < CX at depth NEAR,
+    the others at FAR, back-projected through the camera."""
+    out = []
+    for v in range(m.view_count):
+        uv = m.view_keypoints(v).astype(np.float64)
+        d = np.where(uv[:, 0] < CX, NEAR, FAR)
+        out.append(np.stack([(uv[:, 0] - CX) / FX * d, (uv[:, 1] - CY) / FY * d, d], axis=1))
+    return out
+
+
+def shifted_left(img: np.ndarray, seed: int, px: int = SHIFT) -> np.ndarray:
+    """``img`` with its content ``px`` pixels to the left (``query[:, x] = img[:, x + px]``,
+    the last column repeated), 10% brighter, with noise of at most 3 grey levels."""
+    rng = np.random.default_rng(seed)
+    shifted = np.concatenate([img[:, px:], np.repeat(img[:, -1:], px, axis=1)], axis=1).astype(np.int32)
+    return np.clip(shifted * 11 // 10 + rng.integers(-3, 4, size=img.shape), 0, 255).astype(np.uint8)
+
+
+def project(world_T_camera: np.ndarray, xyz: np.ndarray) -> np.ndarray:
+    """Pixels (N, 2) of the map-frame points ``xyz`` seen by the camera at ``world_T_camera``."""
+    camera_T_world = np.linalg.inv(world_T_camera)
+    p = xyz @ camera_T_world[:3, :3].T + camera_T_world[:3, 3]
+    return np.stack([FX * p[:, 0] / p[:, 2] + CX, FY * p[:, 1] / p[:, 2] + CY], axis=1)
+
+
+@pytest.fixture(scope="module")
+def points_map(vlad_map):
+    m = vlad_map.with_keypoint_points(np.concatenate(scene_points(vlad_map)))
+    yield m
+    m.close()
+
+
+def test_view_keypoints_add_up_to_the_keypoint_total(vlad_map, corridor):
+    counts = []
+    for v in range(vlad_map.view_count):
+        kp = vlad_map.view_keypoints(v)
+        assert kp.dtype == np.float32 and kp.ndim == 2 and kp.shape[1] == 2
+        assert ((kp >= 0) & (kp <= [W - 1, H - 1])).all()  # pixel positions in the image
+        counts.append(len(kp))
+    assert min(counts) > 100  # beyond the first buffer: read in two calls
+    assert vlad_map.keypoint_total == sum(counts)
+    np.testing.assert_array_equal(vlad_map.view_keypoints(3), vlad_map.view_keypoints(3))
+    # The C contract: a short buffer is refused, and the count written anyway.
+    count = ctypes.c_size_t(0)
+    status = _lib.lib.topoloc_map_view_keypoints(vlad_map._h, 3, None, 0, ctypes.byref(count))
+    assert status == topoloc.BufferTooSmallError.STATUS and count.value == counts[3]
+    for view in (PLACES, -1):
+        with pytest.raises(topoloc.UnknownViewError):
+            vlad_map.view_keypoints(view)
+    # A map built from descriptors stores no keypoints.
+    assert corridor.map.keypoint_total == 0
+    with pytest.raises(topoloc.InvalidArgumentError, match="no keypoints") as info:
+        corridor.map.view_keypoints(0)
+    assert info.value.status == 2
+    with pytest.raises(topoloc.UnknownViewError):  # the view is checked first
+        corridor.map.view_keypoints(corridor.map.view_count)
+
+
+def test_with_keypoint_points_makes_a_new_map(vlad_map, points_map, images):
+    m = points_map
+    for name in ("place_count", "view_count", "edge_count", "dim", "descriptor_kind", "keypoint_total"):
+        assert getattr(m, name) == getattr(vlad_map, name), name
+    np.testing.assert_array_equal(m.view_descriptors(), vlad_map.view_descriptors())
+    for v in range(m.view_count):
+        np.testing.assert_array_equal(m.view_keypoints(v), vlad_map.view_keypoints(v))
+    # Rows of NaN (unknown points) are accepted, from any array-like; the copy outlives the
+    # map it was made from.
+    with topoloc.Map.build_from_images(images[:2], backend="vlad-orb") as small:
+        xyz = np.full((small.keypoint_total, 3), np.nan)
+        xyz[::3] = [0.0, 0.0, 2.0]
+        copy = small.with_keypoint_points(xyz.tolist())
+    with copy, topoloc.Localizer(copy, mode="single_frame", verify_candidates=2, **CAMERA) as loc:
+        assert copy.keypoint_total == len(xyz)
+        assert loc.process(image=images[1], timestamp=0.0).place == 1
+
+
+def test_with_keypoint_points_checks_the_array(vlad_map, corridor, images, monkeypatch):
+    total = vlad_map.keypoint_total
+    xyz = np.concatenate(scene_points(vlad_map))
+
+    def not_called(*args):
+        raise AssertionError("topoloc_map_with_keypoint_points was called")
+
+    monkeypatch.setattr(_lib.lib, "topoloc_map_with_keypoint_points", not_called)
+    for bad in (xyz[:, :2], xyz.reshape(-1), xyz[:, :, None], xyz.T, np.zeros((total, 4)), 1.0):
+        with pytest.raises(topoloc.InvalidArgumentError, match=r"\(N, 3\)"):
+            vlad_map.with_keypoint_points(bad)
+    for dtype in (str, complex, object):
+        with pytest.raises(TypeError, match="dtype"):
+            vlad_map.with_keypoint_points(xyz.astype(dtype))
+    monkeypatch.undo()
+    # Checked by the library: the number of rows, partly unknown or infinite points, a map
+    # without keypoints.
+    for rows in (xyz[:-1], np.concatenate([xyz, xyz[:1]]), xyz[:0]):
+        with pytest.raises(topoloc.InvalidArgumentError, match=f"keypoints need {3 * total}") as info:
+            vlad_map.with_keypoint_points(rows)
+        assert info.value.status == 2
+    partly = xyz.copy()
+    partly[7, 2] = np.nan
+    infinite = xyz.copy()
+    infinite[4] = np.inf
+    for rows in (partly, infinite):
+        with pytest.raises(topoloc.InvalidArgumentError):
+            vlad_map.with_keypoint_points(rows)
+    with pytest.raises(topoloc.InvalidArgumentError, match="no keypoints"):
+        corridor.map.with_keypoint_points(np.zeros((0, 3)))
+    # The map is unchanged and still works.
+    assert vlad_map.keypoint_total == total
+    with topoloc.Localizer(vlad_map, mode="single_frame", verify_candidates=3) as loc:
+        r = loc.process(image=revisit(images[5], 305), timestamp=0.0)
+        assert r.place == 5 and r.verified and r.inliers >= 20 and r.pose_fix is None
+
+
+def test_pose_fix_places_the_camera(points_map, images):
+    with topoloc.Localizer(points_map, mode="single_frame", verify_candidates=3, pose_min_inliers=12,
+                           **CAMERA) as loc, \
+            topoloc.Localizer(points_map, mode="single_frame", verify_candidates=3) as plain:
+        o = loc.options
+        assert (o["camera_fx"], o["camera_fy"], o["camera_cx"], o["camera_cy"]) == (FX, FY, CX, CY)
+        assert o["pose_min_inliers"] == 12 and o["verify_candidates"] == 3
+        scene = scene_points(points_map)
+        for p in (0, 5, 9):
+            query = shifted_left(images[p], 500 + p)
+            r = loc.process(image=query, timestamp=0.0)
+            fix = r.pose_fix
+            assert r.place == p and r.verified, r
+            assert fix is not None, f"no pose fix for place {p}: {r.inliers} verification inliers"
+            assert isinstance(fix, topoloc.PoseFix) and fix.view == p and fix.inliers >= 12, fix
+            pose = fix.world_T_camera
+            assert pose.dtype == np.float64 and pose.shape == (4, 4)
+            np.testing.assert_allclose(pose[3], [0, 0, 0, 1])
+            np.testing.assert_allclose(pose[:3, :3] @ pose[:3, :3].T, np.eye(3), atol=1e-9)
+            # The stored keypoints' scene points project where the query sees them: SHIFT
+            # pixels to the left. Without the fix (the identity pose) they would be SHIFT off.
+            expected = points_map.view_keypoints(fix.view) - [SHIFT, 0]
+            error = np.linalg.norm(project(pose, scene[fix.view]) - expected, axis=1)
+            assert np.median(error) < 1.5, (p, np.median(error), fix)
+            assert np.median(np.linalg.norm(project(np.eye(4), scene[fix.view]) - expected, axis=1)) > 1.5
+            # The same shift at 1 m and at 4 m is a pure turn, about the y axis, by atan(SHIFT / FX).
+            assert np.linalg.norm(pose[:3, 3]) < 0.02, pose
+            assert np.arctan2(pose[0, 2], pose[2, 2]) == pytest.approx(np.arctan(SHIFT / FX), abs=5e-4)
+            # The same frame again gives the same answer; without a camera, no pose fix.
+            again = loc.process(image=query, timestamp=0.0)
+            assert again.pose_fix == fix and answer(again) == answer(r)
+            without = plain.process(image=query, timestamp=0.0)
+            assert without.verified and without.inliers == r.inliers and without.pose_fix is None
+
+
+def test_pose_fix_options(vlad_map, points_map, images):
+    d = topoloc.localizer_options_default()
+    assert (d["camera_fx"], d["camera_fy"], d["camera_cx"], d["camera_cy"]) == (0.0, 0.0, 0.0, 0.0)
+    assert d["pose_min_inliers"] == 30
+    bad = [
+        dict(CAMERA, camera_fx=-400.0),
+        dict(CAMERA, camera_fy=0.0),
+        dict(CAMERA, camera_cx=float("nan")),
+        dict(CAMERA, camera_fy=float("inf")),
+        dict(CAMERA, pose_min_inliers=5),
+        dict(CAMERA, pose_min_inliers=-1),
+        dict(pose_min_inliers=10001),
+    ]
+    for kwargs in bad:
+        with pytest.raises(topoloc.InvalidOptionError) as info:
+            topoloc.Localizer(points_map, verify_candidates=3, **kwargs)
+        assert info.value.status == 204 and info.value.message, kwargs
+    with pytest.raises(topoloc.InvalidOptionError, match="fx"):
+        topoloc.Localizer(points_map, verify_candidates=3, **dict(CAMERA, camera_fx=-400.0))
+    # Pose fixes come from verified views, against scene points.
+    with pytest.raises(topoloc.InvalidOptionError, match="candidates"):
+        topoloc.Localizer(points_map, **CAMERA)
+    with pytest.raises(topoloc.InvalidOptionError, match="scene points") as info:
+        topoloc.Localizer(vlad_map, verify_candidates=3, **CAMERA)
+    assert info.value.status == 204
+    # Too few inliers for the threshold: verified, but no pose fix.
+    with topoloc.Localizer(points_map, mode="single_frame", verify_candidates=3, pose_min_inliers=10000,
+                           **CAMERA) as loc:
+        r = loc.process(image=shifted_left(images[4], 4), timestamp=0.0)
+        assert r.place == 4 and r.verified and r.inliers >= 12 and r.pose_fix is None
 
 
 # ---------------------------------------------------------------------------------------------

@@ -65,6 +65,7 @@ def test_abi_and_mode_constants_match_header():
     text = HEADER.read_text()
     defines = dict(re.findall(r"#define (TOPOLOC_\w+) (\d+)\b", text))
     assert int(defines["TOPOLOC_ABI_VERSION"]) == _lib.ABI_VERSION
+    assert int(defines["TOPOLOC_ABI_VERSION_MINOR"]) == _lib.ABI_VERSION_MINOR
     assert int(defines["TOPOLOC_MODE_FILTER"]) == topoloc.MODE_FILTER == 0
     assert int(defines["TOPOLOC_MODE_SINGLE_FRAME"]) == topoloc.MODE_SINGLE_FRAME == 1
 
@@ -174,6 +175,12 @@ def test_defaults_are_the_library_defaults():
     assert d["metric_particles"] == raw.metric_particles >= 1
     assert d["metric_temperature"] == raw.metric_temperature > 0
     assert d["metric_seed"] == raw.metric_seed == 0
+    for name in ("camera_fx", "camera_fy", "camera_cx", "camera_cy"):
+        assert d[name] == getattr(raw, name) == 0.0, name  # no camera: no pose fixes
+    assert d["pose_min_inliers"] == raw.pose_min_inliers == 30
+    # Every field of the struct is an option (the expected_descriptor_* ones by shorter names).
+    renamed = {"expected_descriptor_kind": "expected_kind", "expected_descriptor_model": "expected_model"}
+    assert set(d) == {renamed.get(name, name) for name, _ in raw._fields_} - {"struct_size"}
     kf = topoloc.keyframe_options_default()
     raw_kf = _lib.defaults(_lib.topoloc_keyframe_options, _lib.lib.topoloc_keyframe_options_init)
     assert kf["place_spacing_m"] == raw_kf.place_spacing_m > 0
@@ -384,6 +391,23 @@ METRIC_FIELDS = {
     "topoloc_frame": [],
 }
 
+#: Fields appended after those for pose fixes (ABI 1.6).
+POSE_FIX_FIELDS = {
+    "topoloc_localizer_options": [
+        ("camera_fx", c_double), ("camera_fy", c_double), ("camera_cx", c_double), ("camera_cy", c_double),
+        ("pose_min_inliers", c_uint32),
+    ],
+    "topoloc_frame": [],
+}
+
+#: Fields of topoloc_result from ``candidates_len`` on: verification (ABI 1.2), then pose fixes
+#: (ABI 1.6).
+RESULT_TAIL_FIELDS = [
+    ("candidates_len", c_size_t), ("verified", c_bool), ("inliers", c_uint32),
+    ("has_pose_fix", c_bool), ("pose_fix_view", c_uint32), ("pose_fix_inliers", c_uint32),
+    ("world_T_camera", c_double * 16),
+]
+
 
 @needs_header
 def test_image_structs_are_in_the_layout_checks():
@@ -402,9 +426,12 @@ def test_image_structs_are_in_the_layout_checks():
         assert fields[len(old):images] == IMAGE_FIELDS[name], f"{name}: image fields not appended as expected"
         verification = images + len(VERIFICATION_FIELDS[name])
         assert fields[images:verification] == VERIFICATION_FIELDS[name], f"{name}: verification fields not appended"
-        assert fields[verification:] == METRIC_FIELDS[name], f"{name}: metric fields not appended"
+        metric = verification + len(METRIC_FIELDS[name])
+        assert fields[verification:metric] == METRIC_FIELDS[name], f"{name}: metric fields not appended"
+        assert fields[metric:] == POSE_FIX_FIELDS[name], f"{name}: pose fix fields not appended"
     result = structs["topoloc_result"]
-    assert [f for f, _ in result[-3:]] == ["candidates_len", "verified", "inliers"], "result: fields not appended"
+    assert result[-len(RESULT_TAIL_FIELDS):] == RESULT_TAIL_FIELDS, "result: fields not appended"
+    assert _lib.topoloc_result._fields_[-len(RESULT_TAIL_FIELDS):] == RESULT_TAIL_FIELDS
 
 
 @needs_header
@@ -532,7 +559,7 @@ def test_status_names_match_the_librarys_table():
 
 
 def test_abi_minor_version():
-    assert topoloc.abi_version_minor() >= _lib.ABI_VERSION_MINOR == 5
+    assert topoloc.abi_version_minor() >= _lib.ABI_VERSION_MINOR == 6
 
 
 EXPECTED_CLASSES = {

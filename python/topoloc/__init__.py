@@ -28,6 +28,12 @@ Maps can also be built from camera images (``Map.build_from_images`` with uint8 
 ``Map.build_from_image_files`` with files or a folder); such maps store their describer, and
 a localizer on them accepts images: ``loc.process(image=frame, timestamp=t)``.
 
+Pose fixes (ABI 1.6): such maps store keypoints per view (``Map.view_keypoints``); with their
+scene points attached (``Map.with_keypoint_points``, from depth or SLAM map points) and the
+camera intrinsics given to a :class:`Localizer` (``camera_fx`` ... ``camera_cy``, with
+``verify_candidates``), a result may carry a :class:`PoseFix`, the camera's metric pose in the
+map frame.
+
 Loop closure (ABI 1.5): a :class:`LoopDetector` takes SLAM keyframes (global descriptor,
 keypoints with binary descriptors, optional poses) and returns one gated :class:`LoopHint` per
 keyframe, with the relative pose when camera intrinsics are given.
@@ -95,6 +101,7 @@ from ._core import (
     LoopHint,
     Map,
     MapBuilder,
+    PoseFix,
     Result,
     ViewInfo,
     abi_version,
@@ -133,6 +140,7 @@ __all__ = [
     "localizer_options_default",
     "Result",
     "Candidate",
+    "PoseFix",
     "MODE_FILTER",
     "MODE_SINGLE_FRAME",
     "MODE_METRIC",

@@ -39,6 +39,7 @@ __all__ = [
     "Localizer",
     "Result",
     "Candidate",
+    "PoseFix",
     "ViewInfo",
     "Gate",
     "LoopHint",
@@ -124,6 +125,11 @@ def _f32_ptr(arr: np.ndarray):
 
 def _f64_ptr(arr: np.ndarray):
     return arr.ctypes.data_as(POINTER(c_double))
+
+
+def _matrix(values: ctypes.Array, n: int) -> np.ndarray:
+    """A new (n, n) float64 array from a C ``double[n * n]`` in row-major order."""
+    return np.array(values[:], dtype=np.float64).reshape(n, n)
 
 
 # --------------------------------------------------------------------------------------------
@@ -239,20 +245,29 @@ def _read_string(fn, *args) -> str:
     raise AssertionError("unreachable")
 
 
-def _read_u32s(fn, *args) -> np.ndarray:
-    """Calls a ``(..., uint32_t *buf, size_t len, size_t *count)`` function, growing the buffer."""
+def _read_array(fn, *args, ctype: Any = c_uint32, dtype: Any = np.uint32, width: int = 1) -> np.ndarray:
+    """Calls a ``(..., T *buf, size_t len, size_t *count)`` function, growing the buffer:
+    ``*count`` items of ``width`` values each, ``len`` counting values. Returns a new
+    ``(count,)`` array, or ``(count, width)`` for ``width`` > 1."""
     count = c_size_t(0)
     capacity = 16
     for _ in range(2):
-        out = np.empty(capacity, dtype=np.uint32)
-        status = fn(*args, out.ctypes.data_as(POINTER(c_uint32)), capacity, byref(count))
+        out = np.empty(capacity * width, dtype=dtype)
+        status = fn(*args, out.ctypes.data_as(POINTER(ctype)), out.size, byref(count))
         if status == _lib.TOPOLOC_ERR_BUFFER_TOO_SMALL and count.value > capacity:
             capacity = int(count.value)
             continue
         check(status)
-        return out[: int(count.value)].copy()
+        n = int(count.value)
+        items = out[: n * width].copy()
+        return items if width == 1 else items.reshape(n, width)
     check(status)  # pragma: no cover
     raise AssertionError("unreachable")
+
+
+def _read_u32s(fn, *args) -> np.ndarray:
+    """Calls a ``(..., uint32_t *buf, size_t len, size_t *count)`` function, growing the buffer."""
+    return _read_array(fn, *args)
 
 
 # --------------------------------------------------------------------------------------------
@@ -782,7 +797,7 @@ class Map(_Handle):
         view = _u32(view, "view", UnknownViewError)
         info = _lib.defaults(_lib.topoloc_view_info, lib.topoloc_view_info_init)
         check(lib.topoloc_map_view_info(self._h, view, byref(info)))
-        pose = np.array(info.world_T_camera[:], dtype=np.float64).reshape(4, 4) if info.has_pose else None
+        pose = _matrix(info.world_T_camera, 4) if info.has_pose else None
         result = ViewInfo(
             view=view,
             place=int(info.place),
@@ -816,6 +831,41 @@ class Map(_Handle):
         Raises :class:`UnknownViewError`."""
         view = _u32(view, "view", UnknownViewError)
         return _read_string(lib.topoloc_map_view_image, self._h, view)
+
+    # -- keypoints (ABI 1.6) -------------------------------------------------------------------
+
+    @property
+    def keypoint_total(self) -> int:
+        """Number of keypoints of all views together (0 when the map stores none; maps built
+        from images store them): the rows :meth:`with_keypoint_points` takes."""
+        return self._size(lib.topoloc_map_keypoint_total)
+
+    def view_keypoints(self, view: int) -> np.ndarray:
+        """Pixel positions of ``view``'s keypoints as a new (N, 2) float32 array of ``x y``
+        (OpenCV convention: the centre of the top-left pixel is (0, 0)), in the order
+        :meth:`with_keypoint_points` expects their scene points. Raises
+        :class:`UnknownViewError`, :class:`InvalidArgumentError` (the map stores no keypoints)."""
+        view = _u32(view, "view", UnknownViewError)
+        return _read_array(
+            lib.topoloc_map_view_keypoints, self._h, view, ctype=c_float, dtype=np.float32, width=2
+        )
+
+    def with_keypoint_points(self, xyz: Any) -> "Map":
+        """A new :class:`Map`, a copy of this one whose keypoints carry their scene points: with
+        it and camera intrinsics, a :class:`Localizer` reports pose fixes (:class:`PoseFix`).
+
+        ``xyz``: (:attr:`keypoint_total`, 3) array of the map-frame position (the frame of the
+        place positions and view poses, metres) of each keypoint, view after view in the order
+        of :meth:`view_keypoints`; a row of three NaN where unknown. This map is unchanged; the
+        copy holds its descriptors in memory. An array that is not (N, 3) raises
+        :class:`InvalidArgumentError` (``TypeError`` for a non-numeric dtype) before the library
+        is called; the library raises :class:`InvalidArgumentError` for a map without
+        keypoints, the wrong number of rows, or a row neither finite nor all NaN.
+        """
+        points = _keypoint_array(xyz, "xyz", 3, None)
+        out = _lib.MapPtr()
+        check(lib.topoloc_map_with_keypoint_points(self._h, _f32_ptr(points), points.size, byref(out)))
+        return Map._adopt(out)
 
 
 # --------------------------------------------------------------------------------------------
@@ -1263,6 +1313,35 @@ class Candidate:
     similarity: float
 
 
+@dataclass(frozen=True, eq=False)
+class PoseFix:
+    """A metric pose of the camera for one frame (:attr:`Result.pose_fix`, ABI 1.6): the frame's
+    keypoints matched to the scene points of a map view's keypoints
+    (:meth:`Map.with_keypoint_points`) and placed by a perspective-n-point fit with RANSAC.
+
+    Attributes:
+        view: the view the camera was placed against.
+        inliers: PnP RANSAC inliers of the fit (at least the localizer's ``pose_min_inliers``).
+        world_T_camera: (4, 4) float64, the camera in the map frame (row-major ``[R t; 0 0 0 1]``,
+            metres), camera axes optical (z forward, x right, y down). A pose graph adds it as a
+            prior or loop constraint on the frame's pose.
+    """
+
+    view: int
+    inliers: int
+    world_T_camera: np.ndarray
+
+    def __eq__(self, other: object) -> bool:
+        """Equal view, inliers and pose (the arrays compared element by element)."""
+        if not isinstance(other, PoseFix):
+            return NotImplemented
+        return (self.view, self.inliers) == (other.view, other.inliers) and bool(
+            np.array_equal(self.world_T_camera, other.world_T_camera)
+        )
+
+    __hash__ = None  # type: ignore[assignment]  # holds an array
+
+
 @dataclass(frozen=True)
 class Result:
     """The answer for one frame (see :meth:`Localizer.process`).
@@ -1281,6 +1360,10 @@ class Result:
             with ``verify_candidates`` > 0).
         inliers: RANSAC inliers between the frame and ``view`` (0 unless ``verified``): with
             ``place`` and ``view``, the evidence for a loop closure.
+        pose_fix: the camera's metric pose against the best-verified view (a :class:`PoseFix`),
+            or ``None``: localizers made with camera intrinsics and verification on a map whose
+            keypoints carry scene points report one when at least ``pose_min_inliers``
+            keypoints agree (ABI 1.6).
     """
 
     frame_index: int
@@ -1293,6 +1376,7 @@ class Result:
     candidates: List[Candidate] = field(default_factory=list)
     verified: bool = False
     inliers: int = 0
+    pose_fix: Optional[PoseFix] = None
 
 
 _MODES = {"filter": _lib.MODE_FILTER, "single_frame": _lib.MODE_SINGLE_FRAME, "metric": _lib.MODE_METRIC}
@@ -1312,6 +1396,8 @@ _OPTION_FIELDS = (
     "off_map_similarity",
     "off_map_margin",
 )
+#: Pinhole intrinsics of the localizer's camera (ABI 1.6), pixels; ``camera_fx == 0``: none.
+_CAMERA_FIELDS = ("camera_fx", "camera_fy", "camera_cx", "camera_cy")
 
 
 def localizer_options_default() -> Dict[str, Any]:
@@ -1320,7 +1406,9 @@ def localizer_options_default() -> Dict[str, Any]:
     ``expected_kind``, ``expected_model``, ``image_backend`` ("auto"), ``onnx_model_path`` and
     ``onnx_runtime_path`` (``None``: the library's search), ``verify_candidates`` (0: off),
     ``verify_views_per_candidate``, ``verify_inlier_weight``, ``metric_particles``,
-    ``metric_temperature`` and ``metric_seed``."""
+    ``metric_temperature``, ``metric_seed``, the camera intrinsics ``camera_fx``,
+    ``camera_fy``, ``camera_cx``, ``camera_cy`` (``camera_fx == 0``: no camera, no pose fixes)
+    and ``pose_min_inliers`` (ABI 1.6)."""
     o = _lib.defaults(_lib.topoloc_localizer_options, lib.topoloc_localizer_options_init)
     return _options_dict(o)
 
@@ -1341,6 +1429,8 @@ def _options_dict(o: _lib.topoloc_localizer_options) -> Dict[str, Any]:
     out["metric_particles"] = int(o.metric_particles)
     out["metric_temperature"] = float(o.metric_temperature)
     out["metric_seed"] = int(o.metric_seed)
+    out.update({name: float(getattr(o, name)) for name in _CAMERA_FIELDS})
+    out["pose_min_inliers"] = int(o.pose_min_inliers)
     return out
 
 
@@ -1379,6 +1469,14 @@ class Localizer(_SingleThreaded):
     :class:`InvalidOptionError`) and image frames (:class:`InvalidImageError` for a descriptor
     frame).
 
+    Pose fixes (ABI 1.6, off by default): with verification on and the pinhole intrinsics of
+    the frames' camera, ``camera_fx``, ``camera_fy``, ``camera_cx``, ``camera_cy`` (pixels of
+    the images as passed, undistorted; ``camera_fx == 0``: none; focal lengths finite and > 0,
+    principal point finite), on a map whose keypoints carry scene points
+    (:meth:`Map.with_keypoint_points`; otherwise :class:`InvalidOptionError`), the
+    best-verified view places the camera metrically: the result's ``pose_fix`` (a
+    :class:`PoseFix`) when at least ``pose_min_inliers`` (6..10000) keypoints agree.
+
     Ownership: owns a C ``topoloc_localizer`` handle, released by :meth:`close`, the ``with``
     statement or garbage collection. The localizer keeps its own reference to the map data, so
     the :class:`Map` may be closed while the localizer is in use.
@@ -1410,6 +1508,11 @@ class Localizer(_SingleThreaded):
         metric_particles: Optional[int] = None,
         metric_temperature: Optional[float] = None,
         metric_seed: Optional[int] = None,
+        camera_fx: Optional[float] = None,
+        camera_fy: Optional[float] = None,
+        camera_cx: Optional[float] = None,
+        camera_cy: Optional[float] = None,
+        pose_min_inliers: Optional[int] = None,
     ) -> None:
         self._init_guard()
         self._free = lib.topoloc_localizer_free
@@ -1429,6 +1532,10 @@ class Localizer(_SingleThreaded):
             "off_map_probability": off_map_probability,
             "off_map_similarity": off_map_similarity,
             "off_map_margin": off_map_margin,
+            "camera_fx": camera_fx,
+            "camera_fy": camera_fy,
+            "camera_cx": camera_cx,
+            "camera_cy": camera_cy,
         }
         for name, value in given.items():
             if value is not None:
@@ -1458,6 +1565,8 @@ class Localizer(_SingleThreaded):
             if not isinstance(metric_seed, int) or not 0 <= metric_seed < 2**64:
                 raise InvalidOptionError(f"metric_seed must be an integer in [0, 2**64), got {metric_seed!r}")
             options.metric_seed = metric_seed
+        if pose_min_inliers is not None:
+            options.pose_min_inliers = _u32(pose_min_inliers, "pose_min_inliers", InvalidOptionError)
 
         out = _lib.LocalizerPtr()
         check(lib.topoloc_localizer_new(map._h, byref(options), byref(out)))
@@ -1567,6 +1676,7 @@ class Localizer(_SingleThreaded):
                 candidates=candidates,
                 verified=bool(result.verified),
                 inliers=int(result.inliers),
+                pose_fix=_pose_fix(result),
             )
         finally:
             self._leave()
@@ -1580,6 +1690,17 @@ class Localizer(_SingleThreaded):
             check(lib.topoloc_localizer_reset(h))
         finally:
             self._leave()
+
+
+def _pose_fix(result: _lib.topoloc_result) -> Optional[PoseFix]:
+    """The :class:`PoseFix` of a filled ``topoloc_result``, or ``None`` without one."""
+    if not result.has_pose_fix:
+        return None
+    return PoseFix(
+        view=int(result.pose_fix_view),
+        inliers=int(result.pose_fix_inliers),
+        world_T_camera=_matrix(result.world_T_camera, 4),
+    )
 
 
 # --------------------------------------------------------------------------------------------
@@ -1719,7 +1840,10 @@ def _loop_options(given: Dict[str, Any]) -> _lib.topoloc_loop_options:
 
 def _keypoint_array(values: Any, name: str, columns: int, count: Optional[int]) -> np.ndarray:
     """A C-contiguous float32 (N, columns) array; ``count``: the N it must have."""
-    arr = np.asarray(values, dtype=np.float32)
+    arr = np.asarray(values)
+    if arr.size and arr.dtype.kind not in "iuf":
+        raise TypeError(f"{name} must be an array of real numbers, got dtype {arr.dtype}")
+    arr = arr.astype(np.float32, copy=False)
     if arr.ndim != 2 or arr.shape[1] != columns:
         raise InvalidArgumentError(f"{name} must be an (N, {columns}) array, got shape {arr.shape}")
     if count is not None and arr.shape[0] != count:
@@ -1925,8 +2049,8 @@ class LoopDetector(_SingleThreaded):
                 confidence=float(hint.confidence),
                 has_pose=bool(hint.has_pose),
                 scale_known=bool(hint.scale_known),
-                matched_T_query=np.array(hint.matched_T_query[:], dtype=np.float64).reshape(4, 4),
-                covariance=np.array(hint.covariance[:], dtype=np.float64).reshape(6, 6),
+                matched_T_query=_matrix(hint.matched_T_query, 4),
+                covariance=_matrix(hint.covariance, 6),
             )
         finally:
             self._leave()

@@ -48,7 +48,7 @@ ABI_VERSION = 1
 
 #: ABI minor version these bindings were written for (``TOPOLOC_ABI_VERSION_MINOR``): they use
 #: items up to "ABI 1.N" of the header.
-ABI_VERSION_MINOR = 5
+ABI_VERSION_MINOR = 6
 
 #: Environment variable naming the shared library to load.
 ENV_VAR = "TOPOLOC_LIBRARY"
@@ -233,6 +233,11 @@ class topoloc_localizer_options(Structure):
         ("metric_particles", c_uint32),
         ("metric_temperature", c_float),
         ("metric_seed", c_uint64),
+        ("camera_fx", c_double),
+        ("camera_fy", c_double),
+        ("camera_cx", c_double),
+        ("camera_cy", c_double),
+        ("pose_min_inliers", c_uint32),
     ]
 
 
@@ -271,6 +276,10 @@ class topoloc_result(Structure):
         ("candidates_len", c_size_t),
         ("verified", c_bool),
         ("inliers", c_uint32),
+        ("has_pose_fix", c_bool),
+        ("pose_fix_view", c_uint32),
+        ("pose_fix_inliers", c_uint32),
+        ("world_T_camera", c_double * 16),
     ]
 
 
@@ -474,6 +483,10 @@ SIGNATURES = {
     "topoloc_map_view_info": (status_t, [MapPtr, c_uint32, _p(topoloc_view_info)]),
     "topoloc_map_view_image": (status_t, [MapPtr, c_uint32, _p(c_char), c_size_t, _p(c_size_t)]),
     "topoloc_map_view_descriptor": (status_t, [MapPtr, c_uint32, _p(c_float), c_size_t]),
+    # Map keypoints (ABI 1.6)
+    "topoloc_map_keypoint_total": (status_t, [MapPtr, _p(c_size_t)]),
+    "topoloc_map_view_keypoints": (status_t, [MapPtr, c_uint32, _p(c_float), c_size_t, _p(c_size_t)]),
+    "topoloc_map_with_keypoint_points": (status_t, [MapPtr, _p(c_float), c_size_t, _p(MapPtr)]),
     "topoloc_skeleton_options_init": (status_t, [_p(topoloc_skeleton_options), c_size_t]),
     "topoloc_graph_from_occupancy": (
         status_t,
