@@ -98,6 +98,8 @@ struct ModeRun {
     places: Vec<Vec<(PlaceId, f32)>>,
     /// Confidence per frame; `correct` is frame-aligned (image folders only).
     outcomes: Vec<ScoredOutcome>,
+    /// Whether each frame was flagged off the map.
+    off_map: Vec<bool>,
     localize_ms: Vec<f64>,
 }
 
@@ -498,6 +500,7 @@ fn localize_all(
         candidates: Vec::with_capacity(described.len()),
         places: Vec::with_capacity(described.len()),
         outcomes: Vec::with_capacity(described.len()),
+        off_map: Vec::with_capacity(described.len()),
         localize_ms: Vec::with_capacity(described.len()),
     };
     let mut out = Localization::default();
@@ -519,6 +522,7 @@ fn localize_all(
                 confidence: 0.0,
                 correct: false,
             });
+            run.off_map.push(false);
             run.localize_ms.push(0.0);
             continue;
         };
@@ -533,6 +537,7 @@ fn localize_all(
             &mut out,
         )?;
         run.localize_ms.push(start.elapsed().as_secs_f64() * 1e3);
+        run.off_map.push(out.off_map);
         if let Some((matrix, columns)) = similarity.as_mut() {
             let row = &mut matrix[i * *columns..(i + 1) * *columns];
             for (v, &s) in localizer.last_view_similarities().iter().enumerate() {
@@ -568,6 +573,15 @@ fn localize_all(
     Ok(run)
 }
 
+/// Frames after which an off-map stream (queries from elsewhere) should be flagged: the
+/// localizer's off-map target is "flagged within 10 frames".
+const OFF_MAP_SETTLE: usize = 10;
+
+/// Share of true values (0 for none).
+fn share(flags: &[bool]) -> f64 {
+    flags.iter().filter(|&&f| f).count() as f64 / flags.len().max(1) as f64
+}
+
 /// Metrics of one configuration, and its PR curve as (recall, precision) points.
 fn summarize(
     run: &ModeRun,
@@ -583,6 +597,8 @@ fn summarize(
         "r_at_100p": pr.recall_at_full_precision,
         "average_precision": pr.average_precision,
         "localize_ms_median": median_and_p90(&run.localize_ms).0,
+        "off_map_rate": share(&run.off_map),
+        "off_map_rate_after_10": share(run.off_map.get(OFF_MAP_SETTLE..).unwrap_or_default()),
     });
     if let Some(truth) = gt_nodes {
         let hops = HopDistances::from_map(map);
@@ -717,14 +733,24 @@ fn print_table(report: &JsonMap<String, Value>, runs: &[ModeRun]) {
         );
     }
     println!(
-        "\n{:<16} {:>6} {:>6} {:>6} {:>7} {:>6} {:>6} {:>6} {:>12}",
-        "mode", "R@1", "R@5", "R@10", "R@100P", "AP", "MNA", "OHA", "localize ms"
+        "\n{:<16} {:>6} {:>6} {:>6} {:>7} {:>6} {:>6} {:>6} {:>8} {:>9} {:>12}",
+        "mode",
+        "R@1",
+        "R@5",
+        "R@10",
+        "R@100P",
+        "AP",
+        "MNA",
+        "OHA",
+        "off-map",
+        "off@10+",
+        "localize ms"
     );
     let f = |v: &Value| v.as_f64().map_or("-".to_string(), |x| format!("{x:.3}"));
     for run in runs {
         let s = &report[run.name];
         println!(
-            "{:<16} {:>6} {:>6} {:>6} {:>7} {:>6} {:>6} {:>6} {:>12.3}",
+            "{:<16} {:>6} {:>6} {:>6} {:>7} {:>6} {:>6} {:>6} {:>8} {:>9} {:>12.3}",
             run.name.replace('_', "-"),
             f(&s["r_at_1"]),
             f(&s["r_at_5"]),
@@ -733,6 +759,8 @@ fn print_table(report: &JsonMap<String, Value>, runs: &[ModeRun]) {
             f(&s["average_precision"]),
             f(&s["mna"]),
             f(&s["oha"]),
+            f(&s["off_map_rate"]),
+            f(&s["off_map_rate_after_10"]),
             s["localize_ms_median"].as_f64().unwrap_or(0.0)
         );
     }
