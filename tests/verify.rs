@@ -12,7 +12,7 @@ use topoloc::errors::VisionError;
 use topoloc::map::ViewAttributes;
 use topoloc::verify::{
     check_pair, FeatureKind, KeypointDetector, Keypoints, PairOptions, VerificationOptions,
-    ViewKeypoints,
+    VerificationScore, ViewKeypoints,
 };
 use topoloc::{
     DescriptorIdentity, Frame, LoadOptions, LocalizeError, Localizer, LocalizerOptions, Map,
@@ -135,6 +135,43 @@ fn verification_tells_places_with_identical_descriptors_apart() {
         .find(|c| u64::from(c.place) == TWIN_A)
         .expect("the look-alike stays a candidate");
     assert!(twin.verified && twin.inliers < 30, "{twin:?}");
+}
+
+/// The seed's s-GC score as the evidence instead of GC inliers: the same look-alike pair is
+/// told apart, and the evidence is deterministic (no sampling), so two runs agree exactly.
+#[test]
+fn the_spatial_score_also_tells_places_with_identical_descriptors_apart() {
+    let map = Arc::new(twin_map(true));
+    let query_image = revisit(&place_image(TWIN_B), 2);
+    let descriptor = descriptor_of(TWIN_B);
+    let frame = Frame {
+        timestamp: 0.0,
+        descriptor: &descriptor,
+        image: Some(gray(&query_image)),
+        odometry: None,
+    };
+    let mut options = single_frame(2);
+    options.verification.score = VerificationScore::Spatial;
+    let mut spatial = Localizer::new(map.clone(), options.clone()).unwrap();
+    let out = spatial.localize(&frame).unwrap();
+    assert_eq!(u64::from(out.place), TWIN_B);
+    assert!(out.confidence > 0.99, "confidence {}", out.confidence);
+    let best = out.candidates[0];
+    let twin = out
+        .candidates
+        .iter()
+        .find(|c| u64::from(c.place) == TWIN_A)
+        .expect("the look-alike stays a candidate");
+    assert!(best.verified && twin.verified);
+    assert!(
+        best.inliers > 4 * twin.inliers.max(1),
+        "s-GC evidence {best:?} vs look-alike {twin:?}"
+    );
+    let again = Localizer::new(map, options)
+        .unwrap()
+        .localize(&frame)
+        .unwrap();
+    assert_eq!(again.candidates, out.candidates, "s-GC has no sampling");
 }
 
 #[test]

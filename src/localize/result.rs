@@ -33,7 +33,8 @@ pub struct Candidate {
     pub similarity: f32,
     /// Whether the place was verified geometrically in this frame.
     pub verified: bool,
-    /// Geometric inliers between the query and `view` (0 unless `verified`).
+    /// Geometric inliers between the query and `view` (0 unless `verified`); with
+    /// [`crate::verify::VerificationScore::Spatial`], the s-GC agreeing-match count instead.
     pub inliers: u32,
 }
 

@@ -12,8 +12,8 @@ use crate::errors::VisionError;
 use crate::image::ImageView;
 use crate::map::{Map, PlaceId, ViewId};
 use crate::verify::{
-    cells_from_map, check_pair, locate, FeatureDetector, FeatureKind, Keypoints,
-    VerificationOptions, ViewKeypoints,
+    cells_from_map, check_pair, locate, spatial_check, FeatureDetector, FeatureKind, Keypoints,
+    VerificationOptions, VerificationScore, ViewKeypoints,
 };
 use nalgebra::Point3;
 
@@ -169,9 +169,18 @@ impl Verifier {
                 let stored = keypoints
                     .view(view as usize)
                     .expect("one keypoint entry per view");
-                let check = check_pair(self.query.as_ref(), stored, &options.pair)?;
-                if check.inliers > best.0 {
-                    best = (check.inliers, view);
+                let evidence = match options.score {
+                    VerificationScore::Inliers => {
+                        check_pair(self.query.as_ref(), stored, &options.pair)?.inliers
+                    }
+                    VerificationScore::Spatial => {
+                        let spatial =
+                            spatial_check(self.query.as_ref(), stored, options.pair.max_hamming)?;
+                        (spatial.score * self.query.len() as f32).round() as u32
+                    }
+                };
+                if evidence > best.0 {
+                    best = (evidence, view);
                 }
             }
             self.checked.push((place, best.0, best.1));

@@ -40,6 +40,18 @@ pub use xfeat::{XFeatDetector, XFeatOptions, DEFAULT_XFEAT_KEYPOINTS};
 /// Keypoints per view a map built from images stores by default, and a query detects.
 pub const DEFAULT_KEYPOINTS: usize = 500;
 
+/// What a checked view's evidence is: the seed's two scores.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum VerificationScore {
+    /// GC: inliers of a robust fundamental-matrix fit ([`check_pair`]).
+    #[default]
+    Inliers,
+    /// s-GC: the sampling-free spatial score of the mutual matches ([`spatial_check`]), as an
+    /// agreeing-match count (the score times the query's keypoints), so that `inlier_weight`
+    /// applies to it as to inliers. No RANSAC: deterministic and cheaper per candidate.
+    Spatial,
+}
+
 /// When and how the localizer verifies candidates. Off by default (`candidates == 0`):
 /// verification needs the frame's image and a map holding keypoints, and costs one ORB match and
 /// RANSAC fit per checked view (timings in BENCHMARKS.md).
@@ -60,6 +72,8 @@ pub struct VerificationOptions {
     pub xfeat: XFeatOptions,
     /// Matching and RANSAC.
     pub pair: PairOptions,
+    /// GC inliers (default) or the s-GC spatial score as each checked view's evidence.
+    pub score: VerificationScore,
     /// Intrinsics of the query camera. With them, and a map storing keypoint scene points, the
     /// best-verified view gives a metric pose of the camera ([`locate`]). Default `None`.
     pub camera: Option<PinholeCamera>,
@@ -76,6 +90,7 @@ impl Default for VerificationOptions {
             query_keypoints: DEFAULT_KEYPOINTS,
             xfeat: XFeatOptions::default(),
             pair: PairOptions::default(),
+            score: VerificationScore::default(),
             camera: None,
             locate: LocateOptions::default(),
         }

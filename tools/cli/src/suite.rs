@@ -5,7 +5,8 @@
 //! exactly as `topoloc demo` and `topoloc simulate` do (12 views per place unless
 //! `--views-per-place` says otherwise), then localizes every frame with each
 //! localizer configuration (single-frame, filter, filter with drifting odometry, that with
-//! geometric verification of the most probable places unless `--verify 0`, and metric mode
+//! geometric verification of the most probable places unless `--verify 0` (scored by GC inliers,
+//! and by the s-GC spatial score: the seed's ablation), and metric mode
 //! (particles moved by the odometry) without and with verification, and with pose fixes from
 //! the best-verified view (the map's keypoint scene points, the sim camera's intrinsics);
 //! `--configurations` picks some). Prints MNA and
@@ -21,7 +22,7 @@ use std::time::Instant;
 use topoloc::describe::DescriberOptions;
 use topoloc::eval::HopDistances;
 use topoloc::image::ImageView;
-use topoloc::verify::VerificationOptions;
+use topoloc::verify::{VerificationOptions, VerificationScore};
 use topoloc::{LocalizerOptions, MetricOptions, Mode};
 use topoloc_sim::capture::image_view;
 use topoloc_sim::scenario::{build_scene, describe_flight, fly};
@@ -68,7 +69,7 @@ pub struct SuiteArgs {
     #[arg(long, default_value_t = 0)]
     pub metric_seed: u64,
     /// Configurations to run, comma-separated (default: all): single-frame, filter,
-    /// filter+odometry, filter+odometry+verification, metric+odometry,
+    /// filter+odometry, filter+odometry+verification (GC), filter+odometry+s-gc, metric+odometry,
     /// metric+odometry+verification, metric+odometry+pose-fix.
     #[arg(long, value_delimiter = ',', value_parser = parse_configuration)]
     pub configurations: Vec<String>,
@@ -91,6 +92,8 @@ struct Configuration {
     /// map's keypoint scene points), weighing the particles by position; the places are then
     /// not weighed by their inlier counts.
     pose_fix: bool,
+    /// The evidence of a verified view: GC inliers or the s-GC spatial score.
+    score: VerificationScore,
 }
 
 const fn configuration(
@@ -106,11 +109,20 @@ const fn configuration(
         odometry,
         verify,
         pose_fix,
+        score: VerificationScore::Inliers,
+    }
+}
+
+/// A verifying configuration scored by s-GC instead of GC inliers.
+const fn spatially_scored(c: Configuration) -> Configuration {
+    Configuration {
+        score: VerificationScore::Spatial,
+        ..c
     }
 }
 
 /// The localizer configurations compared.
-const CONFIGURATIONS: [Configuration; 7] = [
+const CONFIGURATIONS: [Configuration; 8] = [
     configuration("single-frame", Mode::SingleFrame, false, false, false),
     configuration("filter", Mode::Filter, false, false, false),
     configuration("filter+odometry", Mode::Filter, true, false, false),
@@ -121,6 +133,13 @@ const CONFIGURATIONS: [Configuration; 7] = [
         true,
         false,
     ),
+    spatially_scored(configuration(
+        "filter+odometry+s-gc",
+        Mode::Filter,
+        true,
+        true,
+        false,
+    )),
     configuration("metric+odometry", Mode::Metric, true, false, false),
     configuration(
         "metric+odometry+verification",
@@ -218,6 +237,7 @@ pub fn run(args: &SuiteArgs) -> Result<()> {
                             (false, _) => args.inlier_weight,
                         },
                         camera: c.pose_fix.then(|| options.capture.intrinsics.pinhole()),
+                        score: c.score,
                         ..VerificationOptions::default()
                     };
                     let options = LocalizerOptions {

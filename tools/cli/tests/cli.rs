@@ -125,7 +125,10 @@ fn build_map_and_eval_follow_the_contract() {
     assert!(report.get("mna").is_none(), "no ground-truth nodes given");
     // The queries are the map's own images: none may be flagged off the map.
     assert_eq!(report["off_map_rate"].as_f64(), Some(0.0), "{report}");
-    assert_eq!(report["single_frame"]["off_map_rate_after_10"].as_f64(), Some(0.0));
+    assert_eq!(
+        report["single_frame"]["off_map_rate_after_10"].as_f64(),
+        Some(0.0)
+    );
 
     let csv = std::fs::read_to_string(&predictions).unwrap();
     let rows: Vec<&str> = csv.lines().skip(1).collect();
