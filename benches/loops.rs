@@ -38,12 +38,24 @@ fn loop_query(c: &mut Criterion) {
             max_results: 5,
             max_id: Some(n as u64 - 50),
             before_timestamp: None,
+            min_id_gap: 0,
         };
         let mut i = 0usize;
         group.bench_with_input(BenchmarkId::new("loop_candidates", n), &n, |b, _| {
             b.iter(|| {
                 i = (i + 7919) % rows.len();
                 db.loop_candidates(&rows[i], &query).unwrap()
+            })
+        });
+        // One candidate per stretch of 10 ids, as the hint detector asks (a sort more).
+        let spread = LoopQuery {
+            min_id_gap: 10,
+            ..query
+        };
+        group.bench_with_input(BenchmarkId::new("loop_candidates_gap10", n), &n, |b, _| {
+            b.iter(|| {
+                i = (i + 7919) % rows.len();
+                db.loop_candidates(&rows[i], &spread).unwrap()
             })
         });
         let mut grown = db.clone();

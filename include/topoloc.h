@@ -831,7 +831,8 @@ typedef struct topoloc_loop_options {
    */
   double odometry_max_rotation_deg;
   /**
-   * Largest translation difference to the odometry, metres (> 0; metric hints). Default 20.
+   * Largest translation difference to the odometry, metres (> 0; an unscaled hint's
+   * direction is scaled by the odometry's baseline). Default 20.
    */
   double odometry_max_translation_m;
   /**
@@ -864,6 +865,11 @@ typedef struct topoloc_loop_options {
    * With poses, a new place is linked to places within this distance (metres). Default 3.
    */
   double neighbour_radius_m;
+  /**
+   * A candidate whose id is less than this from a more similar candidate's is skipped (its
+   * stretch is still searched when the better one is refined); 0 = off. Default 10.
+   */
+  uint64_t candidate_id_gap;
 } topoloc_loop_options;
 
 /**

@@ -30,10 +30,12 @@ fn detector(options: HintOptions) -> LoopDetector {
     LoopDetector::new(db, options).unwrap()
 }
 
+/// The defaults scaled to these short routes: a 5-keyframe exclusion window, stretches of 2.
 fn options() -> HintOptions {
     HintOptions {
         exclude_recent_ids: 5,
         exclude_recent_s: 5.0,
+        candidate_id_gap: 2,
         ..HintOptions::default()
     }
 }
@@ -252,4 +254,59 @@ fn a_metric_hint_carries_the_pose_and_must_agree_with_odometry() {
         other => panic!("expected the odometry gate, got {other:?}"),
     }
     assert!(refused.pose.is_some(), "the refused pose is still reported");
+}
+
+/// A perfect look-alike (the true keyframe's features, a more similar descriptor) whose
+/// odometry puts it 30 m and 90 degrees away: the odometry refuses it and the next candidate,
+/// the true keyframe, is accepted instead of the look-alike hiding it.
+#[test]
+fn a_look_alike_refused_by_odometry_gives_way_to_the_true_keyframe() {
+    let mut detector = detector(HintOptions {
+        camera: Some(CAMERA),
+        consistent_keyframes: 1,
+        ..options()
+    });
+    let (q, m, s) = scene(120, 20, &truth(), 9);
+    let (d_true, d_query) = (unit_vector(1, DIM), unit_vector(2, DIM));
+    let d_alike = mix(&d_query, &d_true, 0.1);
+    let features = |points: &[[f32; 2]], scene: Option<Vec<[f32; 3]>>| KeyframeFeatures {
+        keypoints: keypoints(points),
+        camera_points: scene,
+    };
+    let posed = |id, descriptor, pose| KeyframeEntry {
+        world_t_body: Some(pose),
+        ..entry(id, descriptor)
+    };
+    detector
+        .process(
+            &posed(0, &d_true, Isometry3::identity()),
+            features(&m, Some(s.clone())),
+        )
+        .unwrap();
+    let far = Isometry3::from_parts(
+        Translation3::new(30.0, 0.0, 0.0),
+        UnitQuaternion::from_scaled_axis(Vector3::z() * 90f64.to_radians()),
+    );
+    detector
+        .process(&posed(10, &d_alike, far), features(&m, Some(s)))
+        .unwrap();
+    let done = detector
+        .process(&posed(20, &d_query, truth()), features(&q, None))
+        .unwrap();
+    let candidates = detector
+        .database()
+        .relocalization_candidates(&d_query, 3)
+        .unwrap();
+    let earlier: Vec<u64> = candidates
+        .iter()
+        .map(|c| c.keyframe_id)
+        .filter(|&id| id != 20)
+        .collect();
+    assert_eq!(earlier, [10, 0], "the look-alike ranks first");
+    let hint = done.hint.expect("a candidate");
+    assert_eq!(
+        (hint.gate, hint.matched_id),
+        (Gate::Accepted, 0),
+        "{hint:?}"
+    );
 }

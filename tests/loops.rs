@@ -121,6 +121,45 @@ fn corridor() -> KeyframeDatabase {
     db
 }
 
+/// With `min_id_gap`, the candidates come from different stretches of ids: the best of each,
+/// in order of similarity, never two closer in id than the gap.
+#[test]
+fn an_id_gap_takes_one_candidate_per_stretch() {
+    let db = corridor();
+    let revisit = scene(3 * 3 + 1, 9);
+    let query = |min_id_gap| {
+        db.loop_candidates(
+            &revisit,
+            &LoopQuery {
+                max_results: 4,
+                min_id_gap,
+                ..Default::default()
+            },
+        )
+        .unwrap()
+    };
+    let plain = query(0);
+    let ids: Vec<u64> = plain.iter().map(|m| m.keyframe_id).collect();
+    assert!(
+        ids.iter()
+            .any(|a| ids.iter().any(|b| a != b && a.abs_diff(*b) < 6)),
+        "without a gap, neighbours fill the slots: {ids:?}"
+    );
+    let spread = query(6);
+    assert_eq!(spread.len(), 4);
+    assert_eq!(spread[0], plain[0], "the best candidate stays first");
+    for (i, a) in spread.iter().enumerate() {
+        for b in &spread[i + 1..] {
+            assert!(a.keyframe_id.abs_diff(b.keyframe_id) >= 6, "{spread:?}");
+        }
+    }
+    assert!(spread
+        .windows(2)
+        .all(|w| w[0].similarity >= w[1].similarity));
+    // A gap wider than the database leaves one candidate.
+    assert_eq!(query(1000).len(), 1);
+}
+
 #[test]
 fn loop_queries_find_the_revisited_place_and_exclude_recent_keyframes() {
     let db = corridor();

@@ -103,6 +103,7 @@ def test_options_defaults():
     assert (d["fx"], d["fy"], d["cx"], d["cy"]) == (0.0, 0.0, 0.0, 0.0)
     assert d["novelty_similarity"] == pytest.approx(0.9)
     assert d["place_spacing_m"] == 2.0 and d["neighbour_radius_m"] == 3.0
+    assert d["candidate_id_gap"] == 10
     with topoloc.LoopDetector("test", "loops", DIM) as det:
         assert det.options == d and det.dim == DIM
     with topoloc.LoopDetector("test", "loops", DIM, min_inliers=40, odometry_gate=False, fx=None) as det:

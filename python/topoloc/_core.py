@@ -1795,6 +1795,7 @@ _LOOP_OPTION_KINDS = {
     "novelty_similarity": "float",
     "place_spacing_m": "float",
     "neighbour_radius_m": "float",
+    "candidate_id_gap": "u64",
 }
 
 
@@ -1893,7 +1894,8 @@ class LoopDetector(_SingleThreaded):
     ``min_inliers`` (8..10000), ``consistent_keyframes`` (1..100), ``odometry_gate``,
     ``odometry_max_rotation_deg``, ``odometry_max_translation_m``, the pinhole intrinsics
     ``fx``, ``fy``, ``cx``, ``cy`` (pixels; ``fx == 0``: none, hints carry no pose), and the
-    place graph's ``novelty_similarity``, ``place_spacing_m``, ``neighbour_radius_m``. Invalid
+    place graph's ``novelty_similarity``, ``place_spacing_m``, ``neighbour_radius_m``, and
+    ``candidate_id_gap`` (candidates from different stretches of ids; 0: off). Invalid
     options raise :class:`InvalidOptionError`, unknown names ``TypeError``.
 
     Ownership: owns a C ``topoloc_loop_detector`` handle, released by :meth:`close`, the

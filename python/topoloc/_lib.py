@@ -336,6 +336,8 @@ class topoloc_loop_options(Structure):
         ("novelty_similarity", c_float),
         ("place_spacing_m", c_double),
         ("neighbour_radius_m", c_double),
+        # ABI 1.6
+        ("candidate_id_gap", c_uint64),
     ]
 
 

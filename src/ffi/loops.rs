@@ -69,7 +69,8 @@ pub struct topoloc_loop_options {
     pub odometry_gate: bool,
     /// Largest rotation difference to the odometry, degrees (> 0). Default 30.
     pub odometry_max_rotation_deg: f64,
-    /// Largest translation difference to the odometry, metres (> 0; metric hints). Default 20.
+    /// Largest translation difference to the odometry, metres (> 0; an unscaled hint's
+    /// direction is scaled by the odometry's baseline). Default 20.
     pub odometry_max_translation_m: f64,
     /// Pinhole intrinsics of the camera (undistorted images, pixels); `fx == 0` = none: hints
     /// then carry no pose. Default none.
@@ -87,10 +88,18 @@ pub struct topoloc_loop_options {
     pub place_spacing_m: f64,
     /// With poses, a new place is linked to places within this distance (metres). Default 3.
     pub neighbour_radius_m: f64,
+    // ABI 1.6 (topoloc 0.1): candidates from different stretches.
+    /// A candidate whose id is less than this from a more similar candidate's is skipped (its
+    /// stretch is still searched when the better one is refined); 0 = off. Default 10.
+    pub candidate_id_gap: u64,
 }
 
 impl Versioned for topoloc_loop_options {
-    const LAYOUTS: &'static [usize] = &[std::mem::size_of::<Self>()];
+    /// ABI 1.5 ended before `candidate_id_gap`.
+    const LAYOUTS: &'static [usize] = &[
+        std::mem::offset_of!(Self, candidate_id_gap),
+        std::mem::size_of::<Self>(),
+    ];
 }
 
 impl Default for topoloc_loop_options {
@@ -114,6 +123,7 @@ impl Default for topoloc_loop_options {
             novelty_similarity: d.novelty_similarity,
             place_spacing_m: d.place_spacing_m,
             neighbour_radius_m: d.neighbour_radius_m,
+            candidate_id_gap: h.candidate_id_gap,
         }
     }
 }
@@ -146,6 +156,7 @@ fn loop_options(
     });
     let hints = HintOptions {
         candidates: o.candidates as usize,
+        candidate_id_gap: o.candidate_id_gap,
         exclude_recent_ids: o.exclude_recent_ids,
         exclude_recent_s: o.exclude_recent_s,
         min_inliers: o.min_inliers,

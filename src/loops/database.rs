@@ -94,6 +94,11 @@ pub struct LoopQuery {
     /// Only keyframes with a timestamp earlier than this; `None` = any. Keyframes reloaded
     /// from a map count as earlier than every timestamp.
     pub before_timestamp: Option<f64>,
+    /// A keyframe whose id is less than this from a better candidate's is left out, so that
+    /// the candidates come from different stretches of the route: consecutive keyframes see the
+    /// same things, and one look-alike stretch would otherwise fill every slot (ORB-SLAM groups
+    /// its candidates by covisibility for the same reason). 0 = keep all (default).
+    pub min_id_gap: u64,
 }
 
 impl Default for LoopQuery {
@@ -102,6 +107,7 @@ impl Default for LoopQuery {
             max_results: 5,
             max_id: None,
             before_timestamp: None,
+            min_id_gap: 0,
         }
     }
 }
@@ -337,7 +343,8 @@ impl KeyframeDatabase {
     }
 
     /// Loop candidates for `descriptor`: the keyframes `query` allows, most similar first (ties
-    /// by the lower id). Cost: one pass over the keyframes' descriptors; allocates the scores.
+    /// by the lower id). Cost: one pass over the keyframes' descriptors; allocates the scores
+    /// (with `min_id_gap`, also a sort of the allowed keyframes).
     pub fn loop_candidates(
         &self,
         descriptor: &[f32],
@@ -367,6 +374,22 @@ impl KeyframeDatabase {
                 .total_cmp(&a.similarity)
                 .then(a.keyframe_id.cmp(&b.keyframe_id))
         };
+        if query.min_id_gap > 0 {
+            found.sort_unstable_by(order);
+            let mut kept: Vec<Match> = Vec::with_capacity(query.max_results);
+            for m in found {
+                if kept.len() == query.max_results {
+                    break;
+                }
+                if kept
+                    .iter()
+                    .all(|k| k.keyframe_id.abs_diff(m.keyframe_id) >= query.min_id_gap)
+                {
+                    kept.push(m);
+                }
+            }
+            return Ok(kept);
+        }
         if query.max_results < found.len() && query.max_results > 0 {
             found.select_nth_unstable_by(query.max_results - 1, order);
         }

@@ -1,20 +1,25 @@
 //! Verified loop-closure hints: for each new keyframe, the database's loop candidates (recent
-//! keyframes excluded) are checked geometrically against the keyframe's local features, and
-//! the best one becomes a hint only when it passes every gate, in this order:
+//! keyframes excluded, at most one per stretch of `candidate_id_gap` consecutive ids, so that
+//! one look-alike stretch cannot fill every slot) are checked geometrically against the
+//! keyframe's local features, and a candidate becomes a hint only when it passes every gate:
 //!
 //! 1. a candidate exists outside the exclusion window ([`Gate::NoCandidate`]);
-//! 2. it has at least `min_inliers` fundamental-matrix inliers ([`Gate::TooFewInliers`]);
-//!    then the keyframes of its place and the linked places are checked too, and the one with
-//!    the most inliers is the match (neighbouring keyframes look alike; geometry picks the
-//!    nearest);
-//! 3. the best candidates of the last `consistent_keyframes` keyframes agree: each one's group
-//!    (its place and the linked places) shares a place with the previous one's
-//!    ([`Gate::Inconsistent`], ORB-SLAM's consistency groups on the place graph);
-//! 4. with camera intrinsics and point-accurate features, a relative pose is found
+//! 2. the candidate with the most fundamental-matrix inliers, refined within its group (the
+//!    keyframes of its place and the linked places, and of its stretch: neighbouring
+//!    keyframes look alike, geometry picks the nearest), has at least `min_inliers`
+//!    ([`Gate::TooFewInliers`]);
+//! 3. with camera intrinsics and point-accurate features, a relative pose is found
 //!    ([`Gate::NoPose`]; dense cells verify but give no pose);
-//! 5. with odometry poses on both keyframes, the hint's pose agrees with the odometry's
-//!    relative pose (VINS-Fusion's loop check: |delta yaw| and |delta t| bounds,
-//!    [`Gate::Odometry`]).
+//! 4. with odometry poses on both keyframes, the pose agrees with the odometry's relative
+//!    pose (VINS-Fusion's loop check: |delta yaw| and |delta t| bounds; an unscaled pose's
+//!    direction is scaled by the odometry's baseline, [`Gate::Odometry`]);
+//!
+//!    a candidate refused by gate 3 or 4 gives way to the next with enough inliers (most
+//!    first, each refined), so a look-alike with more inliers than the true match does not
+//!    hide it when geometry or odometry can tell them apart;
+//! 5. the candidates that passed 2-4 for the last `consistent_keyframes` keyframes agree: each
+//!    one's group (its place and the linked places) shares a place with the previous one's
+//!    ([`Gate::Inconsistent`], ORB-SLAM's consistency groups on the place graph).
 //!
 //! At most one hint per keyframe. A refused candidate is reported with the gate that refused
 //! it, so the host can log why no loop was closed. Errors (bad features, keyframes out of
@@ -36,7 +41,8 @@ use std::collections::HashMap;
 pub struct OdometryGate {
     /// Largest rotation difference, degrees. Default 30 (VINS-Fusion's loop_fusion).
     pub max_rotation_deg: f64,
-    /// Largest translation difference, metres (metric hints only). Default 20 (VINS-Fusion).
+    /// Largest translation difference, metres; an unscaled hint's direction is scaled by the
+    /// odometry's baseline first. Default 20 (VINS-Fusion).
     pub max_translation_m: f64,
 }
 
@@ -54,6 +60,10 @@ impl Default for OdometryGate {
 pub struct HintOptions {
     /// Loop candidates verified per keyframe, most similar first. Default 5.
     pub candidates: usize,
+    /// Candidates come from different stretches of the route: one whose id is less than this
+    /// from a more similar candidate's is skipped ([`LoopQuery::min_id_gap`]); 0 = off.
+    /// Default 10.
+    pub candidate_id_gap: u64,
     /// Keyframes with an id within this many of the query's are never candidates (DBoW2's
     /// `max_id = id - window`). Default 30.
     pub exclude_recent_ids: u64,
@@ -80,6 +90,7 @@ impl Default for HintOptions {
     fn default() -> Self {
         Self {
             candidates: 5,
+            candidate_id_gap: 10,
             exclude_recent_ids: 30,
             exclude_recent_s: 10.0,
             min_inliers: 30,
@@ -170,7 +181,8 @@ pub enum Gate {
     Odometry {
         /// Rotation difference, degrees.
         rotation_deg: f64,
-        /// Translation difference, metres (0 for unscaled hints).
+        /// Translation difference, metres (unscaled hints: their direction scaled by the
+        /// odometry's baseline).
         translation_m: f64,
     },
 }
@@ -254,6 +266,10 @@ pub struct LoopDetector {
 type Streak = Option<(PlaceId, usize)>;
 
 /// What the gates decided for the best candidate.
+/// The geometric gates' verdict on one candidate: its pose (`None` without intrinsics or with
+/// cells), or the refusing gate with the pose if one was fitted.
+type Geometry = Result<Option<RelativePose>, (Gate, Option<RelativePose>)>;
+
 struct Gated {
     gate: Gate,
     pose: Option<RelativePose>,
@@ -340,16 +356,10 @@ impl LoopDetector {
         features: KeyframeFeatures,
     ) -> Result<Processed, LoopsError> {
         self.check_features(&features)?;
-        let best = match self.best_candidate(entry, &features)? {
-            Some(best) if best.inliers >= self.options.min_inliers => {
-                Some(self.refine(entry, &features, best)?)
-            }
-            other => other,
-        };
-        let (hint, streak) = match best {
+        let verified = self.verified_candidates(entry, &features)?;
+        let (hint, streak) = match self.decide(entry, &features, &verified)? {
             None => (None, None),
-            Some(best) => {
-                let Gated { gate, pose, streak } = self.gate(entry, &features, &best)?;
+            Some((best, Gated { gate, pose, streak })) => {
                 let hint = LoopHint {
                     query_id: entry.id,
                     matched_id: best.id,
@@ -423,19 +433,21 @@ impl LoopDetector {
         Ok(())
     }
 
-    /// The candidate with the most inliers among the verified ones (ties: the more similar).
-    fn best_candidate(
+    /// The verified candidates, most inliers first (ties: the more similar), each with its
+    /// share of all their inliers as its confidence.
+    fn verified_candidates(
         &self,
         entry: &KeyframeEntry<'_>,
         features: &KeyframeFeatures,
-    ) -> Result<Option<Verified>, LoopsError> {
+    ) -> Result<Vec<Verified>, LoopsError> {
         let Some(max_id) = self.max_candidate_id(entry) else {
-            return Ok(None);
+            return Ok(Vec::new());
         };
         let query = LoopQuery {
             max_results: self.options.candidates,
             max_id: Some(max_id),
             before_timestamp: Some(entry.timestamp - self.options.exclude_recent_s),
+            min_id_gap: self.options.candidate_id_gap,
         };
         let mut verified: Vec<Verified> = Vec::new();
         for candidate in self.database.loop_candidates(entry.descriptor, &query)? {
@@ -450,20 +462,77 @@ impl LoopDetector {
             });
         }
         let total: u32 = verified.iter().map(|v| v.inliers).sum();
-        let mut best: Option<Verified> = None;
-        for v in verified {
-            if best.is_none_or(|b| v.inliers > b.inliers) {
-                best = Some(v);
-            }
-        }
-        Ok(best.map(|b| Verified {
-            confidence: if total > 0 {
-                b.inliers as f32 / total as f32
+        for v in &mut verified {
+            v.confidence = if total > 0 {
+                v.inliers as f32 / total as f32
             } else {
                 0.0
-            },
-            ..b
-        }))
+            };
+        }
+        // Stable: among equal inliers, the more similar (earlier) candidate stays first.
+        verified.sort_by_key(|v| std::cmp::Reverse(v.inliers));
+        Ok(verified)
+    }
+
+    /// Runs the gates over the verified candidates: those with enough inliers, most first,
+    /// each refined within its group, until one passes the geometric gates (pose and odometry);
+    /// then the consistency gate on it. When none passes, the first refusal is reported (the
+    /// candidate with the most inliers). `None` when there was no candidate.
+    fn decide(
+        &self,
+        entry: &KeyframeEntry<'_>,
+        features: &KeyframeFeatures,
+        verified: &[Verified],
+    ) -> Result<Option<(Verified, Gated)>, LoopsError> {
+        let Some(&first) = verified.first() else {
+            return Ok(None);
+        };
+        let refused = |gate, pose| Gated {
+            gate,
+            pose,
+            streak: None,
+        };
+        // The best candidate is refined before the inlier gate: its stretch may hold a
+        // keyframe the query agrees with more.
+        let first = self.refine(entry, features, first)?;
+        if first.inliers < self.options.min_inliers {
+            return Ok(Some((first, refused(Gate::TooFewInliers, None))));
+        }
+        let mut first_refusal = None;
+        let others = verified[1..]
+            .iter()
+            .take_while(|v| v.inliers >= self.options.min_inliers);
+        for (i, &candidate) in std::iter::once(&first).chain(others).enumerate() {
+            let refined = match i {
+                0 => candidate,
+                _ => self.refine(entry, features, candidate)?,
+            };
+            match self.geometry(entry, features, &refined)? {
+                Ok(pose) => {
+                    let agreeing = match self.streak {
+                        Some((place, n)) if self.database.groups_overlap(place, refined.place) => {
+                            n + 1
+                        }
+                        _ => 1,
+                    };
+                    let gate = if agreeing < self.options.consistent_keyframes {
+                        Gate::Inconsistent { agreeing }
+                    } else {
+                        Gate::Accepted
+                    };
+                    let gated = Gated {
+                        gate,
+                        pose,
+                        streak: Some((refined.place, agreeing)),
+                    };
+                    return Ok(Some((refined, gated)));
+                }
+                Err((gate, pose)) => {
+                    first_refusal.get_or_insert((refined, refused(gate, pose)));
+                }
+            }
+        }
+        Ok(first_refusal)
     }
 
     /// GC inliers of the query against keyframe `id`; `None` when it has no features of the
@@ -495,11 +564,11 @@ impl LoopDetector {
         recent.max(self.reloaded_max_id)
     }
 
-    /// The keyframe of the best candidate's group (its place and the linked places) that the
-    /// query agrees with most: appearance ranks neighbouring keyframes of one stretch almost
-    /// alike, geometry tells the nearest. Checks at most `candidates` of them, the nearest in
-    /// id to the best candidate (a place grown online may hold many); keyframes inside the
-    /// exclusion window are skipped.
+    /// The keyframe of the candidate's group (its place, the linked places, and the keyframes
+    /// within `candidate_id_gap` ids) that the query agrees with most: appearance ranks
+    /// neighbouring keyframes of one stretch almost alike, geometry tells the nearest. Checks
+    /// at most `candidates` of them, the nearest in id to the candidate (a place grown online
+    /// may hold many); keyframes inside the exclusion window are skipped.
     fn refine(
         &self,
         entry: &KeyframeEntry<'_>,
@@ -508,13 +577,21 @@ impl LoopDetector {
     ) -> Result<Verified, LoopsError> {
         let max_id = self.max_candidate_id(entry).unwrap_or(0);
         let mut refined = best;
+        // The stretch the candidate stands for (the keyframes the id gap skipped) and its
+        // place group.
+        let gap = self.options.candidate_id_gap;
+        let stretch = (best.id.saturating_sub(gap.saturating_sub(1))
+            ..=best.id.saturating_add(gap.saturating_sub(1)))
+            .filter(|id| self.features.contains_key(id));
         let mut group: Vec<u64> = self
             .database
             .group_keyframes(best.place)
             .into_iter()
+            .chain(stretch)
             .filter(|&id| id != best.id && id <= max_id)
             .collect();
         group.sort_by_key(|&id| (id.abs_diff(best.id), id));
+        group.dedup();
         group.truncate(self.options.candidates);
         for id in group {
             let Some(inliers) = self.inliers_with(features, id)? else {
@@ -532,29 +609,19 @@ impl LoopDetector {
         Ok(refined)
     }
 
-    /// Gates 2-5 for the best candidate: the gate, the pose, and the new consistency streak.
-    fn gate(
+    /// The geometric gates for one candidate: its relative pose (with intrinsics and
+    /// point-accurate features), then the odometry agreement. `Ok` with the pose (`None`
+    /// without intrinsics or with cells), or the refusing gate with the pose if one was fitted.
+    fn geometry(
         &self,
         entry: &KeyframeEntry<'_>,
         features: &KeyframeFeatures,
-        best: &Verified,
-    ) -> Result<Gated, LoopsError> {
-        let gated = |gate, pose, streak| Ok(Gated { gate, pose, streak });
-        if best.inliers < self.options.min_inliers {
-            return gated(Gate::TooFewInliers, None, None);
-        }
-        let agreeing = match self.streak {
-            Some((place, n)) if self.database.groups_overlap(place, best.place) => n + 1,
-            _ => 1,
-        };
-        let streak = Some((best.place, agreeing));
-        if agreeing < self.options.consistent_keyframes {
-            return gated(Gate::Inconsistent { agreeing }, None, streak);
-        }
-        let stored = &self.features[&best.id];
+        candidate: &Verified,
+    ) -> Result<Geometry, LoopsError> {
+        let stored = &self.features[&candidate.id];
         let point_accurate = features.keypoints.descriptors.kind() != FeatureKind::Cells;
         let Some(camera) = self.options.camera.filter(|_| point_accurate) else {
-            return gated(Gate::Accepted, None, streak);
+            return Ok(Ok(None));
         };
         let fitted = relative_pose(
             features.keypoints.as_ref(),
@@ -567,29 +634,34 @@ impl LoopDetector {
         .map_err(|e| LoopsError::InvalidKeyframe(e.to_string()))?;
         let pose = match fitted {
             Ok(pose) => pose,
-            Err(refusal) => return gated(Gate::NoPose(refusal), None, streak),
+            Err(refusal) => return Ok(Err((Gate::NoPose(refusal), None))),
         };
         let odometry = (
             self.options.odometry,
-            self.odometry_between(entry, best.id)?,
+            self.odometry_between(entry, candidate.id)?,
         );
         if let (Some(bounds), Some(odometry)) = odometry {
-            let delta = odometry.inverse() * pose.matched_t_query;
-            let rotation_deg = delta.rotation.angle().to_degrees();
-            let translation_m = if pose.scale_known {
-                delta.translation.vector.norm()
-            } else {
-                0.0
+            let rotation_deg = odometry
+                .rotation
+                .angle_to(&pose.matched_t_query.rotation)
+                .to_degrees();
+            // Without scale, the odometry's baseline scales the fitted direction: a look-alike
+            // place elsewhere fits a direction the odometry's motion disagrees with.
+            let odometry_t = odometry.translation.vector;
+            let fitted_t = match pose.scale_known {
+                true => pose.matched_t_query.translation.vector,
+                false => pose.matched_t_query.translation.vector * odometry_t.norm(),
             };
+            let translation_m = (fitted_t - odometry_t).norm();
             if rotation_deg > bounds.max_rotation_deg || translation_m > bounds.max_translation_m {
                 let gate = Gate::Odometry {
                     rotation_deg,
                     translation_m,
                 };
-                return gated(gate, Some(pose), streak);
+                return Ok(Err((gate, Some(pose))));
             }
         }
-        gated(Gate::Accepted, Some(pose), streak)
+        Ok(Ok(Some(pose)))
     }
 
     /// The odometry's `matched_T_query` between the matched keyframe and the new one, when

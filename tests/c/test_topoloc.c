@@ -3615,6 +3615,21 @@ static void test_loop_closure(void)
     CHECK_STATUS(topoloc_loop_options_default(&options), TOPOLOC_OK);
     CHECK(options.struct_size == sizeof options && options.candidates == 5 &&
           options.min_inliers == 30 && options.consistent_keyframes == 3 && options.fx == 0.0);
+    CHECK(options.candidate_id_gap == 10u); /* ABI 1.6 */
+    {
+        /* A caller of ABI 1.5 gets the 1.6 fields' defaults. */
+        topoloc_loop_options old;
+        topoloc_loop_detector *old_det = NULL;
+        CHECK_STATUS(topoloc_loop_options_default(&old), TOPOLOC_OK);
+        old.struct_size = offsetof(topoloc_loop_options, candidate_id_gap);
+        old.candidate_id_gap = 0u; /* beyond its size: the default (10) is used */
+        CHECK_STATUS(topoloc_loop_detector_new("test", "loops", LOOP_DIM, &old, &old_det),
+                     TOPOLOC_OK);
+        topoloc_loop_detector_free(old_det);
+        old.struct_size = offsetof(topoloc_loop_options, candidate_id_gap) - 1;
+        CHECK_STATUS(topoloc_loop_detector_new("test", "loops", LOOP_DIM, &old, &old_det),
+                     TOPOLOC_ERR_STRUCT_SIZE);
+    }
     options.exclude_recent_ids = 5;
     options.exclude_recent_s = 0.0;
     options.consistent_keyframes = 1;

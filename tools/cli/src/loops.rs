@@ -33,8 +33,8 @@ use topoloc::build::{build_from_images, BuildStage, ImageLayout, ImageMapOptions
 use topoloc::describe::Describer;
 use topoloc::image::{read_rgb, ImageView, PixelFormat};
 use topoloc::loops::{
-    DatabaseOptions, HintOptions, KeyframeDatabase, KeyframeEntry, KeyframeFeatures, LoopDetector,
-    LoopHint,
+    DatabaseOptions, Gate, HintOptions, KeyframeDatabase, KeyframeEntry, KeyframeFeatures,
+    LoopDetector, LoopHint, OdometryGate,
 };
 use topoloc::verify::{
     cells_from_map, FeatureDetector, FeatureKind, Keypoints, PinholeCamera, CELL_TAP,
@@ -75,15 +75,40 @@ pub struct LoopsArgs {
     /// the hints' pose error go in the report.
     #[arg(long)]
     pub truth: Option<PathBuf>,
-    /// With `--truth`: a hint is correct when the two cameras are this close (metres).
+    /// With `--truth`: a hint is correct when the two cameras are this close (metres) ...
     #[arg(long, default_value_t = 2.0)]
     pub truth_radius_m: f64,
+    /// With `--truth`: ... and their orientations differ by at most this (degrees): cameras
+    /// facing apart see different things, which no appearance check can match.
+    #[arg(long, default_value_t = 45.0)]
+    pub truth_max_angle_deg: f64,
+    /// Also write every keyframe's best candidate, accepted or not, with the gate that decided
+    /// (CSV `query_index,gate,matched_index,inliers,confidence,detail`; `detail` is the
+    /// agreeing streak, the pose refusal, or the odometry differences `deg/m`): what a host logs.
+    #[arg(long)]
+    pub decisions: Option<PathBuf>,
     /// Keyframes this many ids before the query or closer are never loop candidates.
     #[arg(long, default_value_t = HintOptions::default().exclude_recent_ids)]
     pub exclude_ids: u64,
     /// Keyframes less than this many seconds before the query are never loop candidates.
     #[arg(long, default_value_t = HintOptions::default().exclude_recent_s)]
     pub exclude_seconds: f64,
+    /// Candidates closer than this in id to a more similar one are skipped (0 = off).
+    #[arg(long, default_value_t = HintOptions::default().candidate_id_gap)]
+    pub candidate_id_gap: u64,
+    /// Fewest inliers of an accepted hint.
+    #[arg(long, default_value_t = HintOptions::default().min_inliers)]
+    pub min_inliers: u32,
+    /// Consecutive keyframes that must agree on the place.
+    #[arg(long, default_value_t = HintOptions::default().consistent_keyframes)]
+    pub consistent_keyframes: usize,
+    /// With `--poses`: largest rotation difference between a hint and the odometry, degrees.
+    #[arg(long, default_value_t = OdometryGate::default().max_rotation_deg)]
+    pub odometry_max_rotation_deg: f64,
+    /// With `--poses`: largest translation difference, metres (an unscaled hint's direction
+    /// scaled by the odometry's baseline).
+    #[arg(long, default_value_t = OdometryGate::default().max_translation_m)]
+    pub odometry_max_translation_m: f64,
     /// With `--map` on a frame-aligned second session: a hint is correct when its matched id
     /// is within this many of the query index; precision and recall go in the report.
     #[arg(long)]
@@ -146,6 +171,13 @@ pub fn run(args: &LoopsArgs) -> Result<()> {
         camera,
         exclude_recent_ids: args.exclude_ids,
         exclude_recent_s: args.exclude_seconds,
+        candidate_id_gap: args.candidate_id_gap,
+        min_inliers: args.min_inliers,
+        consistent_keyframes: args.consistent_keyframes,
+        odometry: Some(OdometryGate {
+            max_rotation_deg: args.odometry_max_rotation_deg,
+            max_translation_m: args.odometry_max_translation_m,
+        }),
         ..HintOptions::default()
     };
     let (mut detector, map, first_id) = match &args.map {
@@ -184,6 +216,7 @@ pub fn run(args: &LoopsArgs) -> Result<()> {
     let mut features = Features::new(kind, &runtime.xfeat_options())?;
     let bar = progress_bar(files.len(), "keyframes");
     let (mut hints, mut gates, mut times) = (Vec::new(), BTreeMap::new(), Vec::new());
+    let mut decisions = String::from("query_index,gate,matched_index,inliers,confidence,detail\n");
     for (index, path) in files.iter().enumerate() {
         let (w, h, rgb) = read_rgb(path)?;
         let image = ImageView::packed(w, h, PixelFormat::Rgb8, &rgb);
@@ -208,6 +241,7 @@ pub fn run(args: &LoopsArgs) -> Result<()> {
         )?;
         times.push(start.elapsed().as_secs_f64() * 1e3);
         *gates.entry(done.gate().name()).or_insert(0usize) += 1;
+        write_decision(&mut decisions, index, done.hint.as_ref(), first_id);
         if let Some(hint) = done.accepted() {
             hints.push((index, *hint));
         }
@@ -215,6 +249,9 @@ pub fn run(args: &LoopsArgs) -> Result<()> {
     }
     bar.finish_and_clear();
     write_csv(&args.out, &hints, first_id)?;
+    if let Some(path) = &args.decisions {
+        std::fs::write(path, decisions).with_context(|| format!("writing {}", path.display()))?;
+    }
     let mut out = report(args, &hints, &gates, &times, files.len(), first_id);
     if let Some(truth) = &truth {
         add_truth(&mut out, args, &hints, truth, first_id);
@@ -225,7 +262,7 @@ pub fn run(args: &LoopsArgs) -> Result<()> {
 
 /// Precision and recall against ground-truth camera poses, and the hints' pose errors.
 /// A keyframe could have closed a loop when an earlier keyframe outside the exclusion window
-/// lies within the radius; a hint is correct when its matched keyframe does.
+/// lies within the radius and the angle; a hint is correct when its matched keyframe does.
 fn add_truth(
     out: &mut serde_json::Value,
     args: &LoopsArgs,
@@ -233,8 +270,10 @@ fn add_truth(
     truth: &[Isometry3<f64>],
     first_id: u64,
 ) {
+    let max_angle = args.truth_max_angle_deg.to_radians();
     let near = |a: usize, b: usize| {
         (truth[a].translation.vector - truth[b].translation.vector).norm() <= args.truth_radius_m
+            && truth[a].rotation.angle_to(&truth[b].rotation) <= max_angle
     };
     let window = args.exclude_ids.max(1) as usize;
     let possible = (0..truth.len())
@@ -271,6 +310,7 @@ fn add_truth(
     };
     out["truth"] = json!({
         "radius_m": args.truth_radius_m,
+        "max_angle_deg": args.truth_max_angle_deg,
         "possible": possible,
         "correct": correct,
         "precision": correct as f64 / hints.len().max(1) as f64,
@@ -365,6 +405,31 @@ fn read_intrinsics(path: &Path) -> Result<PinholeCamera> {
 }
 
 /// The hints file: header, then one row per accepted hint.
+/// Appends keyframe `index`'s decision row (see `--decisions`).
+fn write_decision(csv: &mut String, index: usize, hint: Option<&LoopHint>, first_id: u64) {
+    let Some(hint) = hint else {
+        let _ = writeln!(csv, "{index},no_candidate,,,,");
+        return;
+    };
+    let detail = match hint.gate {
+        Gate::Inconsistent { agreeing } => agreeing.to_string(),
+        Gate::NoPose(refusal) => format!("{refusal:?}"),
+        Gate::Odometry {
+            rotation_deg,
+            translation_m,
+        } => format!("{rotation_deg:.1}/{translation_m:.2}"),
+        _ => String::new(),
+    };
+    let _ = writeln!(
+        csv,
+        "{index},{},{},{},{:.4},{detail}",
+        hint.gate.name(),
+        matched_index(hint, first_id),
+        hint.inliers,
+        hint.confidence
+    );
+}
+
 fn write_csv(path: &Path, hints: &[(usize, LoopHint)], first_id: u64) -> Result<()> {
     let mut csv = String::from(
         "query_index,matched_index,inliers,confidence,scale_known,tx,ty,tz,qx,qy,qz,qw\n",
