@@ -624,6 +624,7 @@ fn loops_follows_the_contract_online_and_against_a_map() {
     ]));
     let header = "query_index,matched_index,inliers,confidence,scale_known,tx,ty,tz,qx,qy,qz,qw";
     // A second session against the map: hints name the map's keyframe ids.
+    let decisions = dir.path().join("decisions.csv");
     let (report, rows) = loops_report(
         dir.path(),
         &[
@@ -633,8 +634,27 @@ fn loops_follows_the_contract_online_and_against_a_map() {
             &s(&map),
             "--aligned-tolerance",
             "0",
+            "--decisions",
+            &s(&decisions),
         ],
     );
+    // One decision per keyframe, with the gate that decided; the accepted ones are the hints.
+    let decided = std::fs::read_to_string(&decisions).unwrap();
+    let decided: Vec<Vec<&str>> = decided.lines().map(|l| l.split(',').collect()).collect();
+    assert_eq!(
+        decided[0].join(","),
+        "query_index,gate,matched_index,inliers,confidence,detail"
+    );
+    assert_eq!(decided.len(), 1 + places as usize);
+    let gates = report["gates"].as_object().unwrap();
+    for (gate, count) in gates {
+        let rows = decided[1..].iter().filter(|r| r[1] == gate).count();
+        assert_eq!(
+            Some(rows as u64),
+            count.as_u64(),
+            "gate {gate}: {decided:?}"
+        );
+    }
     for key in [
         "hints",
         "gates",
