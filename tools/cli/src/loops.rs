@@ -37,7 +37,7 @@ use topoloc::loops::{
     LoopDetector, LoopHint, OdometryGate,
 };
 use topoloc::verify::{
-    cells_from_map, FeatureDetector, FeatureKind, Keypoints, PinholeCamera, CELL_TAP,
+    cells_from_map, FeatureDetector, FeatureKind, Keypoints, PinholeCamera, RelativePose, CELL_TAP,
     DEFAULT_CELLS, DEFAULT_KEYPOINTS,
 };
 use topoloc::{LoadOptions, Map};
@@ -263,6 +263,8 @@ pub fn run(args: &LoopsArgs) -> Result<()> {
 /// Precision and recall against ground-truth camera poses, and the hints' pose errors.
 /// A keyframe could have closed a loop when an earlier keyframe outside the exclusion window
 /// lies within the radius and the angle; a hint is correct when its matched keyframe does.
+/// The pose errors' medians are over the correct hints; `pose_precision` is the share of
+/// posed hints whose relative pose is right ([`PoseError::is_small`]), wherever they match.
 fn add_truth(
     out: &mut serde_json::Value,
     args: &LoopsArgs,
@@ -280,25 +282,27 @@ fn add_truth(
         .filter(|&q| (0..q.saturating_sub(window - 1)).any(|m| near(q, m) && m + window <= q))
         .count();
     let mut correct = 0;
+    let (mut posed, mut pose_correct) = (0, 0);
     let (mut rotation, mut translation, mut direction) = (vec![], vec![], vec![]);
     for (q, hint) in hints {
         let m = matched_index(hint, first_id) as usize;
-        if m >= truth.len() || !near(*q, m) {
+        if m >= truth.len() {
             continue;
         }
-        correct += 1;
+        let loop_correct = near(*q, m);
+        correct += usize::from(loop_correct);
         let Some(pose) = &hint.pose else { continue };
-        let true_rel = truth[m].inverse() * truth[*q];
-        let error = true_rel.inverse() * pose.matched_t_query;
-        rotation.push(error.rotation.angle().to_degrees());
-        let (t, t_true) = (
-            pose.matched_t_query.translation.vector,
-            true_rel.translation.vector,
-        );
-        if pose.scale_known {
-            translation.push((t - t_true).norm());
-        } else if t_true.norm() > 1e-6 {
-            direction.push(t.angle(&t_true).to_degrees());
+        let error = PoseError::of(pose, &(truth[m].inverse() * truth[*q]));
+        posed += 1;
+        pose_correct += usize::from(error.is_small());
+        if !loop_correct {
+            continue;
+        }
+        rotation.push(error.rotation_deg);
+        match error.translation {
+            Translation::Metres(m) => translation.push(m),
+            Translation::DirectionDeg(d) => direction.push(d),
+            Translation::NoBaseline => {}
         }
     }
     let median = |v: &[f64]| {
@@ -318,8 +322,56 @@ fn add_truth(
         "rotation_error_deg_median": median(&rotation),
         "translation_error_m_median": median(&translation),
         "direction_error_deg_median": median(&direction),
-        "posed_hints": rotation.len(),
+        "posed_hints": posed,
+        "pose_correct": pose_correct,
+        "pose_precision": pose_correct as f64 / posed.max(1) as f64,
     });
+}
+
+/// How far a hint's relative pose is from the true one.
+struct PoseError {
+    rotation_deg: f64,
+    translation: Translation,
+}
+
+/// The translation part of a [`PoseError`].
+enum Translation {
+    /// Metric hints: metres.
+    Metres(f64),
+    /// Unscaled hints: the angle between the directions, degrees.
+    DirectionDeg(f64),
+    /// Unscaled, and the cameras are within 0.2 m: the direction means nothing.
+    NoBaseline,
+}
+
+impl PoseError {
+    fn of(pose: &RelativePose, true_rel: &Isometry3<f64>) -> Self {
+        let error = true_rel.inverse() * pose.matched_t_query;
+        let (t, t_true) = (
+            pose.matched_t_query.translation.vector,
+            true_rel.translation.vector,
+        );
+        let translation = match pose.scale_known {
+            true => Translation::Metres((t - t_true).norm()),
+            false if t_true.norm() < 0.2 => Translation::NoBaseline,
+            false => Translation::DirectionDeg(t.angle(&t_true).to_degrees()),
+        };
+        Self {
+            rotation_deg: error.rotation.angle().to_degrees(),
+            translation,
+        }
+    }
+
+    /// A constraint a pose graph can take: rotation within 5 degrees, and translation within
+    /// 0.5 m (metric) or direction within 20 degrees (unscaled, with a baseline).
+    fn is_small(&self) -> bool {
+        self.rotation_deg <= 5.0
+            && match self.translation {
+                Translation::Metres(m) => m <= 0.5,
+                Translation::DirectionDeg(d) => d <= 20.0,
+                Translation::NoBaseline => true,
+            }
+    }
 }
 
 /// The keyframes' local features: a detector, or dense cells from the describer's pass.
