@@ -832,7 +832,7 @@ typedef struct topoloc_loop_options {
   double odometry_max_rotation_deg;
   /**
    * Largest translation difference to the odometry, metres (> 0; an unscaled hint's
-   * direction is scaled by the odometry's baseline). Default 20.
+   * direction is scaled by the odometry's baseline). Default 5.
    */
   double odometry_max_translation_m;
   /**

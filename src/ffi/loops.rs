@@ -70,7 +70,7 @@ pub struct topoloc_loop_options {
     /// Largest rotation difference to the odometry, degrees (> 0). Default 30.
     pub odometry_max_rotation_deg: f64,
     /// Largest translation difference to the odometry, metres (> 0; an unscaled hint's
-    /// direction is scaled by the odometry's baseline). Default 20.
+    /// direction is scaled by the odometry's baseline). Default 5.
     pub odometry_max_translation_m: f64,
     /// Pinhole intrinsics of the camera (undistorted images, pixels); `fx == 0` = none: hints
     /// then carry no pose. Default none.

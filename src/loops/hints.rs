@@ -42,7 +42,8 @@ pub struct OdometryGate {
     /// Largest rotation difference, degrees. Default 30 (VINS-Fusion's loop_fusion).
     pub max_rotation_deg: f64,
     /// Largest translation difference, metres; an unscaled hint's direction is scaled by the
-    /// odometry's baseline first. Default 20 (VINS-Fusion).
+    /// odometry's baseline first. Default 5, chosen on generated train and tr-t revisits over
+    /// VINS-Fusion's 20 (higher precision at the same recall; BENCHMARKS.md).
     pub max_translation_m: f64,
 }
 
@@ -50,7 +51,7 @@ impl Default for OdometryGate {
     fn default() -> Self {
         Self {
             max_rotation_deg: 30.0,
-            max_translation_m: 20.0,
+            max_translation_m: 5.0,
         }
     }
 }
