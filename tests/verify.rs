@@ -96,17 +96,21 @@ fn featureless_images_give_no_keypoints_and_zero_inliers() {
     assert!(KeypointDetector::new(topoloc::verify::MAX_KEYPOINTS + 1).is_err());
 }
 
+/// A frame revisiting twin B: its image and B's descriptor (the same as A's).
+fn twin_b_frame<'a>(image: &'a [u8], descriptor: &'a [f32]) -> Frame<'a> {
+    Frame {
+        timestamp: 0.0,
+        descriptor,
+        image: Some(gray(image)),
+        odometry: None,
+    }
+}
+
 #[test]
 fn verification_tells_places_with_identical_descriptors_apart() {
     let map = Arc::new(twin_map(true));
-    let query_image = revisit(&place_image(TWIN_B), 2);
-    let descriptor = descriptor_of(TWIN_B);
-    let frame = Frame {
-        timestamp: 0.0,
-        descriptor: &descriptor,
-        image: Some(gray(&query_image)),
-        odometry: None,
-    };
+    let (query_image, descriptor) = (revisit(&place_image(TWIN_B), 2), descriptor_of(TWIN_B));
+    let frame = twin_b_frame(&query_image, &descriptor);
 
     let mut plain = Localizer::new(map.clone(), single_frame(0)).unwrap();
     let out = plain.localize(&frame).unwrap();
@@ -142,14 +146,8 @@ fn verification_tells_places_with_identical_descriptors_apart() {
 #[test]
 fn the_spatial_score_also_tells_places_with_identical_descriptors_apart() {
     let map = Arc::new(twin_map(true));
-    let query_image = revisit(&place_image(TWIN_B), 2);
-    let descriptor = descriptor_of(TWIN_B);
-    let frame = Frame {
-        timestamp: 0.0,
-        descriptor: &descriptor,
-        image: Some(gray(&query_image)),
-        odometry: None,
-    };
+    let (query_image, descriptor) = (revisit(&place_image(TWIN_B), 2), descriptor_of(TWIN_B));
+    let frame = twin_b_frame(&query_image, &descriptor);
     let mut options = single_frame(2);
     options.verification.score = VerificationScore::Spatial;
     let mut spatial = Localizer::new(map.clone(), options.clone()).unwrap();

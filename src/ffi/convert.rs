@@ -4,6 +4,7 @@
 use super::boundary::slice;
 use super::error::FfiError;
 use crate::descriptor::ExpectedDescriptor;
+use crate::verify::PinholeCamera;
 use nalgebra::{Isometry3, Matrix3, Rotation3, Translation3, UnitQuaternion};
 use std::ffi::c_char;
 
@@ -49,6 +50,12 @@ pub(crate) fn optional_pose(
 pub(crate) fn pose_to_row_major(pose: &Isometry3<f64>) -> [f64; 16] {
     let h = pose.to_homogeneous();
     std::array::from_fn(|i| h[(i / 4, i % 4)])
+}
+
+/// Pinhole intrinsics from C fields, where `fx == 0` means none (validated by the options
+/// that hold them).
+pub(crate) fn optional_camera(fx: f64, fy: f64, cx: f64, cy: f64) -> Option<PinholeCamera> {
+    (fx != 0.0).then_some(PinholeCamera { fx, fy, cx, cy })
 }
 
 /// Builds an [`ExpectedDescriptor`] from optional C strings and a dimension (0 = any).

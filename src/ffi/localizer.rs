@@ -1,7 +1,7 @@
 //! C functions of the localizer: create, process a frame, reset, free.
 
 use super::boundary::{check_out, optional_string, run, slice, write_out};
-use super::convert::{expected_descriptor, optional_pose, pose_to_row_major};
+use super::convert::{expected_descriptor, optional_camera, optional_pose, pose_to_row_major};
 use super::error::FfiError;
 use super::handles::{clone_arc, free_box, new_box, try_mut, Castable, Opaque, OwnedBox};
 use super::images::{
@@ -13,7 +13,7 @@ use super::topoloc_status;
 use super::versioned::{init_versioned, read_versioned, write_versioned, Versioned};
 use crate::describe::DescriberOptions;
 use crate::localize::{Frame, Localization, Localizer, LocalizerOptions, MetricOptions, Mode};
-use crate::verify::{LocateOptions, PinholeCamera, VerificationOptions};
+use crate::verify::{LocateOptions, VerificationOptions};
 use nalgebra::Isometry3;
 use std::ffi::c_char;
 
@@ -259,12 +259,7 @@ fn localizer_options(o: &topoloc_localizer_options) -> Result<LocalizerOptions, 
             candidates: o.verify_candidates as usize,
             views_per_candidate: o.verify_views_per_candidate as usize,
             inlier_weight: o.verify_inlier_weight,
-            camera: (o.camera_fx != 0.0).then_some(PinholeCamera {
-                fx: o.camera_fx,
-                fy: o.camera_fy,
-                cx: o.camera_cx,
-                cy: o.camera_cy,
-            }),
+            camera: optional_camera(o.camera_fx, o.camera_fy, o.camera_cx, o.camera_cy),
             locate: LocateOptions {
                 min_inliers: o.pose_min_inliers,
                 ..LocateOptions::default()

@@ -2,7 +2,7 @@
 //! keyframe's local features) that turns every added keyframe into at most one gated hint.
 
 use super::boundary::{check_out, run, slice, string, write_array, write_out};
-use super::convert::{optional_pose, pose_to_row_major};
+use super::convert::{optional_camera, optional_pose, pose_to_row_major};
 use super::error::FfiError;
 use super::handles::{free_box, new_box, try_mut, try_ref, Castable, Opaque, OwnedBox};
 use super::map::topoloc_map;
@@ -13,7 +13,7 @@ use crate::loops::{
     DatabaseOptions, Gate, HintOptions, KeyframeDatabase, KeyframeEntry, KeyframeFeatures,
     LoopDetector, LoopHint, OdometryGate,
 };
-use crate::verify::{Descriptor, Keypoints, PinholeCamera, DESCRIPTOR_BYTES, MAX_KEYPOINTS};
+use crate::verify::{Descriptor, Keypoints, DESCRIPTOR_BYTES, MAX_KEYPOINTS};
 use std::ffi::c_char;
 
 /// Finds loop closures for one SLAM run (and, from a map, against an earlier one). Created by
@@ -148,12 +148,7 @@ fn loop_options(
     } else {
         read_versioned(options, topoloc_loop_options::default(), "options")?
     };
-    let camera = (o.fx != 0.0).then_some(PinholeCamera {
-        fx: o.fx,
-        fy: o.fy,
-        cx: o.cx,
-        cy: o.cy,
-    });
+    let camera = optional_camera(o.fx, o.fy, o.cx, o.cy);
     let hints = HintOptions {
         candidates: o.candidates as usize,
         candidate_id_gap: o.candidate_id_gap,

@@ -502,12 +502,10 @@ impl LoopDetector {
         let mut first_refusal = None;
         let others = verified[1..]
             .iter()
-            .take_while(|v| v.inliers >= self.options.min_inliers);
-        for (i, &candidate) in std::iter::once(&first).chain(others).enumerate() {
-            let refined = match i {
-                0 => candidate,
-                _ => self.refine(entry, features, candidate)?,
-            };
+            .take_while(|v| v.inliers >= self.options.min_inliers)
+            .map(|&v| self.refine(entry, features, v));
+        for refined in std::iter::once(Ok(first)).chain(others) {
+            let refined = refined?;
             match self.geometry(entry, features, &refined)? {
                 Ok(pose) => {
                     let agreeing = match self.streak {
