@@ -60,9 +60,10 @@
  * at run time (the library it loaded may be older than the header it was built with).
  * 1.1: image maps; 1.2: verification; 1.3: metric mode; 1.4: `topoloc_abi_version_minor`,
  * `topoloc_status_name`; 1.5: loop closure (`topoloc_loop_detector_*`); 1.6: pose fixes
- * (camera intrinsics in the localizer options, `topoloc_map_with_keypoint_points`).
+ * (camera intrinsics in the localizer options, `topoloc_map_with_keypoint_points`); 1.7:
+ * metric hints (the odometry bound's drift rate, the pose fit's reprojection threshold).
  */
-#define TOPOLOC_ABI_VERSION_MINOR 6
+#define TOPOLOC_ABI_VERSION_MINOR 7
 
 /**
  * Result of every fallible C function. Values are grouped in ranges and never renumbered;
@@ -832,7 +833,8 @@ typedef struct topoloc_loop_options {
   double odometry_max_rotation_deg;
   /**
    * Largest translation difference to the odometry, metres (> 0; an unscaled hint's
-   * direction is scaled by the odometry's baseline). Default 5.
+   * direction is scaled by the odometry's baseline), plus
+   * `odometry_max_translation_per_m` per metre travelled (ABI 1.7). Default 1.
    */
   double odometry_max_translation_m;
   /**
@@ -870,6 +872,16 @@ typedef struct topoloc_loop_options {
    * stretch is still searched when the better one is refined); 0 = off. Default 10.
    */
   uint64_t candidate_id_gap;
+  /**
+   * The odometry translation bound grows by this much per metre the odometry travelled
+   * between the two keyframes (its drift rate, >= 0; 0: a fixed bound). Default 0.02.
+   */
+  double odometry_max_translation_per_m;
+  /**
+   * Reprojection threshold of the metric pose fit against a keyframe's 3D points, pixels
+   * (> 0). Default 5.
+   */
+  double pose_reprojection_px;
 } topoloc_loop_options;
 
 /**

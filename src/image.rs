@@ -153,16 +153,7 @@ impl<'a> ImageView<'a> {
 
 /// Reads an image file (any format OpenCV decodes) as packed RGB8 bytes with its size.
 pub fn read_rgb(path: &std::path::Path) -> Result<(u32, u32, Vec<u8>), VisionError> {
-    let name = path.to_str().ok_or_else(|| {
-        VisionError::InvalidImage(format!("path {} is not UTF-8", path.display()))
-    })?;
-    if !path.is_file() {
-        return Err(VisionError::InvalidImage(format!(
-            "cannot read image '{}': no such file",
-            path.display()
-        )));
-    }
-    let bgr = opencv::imgcodecs::imread(name, opencv::imgcodecs::IMREAD_COLOR)?;
+    let bgr = read_mat(path, opencv::imgcodecs::IMREAD_COLOR)?;
     if bgr.empty() {
         return Err(VisionError::InvalidImage(format!(
             "cannot read image '{}'",
@@ -173,6 +164,35 @@ pub fn read_rgb(path: &std::path::Path) -> Result<(u32, u32, Vec<u8>), VisionErr
     opencv::imgproc::cvt_color_def(&bgr, &mut rgb, opencv::imgproc::COLOR_BGR2RGB)?;
     let bytes = rgb.data_bytes()?.to_vec();
     Ok((rgb.cols() as u32, rgb.rows() as u32, bytes))
+}
+
+/// Reads a 16-bit single-channel image (a depth PNG) as `(width, height, row-major values)`.
+/// Fails, naming the file, when it is missing, does not decode, or is not 16-bit with one
+/// channel.
+pub fn read_u16(path: &std::path::Path) -> Result<(u32, u32, Vec<u16>), VisionError> {
+    let mat = read_mat(path, opencv::imgcodecs::IMREAD_ANYDEPTH)?;
+    if mat.empty() || mat.typ() != opencv::core::CV_16UC1 {
+        return Err(VisionError::InvalidImage(format!(
+            "'{}' is not a 16-bit single-channel image",
+            path.display()
+        )));
+    }
+    let values = mat.data_typed::<u16>()?.to_vec();
+    Ok((mat.cols() as u32, mat.rows() as u32, values))
+}
+
+/// `imread` of an existing file with a UTF-8 path (the Mat may be empty: it did not decode).
+fn read_mat(path: &std::path::Path, flags: i32) -> Result<Mat, VisionError> {
+    let name = path.to_str().ok_or_else(|| {
+        VisionError::InvalidImage(format!("path {} is not UTF-8", path.display()))
+    })?;
+    if !path.is_file() {
+        return Err(VisionError::InvalidImage(format!(
+            "cannot read image '{}': no such file",
+            path.display()
+        )));
+    }
+    Ok(opencv::imgcodecs::imread(name, flags)?)
 }
 
 #[cfg(test)]
@@ -254,5 +274,26 @@ mod tests {
             };
             assert_eq!(bytes, expected, "{format:?}");
         }
+    }
+
+    #[test]
+    fn sixteen_bit_images_read_back_and_others_are_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let values: Vec<u16> = (0..12).map(|i| i * 5000).collect();
+        let mat = Mat::new_rows_cols_with_data::<u16>(3, 4, &values).unwrap();
+        let path = dir.path().join("depth.png");
+        let name = path.to_str().unwrap();
+        assert!(opencv::imgcodecs::imwrite_def(name, &mat).unwrap());
+        assert_eq!(read_u16(&path).unwrap(), (4, 3, values));
+
+        let grey = Mat::new_rows_cols_with_default(3, 4, opencv::core::CV_8UC1, 7.into()).unwrap();
+        let eight = dir.path().join("grey.png");
+        assert!(opencv::imgcodecs::imwrite_def(eight.to_str().unwrap(), &grey).unwrap());
+        let err = read_u16(&eight).unwrap_err().to_string();
+        assert!(err.contains("grey.png") && err.contains("16-bit"), "{err}");
+        let err = read_u16(&dir.path().join("none.png"))
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("no such file"), "{err}");
     }
 }

@@ -13,7 +13,7 @@ use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use topoloc::descriptor::DescriptorIdentity;
 use topoloc::loops::{
     DatabaseOptions, Gate, HintOptions, KeyframeDatabase, KeyframeEntry, KeyframeFeatures,
-    LoopDetector, LoopsError,
+    LoopDetector, LoopsError, OdometryGate,
 };
 use topoloc::verify::{
     CellDescriptor, Descriptors, KeypointDetector, Keypoints, PinholeCamera, PoseRefusal,
@@ -200,11 +200,22 @@ fn bad_features_and_duplicate_ids_change_nothing() {
 }
 
 /// Keyframe 0 with its scene points in its camera frame, then keyframe 10 seeing the same
-/// points from `truth()`; the bodies' odometry poses are `matched_pose` and `query_pose`.
+/// points from `truth()`; the bodies' odometry poses are the identity and `query_pose`.
 fn metric_revisit(query_pose: Isometry3<f64>) -> topoloc::loops::LoopHint {
+    metric_revisit_via(OdometryGate::default(), &[], query_pose)
+}
+
+/// [`metric_revisit`] with the odometry gate `gate`, and keyframes without features at odometry
+/// poses `via` (ids 1, 2, ...) in between: the route the odometry travelled.
+fn metric_revisit_via(
+    gate: OdometryGate,
+    via: &[Isometry3<f64>],
+    query_pose: Isometry3<f64>,
+) -> topoloc::loops::LoopHint {
     let mut detector = detector(HintOptions {
         camera: Some(CAMERA),
         consistent_keyframes: 1,
+        odometry: Some(gate),
         ..options()
     });
     let (q, m, s) = scene(120, 20, &truth(), 9);
@@ -220,6 +231,17 @@ fn metric_revisit(query_pose: Isometry3<f64>) -> topoloc::loops::LoopHint {
     detector
         .process(&with_pose(0, Isometry3::identity()), matched)
         .unwrap();
+    for (i, &pose) in via.iter().enumerate() {
+        let id = i as u64 + 1;
+        let other = unit_vector(100 + id, DIM);
+        let passing = KeyframeEntry {
+            world_t_body: Some(pose),
+            ..entry(id, &other)
+        };
+        detector
+            .process(&passing, KeyframeFeatures::default())
+            .unwrap();
+    }
     let query = KeyframeFeatures {
         keypoints: keypoints(&q),
         camera_points: None,
@@ -254,6 +276,39 @@ fn a_metric_hint_carries_the_pose_and_must_agree_with_odometry() {
         other => panic!("expected the odometry gate, got {other:?}"),
     }
     assert!(refused.pose.is_some(), "the refused pose is still reported");
+}
+
+/// The translation bound grows with the odometry's path between the two keyframes: 2 m of
+/// disagreement is too much right after keyframe 0, and the drift of a 200 m detour.
+#[test]
+fn the_odometry_bound_grows_with_the_distance_travelled() {
+    let gate = OdometryGate {
+        max_translation_m: 0.5,
+        max_translation_per_m: 0.02,
+        ..OdometryGate::default()
+    };
+    let drifted = Translation3::new(0.0, 2.0, 0.0) * truth();
+    match metric_revisit_via(gate, &[], drifted).gate {
+        Gate::Odometry { translation_m, .. } => {
+            assert!((translation_m - 2.0).abs() < 0.1, "{translation_m}")
+        }
+        other => panic!("expected the odometry gate, got {other:?}"),
+    }
+    let at = |x: f64, y: f64| Isometry3::translation(x, y, 0.0);
+    let detour = [at(50.0, 0.0), at(50.0, 50.0), at(0.0, 50.0), at(0.0, 0.0)];
+    let hint = metric_revisit_via(gate, &detour, drifted);
+    assert_eq!(
+        (hint.gate, hint.matched_id),
+        (Gate::Accepted, 0),
+        "{hint:?}"
+    );
+    // A fixed bound (no drift rate) refuses it after the detour too.
+    let fixed = OdometryGate {
+        max_translation_per_m: 0.0,
+        ..gate
+    };
+    let refused = metric_revisit_via(fixed, &detour, drifted);
+    assert!(matches!(refused.gate, Gate::Odometry { .. }), "{refused:?}");
 }
 
 /// A perfect look-alike (the true keyframe's features, a more similar descriptor) whose

@@ -286,6 +286,41 @@ fn a_saved_database_reloads_for_a_second_session_and_extends() {
     ));
 }
 
+/// Each keyframe records the odometry's path length from the session's first keyframe, which
+/// survives erasing a keyframe on the way; reloaded keyframes have none (another session).
+#[test]
+fn keyframes_record_the_distance_the_odometry_travelled() {
+    let mut db = KeyframeDatabase::new(identity(), DatabaseOptions::default()).unwrap();
+    let route = [(0.0, 0.0), (3.0, 4.0), (3.0, 16.0)];
+    for (i, &(x, y)) in route.iter().enumerate() {
+        db.add(&entry(i as u64, &scene(i, 0), Some(at(x, y))))
+            .unwrap();
+    }
+    let travelled = |db: &KeyframeDatabase, id| db.travelled_m(id).unwrap();
+    assert_eq!(
+        [0, 1, 2].map(|id| travelled(&db, id)),
+        [Some(0.0), Some(5.0), Some(17.0)]
+    );
+    db.erase(2).unwrap();
+    assert_eq!(
+        db.travelled_to(&nalgebra::Point3::new(3.0, 20.0, 0.0)),
+        Some(21.0)
+    );
+    assert!(matches!(
+        db.travelled_m(2),
+        Err(LoopsError::UnknownKeyframe(2))
+    ));
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("travel.topoloc");
+    db.save(&path).unwrap();
+    let map = Map::load(&path, &LoadOptions::default()).unwrap();
+    let reloaded = KeyframeDatabase::from_map(&map, DatabaseOptions::default()).unwrap();
+    assert_eq!(travelled(&reloaded, 1), None);
+    assert_eq!(reloaded.travelled_to(&nalgebra::Point3::origin()), None);
+    let unposed = corridor();
+    assert_eq!(travelled(&unposed, 100), None);
+}
+
 /// A bad keyframe: its name, the entry, and the error it must get.
 type BadKeyframe<'a> = (&'static str, KeyframeEntry<'a>, fn(&LoopsError) -> bool);
 

@@ -99,11 +99,12 @@ def test_options_defaults():
     assert d["candidates"] == 5 and d["min_inliers"] == 30 and d["consistent_keyframes"] == 3
     assert d["exclude_recent_ids"] == 30 and d["exclude_recent_s"] == 10.0
     assert d["odometry_gate"] is True
-    assert d["odometry_max_rotation_deg"] == 30.0 and d["odometry_max_translation_m"] == 5.0
+    assert d["odometry_max_rotation_deg"] == 30.0 and d["odometry_max_translation_m"] == 1.0
     assert (d["fx"], d["fy"], d["cx"], d["cy"]) == (0.0, 0.0, 0.0, 0.0)
     assert d["novelty_similarity"] == pytest.approx(0.9)
     assert d["place_spacing_m"] == 2.0 and d["neighbour_radius_m"] == 3.0
     assert d["candidate_id_gap"] == 10
+    assert d["odometry_max_translation_per_m"] == 0.02 and d["pose_reprojection_px"] == 5.0
     with topoloc.LoopDetector("test", "loops", DIM) as det:
         assert det.options == d and det.dim == DIM
     with topoloc.LoopDetector("test", "loops", DIM, min_inliers=40, odometry_gate=False, fx=None) as det:

@@ -1796,6 +1796,8 @@ _LOOP_OPTION_KINDS = {
     "place_spacing_m": "float",
     "neighbour_radius_m": "float",
     "candidate_id_gap": "u64",
+    "odometry_max_translation_per_m": "float",
+    "pose_reprojection_px": "float",
 }
 
 
@@ -1892,10 +1894,13 @@ class LoopDetector(_SingleThreaded):
     ``None``: the library default, :func:`loop_options_default`): ``candidates`` (verified per
     keyframe, 1..64), ``exclude_recent_ids`` and ``exclude_recent_s`` (the exclusion window),
     ``min_inliers`` (8..10000), ``consistent_keyframes`` (1..100), ``odometry_gate``,
-    ``odometry_max_rotation_deg``, ``odometry_max_translation_m``, the pinhole intrinsics
+    ``odometry_max_rotation_deg``, ``odometry_max_translation_m`` and
+    ``odometry_max_translation_per_m`` (the bound grows with the distance travelled between
+    the two keyframes: the odometry's drift rate), the pinhole intrinsics
     ``fx``, ``fy``, ``cx``, ``cy`` (pixels; ``fx == 0``: none, hints carry no pose), and the
     place graph's ``novelty_similarity``, ``place_spacing_m``, ``neighbour_radius_m``, and
-    ``candidate_id_gap`` (candidates from different stretches of ids; 0: off). Invalid
+    ``candidate_id_gap`` (candidates from different stretches of ids; 0: off), and
+    ``pose_reprojection_px`` (the metric pose fit's inlier threshold, pixels). Invalid
     options raise :class:`InvalidOptionError`, unknown names ``TypeError``.
 
     Ownership: owns a C ``topoloc_loop_detector`` handle, released by :meth:`close`, the

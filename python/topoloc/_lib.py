@@ -48,7 +48,7 @@ ABI_VERSION = 1
 
 #: ABI minor version these bindings were written for (``TOPOLOC_ABI_VERSION_MINOR``): they use
 #: items up to "ABI 1.N" of the header.
-ABI_VERSION_MINOR = 6
+ABI_VERSION_MINOR = 7
 
 #: Environment variable naming the shared library to load.
 ENV_VAR = "TOPOLOC_LIBRARY"
@@ -338,6 +338,9 @@ class topoloc_loop_options(Structure):
         ("neighbour_radius_m", c_double),
         # ABI 1.6
         ("candidate_id_gap", c_uint64),
+        # ABI 1.7
+        ("odometry_max_translation_per_m", c_double),
+        ("pose_reprojection_px", c_double),
     ]
 
 

@@ -13,7 +13,7 @@ use crate::loops::{
     DatabaseOptions, Gate, HintOptions, KeyframeDatabase, KeyframeEntry, KeyframeFeatures,
     LoopDetector, LoopHint, OdometryGate,
 };
-use crate::verify::{Descriptor, Keypoints, DESCRIPTOR_BYTES, MAX_KEYPOINTS};
+use crate::verify::{Descriptor, Keypoints, RelativePoseOptions, DESCRIPTOR_BYTES, MAX_KEYPOINTS};
 use std::ffi::c_char;
 
 /// Finds loop closures for one SLAM run (and, from a map, against an earlier one). Created by
@@ -70,7 +70,8 @@ pub struct topoloc_loop_options {
     /// Largest rotation difference to the odometry, degrees (> 0). Default 30.
     pub odometry_max_rotation_deg: f64,
     /// Largest translation difference to the odometry, metres (> 0; an unscaled hint's
-    /// direction is scaled by the odometry's baseline). Default 5.
+    /// direction is scaled by the odometry's baseline), plus
+    /// `odometry_max_translation_per_m` per metre travelled (ABI 1.7). Default 1.
     pub odometry_max_translation_m: f64,
     /// Pinhole intrinsics of the camera (undistorted images, pixels); `fx == 0` = none: hints
     /// then carry no pose. Default none.
@@ -92,12 +93,21 @@ pub struct topoloc_loop_options {
     /// A candidate whose id is less than this from a more similar candidate's is skipped (its
     /// stretch is still searched when the better one is refined); 0 = off. Default 10.
     pub candidate_id_gap: u64,
+    // ABI 1.7 (topoloc 0.1): metric hints.
+    /// The odometry translation bound grows by this much per metre the odometry travelled
+    /// between the two keyframes (its drift rate, >= 0; 0: a fixed bound). Default 0.02.
+    pub odometry_max_translation_per_m: f64,
+    /// Reprojection threshold of the metric pose fit against a keyframe's 3D points, pixels
+    /// (> 0). Default 5.
+    pub pose_reprojection_px: f64,
 }
 
 impl Versioned for topoloc_loop_options {
-    /// ABI 1.5 ended before `candidate_id_gap`.
+    /// ABI 1.5 ended before `candidate_id_gap`, ABI 1.6 before
+    /// `odometry_max_translation_per_m`.
     const LAYOUTS: &'static [usize] = &[
         std::mem::offset_of!(Self, candidate_id_gap),
+        std::mem::offset_of!(Self, odometry_max_translation_per_m),
         std::mem::size_of::<Self>(),
     ];
 }
@@ -124,6 +134,8 @@ impl Default for topoloc_loop_options {
             place_spacing_m: d.place_spacing_m,
             neighbour_radius_m: d.neighbour_radius_m,
             candidate_id_gap: h.candidate_id_gap,
+            odometry_max_translation_per_m: gate.max_translation_per_m,
+            pose_reprojection_px: h.pose.reprojection_px,
         }
     }
 }
@@ -159,8 +171,13 @@ fn loop_options(
         odometry: o.odometry_gate.then_some(OdometryGate {
             max_rotation_deg: o.odometry_max_rotation_deg,
             max_translation_m: o.odometry_max_translation_m,
+            max_translation_per_m: o.odometry_max_translation_per_m,
         }),
         camera,
+        pose: RelativePoseOptions {
+            reprojection_px: o.pose_reprojection_px,
+            ..RelativePoseOptions::default()
+        },
         ..HintOptions::default()
     };
     let database = DatabaseOptions {

@@ -131,6 +131,9 @@ struct Record {
     timestamp: f64,
     place: PlaceId,
     world_t_camera: Option<Isometry3<f64>>,
+    /// The odometry's path length from this session's first keyframe to this one (metres);
+    /// `None` without poses and for reloaded keyframes (another session's odometry).
+    travelled_m: Option<f64>,
 }
 
 #[derive(Clone, Debug, Default)]
@@ -159,6 +162,9 @@ pub struct KeyframeDatabase {
     last_timestamp: Option<f64>,
     /// Whether keyframes carry poses; fixed by the first keyframe of a session.
     with_poses: Option<bool>,
+    /// This session's last added camera position and path length there (kept when that
+    /// keyframe is erased).
+    last_travel: Option<(Point3<f64>, f64)>,
     unit: Vec<f32>,
 }
 
@@ -178,6 +184,7 @@ impl KeyframeDatabase {
             last_place: None,
             last_timestamp: None,
             with_poses: None,
+            last_travel: None,
         })
     }
 
@@ -205,6 +212,7 @@ impl KeyframeDatabase {
                 timestamp: f64::NEG_INFINITY,
                 place: view.place,
                 world_t_camera: view.world_t_camera,
+                travelled_m: None,
             });
         }
         db.descriptors.extend_from_slice(map.descriptors());
@@ -241,12 +249,15 @@ impl KeyframeDatabase {
                 new_place: true,
             },
         };
+        let travelled_m = position.map(|p| self.travelled_to(&p).unwrap_or(0.0));
         self.records.push(Record {
             id: keyframe.id,
             timestamp: keyframe.timestamp,
             place: added.place,
             world_t_camera: camera,
+            travelled_m,
         });
+        self.last_travel = position.zip(travelled_m);
         self.descriptors.extend_from_slice(&self.unit);
         self.places[added.place as usize].members.push(keyframe.id);
         self.last_place = Some(added.place);
@@ -487,6 +498,21 @@ impl KeyframeDatabase {
     pub fn world_t_camera(&self, id: u64) -> Result<Option<Isometry3<f64>>, LoopsError> {
         let r = self.index_of(id).ok_or(LoopsError::UnknownKeyframe(id))?;
         Ok(self.records[r].world_t_camera)
+    }
+
+    /// The odometry's path length (metres) from this session's first keyframe to keyframe
+    /// `id`; `None` without poses and for keyframes reloaded from a map.
+    pub fn travelled_m(&self, id: u64) -> Result<Option<f64>, LoopsError> {
+        let r = self.index_of(id).ok_or(LoopsError::UnknownKeyframe(id))?;
+        Ok(self.records[r].travelled_m)
+    }
+
+    /// The path length a keyframe at camera position `position` would get if added now
+    /// (the last one's plus the straight step to it); `None` before this session's first
+    /// keyframe with a pose.
+    pub fn travelled_to(&self, position: &Point3<f64>) -> Option<f64> {
+        self.last_travel
+            .map(|(last, travelled)| travelled + (position - last).norm())
     }
 
     /// True when places `a` and `b` are the same or linked.

@@ -41,17 +41,25 @@ use std::collections::HashMap;
 pub struct OdometryGate {
     /// Largest rotation difference, degrees. Default 30 (VINS-Fusion's loop_fusion).
     pub max_rotation_deg: f64,
-    /// Largest translation difference, metres; an unscaled hint's direction is scaled by the
-    /// odometry's baseline first. Default 5, chosen on generated train and tr-t revisits over
-    /// VINS-Fusion's 20 (higher precision at the same recall; BENCHMARKS.md).
+    /// Largest translation difference, metres, plus `max_translation_per_m` for every metre
+    /// the odometry travelled between the two keyframes; an unscaled hint's direction is
+    /// scaled by the odometry's baseline first. Default 1 (with 0.02 per metre), chosen on
+    /// generated train and tr-t revisits over VINS-Fusion's fixed 20 m: look-alike stretches
+    /// of a corridor pass a fixed bound that true loops after long detours need
+    /// (BENCHMARKS.md).
     pub max_translation_m: f64,
+    /// The odometry's drift per metre travelled that the translation bound allows for (0.02:
+    /// 2 cm per metre); 0 gives a fixed bound. Applies between keyframes of this session
+    /// (reloaded ones have another session's odometry). Default 0.02.
+    pub max_translation_per_m: f64,
 }
 
 impl Default for OdometryGate {
     fn default() -> Self {
         Self {
             max_rotation_deg: 30.0,
-            max_translation_m: 5.0,
+            max_translation_m: 1.0,
+            max_translation_per_m: 0.02,
         }
     }
 }
@@ -137,6 +145,9 @@ impl HintOptions {
             let positive = |v: f64| v.is_finite() && v > 0.0;
             if !(positive(g.max_rotation_deg) && positive(g.max_translation_m)) {
                 return bad("odometry bounds must be finite and > 0".into());
+            }
+            if !(g.max_translation_per_m.is_finite() && g.max_translation_per_m >= 0.0) {
+                return bad("odometry max_translation_per_m must be finite and >= 0".into());
             }
         }
         if let Some(camera) = &self.camera {
@@ -652,7 +663,10 @@ impl LoopDetector {
                 false => pose.matched_t_query.translation.vector * odometry_t.norm(),
             };
             let translation_m = (fitted_t - odometry_t).norm();
-            if rotation_deg > bounds.max_rotation_deg || translation_m > bounds.max_translation_m {
+            let travelled = self.travelled_between(entry, candidate.id)?.unwrap_or(0.0);
+            let max_translation_m =
+                bounds.max_translation_m + bounds.max_translation_per_m * travelled;
+            if rotation_deg > bounds.max_rotation_deg || translation_m > max_translation_m {
                 let gate = Gate::Odometry {
                     rotation_deg,
                     translation_m,
@@ -661,6 +675,24 @@ impl LoopDetector {
             }
         }
         Ok(Ok(Some(pose)))
+    }
+
+    /// The odometry's path length from the matched keyframe to the new one, when both belong
+    /// to this session and have poses.
+    fn travelled_between(
+        &self,
+        entry: &KeyframeEntry<'_>,
+        matched: u64,
+    ) -> Result<Option<f64>, LoopsError> {
+        let Some(world_t_body) = entry.world_t_body else {
+            return Ok(None);
+        };
+        let query = world_t_body * entry.body_t_camera.unwrap_or_else(Isometry3::identity);
+        let here = self
+            .database
+            .travelled_to(&Point3::from(query.translation.vector));
+        let there = self.database.travelled_m(matched)?;
+        Ok(here.zip(there).map(|(here, there)| here - there))
     }
 
     /// The odometry's `matched_T_query` between the matched keyframe and the new one, when

@@ -15,6 +15,7 @@
 //! the host's pose graph and, in metric mode, a measurement of the particles' position.
 
 mod cells;
+mod depth;
 mod detector;
 mod geometry;
 mod keypoints;
@@ -23,6 +24,7 @@ mod relative;
 pub mod xfeat;
 
 pub use cells::{cells_from_map, CELL_TAP, DEFAULT_CELLS};
+pub use depth::{camera_points_from_depth, DepthImage};
 pub use detector::FeatureDetector;
 pub use geometry::{
     check_pair, spatial_check, FundamentalEstimator, PairCheck, PairOptions, SpatialCheck,

@@ -31,9 +31,13 @@ use opencv::prelude::*;
 pub struct RelativePoseOptions {
     /// Fewest inliers for a pose. Default 30 (as pose fixes, [`LocateOptions`]).
     pub min_inliers: u32,
-    /// Inlier threshold, pixels: reprojection error with points, epipolar distance without.
-    /// Default 1.5.
+    /// Without points: inlier threshold on the epipolar distance, pixels. Default 1.5.
     pub threshold_px: f64,
+    /// With points: inlier threshold on the reprojection error, pixels. Looser than the
+    /// epipolar one: a scene point's depth error adds to the keypoint's, and revisits see it
+    /// from farther than neighbouring keyframes. Default 5 (VINS-Fusion's loop PnP allows
+    /// about 3.5 at this focal length; chosen on generated train revisits, BENCHMARKS.md).
+    pub reprojection_px: f64,
     /// RANSAC iterations at most. Default 1000.
     pub max_iterations: u32,
     /// Without points: the smallest median angle between an inlier's two rays once the
@@ -47,6 +51,7 @@ impl Default for RelativePoseOptions {
         Self {
             min_inliers: 30,
             threshold_px: 1.5,
+            reprojection_px: 5.0,
             max_iterations: 1000,
             min_parallax_deg: 1.0,
         }
@@ -64,6 +69,9 @@ impl RelativePoseOptions {
         }
         if !(self.threshold_px.is_finite() && self.threshold_px > 0.0) {
             return Err("threshold_px must be finite and > 0".into());
+        }
+        if !(self.reprojection_px.is_finite() && self.reprojection_px > 0.0) {
+            return Err("reprojection_px must be finite and > 0".into());
         }
         if !(1..=100_000).contains(&self.max_iterations) {
             return Err("max_iterations must lie in 1..=100000".into());
@@ -151,7 +159,7 @@ fn metric_pose(
 ) -> Result<Result<RelativePose, PoseRefusal>, VisionError> {
     let locate_options = LocateOptions {
         min_inliers: options.min_inliers,
-        reprojection_px: options.threshold_px as f32,
+        reprojection_px: options.reprojection_px as f32,
         max_iterations: options.max_iterations,
     };
     if points.len() != matched.points.len() {
@@ -195,7 +203,7 @@ fn metric_pose(
     };
     let inliers: Vec<&([f32; 2], [f32; 3])> = pairs
         .iter()
-        .filter(|pair| residual(&pose, pair).is_some_and(|r| r.norm() <= options.threshold_px))
+        .filter(|pair| residual(&pose, pair).is_some_and(|r| r.norm() <= options.reprojection_px))
         .collect();
     let covariance = covariance(
         &pose,

@@ -3616,6 +3616,9 @@ static void test_loop_closure(void)
     CHECK(options.struct_size == sizeof options && options.candidates == 5 &&
           options.min_inliers == 30 && options.consistent_keyframes == 3 && options.fx == 0.0);
     CHECK(options.candidate_id_gap == 10u); /* ABI 1.6 */
+    CHECK(options.odometry_max_translation_m == 1.0 &&
+          options.odometry_max_translation_per_m == 0.02 &&
+          options.pose_reprojection_px == 5.0); /* ABI 1.7 */
     {
         /* A caller of ABI 1.5 gets the 1.6 fields' defaults. */
         topoloc_loop_options old;
@@ -3629,6 +3632,17 @@ static void test_loop_closure(void)
         old.struct_size = offsetof(topoloc_loop_options, candidate_id_gap) - 1;
         CHECK_STATUS(topoloc_loop_detector_new("test", "loops", LOOP_DIM, &old, &old_det),
                      TOPOLOC_ERR_STRUCT_SIZE);
+        /* A caller of ABI 1.6 gets the 1.7 fields' defaults; a bad 1.7 field is refused. */
+        old.struct_size = offsetof(topoloc_loop_options, odometry_max_translation_per_m);
+        old.pose_reprojection_px = -1.0;
+        CHECK_STATUS(topoloc_loop_detector_new("test", "loops", LOOP_DIM, &old, &old_det),
+                     TOPOLOC_OK);
+        topoloc_loop_detector_free(old_det);
+        old_det = NULL;
+        old.struct_size = sizeof old;
+        CHECK_STATUS(topoloc_loop_detector_new("test", "loops", LOOP_DIM, &old, &old_det),
+                     TOPOLOC_ERR_INVALID_OPTION);
+        CHECK(old_det == NULL);
     }
     options.exclude_recent_ids = 5;
     options.exclude_recent_s = 0.0;

@@ -106,6 +106,10 @@ TEST(loop_options_and_gates) {
   CHECK_EQ(options.consistent_keyframes, uint32_t{3});
   CHECK(options.odometry_gate);
   CHECK(options.fx == 0.0);
+  static_assert(TOPOLOC_ABI_VERSION_MINOR >= 7, "metric hint options are ABI 1.7");
+  CHECK(options.odometry_max_translation_m == 1.0);
+  CHECK(options.odometry_max_translation_per_m == 0.02);
+  CHECK(options.pose_reprojection_px == 5.0);
 
   static_assert(static_cast<uint32_t>(topoloc::Gate::Accepted) == TOPOLOC_GATE_ACCEPTED);
   static_assert(static_cast<uint32_t>(topoloc::Gate::NoCandidate) == TOPOLOC_GATE_NO_CANDIDATE);

@@ -31,14 +31,14 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 use topoloc::build::{build_from_images, BuildStage, ImageLayout, ImageMapOptions, ImageSource};
 use topoloc::describe::Describer;
-use topoloc::image::{read_rgb, ImageView, PixelFormat};
+use topoloc::image::{read_rgb, read_u16, ImageView, PixelFormat};
 use topoloc::loops::{
     DatabaseOptions, Gate, HintOptions, KeyframeDatabase, KeyframeEntry, KeyframeFeatures,
     LoopDetector, LoopHint, OdometryGate,
 };
 use topoloc::verify::{
-    cells_from_map, FeatureDetector, FeatureKind, Keypoints, PinholeCamera, RelativePose, CELL_TAP,
-    DEFAULT_CELLS, DEFAULT_KEYPOINTS,
+    camera_points_from_depth, cells_from_map, DepthImage, FeatureDetector, FeatureKind, Keypoints,
+    PinholeCamera, RelativePose, RelativePoseOptions, CELL_TAP, DEFAULT_CELLS, DEFAULT_KEYPOINTS,
 };
 use topoloc::{LoadOptions, Map};
 
@@ -54,6 +54,14 @@ pub struct LoopsArgs {
     /// Camera intrinsics file: `fx fy cx cy`; hints then carry relative poses.
     #[arg(long)]
     pub intrinsics: Option<PathBuf>,
+    /// Depth images registered to the keyframe images (16-bit PNG, same file names; as
+    /// `topoloc simulate --depth` writes and RGB-D cameras give): keyframes get 3D points and
+    /// hints metric poses (`scale_known = 1`). Needs `--intrinsics`.
+    #[arg(long, requires = "intrinsics")]
+    pub depth: Option<PathBuf>,
+    /// Depth image units per metre: 1000 for millimetres (ROS 16UC1), 5000 for TUM RGB-D.
+    #[arg(long, default_value_t = 1000.0)]
+    pub depth_scale: f64,
     /// A map of a first session (built from images with keypoints).
     #[arg(long)]
     pub map: Option<PathBuf>,
@@ -109,6 +117,16 @@ pub struct LoopsArgs {
     /// scaled by the odometry's baseline).
     #[arg(long, default_value_t = OdometryGate::default().max_translation_m)]
     pub odometry_max_translation_m: f64,
+    /// With `--poses`: the translation bound grows by this much per metre the odometry
+    /// travelled between the two keyframes (its drift rate).
+    #[arg(long, default_value_t = OdometryGate::default().max_translation_per_m)]
+    pub odometry_max_translation_per_m: f64,
+    /// Fewest inliers of a hint's relative pose.
+    #[arg(long, default_value_t = RelativePoseOptions::default().min_inliers)]
+    pub pose_min_inliers: u32,
+    /// With `--depth`: reprojection threshold of the metric pose fit, pixels.
+    #[arg(long, default_value_t = RelativePoseOptions::default().reprojection_px)]
+    pub pose_reprojection_px: f64,
     /// With `--map` on a frame-aligned second session: a hint is correct when its matched id
     /// is within this many of the query index; precision and recall go in the report.
     #[arg(long)]
@@ -177,7 +195,13 @@ pub fn run(args: &LoopsArgs) -> Result<()> {
         odometry: Some(OdometryGate {
             max_rotation_deg: args.odometry_max_rotation_deg,
             max_translation_m: args.odometry_max_translation_m,
+            max_translation_per_m: args.odometry_max_translation_per_m,
         }),
+        pose: RelativePoseOptions {
+            min_inliers: args.pose_min_inliers,
+            reprojection_px: args.pose_reprojection_px,
+            ..RelativePoseOptions::default()
+        },
         ..HintOptions::default()
     };
     let (mut detector, map, first_id) = match &args.map {
@@ -232,11 +256,17 @@ pub fn run(args: &LoopsArgs) -> Result<()> {
             world_t_body: poses.as_ref().map(|p| p[index].world_t_camera),
             body_t_camera: Some(args.camera_frame.to_optical()),
         };
+        let camera_points = match (&args.depth, &camera) {
+            (Some(dir), Some(camera)) => {
+                Some(depth_points(dir, path, (w, h), &keypoints, camera, args)?)
+            }
+            _ => None,
+        };
         let done = detector.process(
             &entry,
             KeyframeFeatures {
                 keypoints,
-                camera_points: None,
+                camera_points,
             },
         )?;
         times.push(start.elapsed().as_secs_f64() * 1e3);
@@ -431,6 +461,36 @@ fn fit_describer(args: &LoopsArgs, files: &[PathBuf]) -> Result<Map> {
     let (map, _) = build_from_images(&sources, ImageLayout::Sequence, &options, &mut progress)?;
     bar.finish_and_clear();
     Ok(map)
+}
+
+/// The keypoints' 3D points from the depth image of `image` (of `size` pixels) in `dir` (same
+/// file name).
+fn depth_points(
+    dir: &Path,
+    image: &Path,
+    size: (u32, u32),
+    keypoints: &Keypoints,
+    camera: &PinholeCamera,
+    args: &LoopsArgs,
+) -> Result<Vec<[f32; 3]>> {
+    let path = dir.join(image.file_name().context("image path without file name")?);
+    let (width, height, values) = read_u16(&path)?;
+    if (width, height) != size {
+        bail!(
+            "--depth {}: {width}x{height}, the image is {}x{}",
+            path.display(),
+            size.0,
+            size.1
+        );
+    }
+    let depth = DepthImage {
+        width,
+        height,
+        values: &values,
+        units_per_metre: args.depth_scale,
+    };
+    camera_points_from_depth(&keypoints.points, &depth, camera)
+        .with_context(|| format!("--depth {}", path.display()))
 }
 
 /// `fx fy cx cy` from a file, validated.

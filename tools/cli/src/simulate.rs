@@ -4,7 +4,8 @@
 //! skeleton and its map exactly as `topoloc demo` does, saves the map as `OUT/map.topoloc`, and
 //! flies N query trajectories (seeds `Split::trajectory_seed(K, i)`), each written as a dataset
 //! folder `OUT/traj-00i/` (topoloc-sim format: PNG images, TUM ground truth and odometry, the
-//! ground-truth nodes CSV, intrinsics, the place graph and a manifest).
+//! ground-truth nodes CSV, intrinsics, the place graph and a manifest; with `--depth` also
+//! depth images).
 
 use crate::backend_args::progress_bar;
 use crate::progress::StepBars;
@@ -49,6 +50,10 @@ pub struct SimulateArgs {
     /// Map capture.
     #[command(flatten)]
     pub capture: CaptureArgs,
+    /// Also write each frame's depth image (traj-00i/depth/, 16-bit PNG in millimetres, as a
+    /// depth camera would give it): hosts with 3D points, for `topoloc loops --depth`.
+    #[arg(long)]
+    pub depth: bool,
     /// Output folder (new or empty): OUT/map.topoloc and OUT/traj-000, traj-001, ...
     #[arg(long)]
     pub out: PathBuf,
@@ -192,6 +197,13 @@ fn write_dataset(
         .enumerate()
         .try_for_each(|(frame, image)| {
             writer.write_image(frame, &image.rgb)?;
+            if args.depth {
+                let pose = &flight.trajectory.frames[frame].world_t_camera;
+                let depth = scene
+                    .renderer
+                    .try_render_depth(pose, &options.capture.intrinsics)?;
+                writer.write_depth(frame, &depth)?;
+            }
             bar.inc(1);
             anyhow::Ok(())
         })?;

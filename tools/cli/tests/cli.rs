@@ -266,13 +266,10 @@ fn demo_runs_the_whole_pipeline_and_reports_the_contract_keys() {
     assert!(String::from_utf8_lossy(&out.stderr).contains("--condition foggy"));
 }
 
-#[test]
-fn simulate_writes_a_dataset_that_eval_reads() {
-    // A tiny world (one storey, two rooms), two legs at 4 Hz keep this fast.
-    let dir = tempfile::tempdir().unwrap();
-    let s = |p: &Path| p.to_str().unwrap().to_string();
-    let out = dir.path().join("sim");
-    let summary = json(&topoloc(&[
+/// `topoloc simulate` of a tiny world (one storey, two rooms; two legs at 4 Hz keep it fast)
+/// into `out`, with `extra` arguments; its JSON summary.
+fn simulate_tiny(out: &Path, extra: &[&str]) -> serde_json::Value {
+    let mut args = vec![
         "simulate",
         "--backend",
         "vlad",
@@ -289,9 +286,19 @@ fn simulate_writes_a_dataset_that_eval_reads() {
         "--views-per-place",
         "4",
         "--out",
-        &s(&out),
+        out.to_str().unwrap(),
         "--json",
-    ]));
+    ];
+    args.extend_from_slice(extra);
+    json(&topoloc(&args))
+}
+
+#[test]
+fn simulate_writes_a_dataset_that_eval_reads() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = |p: &Path| p.to_str().unwrap().to_string();
+    let out = dir.path().join("sim");
+    let summary = simulate_tiny(&out, &[]);
     let places = summary["places"].as_u64().unwrap();
     assert!(places >= 4, "{summary}");
     assert_eq!(summary["views"].as_u64(), Some(4 * places));
@@ -560,6 +567,128 @@ fn suite_refuses_unknown_or_empty_configuration_lists() {
         String::from_utf8_lossy(&out.stderr).contains("no configuration to run"),
         "{}",
         String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+/// With depth images (`simulate --depth`, `loops --depth`), keyframes carry 3D points and hints
+/// metric relative poses: here every keyframe may match its predecessor, whose true relative
+/// pose the ground truth gives.
+#[test]
+fn loops_with_depth_images_give_metric_hints() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = |p: &Path| p.to_str().unwrap().to_string();
+    let out = dir.path().join("sim");
+    let summary = simulate_tiny(&out, &["--depth"]);
+    let traj = out.join("traj-000");
+    let frames = summary["trajectories"][0]["frames"].as_u64().unwrap() as usize;
+    assert_eq!(
+        std::fs::read_dir(traj.join("depth")).unwrap().count(),
+        frames
+    );
+    let manifest: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(traj.join("manifest.json")).unwrap())
+            .unwrap();
+    assert_eq!(manifest["depth_scale"], 1000.0);
+    let k: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(traj.join("intrinsics.json")).unwrap())
+            .unwrap();
+    let intrinsics = dir.path().join("k.txt");
+    // topoloc-sim puts the centre of the top-left pixel at (0.5, 0.5), OpenCV at (0, 0).
+    let kf = |key: &str| k[key].as_f64().unwrap();
+    let text = format!(
+        "{} {} {} {}",
+        kf("fx"),
+        kf("fy"),
+        kf("cx") - 0.5,
+        kf("cy") - 0.5
+    );
+    std::fs::write(&intrinsics, text).unwrap();
+    let run = |depth: Option<&Path>| {
+        let mut args = vec![
+            "--images".to_string(),
+            s(&traj.join("images")),
+            "--poses".into(),
+            s(&traj.join("odometry.txt")),
+            "--truth".into(),
+            s(&traj.join("groundtruth.txt")),
+            "--camera-frame".into(),
+            "x-forward".into(),
+            "--intrinsics".into(),
+            s(&intrinsics),
+            "--backend".into(),
+            "vlad".into(),
+            "--local-features".into(),
+            "orb".into(),
+            "--exclude-ids".into(),
+            "1".into(),
+            "--exclude-seconds".into(),
+            "0".into(),
+            "--candidate-id-gap".into(),
+            "0".into(),
+            "--consistent-keyframes".into(),
+            "1".into(),
+        ];
+        if let Some(depth) = depth {
+            args.extend(["--depth".to_string(), s(depth)]);
+        }
+        let refs: Vec<&str> = args.iter().map(String::as_str).collect();
+        loops_report(dir.path(), &refs)
+    };
+    let (metric, rows) = run(Some(&traj.join("depth")));
+    let truth = &metric["truth"];
+    assert!(
+        rows.len() > frames / 2,
+        "most keyframes match a neighbour: {metric}"
+    );
+    for row in &rows[1..] {
+        assert_eq!(row[4], "1", "metric hints: {row:?}");
+    }
+    assert!(
+        truth["translation_error_m_median"].as_f64().unwrap() < 0.1
+            && truth["rotation_error_deg_median"].as_f64().unwrap() < 1.0,
+        "{metric}"
+    );
+    let (unscaled, rows) = run(None);
+    assert!(rows.len() > 1, "{unscaled}");
+    assert!(rows[1..].iter().all(|row| row[4] == "0"), "{rows:?}");
+    assert!(
+        unscaled["truth"]["translation_error_m_median"].is_null(),
+        "{unscaled}"
+    );
+
+    // A missing depth image, or depth without intrinsics, is a clear failure.
+    std::fs::remove_file(traj.join("depth/000003.png")).unwrap();
+    let images = s(&traj.join("images"));
+    let depth = s(&traj.join("depth"));
+    let csv = s(&dir.path().join("x.csv"));
+    let (k_arg, vlad) = (s(&intrinsics), "vlad");
+    let failed = topoloc(&[
+        "loops",
+        "--images",
+        &images,
+        "--intrinsics",
+        &k_arg,
+        "--depth",
+        &depth,
+        "--backend",
+        vlad,
+        "--local-features",
+        "orb",
+        "--out",
+        &csv,
+    ]);
+    let stderr = String::from_utf8_lossy(&failed.stderr);
+    assert!(
+        !failed.status.success() && stderr.contains("000003.png"),
+        "{stderr}"
+    );
+    let failed = topoloc(&[
+        "loops", "--images", &images, "--depth", &depth, "--out", &csv,
+    ]);
+    let stderr = String::from_utf8_lossy(&failed.stderr);
+    assert!(
+        !failed.status.success() && stderr.contains("--intrinsics"),
+        "{stderr}"
     );
 }
 

@@ -10,6 +10,9 @@
 //!   odometry.txt       TUM, same timestamps, the drifting odometry
 //!   nodes.csv          header `frame,place,view,visible`, one row per frame (visible is 0 or 1)
 //!   images/000000.png  one RGB PNG per frame, six-digit frame index
+//!   depth/000000.png   optional (format 1.1): one 16-bit PNG per frame, the forward distance
+//!                      of each pixel's surface in units of 1/depth_scale m (the manifest's
+//!                      `depth_scale`, 1000: millimetres); 0 where nothing is seen
 //! ```
 //!
 //! Views are numbered globally place by place (see [`crate::ground_truth`]). `nodes.csv` also
@@ -34,7 +37,7 @@ pub const FORMAT_NAME: &str = "topoloc-sim-dataset";
 /// Major format version this build writes and the newest it reads.
 pub const FORMAT_VERSION_MAJOR: u32 = 1;
 /// Minor format version this build writes (newer minors only add keys and still read).
-pub const FORMAT_VERSION_MINOR: u32 = 0;
+pub const FORMAT_VERSION_MINOR: u32 = 1;
 /// The manifest, written last: a folder without one is incomplete.
 pub const MANIFEST_FILE: &str = "manifest.json";
 /// Camera intrinsics.
@@ -49,6 +52,11 @@ pub const ODOMETRY_FILE: &str = "odometry.txt";
 pub const NODES_FILE: &str = "nodes.csv";
 /// Folder of the frame images.
 pub const IMAGES_DIR: &str = "images";
+/// Folder of the optional depth images.
+pub const DEPTH_DIR: &str = "depth";
+/// Depth image units per metre: millimetres, as ROS `16UC1` depth and most depth cameras
+/// (TUM RGB-D uses 5000).
+pub const DEPTH_SCALE: f64 = 1000.0;
 /// Header row of [`NODES_FILE`].
 pub const NODES_HEADER: &str = "frame,place,view,visible";
 /// List depths reported by [`Dataset::evaluate`]: R@1 to R@10.
@@ -57,6 +65,11 @@ pub const RECALL_DEPTHS: [usize; 10] = [1, 2, 3, 4, 5, 6, 7, 8, 9, 10];
 /// Path of frame `frame`'s image relative to the dataset root, e.g. `images/000042.png`.
 pub fn image_name(frame: usize) -> String {
     format!("{IMAGES_DIR}/{frame:06}.png")
+}
+
+/// Path of frame `frame`'s depth image relative to the dataset root, e.g. `depth/000042.png`.
+pub fn depth_name(frame: usize) -> String {
+    format!("{DEPTH_DIR}/{frame:06}.png")
 }
 
 /// A dataset that cannot be written or read; every variant names the file or folder.
@@ -171,6 +184,9 @@ pub struct Manifest {
     pub info: DatasetInfo,
     /// Number of frames (images, poses, node rows).
     pub frame_count: usize,
+    /// Depth image units per metre when the dataset has depth images (format 1.1).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub depth_scale: Option<f64>,
     /// Files of the dataset relative to its root, the manifest excepted (images included).
     pub files: Vec<String>,
 }
@@ -180,6 +196,8 @@ pub struct Manifest {
 pub struct DatasetWriter {
     root: PathBuf,
     intrinsics: Intrinsics,
+    /// Whether a depth image was written.
+    depth: std::sync::atomic::AtomicBool,
 }
 
 impl DatasetWriter {
@@ -202,6 +220,7 @@ impl DatasetWriter {
         Ok(Self {
             root: root.to_path_buf(),
             intrinsics,
+            depth: false.into(),
         })
     }
 
@@ -237,6 +256,46 @@ impl DatasetWriter {
         Ok(path)
     }
 
+    /// Writes frame `frame`'s depth image (metres per pixel, rows of the intrinsics' size;
+    /// NaN, zero or beyond the 16-bit range for nothing seen) as a 16-bit PNG in
+    /// [`DEPTH_SCALE`] units. Like images, from any thread; once one frame has depth, every
+    /// frame needs it.
+    pub fn write_depth(&self, frame: usize, metres: &[f32]) -> Result<PathBuf, DatasetError> {
+        let path = self.root.join(depth_name(frame));
+        let (w, h) = (self.intrinsics.width, self.intrinsics.height);
+        let needed = w as usize * h as usize;
+        if metres.len() != needed {
+            return Err(invalid(
+                &path,
+                None,
+                format!(
+                    "depth buffer holds {} values, a {w}x{h} image needs {needed}",
+                    metres.len()
+                ),
+            ));
+        }
+        let units: Vec<u16> = metres
+            .iter()
+            .map(|&m| {
+                let u = f64::from(m) * DEPTH_SCALE;
+                if u.is_finite() && u >= 0.5 && u < f64::from(u16::MAX) {
+                    u.round() as u16
+                } else {
+                    0
+                }
+            })
+            .collect();
+        let dir = self.root.join(DEPTH_DIR);
+        std::fs::create_dir_all(&dir).map_err(io(&dir))?;
+        let cv = |e: opencv::Error| invalid(&path, None, format!("OpenCV: {e}"));
+        let mat = Mat::new_rows_cols_with_data::<u16>(h as i32, w as i32, &units).map_err(cv)?;
+        if !opencv::imgcodecs::imwrite_def(&path, &mat).map_err(cv)? {
+            return Err(invalid(&path, None, "OpenCV could not write the PNG"));
+        }
+        self.depth.store(true, std::sync::atomic::Ordering::Relaxed);
+        Ok(path)
+    }
+
     /// Checks the records against each other and the images written, writes the other files
     /// and the manifest last, and returns the manifest. `ground_truth`, `odometry` and `nodes`
     /// hold one entry per frame, with equal timestamps; `nodes[k].frame` must be `k`; every
@@ -251,6 +310,7 @@ impl DatasetWriter {
     ) -> Result<Manifest, DatasetError> {
         let root = &self.root;
         let n = ground_truth.len();
+        let depth = self.depth.load(std::sync::atomic::Ordering::Relaxed);
         let manifest = Manifest {
             format: FORMAT_NAME.into(),
             format_version: format!("{FORMAT_VERSION_MAJOR}.{FORMAT_VERSION_MINOR}"),
@@ -258,7 +318,8 @@ impl DatasetWriter {
             tool_version: env!("CARGO_PKG_VERSION").into(),
             info: info.clone(),
             frame_count: n,
-            files: file_list(n),
+            depth_scale: depth.then_some(DEPTH_SCALE),
+            files: file_list(n, depth),
         };
         check_manifest(&root.join(MANIFEST_FILE), &manifest)?;
         graph
@@ -269,6 +330,9 @@ impl DatasetWriter {
         let rows = nodes.iter().enumerate().map(|(k, t)| (k + 2, *t));
         check_nodes(&root.join(NODES_FILE), graph, rows, n)?;
         check_images(root, n)?;
+        if depth {
+            check_depth(root, n)?;
+        }
 
         write_json(&root.join(INTRINSICS_FILE), &self.intrinsics)?;
         write_json(&root.join(GRAPH_FILE), graph)?;
@@ -296,7 +360,7 @@ impl DatasetWriter {
 }
 
 /// The files of an `n`-frame dataset, manifest excepted.
-fn file_list(n: usize) -> Vec<String> {
+fn file_list(n: usize, depth: bool) -> Vec<String> {
     [
         INTRINSICS_FILE,
         GRAPH_FILE,
@@ -307,6 +371,7 @@ fn file_list(n: usize) -> Vec<String> {
     .iter()
     .map(|s| s.to_string())
     .chain((0..n).map(image_name))
+    .chain((0..if depth { n } else { 0 }).map(depth_name))
     .collect()
 }
 
@@ -436,11 +501,40 @@ fn check_nodes(
 
 /// Checks that `images/` holds exactly the PNGs of frames `0..n`.
 fn check_images(root: &Path, n: usize) -> Result<(), DatasetError> {
-    let dir = root.join(IMAGES_DIR);
+    check_frame_pngs(
+        root,
+        IMAGES_DIR,
+        image_name,
+        n,
+        ["the image folder", "the image of a frame"],
+    )
+}
+
+/// Exactly one depth PNG per frame in [`DEPTH_DIR`].
+fn check_depth(root: &Path, n: usize) -> Result<(), DatasetError> {
+    check_frame_pngs(
+        root,
+        DEPTH_DIR,
+        depth_name,
+        n,
+        ["the depth folder", "the depth image of a frame"],
+    )
+}
+
+/// Exactly one PNG per frame in `root/folder`, named by `name`; `what` names the folder and a
+/// file in errors.
+fn check_frame_pngs(
+    root: &Path,
+    folder: &str,
+    name: fn(usize) -> String,
+    n: usize,
+    what: [&'static str; 2],
+) -> Result<(), DatasetError> {
+    let dir = root.join(folder);
     if !dir.is_dir() {
         return Err(DatasetError::Missing {
             path: dir,
-            what: "the image folder",
+            what: what[0],
         });
     }
     let entries = std::fs::read_dir(&dir).map_err(io(&dir))?;
@@ -461,11 +555,11 @@ fn check_images(root: &Path, n: usize) -> Result<(), DatasetError> {
         ));
     }
     for frame in 0..n {
-        let path = root.join(image_name(frame));
+        let path = root.join(name(frame));
         if !path.is_file() {
             return Err(DatasetError::Missing {
                 path,
-                what: "the image of a frame",
+                what: what[1],
             });
         }
     }
@@ -503,7 +597,7 @@ impl Dataset {
             });
         }
         let manifest = read_manifest(&root.join(MANIFEST_FILE))?;
-        for name in file_list(0).iter().chain(&manifest.files) {
+        for name in file_list(0, false).iter().chain(&manifest.files) {
             let path = root.join(name);
             if !path.is_file() {
                 return Err(DatasetError::Missing {
@@ -527,6 +621,17 @@ impl Dataset {
         let rows = parse_nodes(&path, &read_text(&path)?)?;
         check_nodes(&path, &graph, rows.iter().copied(), n)?;
         check_images(root, n)?;
+        if let Some(scale) = manifest.depth_scale {
+            if !(scale.is_finite() && scale > 0.0) {
+                let path = root.join(MANIFEST_FILE);
+                return Err(invalid(
+                    &path,
+                    None,
+                    format!("depth_scale is {scale}, must be > 0"),
+                ));
+            }
+            check_depth(root, n)?;
+        }
         Ok(Self {
             root: root.to_path_buf(),
             manifest,
@@ -546,6 +651,14 @@ impl Dataset {
     /// Path of frame `frame`'s image.
     pub fn image_path(&self, frame: usize) -> PathBuf {
         self.root.join(image_name(frame))
+    }
+
+    /// Path of frame `frame`'s depth image (see the module documentation), when the dataset
+    /// has depth images.
+    pub fn depth_path(&self, frame: usize) -> Option<PathBuf> {
+        self.manifest
+            .depth_scale
+            .map(|_| self.root.join(depth_name(frame)))
     }
 
     /// Reads frame `frame`'s image as packed RGB8 rows (width x height x 3 bytes); fails,

@@ -493,18 +493,8 @@ impl Renderer {
         condition.validate()?;
         let (w, h) = (k.width as usize, k.height as usize);
         let mut linear = vec![[0.0f32; 3]; w * h];
-
-        let r = pose.rotation.to_rotation_matrix();
-        let col = |v: Vector3<f64>| -> [f32; 3] { (r * v).map(|c| c as f32).into() };
-        // world direction of pixel (u, v) = forward * fx - right_step * (u - cx) - down * ...
-        let axis_x = col(Vector3::x() * k.fx);
-        let step_u = col(-Vector3::y());
-        let step_v = col(-Vector3::z() * (k.fx / k.fy));
-        let forward = col(Vector3::x());
-        let t = pose.translation.vector;
-        let eye = [t.x as f32, t.y as f32, t.z as f32];
-        let start = [0, 1, 2].map(|i| (eye[i] - self.origin[i]) / self.voxel_size);
-
+        let forward = (pose.rotation * Vector3::x()).map(|c| c as f32).into();
+        let start = self.voxel_position(pose);
         let cone_outer = condition.headlight_half_angle_deg.to_radians().cos();
         let cone_inner = (0.7 * condition.headlight_half_angle_deg)
             .to_radians()
@@ -516,30 +506,9 @@ impl Renderer {
             cone: [cone_outer, cone_inner],
             focal: k.fx as f32,
         };
-        let mut dirs = [[0.0f32; 3]; PACKET];
-        let mut hits: [Option<Hit>; PACKET] = Default::default();
-        for row in 0..h {
-            let dv = row as f32 + 0.5 - k.cy as f32;
-            for c0 in (0..w).step_by(PACKET) {
-                for (lane, dir) in dirs.iter_mut().enumerate() {
-                    // Lanes past the right edge repeat the last pixel; their result is dropped.
-                    let du = (c0 + lane).min(w - 1) as f32 + 0.5 - k.cx as f32;
-                    let d = [
-                        axis_x[0] + du * step_u[0] + dv * step_v[0],
-                        axis_x[1] + du * step_u[1] + dv * step_v[1],
-                        axis_x[2] + du * step_u[2] + dv * step_v[2],
-                    ];
-                    let inv_norm = 1.0 / (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
-                    *dir = [d[0] * inv_norm, d[1] * inv_norm, d[2] * inv_norm];
-                }
-                self.trace_packet(start, &dirs, &mut hits);
-                for (lane, hit) in hits.iter().enumerate().take(w - c0) {
-                    if let Some(hit) = hit {
-                        linear[row * w + c0 + lane] = shade.at(start, dirs[lane], hit);
-                    }
-                }
-            }
-        }
+        self.trace_pixels(pose, k, |pixel, dir, hit| {
+            linear[pixel] = shade.at(start, dir, hit);
+        });
 
         if condition.motion_blur_px > 1 {
             box_blur_rows(&mut linear, w, condition.motion_blur_px as usize);
@@ -561,6 +530,69 @@ impl Renderer {
             }
         }
         Ok(image)
+    }
+
+    /// The depth image from `pose`: per pixel (rows of `k.width`), the distance in metres
+    /// along the camera's forward axis to the surface its centre sees (the z of an optical
+    /// camera frame, as depth cameras report it); NaN where the ray leaves the grid.
+    pub fn try_render_depth(&self, pose: &Pose, k: &Intrinsics) -> Result<Vec<f32>, RenderError> {
+        k.validate().map_err(RenderError::InvalidIntrinsics)?;
+        let mut depth = vec![f32::NAN; k.width as usize * k.height as usize];
+        let forward: [f32; 3] = (pose.rotation * Vector3::x()).map(|c| c as f32).into();
+        self.trace_pixels(pose, k, |pixel, dir, hit| {
+            let along = dir[0] * forward[0] + dir[1] * forward[1] + dir[2] * forward[2];
+            depth[pixel] = hit.t * self.voxel_size * along;
+        });
+        Ok(depth)
+    }
+
+    /// The camera position in voxel units from the grid origin.
+    fn voxel_position(&self, pose: &Pose) -> [f32; 3] {
+        let t = pose.translation.vector;
+        let eye = [t.x as f32, t.y as f32, t.z as f32];
+        [0, 1, 2].map(|i| (eye[i] - self.origin[i]) / self.voxel_size)
+    }
+
+    /// Casts one ray through the centre of every pixel of `k` from `pose` (valid intrinsics)
+    /// and calls `visit(pixel index, unit world direction, hit)` for each that hits.
+    fn trace_pixels(
+        &self,
+        pose: &Pose,
+        k: &Intrinsics,
+        mut visit: impl FnMut(usize, [f32; 3], &Hit),
+    ) {
+        let (w, h) = (k.width as usize, k.height as usize);
+        let r = pose.rotation.to_rotation_matrix();
+        let col = |v: Vector3<f64>| -> [f32; 3] { (r * v).map(|c| c as f32).into() };
+        // world direction of pixel (u, v) = forward * fx - right_step * (u - cx) - down * ...
+        let axis_x = col(Vector3::x() * k.fx);
+        let step_u = col(-Vector3::y());
+        let step_v = col(-Vector3::z() * (k.fx / k.fy));
+        let start = self.voxel_position(pose);
+        let mut dirs = [[0.0f32; 3]; PACKET];
+        let mut hits: [Option<Hit>; PACKET] = Default::default();
+        for row in 0..h {
+            let dv = row as f32 + 0.5 - k.cy as f32;
+            for c0 in (0..w).step_by(PACKET) {
+                for (lane, dir) in dirs.iter_mut().enumerate() {
+                    // Lanes past the right edge repeat the last pixel; their result is dropped.
+                    let du = (c0 + lane).min(w - 1) as f32 + 0.5 - k.cx as f32;
+                    let d = [
+                        axis_x[0] + du * step_u[0] + dv * step_v[0],
+                        axis_x[1] + du * step_u[1] + dv * step_v[1],
+                        axis_x[2] + du * step_u[2] + dv * step_v[2],
+                    ];
+                    let inv_norm = 1.0 / (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+                    *dir = [d[0] * inv_norm, d[1] * inv_norm, d[2] * inv_norm];
+                }
+                self.trace_packet(start, &dirs, &mut hits);
+                for (lane, hit) in hits.iter().enumerate().take(w - c0) {
+                    if let Some(hit) = hit {
+                        visit(row * w + c0 + lane, dirs[lane], hit);
+                    }
+                }
+            }
+        }
     }
 
     /// The surface point seen from `pose` through image position `(u, v)` (pixels, the centre

@@ -151,7 +151,7 @@ fn a_looping_trajectory_round_trips_through_the_folder() {
     let n = trajectory.frames.len();
     assert_eq!(ds.frame_count(), n);
     assert_eq!(ds.manifest.format, "topoloc-sim-dataset");
-    assert_eq!(ds.manifest.format_version, "1.0");
+    assert_eq!(ds.manifest.format_version, "1.1");
     assert_eq!(ds.manifest.info, info(spec.motion.rate_hz));
     assert_eq!(ds.manifest.files.len(), 5 + n);
     assert_eq!(ds.intrinsics, Intrinsics::from_hfov(32, 24, 90.0));
@@ -251,7 +251,7 @@ fn damaged_folders_are_refused_naming_the_file() {
         ),
         (
             "newer version",
-            replace("manifest.json", "\"1.0\"", "\"2.1\""),
+            replace("manifest.json", "\"1.1\"", "\"2.1\""),
             vec!["manifest.json", "2.1", "newer"],
         ),
         (
@@ -369,4 +369,93 @@ fn the_writer_refuses_bad_input_naming_the_file() {
         err.contains("odometry.txt") && err.contains("11 poses for 12 frames"),
         "{err}"
     );
+}
+
+/// Depth images (format 1.1) are written as 16-bit millimetres, listed in the manifest, read
+/// back by path, and required for every frame once one frame has one.
+#[test]
+fn depth_images_round_trip_and_are_complete() {
+    let dir = tempfile::tempdir().unwrap();
+    let k = Intrinsics::from_hfov(32, 24, 90.0);
+    let frames = straight_frames();
+    let graph = ring_graph();
+    let nodes = ground_truth(&ring_world(), &graph, &frames).unwrap();
+    let depth_of = |f: usize| -> Vec<f32> {
+        (0..32 * 24)
+            .map(|i| match i % 7 {
+                0 => f32::NAN,
+                _ => 0.5 + f as f32 * 0.25 + (i % 32) as f32 * 0.01,
+            })
+            .collect()
+    };
+
+    let root = dir.path().join("with-depth");
+    let writer = DatasetWriter::create(&root, k).unwrap();
+    for f in 0..frames.len() {
+        writer.write_image(f, &image(&k, f)).unwrap();
+        writer.write_depth(f, &depth_of(f)).unwrap();
+    }
+    let err = writer.write_depth(0, &[1.0; 5]).unwrap_err().to_string();
+    assert!(
+        err.contains("depth/000000.png") && err.contains("needs 768"),
+        "{err}"
+    );
+    writer
+        .finish(&info(10.0), &graph, &frames, &frames, &nodes)
+        .unwrap();
+    let dataset = Dataset::open(&root).unwrap();
+    assert_eq!(dataset.manifest.depth_scale, Some(1000.0));
+    assert!(dataset
+        .manifest
+        .files
+        .iter()
+        .any(|f| f == "depth/000011.png"));
+    let path = dataset.depth_path(3).unwrap();
+    let mm = opencv::imgcodecs::imread(path.to_str().unwrap(), opencv::imgcodecs::IMREAD_ANYDEPTH)
+        .unwrap();
+    use opencv::prelude::*;
+    assert_eq!(mm.typ(), opencv::core::CV_16UC1);
+    let expected = depth_of(3);
+    for (i, &e) in expected.iter().enumerate() {
+        let got = *mm.at_2d::<u16>(i as i32 / 32, i as i32 % 32).unwrap();
+        let want = if e.is_nan() {
+            0
+        } else {
+            (e * 1000.0).round() as u16
+        };
+        assert_eq!(got, want, "pixel {i}");
+    }
+
+    // Without depth the manifest says so, and a missing depth frame is refused.
+    let plain = dir.path().join("plain");
+    write(&plain, straight_frames(), 10.0);
+    let dataset = Dataset::open(&plain).unwrap();
+    assert_eq!(dataset.manifest.depth_scale, None);
+    assert!(dataset.depth_path(0).is_none());
+    let writer = DatasetWriter::create(&dir.path().join("partial"), k).unwrap();
+    for f in 0..frames.len() {
+        writer.write_image(f, &image(&k, f)).unwrap();
+    }
+    writer.write_depth(0, &depth_of(0)).unwrap();
+    let err = writer
+        .finish(&info(10.0), &graph, &frames, &frames, &nodes)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("depth") && err.contains("1 PNG images for 12 frames"),
+        "{err}"
+    );
+    let manifest = root.join("manifest.json");
+    let text = std::fs::read_to_string(&manifest).unwrap();
+    std::fs::write(
+        &manifest,
+        text.replace("\"depth_scale\": 1000.0", "\"depth_scale\": -1.0"),
+    )
+    .unwrap();
+    let err = Dataset::open(&root).unwrap_err().to_string();
+    assert!(err.contains("depth_scale is -1"), "{err}");
+    std::fs::write(&manifest, text).unwrap();
+    std::fs::remove_file(root.join("depth/000004.png")).unwrap();
+    let err = Dataset::open(&root).unwrap_err().to_string();
+    assert!(err.contains("depth/000004.png"), "{err}");
 }

@@ -284,6 +284,47 @@ fn worlds_and_renders_are_deterministic() {
     );
 }
 
+/// The depth image is the forward distance to the surface point each pixel centre sees, the
+/// geometry a depth camera would report.
+#[test]
+fn depth_images_agree_with_surface_points() {
+    let params = WorldParams {
+        voxel_size: 0.15,
+        ..Split::Train.world_params(1)
+    };
+    let world = World::generate(&params).unwrap();
+    let renderer = Renderer::new(&world);
+    let k = Intrinsics::from_hfov(64, 48, 90.0);
+    for p in typical_poses(&world, 3) {
+        let depth = renderer.try_render_depth(&p, &k).unwrap();
+        assert_eq!(depth.len(), 64 * 48);
+        let forward = p.rotation * nalgebra::Vector3::x();
+        let mut checked = 0;
+        for (row, col) in [(0u32, 0u32), (24, 32), (47, 63), (10, 50), (40, 5)] {
+            let d = depth[(row * 64 + col) as usize];
+            let expected = renderer
+                .surface_point(&p, &k, f64::from(col) + 0.5, f64::from(row) + 0.5)
+                .map(|q| (q - p.translation.vector).coords.dot(&forward));
+            match expected {
+                Some(e) => {
+                    assert!(
+                        (f64::from(d) - e).abs() < 1e-3,
+                        "({row}, {col}): {d} vs {e}"
+                    );
+                    assert!(d > 0.0);
+                    checked += 1;
+                }
+                None => assert!(d.is_nan(), "({row}, {col}) leaves the grid: {d}"),
+            }
+        }
+        assert!(checked >= 4, "a room view sees its walls");
+    }
+    let bad = Intrinsics { fx: -1.0, ..k };
+    assert!(renderer
+        .try_render_depth(&typical_poses(&world, 1)[0], &bad)
+        .is_err());
+}
+
 #[test]
 fn bad_input_names_the_field() {
     let ok = Split::Train.world_params(0);
