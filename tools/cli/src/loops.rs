@@ -13,8 +13,10 @@
 //! `query_index,matched_index,inliers,confidence,scale_known,tx,ty,tz,qx,qy,qz,qw` where the
 //! pose columns (`matched_T_query`: the query camera in the matched camera's optical frame,
 //! translation then unit quaternion) are empty for hints without a pose. `--intrinsics FILE`
-//! holds `fx fy cx cy` (pixels, whitespace-separated). `--json` prints the hints, the median
-//! and p90 time per keyframe and the count of each gate; with `--aligned-tolerance T` (a
+//! holds `fx fy cx cy` (pixels, whitespace-separated); `--depth DIR` gives keyframes 3D points
+//! and hints metric poses. `--json` prints the hints, the median and p90 time per keyframe (and
+//! the median of its describing part: global descriptor and local features) and the count of
+//! each gate; with `--aligned-tolerance T` (a
 //! frame-aligned second session, such as Gardens Point) also precision and recall.
 
 use crate::backend_args::{
@@ -240,6 +242,7 @@ pub fn run(args: &LoopsArgs) -> Result<()> {
     let mut features = Features::new(kind, &runtime.xfeat_options())?;
     let bar = progress_bar(files.len(), "keyframes");
     let (mut hints, mut gates, mut times) = (Vec::new(), BTreeMap::new(), Vec::new());
+    let mut describe_times = Vec::new();
     let mut decisions = String::from("query_index,gate,matched_index,inliers,confidence,detail\n");
     for (index, path) in files.iter().enumerate() {
         let (w, h, rgb) = read_rgb(path)?;
@@ -249,6 +252,7 @@ pub fn run(args: &LoopsArgs) -> Result<()> {
         let keypoints = features
             .describe(&mut describer, &image, &mut descriptor)
             .with_context(|| path.display().to_string())?;
+        describe_times.push(start.elapsed().as_secs_f64() * 1e3);
         let entry = KeyframeEntry {
             id: first_id + index as u64,
             timestamp: poses.as_ref().map_or(index as f64, |p| p[index].timestamp),
@@ -282,7 +286,7 @@ pub fn run(args: &LoopsArgs) -> Result<()> {
     if let Some(path) = &args.decisions {
         std::fs::write(path, decisions).with_context(|| format!("writing {}", path.display()))?;
     }
-    let mut out = report(args, &hints, &gates, &times, files.len(), first_id);
+    let mut out = report(args, &hints, &gates, [&times, &describe_times], files.len(), first_id);
     if let Some(truth) = &truth {
         add_truth(&mut out, args, &hints, truth, first_id);
     }
@@ -590,17 +594,19 @@ fn report(
     args: &LoopsArgs,
     hints: &[(usize, LoopHint)],
     gates: &BTreeMap<&str, usize>,
-    times: &[f64],
+    [times, describe_times]: [&[f64]; 2],
     frames: usize,
     first_id: u64,
 ) -> serde_json::Value {
     let (median, p90) = median_and_p90(times);
+    let (describe_median, _) = median_and_p90(describe_times);
     let mut out = json!({
         "keyframes": frames,
         "hints": hints.len(),
         "gates": gates,
         "keyframe_ms_median": median,
         "keyframe_ms_p90": p90,
+        "describe_ms_median": describe_median,
         "out": args.out.display().to_string(),
         "accepted": hints.iter().map(|(i, h)| json!({
             "query_index": i,
