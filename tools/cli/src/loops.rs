@@ -286,7 +286,14 @@ pub fn run(args: &LoopsArgs) -> Result<()> {
     if let Some(path) = &args.decisions {
         std::fs::write(path, decisions).with_context(|| format!("writing {}", path.display()))?;
     }
-    let mut out = report(args, &hints, &gates, [&times, &describe_times], files.len(), first_id);
+    let mut out = report(
+        args,
+        &hints,
+        &gates,
+        [&times, &describe_times],
+        files.len(),
+        first_id,
+    );
     if let Some(truth) = &truth {
         add_truth(&mut out, args, &hints, truth, first_id);
     }
