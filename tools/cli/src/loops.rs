@@ -39,8 +39,9 @@ use topoloc::loops::{
     LoopDetector, LoopHint, OdometryGate,
 };
 use topoloc::verify::{
-    camera_points_from_depth, cells_from_map, DepthImage, FeatureDetector, FeatureKind, Keypoints,
-    PinholeCamera, RelativePose, RelativePoseOptions, CELL_TAP, DEFAULT_CELLS, DEFAULT_KEYPOINTS,
+    camera_points_from_depth, cells_from_map, DepthImage, FeatureDetector, FeatureKind,
+    FundamentalEstimator, Keypoints, PairOptions, PinholeCamera, RelativePose, RelativePoseOptions,
+    CELL_TAP, DEFAULT_CELLS, DEFAULT_KEYPOINTS,
 };
 use topoloc::{LoadOptions, Map};
 
@@ -123,6 +124,12 @@ pub struct LoopsArgs {
     /// travelled between the two keyframes (its drift rate).
     #[arg(long, default_value_t = OdometryGate::default().max_translation_per_m)]
     pub odometry_max_translation_per_m: f64,
+    /// Verify candidates with OpenCV's classic RANSAC instead of MAGSAC++ (cheaper per fit).
+    #[arg(long)]
+    pub pair_ransac: bool,
+    /// Iterations of the candidates' fundamental-matrix fit.
+    #[arg(long, default_value_t = HintOptions::default().pair.max_iterations)]
+    pub pair_iterations: u32,
     /// Fewest inliers of a hint's relative pose.
     #[arg(long, default_value_t = RelativePoseOptions::default().min_inliers)]
     pub pose_min_inliers: u32,
@@ -199,6 +206,14 @@ pub fn run(args: &LoopsArgs) -> Result<()> {
             max_translation_m: args.odometry_max_translation_m,
             max_translation_per_m: args.odometry_max_translation_per_m,
         }),
+        pair: PairOptions {
+            estimator: match args.pair_ransac {
+                true => FundamentalEstimator::Ransac,
+                false => HintOptions::default().pair.estimator,
+            },
+            max_iterations: args.pair_iterations,
+            ..HintOptions::default().pair
+        },
         pose: RelativePoseOptions {
             min_inliers: args.pose_min_inliers,
             reprojection_px: args.pose_reprojection_px,

@@ -851,4 +851,22 @@ fn loops_follows_the_contract_online_and_against_a_map() {
         String::from_utf8_lossy(&failed.stderr).contains("fy"),
         "{failed:?}"
     );
+    // So is a fit without iterations.
+    let failed = topoloc(&[
+        "loops",
+        "--images",
+        &s(&query_dir),
+        "--map",
+        &s(&map),
+        "--pair-ransac",
+        "--pair-iterations",
+        "0",
+        "--out",
+        &s(&dir.path().join("x.csv")),
+    ]);
+    let stderr = String::from_utf8_lossy(&failed.stderr);
+    assert!(
+        !failed.status.success() && stderr.contains("max_iterations"),
+        "{stderr}"
+    );
 }
