@@ -832,41 +832,23 @@ fn loops_follows_the_contract_online_and_against_a_map() {
             "revisit {q} matches first visit {m}: {row:?}"
         );
     }
-    // A bad intrinsics file is a clear failure.
+    // A bad intrinsics file, or a fit without iterations, is a clear failure naming it.
     let bad = dir.path().join("k.txt");
     std::fs::write(&bad, "300 -1 160 120").unwrap();
-    let failed = topoloc(&[
-        "loops",
-        "--images",
-        &s(&query_dir),
-        "--map",
-        &s(&map),
-        "--intrinsics",
-        &s(&bad),
-        "--out",
-        &s(&dir.path().join("x.csv")),
-    ]);
-    assert!(!failed.status.success());
-    assert!(
-        String::from_utf8_lossy(&failed.stderr).contains("fy"),
-        "{failed:?}"
-    );
-    // So is a fit without iterations.
-    let failed = topoloc(&[
-        "loops",
-        "--images",
-        &s(&query_dir),
-        "--map",
-        &s(&map),
-        "--pair-ransac",
-        "--pair-iterations",
-        "0",
-        "--out",
-        &s(&dir.path().join("x.csv")),
-    ]);
-    let stderr = String::from_utf8_lossy(&failed.stderr);
-    assert!(
-        !failed.status.success() && stderr.contains("max_iterations"),
-        "{stderr}"
+    let (images, map, csv) = (s(&query_dir), s(&map), s(&dir.path().join("x.csv")));
+    let refused = |extra: &[&str], needle: &str| {
+        let mut args = vec!["loops", "--images", &images, "--map", &map, "--out", &csv];
+        args.extend_from_slice(extra);
+        let failed = topoloc(&args);
+        let stderr = String::from_utf8_lossy(&failed.stderr);
+        assert!(
+            !failed.status.success() && stderr.contains(needle),
+            "{stderr}"
+        );
+    };
+    refused(&["--intrinsics", &s(&bad)], "fy");
+    refused(
+        &["--pair-ransac", "--pair-iterations", "0"],
+        "max_iterations",
     );
 }
