@@ -75,6 +75,14 @@ pub struct KeyframeEntry<'a> {
     pub body_t_camera: Option<Isometry3<f64>>,
 }
 
+impl KeyframeEntry<'_> {
+    /// The camera's odometry pose, `world_T_body * body_T_camera`, when the keyframe has one.
+    pub fn world_t_camera(&self) -> Option<Isometry3<f64>> {
+        self.world_t_body
+            .map(|body| body * self.body_t_camera.unwrap_or_else(Isometry3::identity))
+    }
+}
+
 /// Where an added keyframe went.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Added {
@@ -310,9 +318,7 @@ impl KeyframeDatabase {
             ));
         }
         normalize_descriptor_into(keyframe.descriptor, self.dim(), &mut self.unit)?;
-        Ok(keyframe
-            .world_t_body
-            .map(|body| body * keyframe.body_t_camera.unwrap_or_else(Isometry3::identity)))
+        Ok(keyframe.world_t_camera())
     }
 
     /// Whether the keyframe in `self.unit` (at `position`) leaves place `last` for a new one.

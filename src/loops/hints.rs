@@ -277,11 +277,11 @@ pub struct LoopDetector {
 /// The place consecutive keyframes' best candidates agreed on, and how many in a row.
 type Streak = Option<(PlaceId, usize)>;
 
-/// What the gates decided for the best candidate.
 /// The geometric gates' verdict on one candidate: its pose (`None` without intrinsics or with
 /// cells), or the refusing gate with the pose if one was fitted.
 type Geometry = Result<Option<RelativePose>, (Gate, Option<RelativePose>)>;
 
+/// What the gates decided for the best candidate.
 struct Gated {
     gate: Gate,
     pose: Option<RelativePose>,
@@ -684,10 +684,9 @@ impl LoopDetector {
         entry: &KeyframeEntry<'_>,
         matched: u64,
     ) -> Result<Option<f64>, LoopsError> {
-        let Some(world_t_body) = entry.world_t_body else {
+        let Some(query) = entry.world_t_camera() else {
             return Ok(None);
         };
-        let query = world_t_body * entry.body_t_camera.unwrap_or_else(Isometry3::identity);
         let here = self
             .database
             .travelled_to(&Point3::from(query.translation.vector));
@@ -702,10 +701,9 @@ impl LoopDetector {
         entry: &KeyframeEntry<'_>,
         matched: u64,
     ) -> Result<Option<Isometry3<f64>>, LoopsError> {
-        let Some(world_t_body) = entry.world_t_body else {
+        let Some(query) = entry.world_t_camera() else {
             return Ok(None);
         };
-        let query = world_t_body * entry.body_t_camera.unwrap_or_else(Isometry3::identity);
         Ok(self
             .database
             .world_t_camera(matched)?
