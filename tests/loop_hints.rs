@@ -16,7 +16,8 @@ use topoloc::loops::{
     LoopDetector, LoopsError, OdometryGate,
 };
 use topoloc::verify::{
-    CellDescriptor, Descriptors, KeypointDetector, Keypoints, PinholeCamera, PoseRefusal,
+    CellDescriptor, Descriptors, FeatureKind, FundamentalEstimator, KeypointDetector, Keypoints,
+    PairOptions, PinholeCamera, PoseRefusal,
 };
 
 const DIM: usize = 16;
@@ -155,6 +156,55 @@ fn a_revisit_without_parallax_gets_no_pose_and_says_why() {
         "a 3-pixel shift is a rotation, not a baseline: {hint:?}"
     );
     assert!(!hint.accepted());
+}
+
+#[test]
+fn the_work_done_is_counted_and_refinement_adds_the_stretch() {
+    let mut work = Vec::new();
+    for refine_keyframes in [0, 2] {
+        let mut detector = detector(HintOptions {
+            refine_keyframes,
+            ..options()
+        });
+        first_pass(&mut detector);
+        let done = revisit_keyframe(&mut detector, 3);
+        assert_eq!(done.hint.unwrap().matched_id, 3, "{done:?}");
+        assert_eq!(done.work.pose_fits, 0, "no intrinsics, no pose fit");
+        work.push(done.work.pair_checks);
+    }
+    // Without refinement one check per candidate (at most 5); with two, the two
+    // keyframes nearest the best candidate (ids 2 and 4, its stretch) besides.
+    assert!((1..=5).contains(&work[0]), "{work:?}");
+    assert!(work[1] >= work[0] + 2, "{work:?}");
+}
+
+#[test]
+fn fits_are_chosen_per_feature_kind_and_refinement_is_bounded() {
+    let defaults = HintOptions::default();
+    assert_eq!(defaults.pair_for(FeatureKind::XFeat), &defaults.pair);
+    assert_eq!(defaults.pair_for(FeatureKind::Orb), &defaults.pair);
+    assert_eq!(defaults.pair_for(FeatureKind::Cells), &defaults.cells_pair);
+    assert_eq!(defaults.pair.estimator, FundamentalEstimator::Ransac);
+    assert_eq!(defaults.cells_pair.estimator, FundamentalEstimator::Magsac);
+    let too_many = HintOptions {
+        refine_keyframes: 65,
+        ..HintOptions::default()
+    };
+    assert!(matches!(
+        too_many.validate(),
+        Err(LoopsError::InvalidOption(m)) if m.contains("refine_keyframes")
+    ));
+    let bad_cells_fit = HintOptions {
+        cells_pair: PairOptions {
+            max_iterations: 0,
+            ..HintOptions::default().cells_pair
+        },
+        ..HintOptions::default()
+    };
+    assert!(matches!(
+        bad_cells_fit.validate(),
+        Err(LoopsError::InvalidOption(m)) if m.contains("cells_pair")
+    ));
 }
 
 #[test]

@@ -86,9 +86,17 @@ pub struct HintOptions {
     pub consistent_keyframes: usize,
     /// The odometry agreement gate (applied when both keyframes have poses and the hint a pose).
     pub odometry: Option<OdometryGate>,
-    /// Matching and fundamental-matrix fit: MAGSAC++ at 1.5 px, 1,000 iterations by default
-    /// (the fit that re-ranked Gardens Point best, BENCHMARKS.md).
+    /// Matching and fundamental-matrix fit for point features (XFeat, ORB): RANSAC at 1.5 px,
+    /// 200 iterations by default (chosen on generated train and tr-t revisits: the precision
+    /// of MAGSAC++ 1,000 at half the time, BENCHMARKS.md).
     pub pair: PairOptions,
+    /// The same for dense cells: MAGSAC++ at 1.5 px, 1,000 iterations by default (the fit
+    /// that re-ranked Gardens Point best; RANSAC 200 lost recall there, BENCHMARKS.md).
+    pub cells_pair: PairOptions,
+    /// Keyframes of a candidate's group (its place, the linked places, its stretch) checked
+    /// when it is refined, nearest in id first; 0 = no refinement. Default 2 (the recall of 5
+    /// on generated train and tr-t revisits with 0.6 times the checks; 0 lost recall).
+    pub refine_keyframes: usize,
     /// Intrinsics of the camera (the same for every keyframe); without them hints have no pose.
     pub camera: Option<PinholeCamera>,
     /// The relative pose fit.
@@ -106,10 +114,16 @@ impl Default for HintOptions {
             consistent_keyframes: 3,
             odometry: Some(OdometryGate::default()),
             pair: PairOptions {
+                estimator: FundamentalEstimator::Ransac,
+                max_iterations: 200,
+                ..PairOptions::default()
+            },
+            cells_pair: PairOptions {
                 estimator: FundamentalEstimator::Magsac,
                 max_iterations: 1000,
                 ..PairOptions::default()
             },
+            refine_keyframes: 2,
             camera: None,
             pose: RelativePoseOptions::default(),
         }
@@ -117,6 +131,14 @@ impl Default for HintOptions {
 }
 
 impl HintOptions {
+    /// The matching and fit options for features of `kind`.
+    pub fn pair_for(&self, kind: FeatureKind) -> &PairOptions {
+        match kind {
+            FeatureKind::Cells => &self.cells_pair,
+            FeatureKind::Orb | FeatureKind::XFeat => &self.pair,
+        }
+    }
+
     /// Fails with [`LoopsError::InvalidOption`] naming the field out of range.
     pub fn validate(&self) -> Result<(), LoopsError> {
         let bad = |m: String| Err(LoopsError::InvalidOption(m));
@@ -153,9 +175,18 @@ impl HintOptions {
         if let Some(camera) = &self.camera {
             camera.validate().map_err(LoopsError::InvalidOption)?;
         }
+        if self.refine_keyframes > 64 {
+            return bad(format!(
+                "refine_keyframes is {}, must lie in 0..=64",
+                self.refine_keyframes
+            ));
+        }
         self.pair
             .validate()
             .map_err(|e| LoopsError::InvalidOption(format!("pair: {e}")))?;
+        self.cells_pair
+            .validate()
+            .map_err(|e| LoopsError::InvalidOption(format!("cells_pair: {e}")))?;
         self.pose
             .validate()
             .map_err(|e| LoopsError::InvalidOption(format!("pose: {e}")))
@@ -247,6 +278,17 @@ pub struct Processed {
     pub added: Added,
     /// The best verified candidate; `None` when there was none ([`Gate::NoCandidate`]).
     pub hint: Option<LoopHint>,
+    /// The geometric work it took, for hosts that budget or log the cost.
+    pub work: Work,
+}
+
+/// Geometric work done for one keyframe: what its time is made of besides describing.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Work {
+    /// Pair checks (matching and a fundamental-matrix fit), candidates and refinements.
+    pub pair_checks: u32,
+    /// Relative-pose fits.
+    pub pose_fits: u32,
 }
 
 impl Processed {
@@ -368,8 +410,9 @@ impl LoopDetector {
         features: KeyframeFeatures,
     ) -> Result<Processed, LoopsError> {
         self.check_features(&features)?;
-        let verified = self.verified_candidates(entry, &features)?;
-        let (hint, streak) = match self.decide(entry, &features, &verified)? {
+        let mut work = Work::default();
+        let verified = self.verified_candidates(entry, &features, &mut work)?;
+        let (hint, streak) = match self.decide(entry, &features, &verified, &mut work)? {
             None => (None, None),
             Some((best, Gated { gate, pose, streak })) => {
                 let hint = LoopHint {
@@ -389,7 +432,7 @@ impl LoopDetector {
             .get_or_insert(features.keypoints.descriptors.kind());
         self.features.insert(entry.id, features);
         self.streak = streak;
-        Ok(Processed { added, hint })
+        Ok(Processed { added, hint, work })
     }
 
     /// Removes a keyframe and its features (ORB-SLAM culls keyframes).
@@ -451,6 +494,7 @@ impl LoopDetector {
         &self,
         entry: &KeyframeEntry<'_>,
         features: &KeyframeFeatures,
+        work: &mut Work,
     ) -> Result<Vec<Verified>, LoopsError> {
         let Some(max_id) = self.max_candidate_id(entry) else {
             return Ok(Vec::new());
@@ -463,7 +507,7 @@ impl LoopDetector {
         };
         let mut verified: Vec<Verified> = Vec::new();
         for candidate in self.database.loop_candidates(entry.descriptor, &query)? {
-            let Some(inliers) = self.inliers_with(features, candidate.keyframe_id)? else {
+            let Some(inliers) = self.inliers_with(features, candidate.keyframe_id, work)? else {
                 continue;
             };
             verified.push(Verified {
@@ -495,6 +539,7 @@ impl LoopDetector {
         entry: &KeyframeEntry<'_>,
         features: &KeyframeFeatures,
         verified: &[Verified],
+        work: &mut Work,
     ) -> Result<Option<(Verified, Gated)>, LoopsError> {
         let Some(&first) = verified.first() else {
             return Ok(None);
@@ -506,18 +551,20 @@ impl LoopDetector {
         };
         // The best candidate is refined before the inlier gate: its stretch may hold a
         // keyframe the query agrees with more.
-        let first = self.refine(entry, features, first)?;
+        let first = self.refine(entry, features, first, work)?;
         if first.inliers < self.options.min_inliers {
             return Ok(Some((first, refused(Gate::TooFewInliers, None))));
         }
         let mut first_refusal = None;
         let others = verified[1..]
             .iter()
-            .take_while(|v| v.inliers >= self.options.min_inliers)
-            .map(|&v| self.refine(entry, features, v));
-        for refined in std::iter::once(Ok(first)).chain(others) {
-            let refined = refined?;
-            match self.geometry(entry, features, &refined)? {
+            .take_while(|v| v.inliers >= self.options.min_inliers);
+        for (i, &candidate) in std::iter::once(&first).chain(others).enumerate() {
+            let refined = match i {
+                0 => candidate,
+                _ => self.refine(entry, features, candidate, work)?,
+            };
+            match self.geometry(entry, features, &refined, work)? {
                 Ok(pose) => {
                     let agreeing = match self.streak {
                         Some((place, n)) if self.database.groups_overlap(place, refined.place) => {
@@ -551,17 +598,20 @@ impl LoopDetector {
         &self,
         features: &KeyframeFeatures,
         id: u64,
+        work: &mut Work,
     ) -> Result<Option<u32>, LoopsError> {
         let Some(stored) = self.features.get(&id) else {
             return Ok(None);
         };
-        if stored.keypoints.descriptors.kind() != features.keypoints.descriptors.kind() {
+        let kind = features.keypoints.descriptors.kind();
+        if stored.keypoints.descriptors.kind() != kind {
             return Ok(None);
         }
+        work.pair_checks += 1;
         check_pair(
             features.keypoints.as_ref(),
             stored.keypoints.as_ref(),
-            &self.options.pair,
+            self.options.pair_for(kind),
         )
         .map(|check| Some(check.inliers))
         .map_err(|e| LoopsError::InvalidKeyframe(e.to_string()))
@@ -577,13 +627,14 @@ impl LoopDetector {
     /// The keyframe of the candidate's group (its place, the linked places, and the keyframes
     /// within `candidate_id_gap` ids) that the query agrees with most: appearance ranks
     /// neighbouring keyframes of one stretch almost alike, geometry tells the nearest. Checks
-    /// at most `candidates` of them, the nearest in id to the candidate (a place grown online
+    /// at most `refine_keyframes` of them, the nearest in id to the candidate (a place grown online
     /// may hold many); keyframes inside the exclusion window are skipped.
     fn refine(
         &self,
         entry: &KeyframeEntry<'_>,
         features: &KeyframeFeatures,
         best: Verified,
+        work: &mut Work,
     ) -> Result<Verified, LoopsError> {
         let max_id = self.max_candidate_id(entry).unwrap_or(0);
         let mut refined = best;
@@ -602,9 +653,9 @@ impl LoopDetector {
             .collect();
         group.sort_by_key(|&id| (id.abs_diff(best.id), id));
         group.dedup();
-        group.truncate(self.options.candidates);
+        group.truncate(self.options.refine_keyframes);
         for id in group {
-            let Some(inliers) = self.inliers_with(features, id)? else {
+            let Some(inliers) = self.inliers_with(features, id, work)? else {
                 continue;
             };
             if inliers > refined.inliers {
@@ -627,18 +678,20 @@ impl LoopDetector {
         entry: &KeyframeEntry<'_>,
         features: &KeyframeFeatures,
         candidate: &Verified,
+        work: &mut Work,
     ) -> Result<Geometry, LoopsError> {
         let stored = &self.features[&candidate.id];
-        let point_accurate = features.keypoints.descriptors.kind() != FeatureKind::Cells;
-        let Some(camera) = self.options.camera.filter(|_| point_accurate) else {
+        let kind = features.keypoints.descriptors.kind();
+        let Some(camera) = self.options.camera.filter(|_| kind != FeatureKind::Cells) else {
             return Ok(Ok(None));
         };
+        work.pose_fits += 1;
         let fitted = relative_pose(
             features.keypoints.as_ref(),
             stored.keypoints.as_ref(),
             stored.camera_points.as_deref(),
             &camera,
-            self.options.pair.max_hamming,
+            self.options.pair_for(kind).max_hamming,
             &self.options.pose,
         )
         .map_err(|e| LoopsError::InvalidKeyframe(e.to_string()))?;

@@ -15,5 +15,5 @@ mod hints;
 pub use database::{Added, DatabaseOptions, KeyframeDatabase, KeyframeEntry, LoopQuery, Match};
 pub use error::LoopsError;
 pub use hints::{
-    Gate, HintOptions, KeyframeFeatures, LoopDetector, LoopHint, OdometryGate, Processed,
+    Gate, HintOptions, KeyframeFeatures, LoopDetector, LoopHint, OdometryGate, Processed, Work,
 };

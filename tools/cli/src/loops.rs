@@ -24,7 +24,7 @@ use crate::backend_args::{
 };
 use crate::process::median_and_p90;
 use anyhow::{bail, Context, Result};
-use clap::Args;
+use clap::{Args, ValueEnum};
 use nalgebra::{Isometry3, Matrix3, Translation3, UnitQuaternion};
 use serde_json::json;
 use std::collections::BTreeMap;
@@ -36,7 +36,7 @@ use topoloc::describe::Describer;
 use topoloc::image::{read_rgb, read_u16, ImageView, PixelFormat};
 use topoloc::loops::{
     DatabaseOptions, Gate, HintOptions, KeyframeDatabase, KeyframeEntry, KeyframeFeatures,
-    LoopDetector, LoopHint, OdometryGate,
+    LoopDetector, LoopHint, OdometryGate, Work,
 };
 use topoloc::verify::{
     camera_points_from_depth, cells_from_map, DepthImage, FeatureDetector, FeatureKind,
@@ -124,12 +124,17 @@ pub struct LoopsArgs {
     /// travelled between the two keyframes (its drift rate).
     #[arg(long, default_value_t = OdometryGate::default().max_translation_per_m)]
     pub odometry_max_translation_per_m: f64,
-    /// Verify candidates with OpenCV's classic RANSAC instead of MAGSAC++ (cheaper per fit).
+    /// The candidates' fundamental-matrix fit [default: ransac for XFeat and ORB, magsac for
+    /// cells].
+    #[arg(long, value_enum)]
+    pub pair_estimator: Option<PairEstimator>,
+    /// Iterations of the candidates' fundamental-matrix fit [default: 200 for XFeat and ORB,
+    /// 1000 for cells].
     #[arg(long)]
-    pub pair_ransac: bool,
-    /// Iterations of the candidates' fundamental-matrix fit.
-    #[arg(long, default_value_t = HintOptions::default().pair.max_iterations)]
-    pub pair_iterations: u32,
+    pub pair_iterations: Option<u32>,
+    /// Keyframes of the best candidate's group checked to refine it (0: none).
+    #[arg(long, default_value_t = HintOptions::default().refine_keyframes)]
+    pub refine_keyframes: usize,
     /// Fewest inliers of a hint's relative pose.
     #[arg(long, default_value_t = RelativePoseOptions::default().min_inliers)]
     pub pose_min_inliers: u32,
@@ -143,6 +148,35 @@ pub struct LoopsArgs {
     /// Print one JSON object instead of text.
     #[arg(long)]
     pub json: bool,
+}
+
+/// A fundamental-matrix estimator.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum PairEstimator {
+    /// OpenCV's classic RANSAC.
+    Ransac,
+    /// MAGSAC++ (OpenCV's USAC).
+    Magsac,
+}
+
+impl PairEstimator {
+    fn estimator(self) -> FundamentalEstimator {
+        match self {
+            PairEstimator::Ransac => FundamentalEstimator::Ransac,
+            PairEstimator::Magsac => FundamentalEstimator::Magsac,
+        }
+    }
+}
+
+/// `defaults` with the estimator and iterations given on the command line.
+fn pair_options(args: &LoopsArgs, defaults: PairOptions) -> PairOptions {
+    PairOptions {
+        estimator: args
+            .pair_estimator
+            .map_or(defaults.estimator, PairEstimator::estimator),
+        max_iterations: args.pair_iterations.unwrap_or(defaults.max_iterations),
+        ..defaults
+    }
 }
 
 /// The frame convention of given camera poses.
@@ -206,14 +240,9 @@ pub fn run(args: &LoopsArgs) -> Result<()> {
             max_translation_m: args.odometry_max_translation_m,
             max_translation_per_m: args.odometry_max_translation_per_m,
         }),
-        pair: PairOptions {
-            estimator: match args.pair_ransac {
-                true => FundamentalEstimator::Ransac,
-                false => HintOptions::default().pair.estimator,
-            },
-            max_iterations: args.pair_iterations,
-            ..HintOptions::default().pair
-        },
+        pair: pair_options(args, HintOptions::default().pair),
+        cells_pair: pair_options(args, HintOptions::default().cells_pair),
+        refine_keyframes: args.refine_keyframes,
         pose: RelativePoseOptions {
             min_inliers: args.pose_min_inliers,
             reprojection_px: args.pose_reprojection_px,
@@ -258,6 +287,7 @@ pub fn run(args: &LoopsArgs) -> Result<()> {
     let bar = progress_bar(files.len(), "keyframes");
     let (mut hints, mut gates, mut times) = (Vec::new(), BTreeMap::new(), Vec::new());
     let mut describe_times = Vec::new();
+    let mut work = Work::default();
     let mut decisions = String::from("query_index,gate,matched_index,inliers,confidence,detail\n");
     for (index, path) in files.iter().enumerate() {
         let (w, h, rgb) = read_rgb(path)?;
@@ -289,6 +319,8 @@ pub fn run(args: &LoopsArgs) -> Result<()> {
             },
         )?;
         times.push(start.elapsed().as_secs_f64() * 1e3);
+        work.pair_checks += done.work.pair_checks;
+        work.pose_fits += done.work.pose_fits;
         *gates.entry(done.gate().name()).or_insert(0usize) += 1;
         write_decision(&mut decisions, index, done.hint.as_ref(), first_id);
         if let Some(hint) = done.accepted() {
@@ -306,6 +338,7 @@ pub fn run(args: &LoopsArgs) -> Result<()> {
         &hints,
         &gates,
         [&times, &describe_times],
+        work,
         files.len(),
         first_id,
     );
@@ -617,6 +650,7 @@ fn report(
     hints: &[(usize, LoopHint)],
     gates: &BTreeMap<&str, usize>,
     [times, describe_times]: [&[f64]; 2],
+    work: Work,
     frames: usize,
     first_id: u64,
 ) -> serde_json::Value {
@@ -629,6 +663,8 @@ fn report(
         "keyframe_ms_median": median,
         "keyframe_ms_p90": p90,
         "describe_ms_median": describe_median,
+        "pair_checks_mean": f64::from(work.pair_checks) / frames.max(1) as f64,
+        "pose_fits_mean": f64::from(work.pose_fits) / frames.max(1) as f64,
         "out": args.out.display().to_string(),
         "accepted": hints.iter().map(|(i, h)| json!({
             "query_index": i,

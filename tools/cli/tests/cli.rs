@@ -848,7 +848,7 @@ fn loops_follows_the_contract_online_and_against_a_map() {
     };
     refused(&["--intrinsics", &s(&bad)], "fy");
     refused(
-        &["--pair-ransac", "--pair-iterations", "0"],
+        &["--pair-estimator", "ransac", "--pair-iterations", "0"],
         "max_iterations",
     );
 }
