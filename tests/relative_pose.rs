@@ -1,7 +1,8 @@
 //! Relative poses for loop-closure hints on generated correspondences with pixel noise and
 //! outliers: metric with the matched keyframe's scene points, rotation and direction without;
 //! a 6x6 covariance in GTSAM Pose3 order that is symmetric, positive definite and grows as the
-//! inliers fall; pure rotation and too few matches are refused with the reason.
+//! inliers fall; pure rotation and too few matches are refused with the reason; a pose from
+//! a pair check's fit samples that fit's inliers only.
 
 mod common;
 
@@ -9,7 +10,8 @@ use common::correspondences::{keypoints, scene, truth, CAMERA};
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use topoloc::errors::VisionError;
 use topoloc::verify::{
-    essential_pose, relative_pose, PoseRefusal, RelativePose, RelativePoseOptions,
+    check_pair, essential_pose, fit_pair, relative_pose, relative_pose_from_fit, PairFit,
+    PairOptions, PoseRefusal, RelativePose, RelativePoseOptions,
 };
 
 fn rotation_error_deg(a: &Isometry3<f64>, b: &Isometry3<f64>) -> f64 {
@@ -125,5 +127,69 @@ fn pure_rotation_and_too_few_matches_are_refused() {
     assert!(
         matches!(short, Err(VisionError::InvalidArgument(ref m)) if m.contains("39 scene points")),
         "{short:?}"
+    );
+}
+
+#[test]
+fn a_pose_from_the_pair_fit_samples_its_inliers_and_counts_every_pair() {
+    let truth = truth();
+    let (q, m, s) = scene(150, 30, &truth, 1);
+    let (query, matched) = (keypoints(&q), keypoints(&m));
+    let options = RelativePoseOptions::default();
+    let pair = PairOptions::default();
+    let fit = fit_pair(query.as_ref(), matched.as_ref(), &pair).unwrap();
+    assert_eq!(fit.matches.len(), 150);
+    assert_eq!(
+        fit.check(),
+        check_pair(query.as_ref(), matched.as_ref(), &pair).unwrap()
+    );
+    let from_fit = |fit: &PairFit| {
+        relative_pose_from_fit(
+            query.as_ref(),
+            matched.as_ref(),
+            Some(&s),
+            fit,
+            &CAMERA,
+            &options,
+        )
+    };
+    let pose = from_fit(&fit).unwrap().expect("a pose");
+    assert!(
+        rotation_error_deg(&pose.matched_t_query, &truth) < 0.3,
+        "{pose:?}"
+    );
+    let dt = (pose.matched_t_query.translation.vector - truth.translation.vector).norm();
+    assert!(dt < 0.03, "translation off by {dt} m");
+    assert!(
+        (110..=125).contains(&pose.inliers),
+        "{} of 120 true",
+        pose.inliers
+    );
+    // Only the 30 outliers (the first correspondences) marked as the fit's inliers: sampling
+    // them finds no pose that the true pairs support.
+    let outliers_only = PairFit {
+        inliers: (0..150).map(|i| fit.matches[i][0] < 30).collect(),
+        ..fit.clone()
+    };
+    assert!(
+        matches!(
+            from_fit(&outliers_only).unwrap(),
+            Err(PoseRefusal::NoConsensus { .. })
+        ),
+        "the seed is what RANSAC samples"
+    );
+    // Too few marked to seed: every pair is sampled.
+    let none = PairFit {
+        inliers: vec![false; 150],
+        ..fit.clone()
+    };
+    assert!(from_fit(&none).unwrap().is_ok());
+    let foreign = PairFit {
+        matches: vec![[0, 999]; 150],
+        ..fit.clone()
+    };
+    assert!(
+        matches!(from_fit(&foreign), Err(VisionError::InvalidArgument(ref m)) if m.contains("pair fit")),
+        "a fit of other keypoints"
     );
 }

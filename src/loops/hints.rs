@@ -29,8 +29,8 @@ use super::database::{Added, DatabaseOptions, KeyframeDatabase, KeyframeEntry, L
 use super::error::LoopsError;
 use crate::map::{Map, PlaceId};
 use crate::verify::{
-    check_pair, relative_pose, FeatureKind, FundamentalEstimator, Keypoints, PairOptions,
-    PinholeCamera, PoseRefusal, RelativePose, RelativePoseOptions,
+    fit_pair, relative_pose_from_fit, FeatureKind, FundamentalEstimator, Keypoints, PairFit,
+    PairOptions, PinholeCamera, PoseRefusal, RelativePose, RelativePoseOptions,
 };
 use nalgebra::{Isometry3, Point3};
 use std::collections::HashMap;
@@ -410,9 +410,9 @@ impl LoopDetector {
         features: KeyframeFeatures,
     ) -> Result<Processed, LoopsError> {
         self.check_features(&features)?;
-        let mut work = Work::default();
-        let verified = self.verified_candidates(entry, &features, &mut work)?;
-        let (hint, streak) = match self.decide(entry, &features, &verified, &mut work)? {
+        let mut checks = Checks::default();
+        let verified = self.verified_candidates(entry, &features, &mut checks)?;
+        let (hint, streak) = match self.decide(entry, &features, &verified, &mut checks)? {
             None => (None, None),
             Some((best, Gated { gate, pose, streak })) => {
                 let hint = LoopHint {
@@ -432,7 +432,11 @@ impl LoopDetector {
             .get_or_insert(features.keypoints.descriptors.kind());
         self.features.insert(entry.id, features);
         self.streak = streak;
-        Ok(Processed { added, hint, work })
+        Ok(Processed {
+            added,
+            hint,
+            work: checks.work,
+        })
     }
 
     /// Removes a keyframe and its features (ORB-SLAM culls keyframes).
@@ -494,7 +498,7 @@ impl LoopDetector {
         &self,
         entry: &KeyframeEntry<'_>,
         features: &KeyframeFeatures,
-        work: &mut Work,
+        checks: &mut Checks,
     ) -> Result<Vec<Verified>, LoopsError> {
         let Some(max_id) = self.max_candidate_id(entry) else {
             return Ok(Vec::new());
@@ -507,7 +511,7 @@ impl LoopDetector {
         };
         let mut verified: Vec<Verified> = Vec::new();
         for candidate in self.database.loop_candidates(entry.descriptor, &query)? {
-            let Some(inliers) = self.inliers_with(features, candidate.keyframe_id, work)? else {
+            let Some(inliers) = self.inliers_with(features, candidate.keyframe_id, checks)? else {
                 continue;
             };
             verified.push(Verified {
@@ -539,7 +543,7 @@ impl LoopDetector {
         entry: &KeyframeEntry<'_>,
         features: &KeyframeFeatures,
         verified: &[Verified],
-        work: &mut Work,
+        checks: &mut Checks,
     ) -> Result<Option<(Verified, Gated)>, LoopsError> {
         let Some(&first) = verified.first() else {
             return Ok(None);
@@ -551,7 +555,7 @@ impl LoopDetector {
         };
         // The best candidate is refined before the inlier gate: its stretch may hold a
         // keyframe the query agrees with more.
-        let first = self.refine(entry, features, first, work)?;
+        let first = self.refine(entry, features, first, checks)?;
         if first.inliers < self.options.min_inliers {
             return Ok(Some((first, refused(Gate::TooFewInliers, None))));
         }
@@ -562,9 +566,9 @@ impl LoopDetector {
         for (i, &candidate) in std::iter::once(&first).chain(others).enumerate() {
             let refined = match i {
                 0 => candidate,
-                _ => self.refine(entry, features, candidate, work)?,
+                _ => self.refine(entry, features, candidate, checks)?,
             };
-            match self.geometry(entry, features, &refined, work)? {
+            match self.geometry(entry, features, &refined, checks)? {
                 Ok(pose) => {
                     let agreeing = match self.streak {
                         Some((place, n)) if self.database.groups_overlap(place, refined.place) => {
@@ -592,13 +596,14 @@ impl LoopDetector {
         Ok(first_refusal)
     }
 
-    /// GC inliers of the query against keyframe `id`; `None` when it has no features of the
-    /// query's kind (reloaded without keypoints, or another kind).
+    /// GC inliers of the query against keyframe `id` (checked once per query: the fit is kept
+    /// for the pose); `None` when it has no features of the query's kind (reloaded without
+    /// keypoints, or another kind).
     fn inliers_with(
         &self,
         features: &KeyframeFeatures,
         id: u64,
-        work: &mut Work,
+        checks: &mut Checks,
     ) -> Result<Option<u32>, LoopsError> {
         let Some(stored) = self.features.get(&id) else {
             return Ok(None);
@@ -607,14 +612,19 @@ impl LoopDetector {
         if stored.keypoints.descriptors.kind() != kind {
             return Ok(None);
         }
-        work.pair_checks += 1;
-        check_pair(
+        if let Some(fit) = checks.fits.get(&id) {
+            return Ok(Some(fit.check().inliers));
+        }
+        checks.work.pair_checks += 1;
+        let fit = fit_pair(
             features.keypoints.as_ref(),
             stored.keypoints.as_ref(),
             self.options.pair_for(kind),
         )
-        .map(|check| Some(check.inliers))
-        .map_err(|e| LoopsError::InvalidKeyframe(e.to_string()))
+        .map_err(|e| LoopsError::InvalidKeyframe(e.to_string()))?;
+        let inliers = fit.check().inliers;
+        checks.fits.insert(id, fit);
+        Ok(Some(inliers))
     }
 
     /// The largest id outside the exclusion window (`None`: no keyframe is): this session's
@@ -634,7 +644,7 @@ impl LoopDetector {
         entry: &KeyframeEntry<'_>,
         features: &KeyframeFeatures,
         best: Verified,
-        work: &mut Work,
+        checks: &mut Checks,
     ) -> Result<Verified, LoopsError> {
         let max_id = self.max_candidate_id(entry).unwrap_or(0);
         let mut refined = best;
@@ -655,7 +665,7 @@ impl LoopDetector {
         group.dedup();
         group.truncate(self.options.refine_keyframes);
         for id in group {
-            let Some(inliers) = self.inliers_with(features, id, work)? else {
+            let Some(inliers) = self.inliers_with(features, id, checks)? else {
                 continue;
             };
             if inliers > refined.inliers {
@@ -678,20 +688,26 @@ impl LoopDetector {
         entry: &KeyframeEntry<'_>,
         features: &KeyframeFeatures,
         candidate: &Verified,
-        work: &mut Work,
+        checks: &mut Checks,
     ) -> Result<Geometry, LoopsError> {
         let stored = &self.features[&candidate.id];
         let kind = features.keypoints.descriptors.kind();
         let Some(camera) = self.options.camera.filter(|_| kind != FeatureKind::Cells) else {
             return Ok(Ok(None));
         };
-        work.pose_fits += 1;
-        let fitted = relative_pose(
+        let Some(fit) = checks.fits.get(&candidate.id) else {
+            return Err(LoopsError::InvalidKeyframe(format!(
+                "keyframe {} reached the pose fit unchecked",
+                candidate.id
+            )));
+        };
+        checks.work.pose_fits += 1;
+        let fitted = relative_pose_from_fit(
             features.keypoints.as_ref(),
             stored.keypoints.as_ref(),
             stored.camera_points.as_deref(),
+            fit,
             &camera,
-            self.options.pair_for(kind).max_hamming,
             &self.options.pose,
         )
         .map_err(|e| LoopsError::InvalidKeyframe(e.to_string()))?;
@@ -762,6 +778,13 @@ impl LoopDetector {
             .world_t_camera(matched)?
             .map(|matched| matched.inverse() * query))
     }
+}
+
+/// The pair checks of one query: their fits, by keyframe id, and the work counted.
+#[derive(Default)]
+struct Checks {
+    fits: HashMap<u64, PairFit>,
+    work: Work,
 }
 
 /// A verified candidate.

@@ -85,6 +85,28 @@ pub struct PairCheck {
     pub inliers: u32,
 }
 
+/// The mutual matches of a pair and which of them the fitted fundamental matrix keeps: what
+/// [`check_pair`] counts, kept for a pose fit on the same matches
+/// ([`super::relative_pose_from_fit`]).
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct PairFit {
+    /// Mutual matches: `[query index, view index]`.
+    pub matches: Vec<[u32; 2]>,
+    /// Whether each match is a fundamental-matrix inlier (none with fewer than
+    /// [`MIN_MATCHES`] matches).
+    pub inliers: Vec<bool>,
+}
+
+impl PairFit {
+    /// The counts of the fit.
+    pub fn check(&self) -> PairCheck {
+        PairCheck {
+            matches: self.matches.len() as u32,
+            inliers: self.inliers.iter().filter(|&&i| i).count() as u32,
+        }
+    }
+}
+
 /// ORB descriptors as an OpenCV matrix borrowing them (one row of 32 bytes each).
 fn descriptor_mat(descriptors: &[Descriptor]) -> opencv::Result<BoxedRef<'_, Mat>> {
     Mat::new_rows_cols_with_data(
@@ -193,16 +215,26 @@ pub fn check_pair(
     view: KeypointsRef<'_>,
     options: &PairOptions,
 ) -> Result<PairCheck, VisionError> {
+    fit_pair(query, view, options).map(|fit| fit.check())
+}
+
+/// [`check_pair`] keeping the matches and the fit's inlier mask.
+pub fn fit_pair(
+    query: KeypointsRef<'_>,
+    view: KeypointsRef<'_>,
+    options: &PairOptions,
+) -> Result<PairFit, VisionError> {
     if query.points.len() < MIN_MATCHES || view.points.len() < MIN_MATCHES {
-        return Ok(PairCheck::default());
+        return Ok(PairFit::default());
     }
     let kept = mutual_matches(query, view, options.max_hamming)?;
-    let count = kept.len() as u32;
+    let matches: Vec<[u32; 2]> = kept
+        .iter()
+        .map(|m| [m.query_idx as u32, m.train_idx as u32])
+        .collect();
     if kept.len() < MIN_MATCHES {
-        return Ok(PairCheck {
-            matches: count,
-            inliers: 0,
-        });
+        let inliers = vec![false; matches.len()];
+        return Ok(PairFit { matches, inliers });
     }
     let point = |p: [f32; 2]| Point2f::new(p[0], p[1]);
     let from: Vector<Point2f> = kept
@@ -226,15 +258,12 @@ pub fn check_pair(
         options.max_iterations as i32,
         &mut mask,
     )?;
-    let inliers = if fundamental.empty() || mask.empty() {
-        0
+    let inliers = if fundamental.empty() || mask.total() != matches.len() {
+        vec![false; matches.len()]
     } else {
-        opencv::core::count_non_zero(&mask)? as u32
+        mask.data_bytes()?.iter().map(|&m| m != 0).collect()
     };
-    Ok(PairCheck {
-        matches: count,
-        inliers,
-    })
+    Ok(PairFit { matches, inliers })
 }
 
 /// Outcome of [`spatial_check`].

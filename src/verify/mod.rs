@@ -27,8 +27,8 @@ pub use cells::{cells_from_map, CELL_TAP, DEFAULT_CELLS};
 pub use depth::{camera_points_from_depth, DepthImage};
 pub use detector::FeatureDetector;
 pub use geometry::{
-    check_pair, spatial_check, FundamentalEstimator, PairCheck, PairOptions, SpatialCheck,
-    MIN_MATCHES,
+    check_pair, fit_pair, spatial_check, FundamentalEstimator, PairCheck, PairFit, PairOptions,
+    SpatialCheck, MIN_MATCHES,
 };
 pub use keypoints::{
     CellDescriptor, Descriptor, Descriptors, DescriptorsRef, FeatureKind, KeypointDetector,
@@ -36,7 +36,10 @@ pub use keypoints::{
     MAX_KEYPOINTS, XFEAT_DIM,
 };
 pub use pose::{locate, LocateOptions, Located, PinholeCamera, MIN_PAIRS};
-pub use relative::{essential_pose, relative_pose, PoseRefusal, RelativePose, RelativePoseOptions};
+pub use relative::{
+    essential_pose, relative_pose, relative_pose_from_fit, PoseRefusal, RelativePose,
+    RelativePoseOptions,
+};
 pub use xfeat::{XFeatDetector, XFeatOptions, DEFAULT_XFEAT_KEYPOINTS};
 
 /// Keypoints per view a map built from images stores by default, and a query detects.

@@ -152,12 +152,50 @@ pub(super) fn locate_pairs(
     camera: &PinholeCamera,
     options: &LocateOptions,
 ) -> Result<Option<Located>, VisionError> {
+    locate_pairs_seeded(image_points, object_points, None, camera, options)
+}
+
+/// [`locate_pairs`] sampling only the `seed` pairs (those already known to agree, e.g. a
+/// fundamental matrix's inliers): RANSAC on them stops after a few iterations where a run on
+/// every pair would exhaust its iterations on a wrong candidate. The pose is then refitted on
+/// every pair within the threshold, and `min_inliers` counts those. Seeds of fewer than
+/// [`MIN_PAIRS`] pairs sample every pair.
+pub(super) fn locate_pairs_seeded(
+    image_points: &Vector<Point2f>,
+    object_points: &Vector<Point3f>,
+    seed: Option<&[bool]>,
+    camera: &PinholeCamera,
+    options: &LocateOptions,
+) -> Result<Option<Located>, VisionError> {
     let needed = (options.min_inliers as usize).max(MIN_PAIRS);
     if object_points.len() < needed {
         return Ok(None);
     }
     let k = camera.matrix()?;
-    let Some(fit) = ransac_pose(object_points, image_points, &k, options)? else {
+    let seeded = seed.filter(|s| s.iter().filter(|&&x| x).count() >= MIN_PAIRS);
+    let fit = match seeded {
+        None => ransac_pose(object_points, image_points, &k, options)?,
+        Some(seed) => {
+            let pick = |i: usize| seed.get(i).copied().unwrap_or(false);
+            let object: Vector<Point3f> = (0..object_points.len())
+                .filter(|&i| pick(i))
+                .map(|i| object_points.get(i))
+                .collect::<opencv::Result<_>>()?;
+            let image: Vector<Point2f> = (0..image_points.len())
+                .filter(|&i| pick(i))
+                .map(|i| image_points.get(i))
+                .collect::<opencv::Result<_>>()?;
+            let sampled = LocateOptions {
+                min_inliers: MIN_PAIRS as u32,
+                ..options.clone()
+            };
+            match ransac_pose(&object, &image, &k, &sampled)? {
+                Some(fit) => widen(&fit, &k, image_points, object_points, camera, options)?,
+                None => None,
+            }
+        }
+    };
+    let Some(fit) = fit else {
         return Ok(None);
     };
     let count = fit.object_inliers.len() as u32;
@@ -265,6 +303,46 @@ fn ransac_pose(
     Ok(Some(PnpFit {
         rvec,
         tvec,
+        object_inliers,
+        image_inliers,
+    }))
+}
+
+/// The seeded fit refined on its inliers ([`refine_pose`]; OpenCV's own refit of the inliers
+/// can be poor on a plane), with every pair within `options.reprojection_px` of that pose (in
+/// front of the camera) as its inliers; `None` below `options.min_inliers`.
+fn widen(
+    fit: &PnpFit,
+    k: &Mat,
+    image_points: &Vector<Point2f>,
+    object_points: &Vector<Point3f>,
+    camera: &PinholeCamera,
+    options: &LocateOptions,
+) -> Result<Option<PnpFit>, VisionError> {
+    let Some((r, t)) = refine_pose(fit, k)? else {
+        return Ok(None);
+    };
+    let threshold = f64::from(options.reprojection_px);
+    let (mut object_inliers, mut image_inliers) = (Vector::new(), Vector::new());
+    for (p, q) in object_points.iter().zip(image_points.iter()) {
+        let c = r * Vector3::new(f64::from(p.x), f64::from(p.y), f64::from(p.z)) + t;
+        if c.z <= 1e-9 {
+            continue;
+        }
+        let du = camera.fx * c.x / c.z + camera.cx - f64::from(q.x);
+        let dv = camera.fy * c.y / c.z + camera.cy - f64::from(q.y);
+        if du.hypot(dv) <= threshold {
+            object_inliers.push(p);
+            image_inliers.push(q);
+        }
+    }
+    if (object_inliers.len() as u32) < options.min_inliers {
+        return Ok(None);
+    }
+    let column = |v: Vector3<f64>| Mat::from_slice(v.as_slice()).and_then(|m| m.try_clone());
+    Ok(Some(PnpFit {
+        rvec: column(r.scaled_axis())?,
+        tvec: column(t)?,
         object_inliers,
         image_inliers,
     }))

@@ -14,9 +14,9 @@
 //! Sampson distance does not see the translation's length, so a unit-variance prior (1 m^2)
 //! is added along the translation direction: hosts estimate the scale themselves.
 
-use super::geometry::mutual_matches;
+use super::geometry::{mutual_matches, PairFit};
 use super::keypoints::KeypointsRef;
-use super::pose::{locate_pairs, LocateOptions, PinholeCamera};
+use super::pose::{locate_pairs_seeded, LocateOptions, PinholeCamera};
 use crate::errors::VisionError;
 use nalgebra::{
     Isometry3, Matrix3, Matrix6, Point3, Rotation3, Translation3, UnitQuaternion, Vector2, Vector3,
@@ -131,30 +131,90 @@ pub fn relative_pose(
     max_hamming: u32,
     options: &RelativePoseOptions,
 ) -> Result<Result<RelativePose, PoseRefusal>, VisionError> {
-    if let Some(points) = matched_points {
-        return metric_pose(query, matched, points, camera, max_hamming, options);
+    let matches: Vec<[u32; 2]> = mutual_matches(query, matched, max_hamming)?
+        .iter()
+        .map(|m| [m.query_idx as u32, m.train_idx as u32])
+        .collect();
+    pose_of_matches(
+        query,
+        matched,
+        matched_points,
+        &matches,
+        None,
+        camera,
+        options,
+    )
+}
+
+/// [`relative_pose`] on the matches of a pair check already made ([`super::fit_pair`], same
+/// keypoints): no second matching, and the metric fit samples the fundamental matrix's
+/// inliers only (every match within the reprojection threshold then counts), so a candidate
+/// whose matches mostly disagree costs a few RANSAC iterations, not all of them. Without
+/// points, the essential matrix is fitted to every match as in [`relative_pose`]. A fit of
+/// other keypoints (indices out of range) is an invalid argument.
+pub fn relative_pose_from_fit(
+    query: KeypointsRef<'_>,
+    matched: KeypointsRef<'_>,
+    matched_points: Option<&[[f32; 3]]>,
+    fit: &PairFit,
+    camera: &PinholeCamera,
+    options: &RelativePoseOptions,
+) -> Result<Result<RelativePose, PoseRefusal>, VisionError> {
+    let in_range = |m: &[u32; 2]| {
+        (m[0] as usize) < query.points.len() && (m[1] as usize) < matched.points.len()
+    };
+    if fit.inliers.len() != fit.matches.len() || !fit.matches.iter().all(in_range) {
+        return Err(VisionError::InvalidArgument(
+            "the pair fit is not of these keypoints".into(),
+        ));
     }
-    let matches = mutual_matches(query, matched, max_hamming)?;
+    let seed = Some(fit.inliers.as_slice());
+    pose_of_matches(
+        query,
+        matched,
+        matched_points,
+        &fit.matches,
+        seed,
+        camera,
+        options,
+    )
+}
+
+/// The pose from given matches (`[query index, matched index]`, in range); `seed` marks the
+/// matches the metric fit samples (all when `None`).
+fn pose_of_matches(
+    query: KeypointsRef<'_>,
+    matched: KeypointsRef<'_>,
+    matched_points: Option<&[[f32; 3]]>,
+    matches: &[[u32; 2]],
+    seed: Option<&[bool]>,
+    camera: &PinholeCamera,
+    options: &RelativePoseOptions,
+) -> Result<Result<RelativePose, PoseRefusal>, VisionError> {
+    if let Some(points) = matched_points {
+        return metric_pose(query, matched, points, matches, seed, camera, options);
+    }
     let query_px: Vec<[f32; 2]> = matches
         .iter()
-        .map(|m| query.points[m.query_idx as usize])
+        .map(|m| query.points[m[0] as usize])
         .collect();
     let matched_px: Vec<[f32; 2]> = matches
         .iter()
-        .map(|m| matched.points[m.train_idx as usize])
+        .map(|m| matched.points[m[1] as usize])
         .collect();
     essential_pose(&query_px, &matched_px, camera, options)
 }
 
-/// The metric case: PnP against the matched keyframe's points (matched once, the pairs
-/// handed to the pose-fix solver), then the covariance from the reprojection residuals of the
-/// pairs within the threshold.
+/// The metric case: PnP against the matched keyframe's points (the matches' pairs handed to
+/// the pose-fix solver), then the covariance from the reprojection residuals of the pairs
+/// within the threshold.
 fn metric_pose(
     query: KeypointsRef<'_>,
     matched: KeypointsRef<'_>,
     points: &[[f32; 3]],
+    matches: &[[u32; 2]],
+    seed: Option<&[bool]>,
     camera: &PinholeCamera,
-    max_hamming: u32,
     options: &RelativePoseOptions,
 ) -> Result<Result<RelativePose, PoseRefusal>, VisionError> {
     let locate_options = LocateOptions {
@@ -169,17 +229,16 @@ fn metric_pose(
             matched.points.len()
         )));
     }
-    let matches = mutual_matches(query, matched, max_hamming)?;
-    let pairs: Vec<([f32; 2], [f32; 3])> = matches
+    // Pairs with a scene point, and whether each is in the seed.
+    let (pairs, seeded): (Vec<([f32; 2], [f32; 3])>, Vec<bool>) = matches
         .iter()
-        .map(|m| {
-            (
-                query.points[m.query_idx as usize],
-                points[m.train_idx as usize],
-            )
+        .enumerate()
+        .map(|(i, m)| {
+            let pair = (query.points[m[0] as usize], points[m[1] as usize]);
+            (pair, seed.is_none_or(|s| s[i]))
         })
-        .filter(|(_, p)| p[0].is_finite())
-        .collect();
+        .filter(|((_, p), _)| p[0].is_finite())
+        .unzip();
     if pairs.len() < options.min_inliers as usize {
         return Ok(Err(PoseRefusal::TooFewMatches {
             found: pairs.len() as u32,
@@ -193,7 +252,9 @@ fn metric_pose(
         .iter()
         .map(|(_, s)| Point3f::new(s[0], s[1], s[2]))
         .collect();
-    let Some(located) = locate_pairs(&image_points, &object_points, camera, &locate_options)?
+    let seed = seed.map(|_| seeded.as_slice());
+    let Some(located) =
+        locate_pairs_seeded(&image_points, &object_points, seed, camera, &locate_options)?
     else {
         return Ok(Err(PoseRefusal::NoConsensus { inliers: 0 }));
     };
