@@ -207,6 +207,62 @@ fn fits_are_chosen_per_feature_kind_and_refinement_is_bounded() {
     ));
 }
 
+/// Six look-alikes (more similar descriptors, another scene, 30 m away by odometry) fill the
+/// appearance candidates; the odometry proposes the true keyframe, which is accepted. Without
+/// odometry candidates it is never checked.
+#[test]
+fn the_odometry_proposes_a_revisit_appearance_ranks_low() {
+    for odometry_candidates in [0, 1] {
+        let mut detector = detector(HintOptions {
+            camera: Some(CAMERA),
+            consistent_keyframes: 1,
+            odometry_candidates,
+            ..options()
+        });
+        let (q, m, s) = scene(120, 20, &truth(), 9);
+        let (d_true, d_query) = (unit_vector(1, DIM), unit_vector(2, DIM));
+        let features = |points: &[[f32; 2]], scene: Option<Vec<[f32; 3]>>| KeyframeFeatures {
+            keypoints: keypoints(points),
+            camera_points: scene,
+        };
+        let posed = |id, descriptor, pose| KeyframeEntry {
+            world_t_body: Some(pose),
+            ..entry(id, descriptor)
+        };
+        detector
+            .process(
+                &posed(0, &d_true, Isometry3::identity()),
+                features(&m, Some(s)),
+            )
+            .unwrap();
+        let far = Isometry3::translation(30.0, 0.0, 0.0);
+        let alike: Vec<Vec<f32>> = (1..=6u64)
+            .map(|k| mix(&d_query, &unit_vector(100 + k, DIM), 0.3))
+            .collect();
+        for (k, d_alike) in (1..=6u64).zip(&alike) {
+            let (_, m_other, s_other) = scene(120, 20, &truth(), 100 + k);
+            detector
+                .process(
+                    &posed(2 * k, &d_alike, far),
+                    features(&m_other, Some(s_other)),
+                )
+                .unwrap();
+        }
+        let done = detector
+            .process(&posed(20, &d_query, truth()), features(&q, None))
+            .unwrap();
+        let hint = done.hint.expect("candidates");
+        match odometry_candidates {
+            0 => assert!(hint.matched_id != 0 && !hint.accepted(), "{hint:?}"),
+            _ => assert_eq!(
+                (hint.gate, hint.matched_id),
+                (Gate::Accepted, 0),
+                "{hint:?}"
+            ),
+        }
+    }
+}
+
 #[test]
 fn bad_features_and_duplicate_ids_change_nothing() {
     let mut detector = detector(options());

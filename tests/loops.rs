@@ -321,6 +321,75 @@ fn keyframes_record_the_distance_the_odometry_travelled() {
     assert_eq!(travelled(&unposed, 100), None);
 }
 
+/// Odometry candidates: this session's keyframes within the radius (which grows with the path
+/// travelled since each) and the angle, nearest first, recent ones excluded; none reloaded.
+#[test]
+fn nearby_candidates_are_the_keyframes_the_odometry_puts_close() {
+    let mut db = KeyframeDatabase::new(identity(), DatabaseOptions::default()).unwrap();
+    let turned = Isometry3::from_parts(
+        Translation3::new(1.0, 0.0, 0.0),
+        UnitQuaternion::from_scaled_axis(Vector3::z() * 90f64.to_radians()),
+    );
+    // 0 and 1 near the origin (1 turned away), 2 and 3 far out, 4 back near the origin.
+    let route = [
+        at(0.5, 0.0),
+        turned,
+        at(40.0, 0.0),
+        at(40.0, 40.0),
+        at(2.5, 0.0),
+    ];
+    for (i, pose) in route.iter().enumerate() {
+        db.add(&entry(i as u64, &scene(i, 0), Some(*pose))).unwrap();
+    }
+    let d = scene(9, 0);
+    let query = |radius: &dyn Fn(f64) -> f64, max_id| {
+        let q = LoopQuery {
+            max_results: 3,
+            max_id: Some(max_id),
+            ..Default::default()
+        };
+        db.nearby_candidates(&d, &at(0.0, 0.0), radius, 30.0, &q)
+            .unwrap()
+            .iter()
+            .map(|m| m.keyframe_id)
+            .collect::<Vec<_>>()
+    };
+    assert_eq!(
+        query(&|_| 3.0, 10),
+        [0, 4],
+        "nearest first, the turned one left out"
+    );
+    assert_eq!(query(&|_| 3.0, 3), [0], "recent keyframes excluded");
+    assert_eq!(query(&|_| 1.0, 10), [0]);
+    // The path from keyframe 0 (0.5 m away) is long; from 4 (2.5 m away) short.
+    assert_eq!(query(&|travelled| 0.01 * travelled, 10), [0]);
+    let own = db
+        .nearby_candidates(
+            &scene(0, 0),
+            &at(0.0, 0.0),
+            |_| 3.0,
+            30.0,
+            &LoopQuery::default(),
+        )
+        .unwrap();
+    assert_eq!(own[0].keyframe_id, 0);
+    assert!(own[0].similarity > 0.99, "the descriptor's cosine: {own:?}");
+    assert!(own[1].similarity < 0.5, "{own:?}");
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("near.topoloc");
+    db.save(&path).unwrap();
+    let map = Map::load(&path, &LoadOptions::default()).unwrap();
+    let reloaded = KeyframeDatabase::from_map(&map, DatabaseOptions::default()).unwrap();
+    let none = reloaded
+        .nearby_candidates(&d, &at(0.0, 0.0), |_| 100.0, 180.0, &LoopQuery::default())
+        .unwrap();
+    assert!(none.is_empty(), "another session's odometry: {none:?}");
+    assert!(matches!(
+        db.nearby_candidates(&d[..3], &at(0.0, 0.0), |_| 3.0, 30.0, &LoopQuery::default()),
+        Err(LoopsError::Descriptor(_))
+    ));
+}
+
 /// A bad keyframe: its name, the entry, and the error it must get.
 type BadKeyframe<'a> = (&'static str, KeyframeEntry<'a>, fn(&LoopsError) -> bool);
 

@@ -521,6 +521,53 @@ impl KeyframeDatabase {
             .map(|(last, travelled)| travelled + (position - last).norm())
     }
 
+    /// Loop candidates by odometry, for revisits that appearance ranks low (LIO-SAM proposes
+    /// its loops by a radius search the same way): this session's keyframes that `query`
+    /// allows (its `max_results`, `max_id` and `before_timestamp`; not its id gap) whose
+    /// camera lies within `radius_m(path length travelled since that keyframe)` of
+    /// `world_t_camera` and faces within `max_angle_deg` of it, nearest first (ties by id).
+    /// `similarity` is the query descriptor's cosine to each. Empty without poses.
+    pub fn nearby_candidates(
+        &self,
+        descriptor: &[f32],
+        world_t_camera: &Isometry3<f64>,
+        radius_m: impl Fn(f64) -> f64,
+        max_angle_deg: f64,
+        query: &LoopQuery,
+    ) -> Result<Vec<Match>, LoopsError> {
+        let mut unit = Vec::with_capacity(self.dim());
+        normalize_descriptor_into(descriptor, self.dim(), &mut unit)?;
+        let here = Point3::from(world_t_camera.translation.vector);
+        let Some(travelled_here) = self.travelled_to(&here) else {
+            return Ok(Vec::new());
+        };
+        let max_angle = max_angle_deg.to_radians();
+        let mut near: Vec<(f64, usize)> = self
+            .records
+            .iter()
+            .enumerate()
+            .filter(|(_, r)| query.max_id.is_none_or(|m| r.id <= m))
+            .filter(|(_, r)| query.before_timestamp.is_none_or(|t| r.timestamp < t))
+            .filter_map(|(i, r)| {
+                let (pose, travelled) = (r.world_t_camera?, r.travelled_m?);
+                let distance = (pose.translation.vector - here.coords).norm();
+                let turned = pose.rotation.angle_to(&world_t_camera.rotation);
+                (distance <= radius_m(travelled_here - travelled) && turned <= max_angle)
+                    .then_some((distance, i))
+            })
+            .collect();
+        near.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+        Ok(near
+            .into_iter()
+            .take(query.max_results)
+            .map(|(_, i)| Match {
+                keyframe_id: self.records[i].id,
+                place: self.records[i].place,
+                similarity: dot(self.row(i), &unit),
+            })
+            .collect())
+    }
+
     /// True when places `a` and `b` are the same or linked.
     pub fn same_or_linked(&self, a: PlaceId, b: PlaceId) -> bool {
         a == b || self.edges.contains(&(a.min(b), a.max(b)))

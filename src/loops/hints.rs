@@ -1,7 +1,9 @@
 //! Verified loop-closure hints: for each new keyframe, the database's loop candidates (recent
 //! keyframes excluded, at most one per stretch of `candidate_id_gap` consecutive ids, so that
-//! one look-alike stretch cannot fill every slot) are checked geometrically against the
-//! keyframe's local features, and a candidate becomes a hint only when it passes every gate:
+//! one look-alike stretch cannot fill every slot), with host odometry also the keyframes
+//! nearest its odometry pose that the odometry gate could pass, are checked geometrically
+//! against the keyframe's local features, and a candidate becomes a hint only when it passes
+//! every gate:
 //!
 //! 1. a candidate exists outside the exclusion window ([`Gate::NoCandidate`]);
 //! 2. the candidate with the most fundamental-matrix inliers, refined within its group (the
@@ -25,7 +27,7 @@
 //! it, so the host can log why no loop was closed. Errors (bad features, keyframes out of
 //! order, duplicate ids) leave the detector exactly as it was.
 
-use super::database::{Added, DatabaseOptions, KeyframeDatabase, KeyframeEntry, LoopQuery};
+use super::database::{Added, DatabaseOptions, KeyframeDatabase, KeyframeEntry, LoopQuery, Match};
 use super::error::LoopsError;
 use crate::map::{Map, PlaceId};
 use crate::verify::{
@@ -93,9 +95,18 @@ pub struct HintOptions {
     /// The same for dense cells: MAGSAC++ at 1.5 px, 1,000 iterations by default (the fit
     /// that re-ranked Gardens Point best; RANSAC 200 lost recall there, BENCHMARKS.md).
     pub cells_pair: PairOptions,
+    /// Candidates proposed by the odometry besides appearance's: the keyframes nearest the
+    /// new one's odometry camera position that could pass the odometry gate (within its
+    /// translation bound plus `odometry_search_m`, facing within its rotation bound), this
+    /// session's only; needs poses and the odometry gate. 0 = none. Default 1.
+    pub odometry_candidates: usize,
+    /// How much farther than the odometry gate's translation bound an odometry candidate may
+    /// be: the two cameras' true distance at a loop (metres, >= 0). Default 2.
+    pub odometry_search_m: f64,
     /// Keyframes of a candidate's group (its place, the linked places, its stretch) checked
-    /// when it is refined, nearest in id first; 0 = no refinement. Default 2 (the recall of 5
-    /// on generated train and tr-t revisits with 0.6 times the checks; 0 lost recall).
+    /// when it is refined, nearest in id first; 0 = no refinement. Default 5 (2 kept the
+    /// recall on bright generated train revisits with 0.6 times the checks, but lost it in dim
+    /// light and on Gardens Point, BENCHMARKS.md).
     pub refine_keyframes: usize,
     /// Intrinsics of the camera (the same for every keyframe); without them hints have no pose.
     pub camera: Option<PinholeCamera>,
@@ -123,7 +134,9 @@ impl Default for HintOptions {
                 max_iterations: 1000,
                 ..PairOptions::default()
             },
-            refine_keyframes: 2,
+            odometry_candidates: 1,
+            odometry_search_m: 2.0,
+            refine_keyframes: 5,
             camera: None,
             pose: RelativePoseOptions::default(),
         }
@@ -174,6 +187,15 @@ impl HintOptions {
         }
         if let Some(camera) = &self.camera {
             camera.validate().map_err(LoopsError::InvalidOption)?;
+        }
+        if self.odometry_candidates > 64 {
+            return bad(format!(
+                "odometry_candidates is {}, must lie in 0..=64",
+                self.odometry_candidates
+            ));
+        }
+        if !(self.odometry_search_m.is_finite() && self.odometry_search_m >= 0.0) {
+            return bad("odometry_search_m must be finite and >= 0".into());
         }
         if self.refine_keyframes > 64 {
             return bad(format!(
@@ -509,8 +531,17 @@ impl LoopDetector {
             before_timestamp: Some(entry.timestamp - self.options.exclude_recent_s),
             min_id_gap: self.options.candidate_id_gap,
         };
+        let mut candidates = self.database.loop_candidates(entry.descriptor, &query)?;
+        for nearby in self.odometry_candidates(entry, &query)? {
+            if candidates
+                .iter()
+                .all(|c| c.keyframe_id != nearby.keyframe_id)
+            {
+                candidates.push(nearby);
+            }
+        }
         let mut verified: Vec<Verified> = Vec::new();
-        for candidate in self.database.loop_candidates(entry.descriptor, &query)? {
+        for candidate in candidates {
             let Some(inliers) = self.inliers_with(features, candidate.keyframe_id, checks)? else {
                 continue;
             };
@@ -532,6 +563,37 @@ impl LoopDetector {
         // Stable: among equal inliers, the more similar (earlier) candidate stays first.
         verified.sort_by_key(|v| std::cmp::Reverse(v.inliers));
         Ok(verified)
+    }
+
+    /// The odometry's candidates ([`HintOptions::odometry_candidates`]); none without a pose or
+    /// the odometry gate.
+    fn odometry_candidates(
+        &self,
+        entry: &KeyframeEntry<'_>,
+        query: &LoopQuery,
+    ) -> Result<Vec<Match>, LoopsError> {
+        let (Some(gate), Some(pose)) = (self.options.odometry, entry.world_t_camera()) else {
+            return Ok(Vec::new());
+        };
+        if self.options.odometry_candidates == 0 {
+            return Ok(Vec::new());
+        }
+        let near = LoopQuery {
+            max_results: self.options.odometry_candidates,
+            ..*query
+        };
+        let radius = |travelled: f64| {
+            gate.max_translation_m
+                + gate.max_translation_per_m * travelled
+                + self.options.odometry_search_m
+        };
+        self.database.nearby_candidates(
+            entry.descriptor,
+            &pose,
+            radius,
+            gate.max_rotation_deg,
+            &near,
+        )
     }
 
     /// Runs the gates over the verified candidates: those with enough inliers, most first,

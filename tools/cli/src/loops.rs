@@ -132,6 +132,14 @@ pub struct LoopsArgs {
     /// 1000 for cells].
     #[arg(long)]
     pub pair_iterations: Option<u32>,
+    /// With `--poses`: candidates proposed by the odometry (the keyframes nearest the new
+    /// one's odometry pose that could pass the odometry gate) besides appearance's.
+    #[arg(long, default_value_t = HintOptions::default().odometry_candidates)]
+    pub odometry_candidates: usize,
+    /// With `--poses`: how much farther than the odometry bound an odometry candidate may be,
+    /// metres.
+    #[arg(long, default_value_t = HintOptions::default().odometry_search_m)]
+    pub odometry_search_m: f64,
     /// Keyframes of the best candidate's group checked to refine it (0: none).
     #[arg(long, default_value_t = HintOptions::default().refine_keyframes)]
     pub refine_keyframes: usize,
@@ -242,6 +250,8 @@ pub fn run(args: &LoopsArgs) -> Result<()> {
         }),
         pair: pair_options(args, HintOptions::default().pair),
         cells_pair: pair_options(args, HintOptions::default().cells_pair),
+        odometry_candidates: args.odometry_candidates,
+        odometry_search_m: args.odometry_search_m,
         refine_keyframes: args.refine_keyframes,
         pose: RelativePoseOptions {
             min_inliers: args.pose_min_inliers,
