@@ -61,9 +61,10 @@
  * 1.1: image maps; 1.2: verification; 1.3: metric mode; 1.4: `topoloc_abi_version_minor`,
  * `topoloc_status_name`; 1.5: loop closure (`topoloc_loop_detector_*`); 1.6: pose fixes
  * (camera intrinsics in the localizer options, `topoloc_map_with_keypoint_points`); 1.7:
- * metric hints (the odometry bound's drift rate, the pose fit's reprojection threshold).
+ * metric hints (the odometry bound's drift rate, the pose fit's reprojection threshold); 1.8:
+ * loop candidates from the odometry (`odometry_candidates`, `odometry_search_m`).
  */
-#define TOPOLOC_ABI_VERSION_MINOR 7
+#define TOPOLOC_ABI_VERSION_MINOR 8
 
 /**
  * Result of every fallible C function. Values are grouped in ranges and never renumbered;
@@ -882,6 +883,17 @@ typedef struct topoloc_loop_options {
    * (> 0). Default 5.
    */
   double pose_reprojection_px;
+  /**
+   * How much farther than the odometry translation bound an odometry candidate may lie,
+   * metres (>= 0). Default 2.
+   */
+  double odometry_search_m;
+  /**
+   * Candidates proposed by the odometry besides appearance's: the keyframes nearest the new
+   * one's odometry pose that could pass the odometry gate (this session's; needs poses and
+   * `odometry_gate`), 0..=64; 0 = none. Default 1.
+   */
+  uint32_t odometry_candidates;
 } topoloc_loop_options;
 
 /**

@@ -207,6 +207,56 @@ fn fits_are_chosen_per_feature_kind_and_refinement_is_bounded() {
     ));
 }
 
+/// Two keyframes with the same features pass every geometric gate; the more similar one's
+/// odometry pose lies 1.5 m off (within a 2 m bound): the one the odometry agrees with wins.
+#[test]
+fn among_passing_candidates_the_odometry_picks_the_one_it_agrees_with() {
+    let mut detector = detector(HintOptions {
+        camera: Some(CAMERA),
+        consistent_keyframes: 1,
+        odometry: Some(OdometryGate {
+            max_translation_m: 2.0,
+            ..OdometryGate::default()
+        }),
+        odometry_candidates: 0,
+        ..options()
+    });
+    let (q, m, s) = scene(120, 20, &truth(), 9);
+    let (d_true, d_query) = (unit_vector(1, DIM), unit_vector(2, DIM));
+    let d_alike = mix(&d_query, &d_true, 0.1);
+    let posed = |id, descriptor, pose| KeyframeEntry {
+        world_t_body: Some(pose),
+        ..entry(id, descriptor)
+    };
+    let matched = || KeyframeFeatures {
+        keypoints: keypoints(&m),
+        camera_points: Some(s.clone()),
+    };
+    detector
+        .process(&posed(0, &d_true, Isometry3::identity()), matched())
+        .unwrap();
+    detector
+        .process(
+            &posed(10, &d_alike, Isometry3::translation(0.0, 1.5, 0.0)),
+            matched(),
+        )
+        .unwrap();
+    let query = KeyframeFeatures {
+        keypoints: keypoints(&q),
+        camera_points: None,
+    };
+    let hint = detector
+        .process(&posed(20, &d_query, truth()), query)
+        .unwrap()
+        .hint
+        .unwrap();
+    assert_eq!(
+        (hint.gate, hint.matched_id),
+        (Gate::Accepted, 0),
+        "{hint:?}"
+    );
+}
+
 /// Six look-alikes (more similar descriptors, another scene, 30 m away by odometry) fill the
 /// appearance candidates; the odometry proposes the true keyframe, which is accepted. Without
 /// odometry candidates it is never checked.

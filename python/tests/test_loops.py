@@ -105,6 +105,7 @@ def test_options_defaults():
     assert d["place_spacing_m"] == 2.0 and d["neighbour_radius_m"] == 3.0
     assert d["candidate_id_gap"] == 10
     assert d["odometry_max_translation_per_m"] == 0.02 and d["pose_reprojection_px"] == 5.0
+    assert d["odometry_candidates"] == 1 and d["odometry_search_m"] == 2.0
     with topoloc.LoopDetector("test", "loops", DIM) as det:
         assert det.options == d and det.dim == DIM
     with topoloc.LoopDetector("test", "loops", DIM, min_inliers=40, odometry_gate=False, fx=None) as det:

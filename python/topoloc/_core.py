@@ -1798,6 +1798,8 @@ _LOOP_OPTION_KINDS = {
     "candidate_id_gap": "u64",
     "odometry_max_translation_per_m": "float",
     "pose_reprojection_px": "float",
+    "odometry_search_m": "float",
+    "odometry_candidates": "u32",
 }
 
 
@@ -1900,7 +1902,9 @@ class LoopDetector(_SingleThreaded):
     ``fx``, ``fy``, ``cx``, ``cy`` (pixels; ``fx == 0``: none, hints carry no pose), and the
     place graph's ``novelty_similarity``, ``place_spacing_m``, ``neighbour_radius_m``, and
     ``candidate_id_gap`` (candidates from different stretches of ids; 0: off), and
-    ``pose_reprojection_px`` (the metric pose fit's inlier threshold, pixels). Invalid
+    ``pose_reprojection_px`` (the metric pose fit's inlier threshold, pixels), and
+    ``odometry_candidates`` and ``odometry_search_m`` (keyframes the odometry puts near the new
+    one, checked besides appearance's candidates; 0: none). Invalid
     options raise :class:`InvalidOptionError`, unknown names ``TypeError``.
 
     Ownership: owns a C ``topoloc_loop_detector`` handle, released by :meth:`close`, the

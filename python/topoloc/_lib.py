@@ -48,7 +48,7 @@ ABI_VERSION = 1
 
 #: ABI minor version these bindings were written for (``TOPOLOC_ABI_VERSION_MINOR``): they use
 #: items up to "ABI 1.N" of the header.
-ABI_VERSION_MINOR = 7
+ABI_VERSION_MINOR = 8
 
 #: Environment variable naming the shared library to load.
 ENV_VAR = "TOPOLOC_LIBRARY"
@@ -341,6 +341,9 @@ class topoloc_loop_options(Structure):
         # ABI 1.7
         ("odometry_max_translation_per_m", c_double),
         ("pose_reprojection_px", c_double),
+        # ABI 1.8
+        ("odometry_search_m", c_double),
+        ("odometry_candidates", c_uint32),
     ]
 
 

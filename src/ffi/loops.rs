@@ -100,14 +100,23 @@ pub struct topoloc_loop_options {
     /// Reprojection threshold of the metric pose fit against a keyframe's 3D points, pixels
     /// (> 0). Default 5.
     pub pose_reprojection_px: f64,
+    // ABI 1.8 (topoloc 0.1): candidates from the odometry.
+    /// How much farther than the odometry translation bound an odometry candidate may lie,
+    /// metres (>= 0). Default 2.
+    pub odometry_search_m: f64,
+    /// Candidates proposed by the odometry besides appearance's: the keyframes nearest the new
+    /// one's odometry pose that could pass the odometry gate (this session's; needs poses and
+    /// `odometry_gate`), 0..=64; 0 = none. Default 1.
+    pub odometry_candidates: u32,
 }
 
 impl Versioned for topoloc_loop_options {
     /// ABI 1.5 ended before `candidate_id_gap`, ABI 1.6 before
-    /// `odometry_max_translation_per_m`.
+    /// `odometry_max_translation_per_m`, ABI 1.7 before `odometry_search_m`.
     const LAYOUTS: &'static [usize] = &[
         std::mem::offset_of!(Self, candidate_id_gap),
         std::mem::offset_of!(Self, odometry_max_translation_per_m),
+        std::mem::offset_of!(Self, odometry_search_m),
         std::mem::size_of::<Self>(),
     ];
 }
@@ -136,6 +145,8 @@ impl Default for topoloc_loop_options {
             candidate_id_gap: h.candidate_id_gap,
             odometry_max_translation_per_m: gate.max_translation_per_m,
             pose_reprojection_px: h.pose.reprojection_px,
+            odometry_search_m: h.odometry_search_m,
+            odometry_candidates: h.odometry_candidates as u32,
         }
     }
 }
@@ -174,6 +185,8 @@ fn loop_options(
             max_translation_per_m: o.odometry_max_translation_per_m,
         }),
         camera,
+        odometry_candidates: o.odometry_candidates as usize,
+        odometry_search_m: o.odometry_search_m,
         pose: RelativePoseOptions {
             reprojection_px: o.pose_reprojection_px,
             ..RelativePoseOptions::default()

@@ -18,7 +18,9 @@
 //!
 //!    a candidate refused by gate 3 or 4 gives way to the next with enough inliers (most
 //!    first, each refined), so a look-alike with more inliers than the true match does not
-//!    hide it when geometry or odometry can tell them apart;
+//!    hide it when geometry or odometry can tell them apart; with odometry, every candidate
+//!    with enough inliers is tried and the passing one the odometry agrees with most is kept
+//!    (a look-alike stretch a few metres on can pass the drift bound beside the true one);
 //! 5. the candidates that passed 2-4 for the last `consistent_keyframes` keyframes agree: each
 //!    one's group (its place and the linked places) shares a place with the previous one's
 //!    ([`Gate::Inconsistent`], ORB-SLAM's consistency groups on the place graph).
@@ -341,9 +343,19 @@ pub struct LoopDetector {
 /// The place consecutive keyframes' best candidates agreed on, and how many in a row.
 type Streak = Option<(PlaceId, usize)>;
 
-/// The geometric gates' verdict on one candidate: its pose (`None` without intrinsics or with
-/// cells), or the refusing gate with the pose if one was fitted.
-type Geometry = Result<Option<RelativePose>, (Gate, Option<RelativePose>)>;
+/// The geometric gates' verdict on one candidate: passed, or the refusing gate with the pose
+/// if one was fitted.
+type Geometry = Result<Passed, (Gate, Option<RelativePose>)>;
+
+/// A candidate that passed the geometric gates.
+#[derive(Clone, Copy)]
+struct Passed {
+    /// Its pose (`None` without intrinsics or with cells).
+    pose: Option<RelativePose>,
+    /// How far the pose's translation is from the odometry's, metres, when the odometry gate
+    /// compared them.
+    odometry_m: Option<f64>,
+}
 
 /// What the gates decided for the best candidate.
 struct Gated {
@@ -622,6 +634,7 @@ impl LoopDetector {
             return Ok(Some((first, refused(Gate::TooFewInliers, None))));
         }
         let mut first_refusal = None;
+        let mut chosen: Option<(Verified, Passed)> = None;
         let others = verified[1..]
             .iter()
             .take_while(|v| v.inliers >= self.options.min_inliers);
@@ -631,31 +644,44 @@ impl LoopDetector {
                 _ => self.refine(entry, features, candidate, checks)?,
             };
             match self.geometry(entry, features, &refined, checks)? {
-                Ok(pose) => {
-                    let agreeing = match self.streak {
-                        Some((place, n)) if self.database.groups_overlap(place, refined.place) => {
-                            n + 1
-                        }
-                        _ => 1,
+                Ok(passed) => {
+                    // With odometry, the passing candidate it agrees with most: a look-alike
+                    // stretch a few metres on passes the bound after a long drift, and the
+                    // true keyframe beside it agrees better. Without, the most inliers.
+                    let Some(disagreement) = passed.odometry_m else {
+                        chosen = Some((refined, passed));
+                        break;
                     };
-                    let gate = if agreeing < self.options.consistent_keyframes {
-                        Gate::Inconsistent { agreeing }
-                    } else {
-                        Gate::Accepted
-                    };
-                    let gated = Gated {
-                        gate,
-                        pose,
-                        streak: Some((refined.place, agreeing)),
-                    };
-                    return Ok(Some((refined, gated)));
+                    let better = chosen.as_ref().is_none_or(|(_, best)| {
+                        best.odometry_m.is_some_and(|best| disagreement < best)
+                    });
+                    if better {
+                        chosen = Some((refined, passed));
+                    }
                 }
                 Err((gate, pose)) => {
                     first_refusal.get_or_insert((refined, refused(gate, pose)));
                 }
             }
         }
-        Ok(first_refusal)
+        let Some((refined, passed)) = chosen else {
+            return Ok(first_refusal);
+        };
+        let agreeing = match self.streak {
+            Some((place, n)) if self.database.groups_overlap(place, refined.place) => n + 1,
+            _ => 1,
+        };
+        let gate = if agreeing < self.options.consistent_keyframes {
+            Gate::Inconsistent { agreeing }
+        } else {
+            Gate::Accepted
+        };
+        let gated = Gated {
+            gate,
+            pose: passed.pose,
+            streak: Some((refined.place, agreeing)),
+        };
+        Ok(Some((refined, gated)))
     }
 
     /// GC inliers of the query against keyframe `id` (checked once per query: the fit is kept
@@ -755,7 +781,10 @@ impl LoopDetector {
         let stored = &self.features[&candidate.id];
         let kind = features.keypoints.descriptors.kind();
         let Some(camera) = self.options.camera.filter(|_| kind != FeatureKind::Cells) else {
-            return Ok(Ok(None));
+            return Ok(Ok(Passed {
+                pose: None,
+                odometry_m: None,
+            }));
         };
         let Some(fit) = checks.fits.get(&candidate.id) else {
             return Err(LoopsError::InvalidKeyframe(format!(
@@ -804,8 +833,15 @@ impl LoopDetector {
                 };
                 return Ok(Err((gate, Some(pose))));
             }
+            return Ok(Ok(Passed {
+                pose: Some(pose),
+                odometry_m: Some(translation_m),
+            }));
         }
-        Ok(Ok(Some(pose)))
+        Ok(Ok(Passed {
+            pose: Some(pose),
+            odometry_m: None,
+        }))
     }
 
     /// The odometry's path length from the matched keyframe to the new one, when both belong

@@ -3619,6 +3619,8 @@ static void test_loop_closure(void)
     CHECK(options.odometry_max_translation_m == 1.0 &&
           options.odometry_max_translation_per_m == 0.02 &&
           options.pose_reprojection_px == 5.0); /* ABI 1.7 */
+    CHECK(topoloc_abi_version_minor() >= 8 && options.odometry_candidates == 1u &&
+          options.odometry_search_m == 2.0); /* ABI 1.8 */
     {
         /* A caller of ABI 1.5 gets the 1.6 fields' defaults. */
         topoloc_loop_options old;
@@ -3635,6 +3637,18 @@ static void test_loop_closure(void)
         /* A caller of ABI 1.6 gets the 1.7 fields' defaults; a bad 1.7 field is refused. */
         old.struct_size = offsetof(topoloc_loop_options, odometry_max_translation_per_m);
         old.pose_reprojection_px = -1.0;
+        CHECK_STATUS(topoloc_loop_detector_new("test", "loops", LOOP_DIM, &old, &old_det),
+                     TOPOLOC_OK);
+        topoloc_loop_detector_free(old_det);
+        old_det = NULL;
+        old.struct_size = sizeof old;
+        CHECK_STATUS(topoloc_loop_detector_new("test", "loops", LOOP_DIM, &old, &old_det),
+                     TOPOLOC_ERR_INVALID_OPTION);
+        CHECK(old_det == NULL);
+        /* A caller of ABI 1.7 gets the 1.8 fields' defaults; a bad 1.8 field is refused. */
+        CHECK_STATUS(topoloc_loop_options_default(&old), TOPOLOC_OK);
+        old.odometry_candidates = 65u;
+        old.struct_size = offsetof(topoloc_loop_options, odometry_search_m);
         CHECK_STATUS(topoloc_loop_detector_new("test", "loops", LOOP_DIM, &old, &old_det),
                      TOPOLOC_OK);
         topoloc_loop_detector_free(old_det);
