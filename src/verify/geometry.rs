@@ -140,14 +140,13 @@ pub(crate) fn mutual_matches(
 }
 
 /// Mutual nearest neighbours of quantised unit descriptors (XFeat, cells): one faer product
-/// gives every cosine, then each query row's best view column is kept when that column's best
-/// row is the same.
+/// gives every (scaled) cosine, then one pass over it, column by column as faer stores it,
+/// finds each query row's best view column and each column's best row; a pair is kept when
+/// each is the other's best (the first on ties).
 fn cosine_matches<const DIM: usize>(query: &[[i8; DIM]], view: &[[i8; DIM]]) -> Vec<DMatch> {
+    // Unscaled: the products are 127^2 times the cosines, which keeps the ranking.
     let to_f32 = |rows: &[[i8; DIM]]| -> Vec<f32> {
-        rows.as_flattened()
-            .iter()
-            .map(|&v| f32::from(v) / 127.0)
-            .collect()
+        rows.as_flattened().iter().map(|&v| f32::from(v)).collect()
     };
     let (q, v) = (to_f32(query), to_f32(view));
     let lhs = MatRef::from_row_major_slice(&q, query.len(), DIM);
@@ -161,29 +160,29 @@ fn cosine_matches<const DIM: usize>(query: &[[i8; DIM]], view: &[[i8; DIM]]) -> 
         1.0f32,
         Par::Seq,
     );
-    let best_of_row: Vec<usize> = (0..query.len())
-        .map(|i| argmax((0..view.len()).map(|j| sim[(i, j)])))
-        .collect();
+    let mut best_of_row = vec![(0usize, f32::NEG_INFINITY); query.len()];
     let best_of_col: Vec<usize> = (0..view.len())
-        .map(|j| argmax((0..query.len()).map(|i| sim[(i, j)])))
+        .map(|j| {
+            let column = sim.col(j);
+            let mut best = (0, f32::NEG_INFINITY);
+            for (i, &x) in column.iter().enumerate() {
+                if x > best.1 {
+                    best = (i, x);
+                }
+                if x > best_of_row[i].1 {
+                    best_of_row[i] = (j, x);
+                }
+            }
+            best.0
+        })
         .collect();
+    let scale = 1.0 / (127.0f32 * 127.0);
     best_of_row
         .iter()
         .enumerate()
-        .filter(|&(i, &j)| best_of_col[j] == i)
-        .map(|(i, &j)| DMatch::new(i as i32, j as i32, 1.0 - sim[(i, j)]).expect("plain struct"))
+        .filter(|&(i, &(j, _))| best_of_col[j] == i)
+        .map(|(i, &(j, x))| DMatch::new(i as i32, j as i32, 1.0 - x * scale).expect("plain struct"))
         .collect()
-}
-
-/// Index of the largest value (the first on ties); 0 for an empty sequence.
-fn argmax(values: impl Iterator<Item = f32>) -> usize {
-    let mut best = (0, f32::NEG_INFINITY);
-    for (i, x) in values.enumerate() {
-        if x > best.1 {
-            best = (i, x);
-        }
-    }
-    best.0
 }
 
 /// Mutual nearest ORB neighbours (OpenCV's brute-force cross-check) within `max_hamming` bits.
