@@ -293,7 +293,7 @@ fn the_odometry_proposes_a_revisit_appearance_ranks_low() {
             let (_, m_other, s_other) = scene(120, 20, &truth(), 100 + k);
             detector
                 .process(
-                    &posed(2 * k, &d_alike, far),
+                    &posed(2 * k, d_alike, far),
                     features(&m_other, Some(s_other)),
                 )
                 .unwrap();

@@ -205,6 +205,9 @@ fn pose_of_matches(
     essential_pose(&query_px, &matched_px, camera, options)
 }
 
+/// A query pixel and the matched keyframe's scene point it sees (matched camera frame).
+type PixelScene = ([f32; 2], [f32; 3]);
+
 /// The metric case: PnP against the matched keyframe's points (the matches' pairs handed to
 /// the pose-fix solver), then the covariance from the reprojection residuals of the pairs
 /// within the threshold.
@@ -230,7 +233,7 @@ fn metric_pose(
         )));
     }
     // Pairs with a scene point, and whether each is in the seed.
-    let (pairs, seeded): (Vec<([f32; 2], [f32; 3])>, Vec<bool>) = matches
+    let (pairs, seeded): (Vec<PixelScene>, Vec<bool>) = matches
         .iter()
         .enumerate()
         .map(|(i, m)| {
@@ -259,10 +262,10 @@ fn metric_pose(
         return Ok(Err(PoseRefusal::NoConsensus { inliers: 0 }));
     };
     let pose = located.world_t_optical;
-    let residual = |pose: &Isometry3<f64>, (pixel, scene): &([f32; 2], [f32; 3])| {
+    let residual = |pose: &Isometry3<f64>, (pixel, scene): &PixelScene| {
         reprojection(camera, pose, pixel, scene)
     };
-    let inliers: Vec<&([f32; 2], [f32; 3])> = pairs
+    let inliers: Vec<&PixelScene> = pairs
         .iter()
         .filter(|pair| residual(&pose, pair).is_some_and(|r| r.norm() <= options.reprojection_px))
         .collect();

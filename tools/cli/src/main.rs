@@ -81,7 +81,7 @@ enum Command {
     EvalVerify(verify_eval::VerifyEvalArgs),
     /// Loop-closure hints over an image sequence (online graph growth, or a second session
     /// against --map): accepted hints to a CSV, gate counts and latency.
-    Loops(loops::LoopsArgs),
+    Loops(Box<loops::LoopsArgs>),
     /// Generate world K of a split, build its graph and map (saved as OUT/map.topoloc) and write
     /// query trajectories as dataset folders OUT/traj-00i for `eval --dataset`.
     Simulate(simulate::SimulateArgs),
