@@ -51,6 +51,23 @@ fn features(image: &[u8]) -> KeyframeFeatures {
     }
 }
 
+/// Keyframe `id` with the body's odometry pose.
+fn posed(id: u64, descriptor: &[f32], pose: Isometry3<f64>) -> KeyframeEntry<'_> {
+    KeyframeEntry {
+        world_t_body: Some(pose),
+        ..entry(id, descriptor)
+    }
+}
+
+/// Features of generated correspondences (see `common::correspondences`), with their scene
+/// points when the keyframe has them.
+fn point_features(points: &[[f32; 2]], scene: Option<Vec<[f32; 3]>>) -> KeyframeFeatures {
+    KeyframeFeatures {
+        keypoints: keypoints(points),
+        camera_points: scene,
+    }
+}
+
 fn entry(id: u64, descriptor: &[f32]) -> KeyframeEntry<'_> {
     KeyframeEntry {
         id,
@@ -224,14 +241,7 @@ fn among_passing_candidates_the_odometry_picks_the_one_it_agrees_with() {
     let (q, m, s) = scene(120, 20, &truth(), 9);
     let (d_true, d_query) = (unit_vector(1, DIM), unit_vector(2, DIM));
     let d_alike = mix(&d_query, &d_true, 0.1);
-    let posed = |id, descriptor, pose| KeyframeEntry {
-        world_t_body: Some(pose),
-        ..entry(id, descriptor)
-    };
-    let matched = || KeyframeFeatures {
-        keypoints: keypoints(&m),
-        camera_points: Some(s.clone()),
-    };
+    let matched = || point_features(&m, Some(s.clone()));
     detector
         .process(&posed(0, &d_true, Isometry3::identity()), matched())
         .unwrap();
@@ -241,12 +251,8 @@ fn among_passing_candidates_the_odometry_picks_the_one_it_agrees_with() {
             matched(),
         )
         .unwrap();
-    let query = KeyframeFeatures {
-        keypoints: keypoints(&q),
-        camera_points: None,
-    };
     let hint = detector
-        .process(&posed(20, &d_query, truth()), query)
+        .process(&posed(20, &d_query, truth()), point_features(&q, None))
         .unwrap()
         .hint
         .unwrap();
@@ -271,18 +277,10 @@ fn the_odometry_proposes_a_revisit_appearance_ranks_low() {
         });
         let (q, m, s) = scene(120, 20, &truth(), 9);
         let (d_true, d_query) = (unit_vector(1, DIM), unit_vector(2, DIM));
-        let features = |points: &[[f32; 2]], scene: Option<Vec<[f32; 3]>>| KeyframeFeatures {
-            keypoints: keypoints(points),
-            camera_points: scene,
-        };
-        let posed = |id, descriptor, pose| KeyframeEntry {
-            world_t_body: Some(pose),
-            ..entry(id, descriptor)
-        };
         detector
             .process(
                 &posed(0, &d_true, Isometry3::identity()),
-                features(&m, Some(s)),
+                point_features(&m, Some(s)),
             )
             .unwrap();
         let far = Isometry3::translation(30.0, 0.0, 0.0);
@@ -294,12 +292,12 @@ fn the_odometry_proposes_a_revisit_appearance_ranks_low() {
             detector
                 .process(
                     &posed(2 * k, d_alike, far),
-                    features(&m_other, Some(s_other)),
+                    point_features(&m_other, Some(s_other)),
                 )
                 .unwrap();
         }
         let done = detector
-            .process(&posed(20, &d_query, truth()), features(&q, None))
+            .process(&posed(20, &d_query, truth()), point_features(&q, None))
             .unwrap();
         let hint = done.hint.expect("candidates");
         match odometry_candidates {
@@ -376,33 +374,22 @@ fn metric_revisit_via(
     });
     let (q, m, s) = scene(120, 20, &truth(), 9);
     let d = unit_vector(1, DIM);
-    let with_pose = |id, pose| KeyframeEntry {
-        world_t_body: Some(pose),
-        ..entry(id, &d)
-    };
-    let matched = KeyframeFeatures {
-        keypoints: keypoints(&m),
-        camera_points: Some(s),
-    };
     detector
-        .process(&with_pose(0, Isometry3::identity()), matched)
+        .process(
+            &posed(0, &d, Isometry3::identity()),
+            point_features(&m, Some(s)),
+        )
         .unwrap();
     for (i, &pose) in via.iter().enumerate() {
         let id = i as u64 + 1;
         let other = unit_vector(100 + id, DIM);
-        let passing = KeyframeEntry {
-            world_t_body: Some(pose),
-            ..entry(id, &other)
-        };
         detector
-            .process(&passing, KeyframeFeatures::default())
+            .process(&posed(id, &other, pose), KeyframeFeatures::default())
             .unwrap();
     }
-    let query = KeyframeFeatures {
-        keypoints: keypoints(&q),
-        camera_points: None,
-    };
-    let done = detector.process(&with_pose(10, query_pose), query).unwrap();
+    let done = detector
+        .process(&posed(10, &d, query_pose), point_features(&q, None))
+        .unwrap();
     done.hint.expect("keyframe 0 is the candidate")
 }
 
@@ -480,18 +467,10 @@ fn a_look_alike_refused_by_odometry_gives_way_to_the_true_keyframe() {
     let (q, m, s) = scene(120, 20, &truth(), 9);
     let (d_true, d_query) = (unit_vector(1, DIM), unit_vector(2, DIM));
     let d_alike = mix(&d_query, &d_true, 0.1);
-    let features = |points: &[[f32; 2]], scene: Option<Vec<[f32; 3]>>| KeyframeFeatures {
-        keypoints: keypoints(points),
-        camera_points: scene,
-    };
-    let posed = |id, descriptor, pose| KeyframeEntry {
-        world_t_body: Some(pose),
-        ..entry(id, descriptor)
-    };
     detector
         .process(
             &posed(0, &d_true, Isometry3::identity()),
-            features(&m, Some(s.clone())),
+            point_features(&m, Some(s.clone())),
         )
         .unwrap();
     let far = Isometry3::from_parts(
@@ -499,10 +478,10 @@ fn a_look_alike_refused_by_odometry_gives_way_to_the_true_keyframe() {
         UnitQuaternion::from_scaled_axis(Vector3::z() * 90f64.to_radians()),
     );
     detector
-        .process(&posed(10, &d_alike, far), features(&m, Some(s)))
+        .process(&posed(10, &d_alike, far), point_features(&m, Some(s)))
         .unwrap();
     let done = detector
-        .process(&posed(20, &d_query, truth()), features(&q, None))
+        .process(&posed(20, &d_query, truth()), point_features(&q, None))
         .unwrap();
     let candidates = detector
         .database()

@@ -10,7 +10,9 @@
 use super::geometry::mutual_matches;
 use super::keypoints::KeypointsRef;
 use crate::errors::VisionError;
-use nalgebra::{Isometry3, Matrix3, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{
+    Isometry3, Matrix3, Point3, Rotation3, Translation3, UnitQuaternion, Vector2, Vector3,
+};
 use opencv::calib3d;
 use opencv::core::{
     Mat, Point2f, Point3f, TermCriteria, TermCriteria_COUNT, TermCriteria_EPS, Vector,
@@ -50,6 +52,12 @@ impl PinholeCamera {
             }
         }
         Ok(())
+    }
+
+    /// The pixel of a point in the camera's optical frame; `None` behind the camera.
+    pub fn project(&self, p: &Vector3<f64>) -> Option<Vector2<f64>> {
+        (p.z > 1e-9)
+            .then(|| Vector2::new(self.fx * p.x / p.z + self.cx, self.fy * p.y / p.z + self.cy))
     }
 
     fn matrix(&self) -> opencv::Result<Mat> {
@@ -326,12 +334,11 @@ fn widen(
     let (mut object_inliers, mut image_inliers) = (Vector::new(), Vector::new());
     for (p, q) in object_points.iter().zip(image_points.iter()) {
         let c = r * Vector3::new(f64::from(p.x), f64::from(p.y), f64::from(p.z)) + t;
-        if c.z <= 1e-9 {
-            continue;
-        }
-        let du = camera.fx * c.x / c.z + camera.cx - f64::from(q.x);
-        let dv = camera.fy * c.y / c.z + camera.cy - f64::from(q.y);
-        if du.hypot(dv) <= threshold {
+        let seen = Vector2::new(f64::from(q.x), f64::from(q.y));
+        if camera
+            .project(&c)
+            .is_some_and(|px| (px - seen).norm() <= threshold)
+        {
             object_inliers.push(p);
             image_inliers.push(q);
         }

@@ -297,12 +297,8 @@ fn reprojection(
         f64::from(scene[1]),
         f64::from(scene[2]),
     ));
-    (p.z > 1e-9).then(|| {
-        Vector2::new(
-            camera.fx * p.x / p.z + camera.cx - f64::from(pixel[0]),
-            camera.fy * p.y / p.z + camera.cy - f64::from(pixel[1]),
-        )
-    })
+    let seen = Vector2::new(f64::from(pixel[0]), f64::from(pixel[1]));
+    camera.project(&p.coords).map(|px| px - seen)
 }
 
 /// The unscaled case from pixel correspondences (`query_px[i]` matches `matched_px[i]`).

@@ -3599,6 +3599,21 @@ static void loop_descriptor(float *d, int scene)
         d[i] = (i == scene % LOOP_DIM) ? 1.0f : 0.05f * (float)i;
 }
 
+/* `old` holds a bad value in a field at or beyond `size`: a caller of that older layout gets
+ * the default there (the detector is made), a caller of the whole struct is refused. */
+static void check_loop_fields_beyond(topoloc_loop_options *old, size_t size)
+{
+    topoloc_loop_detector *det = NULL;
+    old->struct_size = size;
+    CHECK_STATUS(topoloc_loop_detector_new("test", "loops", LOOP_DIM, old, &det), TOPOLOC_OK);
+    topoloc_loop_detector_free(det);
+    det = NULL;
+    old->struct_size = sizeof *old;
+    CHECK_STATUS(topoloc_loop_detector_new("test", "loops", LOOP_DIM, old, &det),
+                 TOPOLOC_ERR_INVALID_OPTION);
+    CHECK(det == NULL);
+}
+
 static void test_loop_closure(void)
 {
     topoloc_loop_options options;
@@ -3635,28 +3650,13 @@ static void test_loop_closure(void)
         CHECK_STATUS(topoloc_loop_detector_new("test", "loops", LOOP_DIM, &old, &old_det),
                      TOPOLOC_ERR_STRUCT_SIZE);
         /* A caller of ABI 1.6 gets the 1.7 fields' defaults; a bad 1.7 field is refused. */
-        old.struct_size = offsetof(topoloc_loop_options, odometry_max_translation_per_m);
         old.pose_reprojection_px = -1.0;
-        CHECK_STATUS(topoloc_loop_detector_new("test", "loops", LOOP_DIM, &old, &old_det),
-                     TOPOLOC_OK);
-        topoloc_loop_detector_free(old_det);
-        old_det = NULL;
-        old.struct_size = sizeof old;
-        CHECK_STATUS(topoloc_loop_detector_new("test", "loops", LOOP_DIM, &old, &old_det),
-                     TOPOLOC_ERR_INVALID_OPTION);
-        CHECK(old_det == NULL);
+        check_loop_fields_beyond(&old,
+                                 offsetof(topoloc_loop_options, odometry_max_translation_per_m));
         /* A caller of ABI 1.7 gets the 1.8 fields' defaults; a bad 1.8 field is refused. */
         CHECK_STATUS(topoloc_loop_options_default(&old), TOPOLOC_OK);
         old.odometry_candidates = 65u;
-        old.struct_size = offsetof(topoloc_loop_options, odometry_search_m);
-        CHECK_STATUS(topoloc_loop_detector_new("test", "loops", LOOP_DIM, &old, &old_det),
-                     TOPOLOC_OK);
-        topoloc_loop_detector_free(old_det);
-        old_det = NULL;
-        old.struct_size = sizeof old;
-        CHECK_STATUS(topoloc_loop_detector_new("test", "loops", LOOP_DIM, &old, &old_det),
-                     TOPOLOC_ERR_INVALID_OPTION);
-        CHECK(old_det == NULL);
+        check_loop_fields_beyond(&old, offsetof(topoloc_loop_options, odometry_search_m));
     }
     options.exclude_recent_ids = 5;
     options.exclude_recent_s = 0.0;
