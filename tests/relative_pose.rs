@@ -194,8 +194,14 @@ fn the_pinhole_projects_points_in_front_and_refuses_those_behind() {
     let px = CAMERA
         .project(&Vector3::new(0.5, -0.25, 2.0))
         .expect("in front");
-    assert!((px.x - (CAMERA.fx * 0.25 + CAMERA.cx)).abs() < 1e-12, "{px}");
-    assert!((px.y - (CAMERA.cy - CAMERA.fy * 0.125)).abs() < 1e-12, "{px}");
+    assert!(
+        (px.x - (CAMERA.fx * 0.25 + CAMERA.cx)).abs() < 1e-12,
+        "{px}"
+    );
+    assert!(
+        (px.y - (CAMERA.cy - CAMERA.fy * 0.125)).abs() < 1e-12,
+        "{px}"
+    );
     assert_eq!(CAMERA.project(&Vector3::new(0.0, 0.0, -1.0)), None);
     assert_eq!(CAMERA.project(&Vector3::new(1.0, 1.0, 0.0)), None);
 }
