@@ -115,6 +115,16 @@ impl Estimator {
         }
     }
 
+    /// Redoes the current frame's off-map update with the likelihood ratio `off_over_on` (see
+    /// [`Belief::replace_off_map_evidence`]); every mode's off-map state is the graph filter's.
+    pub fn replace_off_map_evidence(&mut self, off_over_on: f64) {
+        match self {
+            Estimator::Graph(graph) | Estimator::Metric { graph, .. } => {
+                graph.replace_off_map_evidence(off_over_on)
+            }
+        }
+    }
+
     /// Weighs the particles by a metric position of the camera (a pose fix); the graph filter
     /// has no positions to weigh.
     pub fn weigh_by_position(&mut self, position: &Point3<f64>) {

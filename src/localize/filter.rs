@@ -29,7 +29,10 @@
 //! unrelated places would score in this frame: `mean + (sqrt(2 ln M) + margin) * std` of the
 //! frame's place scores without the best one (the expected maximum of M Gaussian draws plus
 //! `off_map_margin` standard deviations), never below the absolute floor `off_map_similarity`.
-//! Maps with fewer than [`MIN_PLACES_FOR_BACKGROUND`] places use the floor alone.
+//! Maps with fewer than [`MIN_PLACES_FOR_BACKGROUND`] places use the floor alone. With
+//! geometric verification on, the localizer redoes this update with the verification inliers'
+//! likelihood ratio instead ([`Belief::replace_off_map_evidence`]): the appearance scores of a
+//! building's look-alike places do not tell on-map from off-map frames, the inliers do.
 //!
 //! Single-frame mode skips the prediction and starts every frame from the initial prior.
 
@@ -87,6 +90,9 @@ pub(crate) struct Belief {
     pub places: Vec<f64>,
     /// Posterior probability that the robot is off the map.
     pub off_map: f64,
+    /// The off-map probability predicted for the current frame, before its evidence: what
+    /// [`Belief::replace_off_map_evidence`] starts from.
+    predicted_off_map: f64,
     scratch: Vec<f64>,
     turned: Vec<f64>,
 }
@@ -107,6 +113,7 @@ impl Belief {
             prior,
             places: vec![0.0; m],
             off_map: 0.0,
+            predicted_off_map: 0.0,
             headings,
             speeds,
         }
@@ -120,6 +127,7 @@ impl Belief {
             self.states[h * s..(h + 1) * s].fill(p);
         }
         self.off_map = params.off_map_probability;
+        self.predicted_off_map = self.off_map;
     }
 
     /// Moves the belief one frame along the graph (step 1 of the module documentation).
@@ -195,6 +203,7 @@ impl Belief {
             .iter()
             .fold(f32::NEG_INFINITY, |a, &b| a.max(b)) as f64;
         let off_score = off_map_score(params, place_scores, max_score);
+        self.predicted_off_map = self.off_map;
         let s = self.speeds;
         // Predicted place marginals first: the off-map filter weighs them with its own
         // temperature, against the off-map score (both shifted by the larger of the two).
@@ -266,11 +275,26 @@ impl Belief {
         self.weigh_and_normalise(params);
     }
 
+    /// Redoes the current frame's off-map update with other evidence: `off_over_on`, the
+    /// likelihood ratio of the frame off the map against on it (positive, finite), in place of
+    /// the appearance scores' (geometric verification, which tells the two apart where global
+    /// descriptors cannot; BENCHMARKS.md).
+    pub fn replace_off_map_evidence(&mut self, off_over_on: f64) {
+        let off = self.predicted_off_map * off_over_on;
+        let on = 1.0 - self.predicted_off_map;
+        self.off_map = if off + on > 0.0 && off.is_finite() {
+            off / (off + on)
+        } else {
+            1.0
+        };
+    }
+
     /// Copies the belief into `backup` (same shape), to undo a frame that fails half-way.
     pub fn save(&self, backup: &mut Belief) {
         backup.states.copy_from_slice(&self.states);
         backup.places.copy_from_slice(&self.places);
         backup.off_map = self.off_map;
+        backup.predicted_off_map = self.predicted_off_map;
     }
 
     /// Multiplies every state by the likelihood of its place (held in `places`) and returns the

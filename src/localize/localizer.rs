@@ -150,6 +150,12 @@ impl Localizer {
         Ok(out)
     }
 
+    /// True when verification uses the map's dense cells: frames must then carry their image
+    /// and no descriptor, since the localizer's own forward pass gives both.
+    pub fn wants_image_only(&self) -> bool {
+        self.verifier.as_ref().is_some_and(Verifier::wants_cells)
+    }
+
     /// Processes one frame, writing into `out` (reusing its candidate buffer). Validates the
     /// whole frame before touching any state, so an error leaves the localizer unchanged.
     /// Cost: one pass over the descriptor matrix plus O(places + edges); in metric mode also

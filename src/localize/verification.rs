@@ -1,6 +1,6 @@
 //! Stage 5 of a frame: geometric verification of the most probable places against the query
-//! image ([`crate::verify`]), the belief weighed by their inliers, and the pose fix of the
-//! best-verified view.
+//! image ([`crate::verify`]), the belief weighed by their inliers, the off-map decision taken
+//! from them, and the pose fix of the best-verified view.
 
 use super::estimator::Estimator;
 use super::filter::FilterParams;
@@ -17,6 +17,10 @@ use crate::verify::{
 };
 use nalgebra::Point3;
 
+/// Largest off-map log-likelihood ratio one frame's inliers give (a frame with no inlier at
+/// all is strong evidence, not certainty).
+const MAX_LOG_RATIO: f64 = 50.0;
+
 /// State of geometric verification: the query detector, the per-place results of the current
 /// frame, and a copy of the estimator to restore if a check fails half-way.
 pub(super) struct Verifier {
@@ -29,6 +33,9 @@ pub(super) struct Verifier {
     views: Vec<ViewId>,
     /// The pose fix of the current frame.
     fix: Option<PoseFix>,
+    /// The most inliers at which a frame is as likely off the map as on it (0: appearance
+    /// decides); the options' value or the map's feature kind's default.
+    off_map_inliers: f32,
     backup: Estimator,
 }
 
@@ -63,6 +70,9 @@ impl Verifier {
             checked: Vec::with_capacity(options.candidates),
             views: Vec::new(),
             fix: None,
+            off_map_inliers: options
+                .off_map_inliers
+                .unwrap_or_else(|| keypoints.kind().default_off_map_inliers()),
             backup: estimator.clone(),
         })
     }
@@ -132,6 +142,7 @@ impl Verifier {
     ) -> Result<(), LocalizeError> {
         let keypoints = map.keypoints().expect("checked at construction");
         self.check_candidates(map, keypoints, options, estimator, scratch)?;
+        self.weigh_off_map(options, estimator);
         self.weigh_by_inliers(options, params, estimator);
         for &(place, inliers, view) in &self.checked {
             if inliers > 0 {
@@ -186,6 +197,18 @@ impl Verifier {
             self.checked.push((place, best.0, best.1));
         }
         Ok(())
+    }
+
+    /// The frame's off-map update from the most inliers among the checked places, in place of
+    /// the appearance scores' (unless the threshold is 0).
+    fn weigh_off_map(&self, options: &VerificationOptions, estimator: &mut Estimator) {
+        if self.off_map_inliers <= 0.0 || self.checked.is_empty() {
+            return;
+        }
+        let most = self.checked.iter().map(|c| c.1).max().unwrap_or(0);
+        let log_ratio = (f64::from(self.off_map_inliers) - f64::from(most))
+            / f64::from(options.off_map_inlier_scale);
+        estimator.replace_off_map_evidence(log_ratio.min(MAX_LOG_RATIO).exp());
     }
 
     /// Multiplies each place's belief by exp(weight * inliers), unchecked places counting 0.

@@ -53,6 +53,17 @@ impl FeatureKind {
             FeatureKind::Cells => "cells",
         }
     }
+
+    /// The default [`super::VerificationOptions::off_map_inliers`] for maps of this kind: 26
+    /// for XFeat and cells (chosen on generated train worlds with XFeat, BENCHMARKS.md,
+    /// "Off-map flags"); 0 (appearance decides) for ORB, whose inliers do not tell right
+    /// places from wrong ones on real images.
+    pub fn default_off_map_inliers(self) -> f32 {
+        match self {
+            FeatureKind::Orb => 0.0,
+            FeatureKind::XFeat | FeatureKind::Cells => 26.0,
+        }
+    }
 }
 
 /// The descriptors of a set of keypoints, all of one kind, one per point.

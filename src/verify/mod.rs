@@ -84,7 +84,21 @@ pub struct VerificationOptions {
     pub camera: Option<PinholeCamera>,
     /// The pose fit against the best-verified view.
     pub locate: LocateOptions,
+    /// Off-map evidence from the checks: the most inliers (or s-GC evidence) among the checked
+    /// places at which a frame is as likely off the map as on it. The frame's off-map update
+    /// then uses the likelihood ratio `exp((off_map_inliers - most) / off_map_inlier_scale)`
+    /// in place of the appearance scores'. `Some(0.0)` leaves the off-map decision to
+    /// appearance. Default `None`: the map's feature kind's
+    /// ([`FeatureKind::default_off_map_inliers`]).
+    pub off_map_inliers: Option<f32>,
+    /// Inliers per e-fold of that likelihood ratio (> 0). Default
+    /// [`DEFAULT_OFF_MAP_INLIER_SCALE`].
+    pub off_map_inlier_scale: f32,
 }
+
+/// Default [`VerificationOptions::off_map_inlier_scale`]; chosen with the XFeat threshold
+/// (BENCHMARKS.md, "Off-map flags").
+pub const DEFAULT_OFF_MAP_INLIER_SCALE: f32 = 4.0;
 
 impl Default for VerificationOptions {
     fn default() -> Self {
@@ -98,6 +112,8 @@ impl Default for VerificationOptions {
             score: VerificationScore::default(),
             camera: None,
             locate: LocateOptions::default(),
+            off_map_inliers: None,
+            off_map_inlier_scale: DEFAULT_OFF_MAP_INLIER_SCALE,
         }
     }
 }
@@ -132,6 +148,17 @@ impl VerificationOptions {
         }
         if !(self.inlier_weight.is_finite() && self.inlier_weight >= 0.0) {
             return Err("verification.inlier_weight must be finite and >= 0".into());
+        }
+        if let Some(n) = self
+            .off_map_inliers
+            .filter(|n| !(n.is_finite() && *n >= 0.0))
+        {
+            return Err(format!(
+                "verification.off_map_inliers is {n}, must be finite and >= 0"
+            ));
+        }
+        if !(self.off_map_inlier_scale.is_finite() && self.off_map_inlier_scale > 0.0) {
+            return Err("verification.off_map_inlier_scale must be finite and > 0".into());
         }
         if !(1..=MAX_KEYPOINTS).contains(&self.query_keypoints) {
             return Err(format!(

@@ -2,12 +2,15 @@
 //! (topoloc-sim), builds its graph from the voxel skeleton, captures four yaw views per place and
 //! builds the map (ONNX backend when scripts/setup-models.sh has run, else VLAD, saying which),
 //! flies a query trajectory under another lighting condition, localizes every frame single-frame,
-//! with the filter, with the filter plus drifting odometry, and in metric mode (particles moved by
-//! that odometry), and prints the seed's metrics
-//! (MNA, OHA, R@1, R@5), precision-recall, calibration, latency and peak memory. It writes a PNG:
+//! with the filter, with the filter plus drifting odometry, in metric mode (particles moved by
+//! that odometry), and with the filter, odometry and geometric verification of the top places
+//! (XFeat keypoints when their model is set up), and prints the seed's metrics
+//! (MNA, OHA, R@1, R@5), precision-recall, calibration, off-map flags on the flight and on frames
+//! from another world ([`crate::off_world`]), latency and peak memory. It writes a PNG:
 //! the world from above with the graph, the trajectory and the predicted vs true place.
 
 use crate::backend_args::Backend;
+use crate::off_world::{off_world_flags, off_world_frames, OffWorldFlags, SETTLE_FRAMES};
 use crate::process::{median_and_p90, resident_memory_mib};
 use crate::progress::StepBars;
 use crate::scenario_args::{choose_backend, scenario_options, CaptureArgs};
@@ -17,11 +20,16 @@ use serde_json::json;
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::Instant;
+use topoloc::describe::onnx::cache_dir;
+use topoloc::describe::BackendConfig;
 use topoloc::describe::DescriberOptions;
 use topoloc::eval::{calibration, precision_recall, GraphEvaluator, HopDistances, Prediction};
 use topoloc::image::ImageView;
 use topoloc::map::{LoadOptions, PlaceId};
+use topoloc::verify::xfeat::DEFAULT_XFEAT_MODEL_FILE;
+use topoloc::verify::{FeatureKind, VerificationOptions};
 use topoloc::{Frame, Localization, Localizer, LocalizerOptions, Map, Mode};
+use topoloc_sim::capture::image_view;
 use topoloc_sim::render::ConditionKind;
 use topoloc_sim::scenario::{build_scene, describe_flight, fly};
 use topoloc_sim::style::Style;
@@ -72,6 +80,8 @@ pub(crate) struct ConfigResult {
     pub ece: f64,
     /// Share of frames flagged off-map.
     pub off_map_rate: f64,
+    /// How frames from another world were flagged (configurations tested on them).
+    pub off_world: Option<OffWorldFlags>,
     pub ms_median: f64,
     pub ms_p90: f64,
     /// Predicted place per frame.
@@ -108,6 +118,10 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         args.rate_hz,
     );
     options.trajectory.seed = args.seed.wrapping_add(1);
+    let (features, features_note) =
+        demo_features(args.capture.local_features, &options.map.backend);
+    options.map.features = features;
+    say(format!("local features of the map: {features_note}"));
 
     let bars = StepBars::new(args.json);
     let start = Instant::now();
@@ -169,22 +183,60 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         options.odometry.scale_error * 100.0
     ));
 
+    let elsewhere = WorldParams {
+        floors: 1,
+        rooms_per_floor: args.rooms,
+        ..WorldParams::from_style(args.seed.wrapping_add(1), Style::lab())
+    };
+    let off_world = off_world_frames(
+        &map,
+        &elsewhere,
+        &options,
+        OFF_WORLD_FRAMES,
+        &|step, done, total| bars.report(step, done, total),
+    )?;
+    bars.finish();
+    say(format!(
+        "off-world test: {OFF_WORLD_FRAMES} frames from a '{}' world after the first {LEAD_IN} of the flight (filter+odometry configurations)",
+        off_world.style
+    ));
+
     let hops = HopDistances::from_map(&map);
+    let images: Vec<ImageView<'_>> = flight.images.iter().map(image_view).collect();
     let configs = [
-        ("single-frame", Mode::SingleFrame, false),
-        ("filter", Mode::Filter, false),
-        ("filter+odometry", Mode::Filter, true),
-        ("metric+odometry", Mode::Metric, true),
+        ("single-frame", Mode::SingleFrame, false, false),
+        ("filter", Mode::Filter, false, false),
+        ("filter+odometry", Mode::Filter, true, false),
+        ("metric+odometry", Mode::Metric, true, false),
+        ("filter+odometry+verification", Mode::Filter, true, true),
     ];
     let mut results = Vec::new();
-    for (name, mode, odometry) in configs {
+    for (name, mode, odometry, verify) in configs {
         let options = LocalizerOptions {
             mode,
+            verification: VerificationOptions::with_candidates(if verify {
+                VERIFIED_PLACES
+            } else {
+                0
+            }),
             ..LocalizerOptions::default()
         };
-        results.push(evaluate(
-            name, &map, &sequence, &hops, options, odometry, None,
-        )?);
+        let given = verify.then_some(images.as_slice());
+        let mut result = evaluate(
+            name,
+            &map,
+            &sequence,
+            &hops,
+            options.clone(),
+            odometry,
+            given,
+        )?;
+        if mode == Mode::Filter && odometry {
+            result.off_world = Some(off_world_flags(
+                &map, options, &sequence, given, LEAD_IN, &off_world, odometry,
+            )?);
+        }
+        results.push(result);
     }
     let (describe_median, _) = median_and_p90(&describe_ms);
     let (_, peak_rss) = resident_memory_mib().unwrap_or((0.0, 0.0));
@@ -204,6 +256,8 @@ pub fn run(args: &DemoArgs) -> Result<()> {
                     "mna": r.mna, "oha": r.oha, "r_at_1": r.r_at_1, "r_at_5": r.r_at_5,
                     "average_precision": r.average_precision, "r_at_100p": r.r_at_100p,
                     "expected_calibration_error": r.ece, "off_map_rate": r.off_map_rate,
+                    "off_world_flagged_after_10": r.off_world.map(|o| o.flagged_after_settle),
+                    "off_world_first_flag": r.off_world.and_then(|o| o.first_flag),
                     "localize_ms_median": r.ms_median, "localize_ms_p90": r.ms_p90,
                     "ms_per_frame_median": describe_median + r.ms_median,
                 }),
@@ -218,6 +272,9 @@ pub fn run(args: &DemoArgs) -> Result<()> {
                 "places": map.place_count(), "views": map.view_count(), "edges": map.edge_count(),
                 "views_per_place": args.capture.views_per_place,
                 "frames": sequence.frames.len(), "condition": condition.name(),
+                "local_features": features.name(),
+                "off_world": {"style": off_world.style, "frames": OFF_WORLD_FRAMES, "lead_in": LEAD_IN,
+                              "settle": SETTLE_FRAMES},
                 "map_load_ms": load_ms, "map_file_kib": file_kib,
                 "seconds": {"world": t.world_s, "skeleton": t.skeleton_s, "capture": t.capture_s,
                             "map": t.map_s, "total": start.elapsed().as_secs_f64()},
@@ -240,10 +297,40 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     Ok(())
 }
 
+/// Frames flown through another world for the off-map test, and frames of the flight before them.
+const OFF_WORLD_FRAMES: usize = 100;
+const LEAD_IN: usize = 100;
+
+/// Places verified per frame in the verification configuration.
+const VERIFIED_PLACES: usize = 5;
+
+/// The map's local features: the ones asked for, else XFeat when its model is in the cache and
+/// the backend is ONNX (their off-map evidence is calibrated, BENCHMARKS.md), else ORB.
+fn demo_features(
+    asked: Option<crate::backend_args::LocalFeatures>,
+    backend: &BackendConfig,
+) -> (FeatureKind, String) {
+    let xfeat = cache_dir().join(DEFAULT_XFEAT_MODEL_FILE);
+    match (asked, backend) {
+        (Some(f), _) => (f.into(), "asked for".into()),
+        (None, BackendConfig::Onnx(_)) if xfeat.is_file() => (
+            FeatureKind::XFeat,
+            format!("XFeat (model found: {})", xfeat.display()),
+        ),
+        (None, _) => (
+            FeatureKind::Orb,
+            format!(
+                "ORB: no XFeat model at {} or no ONNX backend (run scripts/setup-models.sh); ORB inliers do not inform the off-map flag",
+                xfeat.display()
+            ),
+        ),
+    }
+}
+
 fn print_table(results: &[ConfigResult]) {
     println!();
     println!(
-        "{:<16} {:>6} {:>6} {:>6} {:>6} {:>6} {:>7} {:>6} {:>8} {:>10} {:>10}",
+        "{:<28} {:>6} {:>6} {:>6} {:>6} {:>6} {:>7} {:>6} {:>8} {:>9} {:>10} {:>10}",
         "configuration",
         "MNA",
         "OHA",
@@ -253,19 +340,24 @@ fn print_table(results: &[ConfigResult]) {
         "R@100P",
         "ECE",
         "off-map",
+        "off-world",
         "ms median",
         "ms p90"
     );
     for r in results {
+        let off_world = r
+            .off_world
+            .map_or("-".into(), |o| format!("{:.3}", o.flagged_after_settle));
         println!(
-            "{:<16} {:>6.3} {:>6.3} {:>6.3} {:>6.3} {:>6.3} {:>7.3} {:>6.3} {:>8.3} {:>10.3} {:>10.3}",
-            r.name, r.mna, r.oha, r.r_at_1, r.r_at_5, r.average_precision, r.r_at_100p, r.ece, r.off_map_rate, r.ms_median, r.ms_p90
+            "{:<28} {:>6.3} {:>6.3} {:>6.3} {:>6.3} {:>6.3} {:>7.3} {:>6.3} {:>8.3} {:>9} {:>10.3} {:>10.3}",
+            r.name, r.mna, r.oha, r.r_at_1, r.r_at_5, r.average_precision, r.r_at_100p, r.ece, r.off_map_rate, off_world, r.ms_median, r.ms_p90
         );
     }
     println!();
     println!("MNA: predicted place is the true place. OHA (= R@1): within one graph hop. R@5: any of the top 5 within one hop.");
     println!("AP / R@100P: precision-recall with the confidence as score (correct = true place); R@100P is the recall at 100% precision.");
     println!("ECE: expected calibration error of the confidence (10 bins). Latency: one thread, filter step only.");
+    println!("off-map: share of the flight's (on-map) frames flagged off-map. off-world: share of frames from another world flagged after the first {SETTLE_FRAMES}.");
 }
 
 /// Localizes every frame of `sequence` with `options` and computes the metrics; `images` (one
@@ -279,7 +371,11 @@ pub(crate) fn evaluate(
     use_odometry: bool,
     images: Option<&[ImageView<'_>]>,
 ) -> Result<ConfigResult> {
-    let mut localizer = Localizer::new(map.clone(), options)?;
+    let mut localizer = match images.is_some() && options.verification.enabled() {
+        true => Localizer::with_describer(map.clone(), options, &DescriberOptions::default())?,
+        false => Localizer::new(map.clone(), options)?,
+    };
+    let image_only = localizer.wants_image_only();
     let mut out = Localization::default();
     let mut predictions = Vec::with_capacity(sequence.frames.len());
     let mut latencies = Vec::with_capacity(sequence.frames.len());
@@ -287,7 +383,7 @@ pub(crate) fn evaluate(
     for (i, f) in sequence.frames.iter().enumerate() {
         let frame = Frame {
             timestamp: f.timestamp,
-            descriptor: &f.descriptor,
+            descriptor: if image_only { &[] } else { &f.descriptor },
             odometry: use_odometry.then_some(f.odometry),
             image: images.map(|images| images[i]),
         };
@@ -318,6 +414,7 @@ pub(crate) fn evaluate(
         r_at_100p: pr.recall_at_full_precision,
         ece: calibration.expected_calibration_error,
         off_map_rate: off_map as f64 / predictions.len().max(1) as f64,
+        off_world: None,
         ms_median,
         ms_p90,
         predicted: predictions

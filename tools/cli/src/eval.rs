@@ -70,6 +70,18 @@ pub struct EvalArgs {
     /// Localizer temperature (default: the library's).
     #[arg(long)]
     pub temperature: Option<f32>,
+    /// Places verified geometrically per frame with the local features the map stores (0: no
+    /// verification); the off-map decision then reads their inliers
+    /// (`VerificationOptions::off_map_inliers`).
+    #[arg(long, default_value_t = 0)]
+    pub verify: usize,
+    /// With --verify: the most inliers at which a frame is as likely off the map as on it (0:
+    /// the off-map decision stays with appearance); default the map's feature kind's.
+    #[arg(long)]
+    pub off_map_inliers: Option<f32>,
+    /// With --verify: inliers per e-fold of the off-map likelihood ratio; default the library's.
+    #[arg(long)]
+    pub off_map_inlier_scale: Option<f32>,
     /// Write one CSV row per query frame: `query_index,predicted_index,confidence`, then the
     /// next candidates as `index:probability` (with --dataset: `frame,predicted_place,
     /// confidence`, then `place:probability`).
@@ -177,7 +189,8 @@ fn run_images(args: &EvalArgs, images: &Path, map: &Arc<Map>) -> Result<()> {
     let files = image_files(images)?;
     let view_image = view_image_indices(map);
     let map_images = view_image.iter().max().map_or(0, |m| m + 1);
-    let described = describe_frames(args, map, &files, &|_, path| Ok(read_rgb(path)?))?;
+    let read: &ReadImage<'_> = &|_, path| Ok(read_rgb(path)?);
+    let described = describe_frames(args, map, &files, read)?;
     let gt_nodes = match &args.gt_nodes {
         Some(path) => Some(read_gt_nodes(path, files.len(), map.place_count())?),
         None => None,
@@ -190,6 +203,7 @@ fn run_images(args: &EvalArgs, images: &Path, map: &Arc<Map>) -> Result<()> {
             described: &described,
             timestamps: &timestamps,
             odometry: None,
+            images: (args.verify > 0).then_some((files.as_slice(), read)),
         };
         let run = localize_all(
             name,
@@ -262,9 +276,8 @@ fn run_dataset(args: &EvalArgs, root: &Path, map: &Arc<Map>) -> Result<()> {
     let n = dataset.frame_count();
     let paths: Vec<PathBuf> = (0..n).map(|i| dataset.image_path(i)).collect();
     let (width, height) = (dataset.intrinsics.width, dataset.intrinsics.height);
-    let described = describe_frames(args, map, &paths, &|i, _| {
-        Ok((width, height, dataset.read_image(i)?))
-    })?;
+    let read: &ReadImage<'_> = &|i, _| Ok((width, height, dataset.read_image(i)?));
+    let described = describe_frames(args, map, &paths, read)?;
     let timestamps: Vec<f64> = dataset.ground_truth.iter().map(|p| p.timestamp).collect();
     // previous_T_current of every frame from the odometry poses (identity for the first).
     let increments: Vec<Isometry3<f64>> = (0..n)
@@ -293,6 +306,7 @@ fn run_dataset(args: &EvalArgs, root: &Path, map: &Arc<Map>) -> Result<()> {
             described: &described,
             timestamps: &timestamps,
             odometry: odometry.then_some(increments.as_slice()),
+            images: (args.verify > 0).then_some((paths.as_slice(), read)),
         };
         let run = localize_all(
             name,
@@ -309,6 +323,8 @@ fn run_dataset(args: &EvalArgs, root: &Path, map: &Arc<Map>) -> Result<()> {
             "average_precision": pr.average_precision,
             "r_at_100p": pr.recall_at_full_precision,
             "localize_ms_median": median_and_p90(&run.localize_ms).0,
+            "off_map_rate": share(&run.off_map),
+            "off_map_rate_after_10": share(run.off_map.get(OFF_MAP_SETTLE..).unwrap_or_default()),
         });
         for r in &metrics.recall_at_n {
             summary[format!("r_at_{}", r.n)] = json!(r.recall);
@@ -339,7 +355,8 @@ fn configurations(args: &EvalArgs) -> &'static [(&'static str, Mode, bool)] {
     }
 }
 
-/// A localizer in `mode` keeping the top 10 candidates, at `--temperature` if given.
+/// A localizer in `mode` keeping the top 10 candidates, at `--temperature` if given, verifying
+/// `--verify` places per frame (with the map's describer, for dense cells).
 fn localizer(args: &EvalArgs, map: &Arc<Map>, mode: Mode) -> Result<Localizer> {
     let mut options = LocalizerOptions {
         mode,
@@ -349,7 +366,23 @@ fn localizer(args: &EvalArgs, map: &Arc<Map>, mode: Mode) -> Result<Localizer> {
     if let Some(t) = args.temperature {
         options.temperature = t;
     }
-    Ok(Localizer::new(map.clone(), options)?)
+    if args.verify == 0 {
+        return Ok(Localizer::new(map.clone(), options)?);
+    }
+    let verification = &mut options.verification;
+    verification.candidates = args.verify;
+    verification.xfeat = args.runtime.xfeat_options();
+    if let Some(k) = map.keypoints().map(|k| k.kind()) {
+        verification.pair = topoloc::loops::HintOptions::default().pair_for(k).clone();
+    }
+    if let Some(n) = args.off_map_inliers {
+        verification.off_map_inliers = Some(n);
+    }
+    if let Some(scale) = args.off_map_inlier_scale {
+        verification.off_map_inlier_scale = scale;
+    }
+    let describer = args.runtime.describer_options(args.backend);
+    Ok(Localizer::with_describer(map.clone(), options, &describer)?)
 }
 
 /// The report's keys common to both inputs: map, descriptor, frames, uninformative frames,
@@ -479,6 +512,9 @@ struct Queries<'a> {
     /// Odometry per frame, `previous_T_current` (the first frame's is ignored); `None`: the
     /// localizer gets no odometry.
     odometry: Option<&'a [Isometry3<f64>]>,
+    /// With verification: the frames' image files and their reader (the images are read again
+    /// as each frame is localized, since verification needs them).
+    images: Option<(&'a [PathBuf], &'a ReadImage<'a>)>,
 }
 
 /// Localizes every frame; frames without a descriptor get no answer (and their odometry is
@@ -526,13 +562,25 @@ fn localize_all(
             run.localize_ms.push(0.0);
             continue;
         };
+        let image = match queries.images {
+            Some((paths, read)) => Some(read(i, &paths[i])?),
+            None => None,
+        };
+        let image = image
+            .as_ref()
+            .map(|(w, h, rgb)| ImageView::packed(*w, *h, PixelFormat::Rgb8, rgb));
+        // Dense cells come from the localizer's own forward pass: it describes the image.
+        let descriptor = match localizer.wants_image_only() {
+            true => &[][..],
+            false => descriptor.as_slice(),
+        };
         let start = Instant::now();
         localizer.process(
             &Frame {
                 timestamp: queries.timestamps[i],
                 descriptor,
                 odometry: motion.take(),
-                image: None,
+                image,
             },
             &mut out,
         )?;

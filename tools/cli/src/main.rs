@@ -7,6 +7,7 @@ mod demo;
 mod eval;
 mod loops;
 mod memory;
+mod off_world;
 mod plot;
 mod process;
 mod progress;

@@ -2,10 +2,11 @@
 //! the map capture, the query light and rate, the backend choice, and the scenario built from
 //! them.
 
-use crate::backend_args::Backend;
+use crate::backend_args::{Backend, LocalFeatures};
 use topoloc::build::ImageMapOptions;
 use topoloc::describe::onnx::{cache_dir, DEFAULT_MODEL_FILE};
 use topoloc::describe::BackendConfig;
+use topoloc::verify::FeatureKind;
 use topoloc_sim::render::{Condition, ConditionKind};
 use topoloc_sim::scenario::ScenarioOptions;
 use topoloc_sim::style::Split;
@@ -55,6 +56,11 @@ pub struct CaptureArgs {
     /// MNA/OHA by about 0.05 at 5x the views and map build time (BENCHMARKS.md).
     #[arg(long, default_value_t = 0.0)]
     pub ring_m: f64,
+    /// Local features stored per map view for geometric verification (cells need the ONNX
+    /// backend: they come from its forward pass). Default ORB; `demo`: XFeat when its model
+    /// is set up.
+    #[arg(long, value_enum)]
+    pub local_features: Option<LocalFeatures>,
 }
 
 /// The scenario of `demo`, `simulate` and `suite`: `world` with `capture` views per place
@@ -73,6 +79,9 @@ pub(crate) fn scenario_options(
         world,
         ImageMapOptions {
             backend,
+            features: capture
+                .local_features
+                .map_or(FeatureKind::Orb, FeatureKind::from),
             ..ImageMapOptions::default()
         },
     );

@@ -249,14 +249,32 @@ pub fn fly(
         options.trajectory.seed,
     )
     .map_err(ScenarioError::Other)?;
+    let images = render_frames(&scene.renderer, &trajectory, options, intrinsics, progress)?;
+    Ok(Flight {
+        trajectory,
+        truth,
+        odometry,
+        images,
+    })
+}
+
+/// Renders the frames of `trajectory` (in parallel) under the query condition, with noise
+/// seeded by the trajectory seed and the frame index.
+fn render_frames(
+    renderer: &Renderer,
+    trajectory: &Trajectory,
+    options: &ScenarioOptions,
+    intrinsics: &Intrinsics,
+    progress: &(dyn Fn(Step, usize, usize) + Sync),
+) -> Result<Vec<Image>, RenderError> {
     let total = trajectory.frames.len();
     let done = AtomicUsize::new(0);
-    let images = trajectory
+    trajectory
         .frames
         .par_iter()
         .enumerate()
         .map(|(i, frame)| {
-            let image = scene.renderer.try_render(
+            let image = renderer.try_render(
                 &frame.world_t_camera,
                 intrinsics,
                 &options.query_condition,
@@ -269,13 +287,40 @@ pub fn fly(
             );
             image
         })
-        .collect::<Result<Vec<_>, _>>()?;
-    Ok(Flight {
-        trajectory,
-        truth,
-        odometry,
-        images,
-    })
+        .collect()
+}
+
+/// Frames of a robot that has left the mapped world: its drifting odometry and rendered frames.
+pub struct Elsewhere {
+    /// The odometry stream, one pose per frame.
+    pub odometry: Vec<TimedPose>,
+    /// The rendered frames.
+    pub images: Vec<Image>,
+}
+
+/// Flies `options.trajectory` (its seed, legs and motion) through a world of `params` instead
+/// of the scene's, keeping its first `max_frames` frames, rendered as [`fly`] renders them: the
+/// frames an off-map test needs. No graph or map is built for that world.
+pub fn fly_elsewhere(
+    params: &WorldParams,
+    options: &ScenarioOptions,
+    intrinsics: &Intrinsics,
+    max_frames: usize,
+    progress: &(dyn Fn(Step, usize, usize) + Sync),
+) -> Result<Elsewhere, ScenarioError> {
+    let world = World::generate(params)?;
+    let mut trajectory =
+        planner(&world, options.clearance_m)?.random_trajectory(&options.trajectory)?;
+    trajectory.frames.truncate(max_frames);
+    let odometry = odometry(
+        &trajectory.frames,
+        &options.odometry,
+        options.trajectory.seed,
+    )
+    .map_err(ScenarioError::Other)?;
+    let renderer = Renderer::new(&world);
+    let images = render_frames(&renderer, &trajectory, options, intrinsics, progress)?;
+    Ok(Elsewhere { odometry, images })
 }
 
 /// Describes every frame of `flight` with the scene map's describer (in parallel) and returns
