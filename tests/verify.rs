@@ -1,6 +1,7 @@
 //! Geometric verification: ORB keypoints of a place seen again match its stored keypoints with
 //! many RANSAC inliers and an unrelated place's with few; a localizer that verifies tells two
-//! places with identical descriptors apart by their keypoints; keypoints survive the map file;
+//! places with identical descriptors apart by their keypoints, and flags frames off the map by
+//! their lack of inliers when told to; keypoints survive the map file;
 //! missing keypoints or images are typed errors that leave the localizer unchanged.
 
 mod common;
@@ -212,6 +213,90 @@ fn verification_needs_keypoints_in_the_map_and_an_image_in_the_frame() {
     let out = localizer.localize(&frame).unwrap();
     assert_eq!(out.frame_index, 0);
     assert_eq!(out.place, 1);
+}
+
+/// Off-map flags per frame of a filter verifying 3 places, with the off-map threshold
+/// `off_map_inliers` (`None`: the map's kind's default, appearance for ORB): 20 frames seeing
+/// place 5 again, 20 frames of unseen images that still carry place 5's descriptor (appearance
+/// alone says "on the map"), and 10 frames back at place 5.
+fn off_map_flags(off_map_inliers: Option<f32>) -> Vec<bool> {
+    let options = LocalizerOptions {
+        mode: Mode::Filter,
+        verification: VerificationOptions {
+            candidates: 3,
+            off_map_inliers,
+            ..VerificationOptions::default()
+        },
+        ..LocalizerOptions::default()
+    };
+    let mut localizer = Localizer::new(Arc::new(twin_map(true)), options).unwrap();
+    let descriptor = descriptor_of(5);
+    let home = place_image(5);
+    let images: Vec<Vec<u8>> = (0..50u64)
+        .map(|i| match i {
+            20..=39 => place_image(1000 + i),
+            _ => revisit(&home, i),
+        })
+        .collect();
+    images
+        .iter()
+        .enumerate()
+        .map(|(i, image)| {
+            let frame = Frame {
+                timestamp: i as f64 * 0.1,
+                descriptor: &descriptor,
+                image: Some(gray(image)),
+                odometry: None,
+            };
+            localizer.localize(&frame).unwrap().off_map
+        })
+        .collect()
+}
+
+#[test]
+fn the_off_map_flag_follows_the_verification_inliers() {
+    let flags = off_map_flags(Some(30.0));
+    assert!(!flags[..20].iter().any(|&f| f), "on-map frames flagged: {flags:?}");
+    let first = flags[20..40].iter().position(|&f| f).expect("never flagged");
+    assert!(first < 10, "first flagged after {first} unseen frames");
+    assert!(
+        flags[20 + first..40].iter().all(|&f| f),
+        "flag dropped on unseen frames: {flags:?}"
+    );
+    assert!(
+        !flags[43..].iter().any(|&f| f),
+        "flag stuck after returning: {flags:?}"
+    );
+    // Without inlier evidence the matching descriptors keep every frame on the map; ORB maps
+    // leave the decision to appearance by default.
+    assert!(!off_map_flags(Some(0.0)).iter().any(|&f| f));
+    assert_eq!(off_map_flags(None), off_map_flags(Some(0.0)));
+    assert_eq!(FeatureKind::Orb.default_off_map_inliers(), 0.0);
+    assert!(FeatureKind::XFeat.default_off_map_inliers() > 0.0);
+}
+
+#[test]
+fn bad_off_map_evidence_options_are_refused() {
+    for (inliers, scale, field) in [
+        (Some(f32::NAN), 4.0, "off_map_inliers"),
+        (Some(-1.0), 4.0, "off_map_inliers"),
+        (None, 0.0, "off_map_inlier_scale"),
+        (None, f32::INFINITY, "off_map_inlier_scale"),
+    ] {
+        let options = LocalizerOptions {
+            verification: VerificationOptions {
+                candidates: 2,
+                off_map_inliers: inliers,
+                off_map_inlier_scale: scale,
+                ..VerificationOptions::default()
+            },
+            ..LocalizerOptions::default()
+        };
+        match Localizer::new(Arc::new(twin_map(true)), options) {
+            Err(LocalizeError::InvalidOption(msg)) => assert!(msg.contains(field), "{msg}"),
+            other => panic!("{field}: expected an invalid option, got {:?}", other.err()),
+        }
+    }
 }
 
 #[test]

@@ -237,6 +237,7 @@ fn demo_runs_the_whole_pipeline_and_reports_the_contract_keys() {
         "filter",
         "filter+odometry",
         "metric+odometry",
+        "filter+odometry+verification",
     ] {
         let c = &report["configurations"][config];
         for key in ["mna", "oha", "r_at_1", "r_at_5"] {
@@ -246,6 +247,20 @@ fn demo_runs_the_whole_pipeline_and_reports_the_contract_keys() {
         // MNA counts the exact place, OHA also its neighbours: never fewer.
         assert!(c["oha"].as_f64() >= c["mna"].as_f64(), "{config}: {c}");
     }
+    // The filter+odometry configurations are also tested on frames from another world.
+    let configurations = &report["configurations"];
+    for (config, tested) in [
+        ("filter+odometry", true),
+        ("filter+odometry+verification", true),
+        ("filter", false),
+    ] {
+        let flagged = configurations[config]["off_world_flagged_after_10"].as_f64();
+        assert_eq!(flagged.is_some(), tested, "{config}: {report}");
+        assert!(flagged.map_or(true, |f| (0.0..=1.0).contains(&f)));
+    }
+    assert_eq!(report["off_world"]["style"], "lab", "{report}");
+    // The VLAD backend has no XFeat: ORB keypoints, which leave off-map flags to appearance.
+    assert_eq!(report["local_features"], "orb", "{report}");
     assert!(report["places"].as_u64().unwrap() >= 4, "{report}");
     // 12 views per place by default (30 degrees apart).
     assert_eq!(report["views_per_place"].as_u64(), Some(12));
