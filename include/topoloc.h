@@ -62,9 +62,10 @@
  * `topoloc_status_name`; 1.5: loop closure (`topoloc_loop_detector_*`); 1.6: pose fixes
  * (camera intrinsics in the localizer options, `topoloc_map_with_keypoint_points`); 1.7:
  * metric hints (the odometry bound's drift rate, the pose fit's reprojection threshold); 1.8:
- * loop candidates from the odometry (`odometry_candidates`, `odometry_search_m`).
+ * loop candidates from the odometry (`odometry_candidates`, `odometry_search_m`); 1.9:
+ * off-map evidence from verification (`verify_off_map_inliers`, `_inlier_scale`).
  */
-#define TOPOLOC_ABI_VERSION_MINOR 8
+#define TOPOLOC_ABI_VERSION_MINOR 9
 
 /**
  * Result of every fallible C function. Values are grouped in ranges and never renumbered;
@@ -412,6 +413,18 @@ typedef struct topoloc_localizer_options {
    * Fewest PnP RANSAC inliers for a pose fix (>= 6). Default 30.
    */
   uint32_t pose_min_inliers;
+  /**
+   * With verification on: the most inliers among the checked places at which a frame is as
+   * likely off the map as on it; the frame's off-map update then reads the inliers instead
+   * of appearance (the likelihood ratio `exp((verify_off_map_inliers - most) /
+   * verify_off_map_inlier_scale)`). Negative: the map's feature kind's default (XFeat and
+   * cells 26, ORB 0), the default -1; 0: appearance decides; NaN: `_INVALID_OPTION`.
+   */
+  double verify_off_map_inliers;
+  /**
+   * Inliers per e-fold of that likelihood ratio (finite, > 0). Default 4.
+   */
+  double verify_off_map_inlier_scale;
 } topoloc_localizer_options;
 
 /**

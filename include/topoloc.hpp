@@ -345,8 +345,10 @@ using LoadOptions = topoloc_map_load_options;
 /// for each field's meaning and default (no camera intrinsics: set `camera_fx`, `camera_fy`,
 /// `camera_cx`, `camera_cy` for results with a pose fix, which also need `verify_candidates` > 0
 /// and a map from `Map::with_keypoint_points`; `pose_min_inliers`, default 30, is the fewest
-/// PnP inliers of a fix; ABI 1.6). The string fields are borrowed only during the `Localizer`
-/// constructor.
+/// PnP inliers of a fix; ABI 1.6; with verification on, `verify_off_map_inliers` and
+/// `verify_off_map_inlier_scale` make the off-map flag read the inliers, negative = the map's
+/// feature kind's threshold; ABI 1.9). The string fields are borrowed only during the
+/// `Localizer` constructor.
 using LocalizerOptions = topoloc_localizer_options;
 
 /// Parameters of `map_from_keyframes` (the C struct). Start from `default_keyframe_options()`.

@@ -256,8 +256,14 @@ fn off_map_flags(off_map_inliers: Option<f32>) -> Vec<bool> {
 #[test]
 fn the_off_map_flag_follows_the_verification_inliers() {
     let flags = off_map_flags(Some(30.0));
-    assert!(!flags[..20].iter().any(|&f| f), "on-map frames flagged: {flags:?}");
-    let first = flags[20..40].iter().position(|&f| f).expect("never flagged");
+    assert!(
+        !flags[..20].iter().any(|&f| f),
+        "on-map frames flagged: {flags:?}"
+    );
+    let first = flags[20..40]
+        .iter()
+        .position(|&f| f)
+        .expect("never flagged");
     assert!(first < 10, "first flagged after {first} unseen frames");
     assert!(
         flags[20 + first..40].iter().all(|&f| f),

@@ -819,3 +819,24 @@ def test_onnx_build_from_files_with_progress(tmp_path, images):
                                             progress=lambda *a: seen.append(a)) as m:
         assert (m.place_count, m.dim) == (4, 3)
     assert ("describing", 4, 4) in seen and seen[-1] == ("fitting", 1, 1)
+
+
+def test_the_off_map_flag_reads_verification_inliers_when_told(vlad_map, images):
+    """ABI 1.9: with a threshold (ORB maps default to 0: appearance decides), frames of scenes
+    the map has never seen are flagged within 10 frames, and returning clears the flag; bad
+    values are refused."""
+    d = topoloc.localizer_options_default()
+    assert d["verify_off_map_inliers"] < 0 and d["verify_off_map_inlier_scale"] == 4.0
+    home = images[3]
+    elsewhere = [place_image(5000 + i) for i in range(15)]
+    with topoloc.Localizer(vlad_map, verify_candidates=3, verify_off_map_inliers=30.0) as loc:
+        assert loc.options["verify_off_map_inliers"] == 30.0
+        stream = [home] * 10 + elsewhere + [home] * 10
+        flags = [loc.process(image=image, timestamp=0.1 * i).off_map for i, image in enumerate(stream)]
+    assert not any(flags[:10]), flags
+    assert all(flags[20:25]), flags
+    assert not any(flags[28:]), flags
+    with pytest.raises(topoloc.InvalidOptionError):
+        topoloc.Localizer(vlad_map, verify_candidates=3, verify_off_map_inliers=float("nan"))
+    with pytest.raises(topoloc.InvalidOptionError):
+        topoloc.Localizer(vlad_map, verify_candidates=3, verify_off_map_inlier_scale=0.0)

@@ -178,6 +178,8 @@ def test_defaults_are_the_library_defaults():
     for name in ("camera_fx", "camera_fy", "camera_cx", "camera_cy"):
         assert d[name] == getattr(raw, name) == 0.0, name  # no camera: no pose fixes
     assert d["pose_min_inliers"] == raw.pose_min_inliers == 30
+    assert d["verify_off_map_inliers"] == raw.verify_off_map_inliers == -1.0  # the kind's
+    assert d["verify_off_map_inlier_scale"] == raw.verify_off_map_inlier_scale == 4.0
     # Every field of the struct is an option (the expected_descriptor_* ones by shorter names).
     renamed = {"expected_descriptor_kind": "expected_kind", "expected_descriptor_model": "expected_model"}
     assert set(d) == {renamed.get(name, name) for name, _ in raw._fields_} - {"struct_size"}
@@ -400,6 +402,14 @@ POSE_FIX_FIELDS = {
     "topoloc_frame": [],
 }
 
+#: Fields appended after those for off-map evidence from verification (ABI 1.9).
+OFF_MAP_FIELDS = {
+    "topoloc_localizer_options": [
+        ("verify_off_map_inliers", c_double), ("verify_off_map_inlier_scale", c_double),
+    ],
+    "topoloc_frame": [],
+}
+
 #: Fields of topoloc_result from ``candidates_len`` on: verification (ABI 1.2), then pose fixes
 #: (ABI 1.6).
 RESULT_TAIL_FIELDS = [
@@ -428,7 +438,9 @@ def test_image_structs_are_in_the_layout_checks():
         assert fields[images:verification] == VERIFICATION_FIELDS[name], f"{name}: verification fields not appended"
         metric = verification + len(METRIC_FIELDS[name])
         assert fields[verification:metric] == METRIC_FIELDS[name], f"{name}: metric fields not appended"
-        assert fields[metric:] == POSE_FIX_FIELDS[name], f"{name}: pose fix fields not appended"
+        pose = metric + len(POSE_FIX_FIELDS[name])
+        assert fields[metric:pose] == POSE_FIX_FIELDS[name], f"{name}: pose fix fields not appended"
+        assert fields[pose:] == OFF_MAP_FIELDS[name], f"{name}: off-map fields not appended"
     result = structs["topoloc_result"]
     assert result[-len(RESULT_TAIL_FIELDS):] == RESULT_TAIL_FIELDS, "result: fields not appended"
     assert _lib.topoloc_result._fields_[-len(RESULT_TAIL_FIELDS):] == RESULT_TAIL_FIELDS
@@ -559,7 +571,7 @@ def test_status_names_match_the_librarys_table():
 
 
 def test_abi_minor_version():
-    assert topoloc.abi_version_minor() >= _lib.ABI_VERSION_MINOR == 8
+    assert topoloc.abi_version_minor() >= _lib.ABI_VERSION_MINOR == 9
 
 
 EXPECTED_CLASSES = {

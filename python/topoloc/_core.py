@@ -1408,7 +1408,8 @@ def localizer_options_default() -> Dict[str, Any]:
     ``verify_views_per_candidate``, ``verify_inlier_weight``, ``metric_particles``,
     ``metric_temperature``, ``metric_seed``, the camera intrinsics ``camera_fx``,
     ``camera_fy``, ``camera_cx``, ``camera_cy`` (``camera_fx == 0``: no camera, no pose fixes)
-    and ``pose_min_inliers`` (ABI 1.6)."""
+    and ``pose_min_inliers`` (ABI 1.6), ``verify_off_map_inliers`` (negative: the map's feature
+    kind's default) and ``verify_off_map_inlier_scale`` (ABI 1.9)."""
     o = _lib.defaults(_lib.topoloc_localizer_options, lib.topoloc_localizer_options_init)
     return _options_dict(o)
 
@@ -1431,6 +1432,8 @@ def _options_dict(o: _lib.topoloc_localizer_options) -> Dict[str, Any]:
     out["metric_seed"] = int(o.metric_seed)
     out.update({name: float(getattr(o, name)) for name in _CAMERA_FIELDS})
     out["pose_min_inliers"] = int(o.pose_min_inliers)
+    out["verify_off_map_inliers"] = float(o.verify_off_map_inliers)
+    out["verify_off_map_inlier_scale"] = float(o.verify_off_map_inlier_scale)
     return out
 
 
@@ -1467,7 +1470,11 @@ class Localizer(_SingleThreaded):
     multiplied by ``exp(verify_inlier_weight * n)``); the result reports ``verified`` and
     ``inliers``. It needs a map built from images (they store keypoints; otherwise
     :class:`InvalidOptionError`) and image frames (:class:`InvalidImageError` for a descriptor
-    frame).
+    frame). With verification on, the off-map flag (ABI 1.9) reads the inliers instead of
+    appearance: a frame whose best checked place has ``verify_off_map_inliers`` inliers is as
+    likely off the map as on it, each ``verify_off_map_inlier_scale`` fewer (or more) multiply
+    the odds by e. ``verify_off_map_inliers`` negative (default): the map's feature kind's
+    threshold (XFeat and cells 26, ORB 0); 0: appearance decides.
 
     Pose fixes (ABI 1.6, off by default): with verification on and the pinhole intrinsics of
     the frames' camera, ``camera_fx``, ``camera_fy``, ``camera_cx``, ``camera_cy`` (pixels of
@@ -1513,6 +1520,8 @@ class Localizer(_SingleThreaded):
         camera_cx: Optional[float] = None,
         camera_cy: Optional[float] = None,
         pose_min_inliers: Optional[int] = None,
+        verify_off_map_inliers: Optional[float] = None,
+        verify_off_map_inlier_scale: Optional[float] = None,
     ) -> None:
         self._init_guard()
         self._free = lib.topoloc_localizer_free
@@ -1536,6 +1545,8 @@ class Localizer(_SingleThreaded):
             "camera_fy": camera_fy,
             "camera_cx": camera_cx,
             "camera_cy": camera_cy,
+            "verify_off_map_inliers": verify_off_map_inliers,
+            "verify_off_map_inlier_scale": verify_off_map_inlier_scale,
         }
         for name, value in given.items():
             if value is not None:

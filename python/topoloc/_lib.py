@@ -48,7 +48,7 @@ ABI_VERSION = 1
 
 #: ABI minor version these bindings were written for (``TOPOLOC_ABI_VERSION_MINOR``): they use
 #: items up to "ABI 1.N" of the header.
-ABI_VERSION_MINOR = 8
+ABI_VERSION_MINOR = 9
 
 #: Environment variable naming the shared library to load.
 ENV_VAR = "TOPOLOC_LIBRARY"
@@ -238,6 +238,9 @@ class topoloc_localizer_options(Structure):
         ("camera_cx", c_double),
         ("camera_cy", c_double),
         ("pose_min_inliers", c_uint32),
+        # ABI 1.9: off-map evidence from verification.
+        ("verify_off_map_inliers", c_double),
+        ("verify_off_map_inlier_scale", c_double),
     ]
 
 

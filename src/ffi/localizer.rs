@@ -118,16 +118,28 @@ pub struct topoloc_localizer_options {
     pub camera_cy: f64,
     /// Fewest PnP RANSAC inliers for a pose fix (>= 6). Default 30.
     pub pose_min_inliers: u32,
+    // ABI 1.9 (topoloc 0.1): off-map evidence from verification.
+    /// With verification on: the most inliers among the checked places at which a frame is as
+    /// likely off the map as on it; the frame's off-map update then reads the inliers instead
+    /// of appearance (the likelihood ratio `exp((verify_off_map_inliers - most) /
+    /// verify_off_map_inlier_scale)`). Negative: the map's feature kind's default (XFeat and
+    /// cells 26, ORB 0), the default -1; 0: appearance decides; NaN: `_INVALID_OPTION`.
+    pub verify_off_map_inliers: f64,
+    /// Inliers per e-fold of that likelihood ratio (finite, > 0). Default 4.
+    pub verify_off_map_inlier_scale: f64,
 }
 
 impl Versioned for topoloc_localizer_options {
     /// ABI 1.0 ended before `image_backend`; 1.1 added the image fields, 1.2 verification,
-    /// 1.3 metric mode, 1.6 pose fixes.
+    /// 1.3 metric mode, 1.6 pose fixes, 1.9 off-map evidence from verification (its fields
+    /// are 8 bytes wide so that the 1.6 layout, padded after `pose_min_inliers`, still ends
+    /// where they start).
     const LAYOUTS: &'static [usize] = &[
         std::mem::offset_of!(Self, image_backend),
         std::mem::offset_of!(Self, verify_candidates),
         std::mem::offset_of!(Self, metric_particles),
         std::mem::offset_of!(Self, camera_fx),
+        std::mem::offset_of!(Self, verify_off_map_inliers),
         std::mem::size_of::<Self>(),
     ];
 }
@@ -161,6 +173,8 @@ impl Default for topoloc_localizer_options {
             camera_cx: 0.0,
             camera_cy: 0.0,
             pose_min_inliers: d.verification.locate.min_inliers,
+            verify_off_map_inliers: -1.0,
+            verify_off_map_inlier_scale: f64::from(d.verification.off_map_inlier_scale),
         }
     }
 }
@@ -264,6 +278,12 @@ fn localizer_options(o: &topoloc_localizer_options) -> Result<LocalizerOptions, 
                 min_inliers: o.pose_min_inliers,
                 ..LocateOptions::default()
             },
+            // Negative: the kind's default; NaN stays NaN, for validation to refuse.
+            off_map_inliers: match o.verify_off_map_inliers {
+                n if n < 0.0 => None,
+                n => Some(n as f32),
+            },
+            off_map_inlier_scale: o.verify_off_map_inlier_scale as f32,
             ..VerificationOptions::default()
         },
         metric: MetricOptions {

@@ -15,8 +15,9 @@ pub const TOPOLOC_ABI_VERSION: u32 = 1;
 /// `topoloc_status_name`; 1.5: loop closure (`topoloc_loop_detector_*`); 1.6: pose fixes
 /// (camera intrinsics in the localizer options, `topoloc_map_with_keypoint_points`); 1.7:
 /// metric hints (the odometry bound's drift rate, the pose fit's reprojection threshold); 1.8:
-/// loop candidates from the odometry (`odometry_candidates`, `odometry_search_m`).
-pub const TOPOLOC_ABI_VERSION_MINOR: u32 = 8;
+/// loop candidates from the odometry (`odometry_candidates`, `odometry_search_m`); 1.9:
+/// off-map evidence from verification (`verify_off_map_inliers`, `_inlier_scale`).
+pub const TOPOLOC_ABI_VERSION_MINOR: u32 = 9;
 
 static VERSION: &CStr =
     match CStr::from_bytes_with_nul(concat!(env!("CARGO_PKG_VERSION"), "\0").as_bytes()) {

@@ -125,6 +125,21 @@ static void check_null_impl(topoloc_status got, const char *name, const char *ex
 /* Checks that a failed call left a non-empty message. */
 #define CHECK_HAS_MESSAGE() CHECK(last_error()[0] != '\0')
 
+static bool contains_text(const char *haystack, const char *needle)
+{
+    return strstr(haystack, needle) != NULL;
+}
+
+/* CHECK that the last error message contains `text`, showing the message when it does not. */
+#define CHECK_MESSAGE_HAS(text)                                                                    \
+    do {                                                                                           \
+        const char *check_msg_ = last_error();                                                     \
+        if (!contains_text(check_msg_, (text))) {                                                  \
+            fprintf(stderr, "    message \"%s\" does not contain \"%s\"\n", check_msg_, (text));    \
+        }                                                                                          \
+        CHECK(contains_text(check_msg_, (text)));                                                  \
+    } while (0)
+
 /* Checks a map's place, view and edge counts (each a check of its own). */
 static void check_counts_impl(const topoloc_map *map, size_t places, size_t views, size_t edges,
                               const char *file, int line)
@@ -1542,6 +1557,24 @@ static void test_options_errors(const topoloc_map *map)
     options.expected_descriptor_model = MODEL;
     CHECK_OK(topoloc_localizer_new(map, &options, &loc));
     topoloc_localizer_free(loc);
+    loc = NULL;
+
+    /* ABI 1.9: off-map evidence from verification; negative = the map's kind's default. */
+    CHECK(topoloc_abi_version_minor() >= 9);
+    CHECK_OK(topoloc_localizer_options_default(&options));
+    CHECK(options.verify_off_map_inliers == -1.0 && options.verify_off_map_inlier_scale == 4.0);
+    options.verify_off_map_inliers = NAN;
+    CHECK_STATUS(topoloc_localizer_new(map, &options, &loc), TOPOLOC_ERR_INVALID_OPTION);
+    CHECK_MESSAGE_HAS("off_map_inliers");
+    options.verify_off_map_inliers = 30.0;
+    options.verify_off_map_inlier_scale = 0.0;
+    CHECK_STATUS(topoloc_localizer_new(map, &options, &loc), TOPOLOC_ERR_INVALID_OPTION);
+    CHECK_MESSAGE_HAS("off_map_inlier_scale");
+    CHECK(loc == NULL);
+    /* A caller of ABI 1.6 gets the 1.9 defaults: the bad scale beyond its size is ignored. */
+    options.struct_size = offsetof(topoloc_localizer_options, verify_off_map_inliers);
+    CHECK_OK(topoloc_localizer_new(map, &options, &loc));
+    topoloc_localizer_free(loc);
 }
 
 static void test_files(void)
@@ -2109,20 +2142,6 @@ static void vlad_options(topoloc_image_map_options *options, uint32_t images)
     options->vlad_clusters = IMG_CLUSTERS;
 }
 
-static bool contains_text(const char *haystack, const char *needle)
-{
-    return strstr(haystack, needle) != NULL;
-}
-
-/* CHECK that the last error message contains `text`, showing the message when it does not. */
-#define CHECK_MESSAGE_HAS(text)                                                                    \
-    do {                                                                                           \
-        const char *check_msg_ = last_error();                                                     \
-        if (!contains_text(check_msg_, (text))) {                                                  \
-            fprintf(stderr, "    message \"%s\" does not contain \"%s\"\n", check_msg_, (text));    \
-        }                                                                                          \
-        CHECK(contains_text(check_msg_, (text)));                                                  \
-    } while (0)
 
 /* Progress callback log. */
 struct progress_log {

@@ -85,6 +85,24 @@ TEST(pose_fix_defaults) {
   CHECK(fix.view == 0 && fix.inliers == 0);
 }
 
+TEST(off_map_evidence_options) {
+  static_assert(TOPOLOC_ABI_VERSION_MINOR >= 9, "off-map evidence from verification is ABI 1.9");
+  CHECK(topoloc_abi_version_minor() >= 9);
+  topoloc::LocalizerOptions options = topoloc::default_localizer_options();
+  CHECK(options.verify_off_map_inliers < 0.0);  // the map's feature kind's threshold
+  CHECK(options.verify_off_map_inlier_scale == 4.0);
+  options.verify_candidates = 2;
+  options.verify_off_map_inlier_scale = -1.0;
+  bool refused = false;
+  try {
+    topoloc::Localizer localizer(image_map(), options);
+  } catch (const topoloc::Error &e) {
+    refused = e.status() == TOPOLOC_ERR_INVALID_OPTION &&
+              std::string(e.what()).find("off_map_inlier_scale") != std::string::npos;
+  }
+  CHECK(refused);
+}
+
 TEST(map_keypoints) {
   const topoloc::Map &map = image_map();
   const std::size_t total = map.keypoint_total();

@@ -256,7 +256,7 @@ fn demo_runs_the_whole_pipeline_and_reports_the_contract_keys() {
     ] {
         let flagged = configurations[config]["off_world_flagged_after_10"].as_f64();
         assert_eq!(flagged.is_some(), tested, "{config}: {report}");
-        assert!(flagged.map_or(true, |f| (0.0..=1.0).contains(&f)));
+        assert!(flagged.is_none_or(|f| (0.0..=1.0).contains(&f)));
     }
     assert_eq!(report["off_world"]["style"], "lab", "{report}");
     // The VLAD backend has no XFeat: ORB keypoints, which leave off-map flags to appearance.
