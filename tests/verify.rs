@@ -12,8 +12,8 @@ use std::sync::Arc;
 use topoloc::errors::VisionError;
 use topoloc::map::ViewAttributes;
 use topoloc::verify::{
-    check_pair, FeatureKind, KeypointDetector, Keypoints, PairOptions, VerificationOptions,
-    VerificationScore, ViewKeypoints,
+    check_pair, FeatureKind, FundamentalEstimator, KeypointDetector, Keypoints, PairOptions,
+    VerificationOptions, VerificationScore, ViewKeypoints,
 };
 use topoloc::{
     DescriptorIdentity, Frame, LoadOptions, LocalizeError, Localizer, LocalizerOptions, Map,
@@ -83,6 +83,27 @@ fn a_place_seen_again_has_many_inliers_and_another_place_few() {
         different.inliers < 30 && different.inliers * 4 < same.inliers,
         "other place: {different:?} vs same {same:?}"
     );
+}
+
+#[test]
+fn a_camera_back_where_the_view_was_taken_keeps_its_inliers_with_either_fit() {
+    // No motion: every match stays where it was, which no fundamental matrix describes.
+    let stored = detect(&place_image(5));
+    let other = detect(&place_image(6));
+    for estimator in [FundamentalEstimator::Ransac, FundamentalEstimator::Magsac] {
+        let options = PairOptions {
+            estimator,
+            max_iterations: 1000,
+            ..PairOptions::default()
+        };
+        let same = check_pair(stored.as_ref(), stored.as_ref(), &options).unwrap();
+        assert!(
+            same.matches >= 200 && same.inliers == same.matches,
+            "{estimator:?}: {same:?}"
+        );
+        let different = check_pair(other.as_ref(), stored.as_ref(), &options).unwrap();
+        assert!(different.inliers < 30, "{estimator:?}: {different:?}");
+    }
 }
 
 #[test]

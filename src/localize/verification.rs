@@ -182,11 +182,19 @@ impl Verifier {
                     .expect("one keypoint entry per view");
                 let evidence = match options.score {
                     VerificationScore::Inliers => {
-                        check_pair(self.query.as_ref(), stored, &options.pair)?.inliers
+                        check_pair(
+                            self.query.as_ref(),
+                            stored,
+                            options.pair_for(keypoints.kind()),
+                        )?
+                        .inliers
                     }
                     VerificationScore::Spatial => {
-                        let spatial =
-                            spatial_check(self.query.as_ref(), stored, options.pair.max_hamming)?;
+                        let spatial = spatial_check(
+                            self.query.as_ref(),
+                            stored,
+                            options.pair_for(keypoints.kind()).max_hamming,
+                        )?;
                         (spatial.score * self.query.len() as f32).round() as u32
                     }
                 };

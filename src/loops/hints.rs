@@ -94,8 +94,7 @@ pub struct HintOptions {
     /// 200 iterations by default (chosen on generated train and tr-t revisits: the precision
     /// of MAGSAC++ 1,000 at half the time, BENCHMARKS.md).
     pub pair: PairOptions,
-    /// The same for dense cells: MAGSAC++ at 1.5 px, 1,000 iterations by default (the fit
-    /// that re-ranked Gardens Point best; RANSAC 200 lost recall there, BENCHMARKS.md).
+    /// The same for dense cells. Default [`PairOptions::cells_default`].
     pub cells_pair: PairOptions,
     /// Candidates proposed by the odometry besides appearance's: the keyframes nearest the
     /// new one's odometry camera position that could pass the odometry gate (within its
@@ -131,11 +130,7 @@ impl Default for HintOptions {
                 max_iterations: 200,
                 ..PairOptions::default()
             },
-            cells_pair: PairOptions {
-                estimator: FundamentalEstimator::Magsac,
-                max_iterations: 1000,
-                ..PairOptions::default()
-            },
+            cells_pair: PairOptions::cells_default(),
             odometry_candidates: 1,
             odometry_search_m: 2.0,
             refine_keyframes: 5,

@@ -54,6 +54,16 @@ impl Default for PairOptions {
 }
 
 impl PairOptions {
+    /// The fit for dense cells: MAGSAC++ at 1.5 px with 1,000 iterations (it re-ranked Gardens
+    /// Point best; RANSAC 200 lost recall there, BENCHMARKS.md).
+    pub fn cells_default() -> Self {
+        Self {
+            estimator: FundamentalEstimator::Magsac,
+            max_iterations: 1000,
+            ..Self::default()
+        }
+    }
+
     /// Fails with a message naming the field out of range.
     pub fn validate(&self) -> Result<(), String> {
         if !(1..=256).contains(&self.max_hamming) {
@@ -207,8 +217,10 @@ fn orb_matches(
         .collect())
 }
 
-/// Matches `query` to `view` and counts the geometric inliers. Deterministic (OpenCV's RANSAC
-/// uses a fixed seed). Options are assumed valid ([`PairOptions::validate`]).
+/// Matches `query` to `view` and counts the geometric inliers: the fundamental matrix's, or
+/// the matches that did not move when they are more (the camera back where the view was
+/// taken). Deterministic (OpenCV's RANSAC uses a fixed seed). Options are assumed valid
+/// ([`PairOptions::validate`]).
 pub fn check_pair(
     query: KeypointsRef<'_>,
     view: KeypointsRef<'_>,
@@ -257,10 +269,23 @@ pub fn fit_pair(
         options.max_iterations as i32,
         &mut mask,
     )?;
-    let inliers = if fundamental.empty() || mask.total() != matches.len() {
+    let inliers: Vec<bool> = if fundamental.empty() || mask.total() != matches.len() {
         vec![false; matches.len()]
     } else {
         mask.data_bytes()?.iter().map(|&m| m != 0).collect()
+    };
+    // The no-motion model beside the fundamental matrix: a camera back where the view was taken
+    // sees its points where they were, which no fundamental matrix describes (MAGSAC++ then
+    // finds none, and dense cells, on a 16 px grid, do not move for a shift of a few pixels).
+    let still: Vec<bool> = from
+        .iter()
+        .zip(to.iter())
+        .map(|(a, b)| (a.x - b.x).hypot(a.y - b.y) <= options.ransac_threshold_px as f32)
+        .collect();
+    let count = |mask: &[bool]| mask.iter().filter(|&&m| m).count();
+    let inliers = match count(&still) > count(&inliers) {
+        true => still,
+        false => inliers,
     };
     Ok(PairFit { matches, inliers })
 }

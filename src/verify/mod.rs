@@ -75,8 +75,10 @@ pub struct VerificationOptions {
     pub query_keypoints: usize,
     /// Where the XFeat network is, for maps storing XFeat keypoints.
     pub xfeat: XFeatOptions,
-    /// Matching and RANSAC.
+    /// Matching and RANSAC for keypoints (ORB, XFeat). Default [`PairOptions::default`].
     pub pair: PairOptions,
+    /// The same for dense cells. Default [`PairOptions::cells_default`].
+    pub cells_pair: PairOptions,
     /// GC inliers (default) or the s-GC spatial score as each checked view's evidence.
     pub score: VerificationScore,
     /// Intrinsics of the query camera. With them, and a map storing keypoint scene points, the
@@ -109,6 +111,7 @@ impl Default for VerificationOptions {
             query_keypoints: DEFAULT_KEYPOINTS,
             xfeat: XFeatOptions::default(),
             pair: PairOptions::default(),
+            cells_pair: PairOptions::cells_default(),
             score: VerificationScore::default(),
             camera: None,
             locate: LocateOptions::default(),
@@ -124,6 +127,14 @@ impl VerificationOptions {
         Self {
             candidates,
             ..Self::default()
+        }
+    }
+
+    /// The matching and fit options for features of `kind`.
+    pub fn pair_for(&self, kind: FeatureKind) -> &PairOptions {
+        match kind {
+            FeatureKind::Cells => &self.cells_pair,
+            FeatureKind::Orb | FeatureKind::XFeat => &self.pair,
         }
     }
 
@@ -179,6 +190,9 @@ impl VerificationOptions {
             .map_err(|e| format!("verification.locate.{e}"))?;
         self.pair
             .validate()
-            .map_err(|e| format!("verification.pair: {e}"))
+            .map_err(|e| format!("verification.pair: {e}"))?;
+        self.cells_pair
+            .validate()
+            .map_err(|e| format!("verification.cells_pair: {e}"))
     }
 }

@@ -372,9 +372,6 @@ fn localizer(args: &EvalArgs, map: &Arc<Map>, mode: Mode) -> Result<Localizer> {
     let verification = &mut options.verification;
     verification.candidates = args.verify;
     verification.xfeat = args.runtime.xfeat_options();
-    if let Some(k) = map.keypoints().map(|k| k.kind()) {
-        verification.pair = topoloc::loops::HintOptions::default().pair_for(k).clone();
-    }
     if let Some(n) = args.off_map_inliers {
         verification.off_map_inliers = Some(n);
     }
