@@ -40,7 +40,9 @@ pub struct LocalizerOptions {
     /// Probability of entering the off-map state per frame. Default 0.01; 0 disables off-map.
     pub off_map_probability: f32,
     /// Absolute floor of the off-map hypothesis' score: frames whose best place scores below it
-    /// (for long enough) are reported off-map. Default 0.2.
+    /// (for long enough) are reported off-map. Default 0.2. This and the next two shape the
+    /// appearance evidence, which verification's inliers replace when it runs with an off-map
+    /// threshold ([`crate::verify::VerificationOptions::off_map_inliers`]).
     pub off_map_similarity: f32,
     /// How many standard deviations above the expected best background score a place must
     /// score to beat the off-map hypothesis (see `filter.rs`; negative values lower the bar,
