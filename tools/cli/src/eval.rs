@@ -123,6 +123,9 @@ type ReadImage<'a> = dyn Fn(usize, &Path) -> Result<(u32, u32, Vec<u8>)> + Sync 
 
 /// Runs the command.
 pub fn run(args: &EvalArgs) -> Result<()> {
+    if args.verify == 0 && (args.off_map_inliers.is_some() || args.off_map_inlier_scale.is_some()) {
+        bail!("--off-map-inliers and --off-map-inlier-scale shape verification's evidence: give --verify N too");
+    }
     let map = Arc::new(
         Map::load(&args.map, &LoadOptions::default())
             .with_context(|| format!("loading {}", args.map.display()))?,

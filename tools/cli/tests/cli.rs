@@ -171,6 +171,23 @@ fn build_map_and_eval_follow_the_contract() {
     assert!(single.get("filter").is_none());
     assert_eq!(single["mna"], single["single_frame"]["mna"]);
     assert!(single["oha"].as_f64().unwrap() >= single["mna"].as_f64().unwrap());
+
+    // Verification with an off-map threshold: the queries are the map's places, never off it.
+    let eval = |extra: &[&str]| {
+        let (map, queries) = (s(&map), s(&query_dir));
+        let mut a = vec!["eval", "--map", &map, "--images", &queries, "--json"];
+        a.extend_from_slice(extra);
+        topoloc(&a)
+    };
+    let verified = json(&eval(&["--verify", "3", "--off-map-inliers", "20"]));
+    assert_eq!(
+        verified["filter"]["off_map_rate"].as_f64(),
+        Some(0.0),
+        "{verified}"
+    );
+    let out = eval(&["--off-map-inliers", "20"]);
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--verify"));
 }
 
 #[test]
