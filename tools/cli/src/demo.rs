@@ -233,7 +233,12 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         )?;
         if mode == Mode::Filter && odometry {
             result.off_world = Some(off_world_flags(
-                &map, options, &sequence, given, LEAD_IN, &off_world, odometry,
+                localizer(&map, options)?,
+                &sequence,
+                given,
+                LEAD_IN,
+                &off_world,
+                odometry,
             )?);
         }
         results.push(result);
@@ -360,6 +365,16 @@ fn print_table(results: &[ConfigResult]) {
     println!("off-map: share of the flight's (on-map) frames flagged off-map. off-world: share of frames from another world flagged after the first {SETTLE_FRAMES}.");
 }
 
+/// A localizer on `map`; with the map's describer when it verifies by dense cells, which come
+/// from the describer's forward pass.
+fn localizer(map: &Arc<Map>, options: LocalizerOptions) -> Result<Localizer> {
+    let cells = map.keypoints().map(|k| k.kind()) == Some(FeatureKind::Cells);
+    Ok(match cells && options.verification.enabled() {
+        true => Localizer::with_describer(map.clone(), options, &DescriberOptions::default())?,
+        false => Localizer::new(map.clone(), options)?,
+    })
+}
+
 /// Localizes every frame of `sequence` with `options` and computes the metrics; `images` (one
 /// per frame) are given to the localizer beside the descriptors, for verification.
 pub(crate) fn evaluate(
@@ -371,10 +386,7 @@ pub(crate) fn evaluate(
     use_odometry: bool,
     images: Option<&[ImageView<'_>]>,
 ) -> Result<ConfigResult> {
-    let mut localizer = match images.is_some() && options.verification.enabled() {
-        true => Localizer::with_describer(map.clone(), options, &DescriberOptions::default())?,
-        false => Localizer::new(map.clone(), options)?,
-    };
+    let mut localizer = localizer(map, options)?;
     let image_only = localizer.wants_image_only();
     let mut out = Localization::default();
     let mut predictions = Vec::with_capacity(sequence.frames.len());

@@ -6,10 +6,9 @@
 
 use anyhow::{Context, Result};
 use nalgebra::Isometry3;
-use std::sync::Arc;
 use topoloc::describe::{Describer, DescriberOptions};
 use topoloc::image::ImageView;
-use topoloc::{Frame, Localization, Localizer, LocalizerOptions, Map};
+use topoloc::{Frame, Localization, Localizer, Map};
 use topoloc_sim::capture::image_view;
 use topoloc_sim::render::Image;
 use topoloc_sim::scenario::{fly_elsewhere, ScenarioOptions, Step};
@@ -83,23 +82,19 @@ pub(crate) fn off_world_frames(
     })
 }
 
-/// Localizes the first `lead_in` frames of `on` (with their `on_images` when verification
-/// needs them), then every frame of `off`, and reports how the off-world frames were flagged.
-/// The off-world frames carry their own odometry when `use_odometry` (the robot keeps moving).
+/// Localizes the first `lead_in` frames of `on` with a new `localizer` (given their
+/// `on_images` when it verifies), then every frame of `off`, and reports how the off-world
+/// frames were flagged. The off-world frames carry their own odometry when `use_odometry` (the
+/// robot keeps moving).
 pub(crate) fn off_world_flags(
-    map: &Arc<Map>,
-    options: LocalizerOptions,
+    mut localizer: Localizer,
     on: &Sequence,
     on_images: Option<&[ImageView<'_>]>,
     lead_in: usize,
     off: &OffWorldFrames,
     use_odometry: bool,
 ) -> Result<OffWorldFlags> {
-    let verifying = options.verification.enabled();
-    let mut localizer = match verifying {
-        true => Localizer::with_describer(map.clone(), options, &DescriberOptions::default())?,
-        false => Localizer::new(map.clone(), options)?,
-    };
+    let verifying = localizer.options().verification.enabled();
     let image_only = localizer.wants_image_only();
     let mut out = Localization::default();
     let lead_in = lead_in.min(on.frames.len());
