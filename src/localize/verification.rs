@@ -207,13 +207,18 @@ impl Verifier {
         Ok(())
     }
 
+    /// The most inliers (or s-GC evidence) among the places checked in this frame; 0 for none.
+    fn most_inliers(&self) -> u32 {
+        self.checked.iter().map(|c| c.1).max().unwrap_or(0)
+    }
+
     /// The frame's off-map update from the most inliers among the checked places, in place of
     /// the appearance scores' (unless the threshold is 0).
     fn weigh_off_map(&self, options: &VerificationOptions, estimator: &mut Estimator) {
         if self.off_map_inliers <= 0.0 || self.checked.is_empty() {
             return;
         }
-        let most = self.checked.iter().map(|c| c.1).max().unwrap_or(0);
+        let most = self.most_inliers();
         let log_ratio = (f64::from(self.off_map_inliers) - f64::from(most))
             / f64::from(options.off_map_inlier_scale);
         estimator.replace_off_map_evidence(log_ratio.min(MAX_LOG_RATIO).exp());
@@ -226,7 +231,7 @@ impl Verifier {
         params: &FilterParams,
         estimator: &mut Estimator,
     ) {
-        let most = self.checked.iter().map(|c| c.1).max().unwrap_or(0);
+        let most = self.most_inliers();
         let weight = f64::from(options.inlier_weight);
         // exp(weight * (inliers - most)) for checked places, exp(-weight * most) for the rest:
         // the same ratios as exp(weight * inliers) with unchecked places at 0, kept at most 1.
