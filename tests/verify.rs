@@ -363,3 +363,34 @@ fn inconsistent_keypoint_arrays_are_refused() {
         ViewKeypoints::from_parts(vec![0, 1], vec![[f32::NAN, 0.0]], vec![descriptor]).is_err()
     );
 }
+
+#[test]
+fn a_pair_that_cannot_reach_the_callers_inlier_gate_is_not_fitted() {
+    let stored = detect(&place_image(5));
+    let options = PairOptions::default();
+    let fitted = topoloc::verify::fit_pair(stored.as_ref(), stored.as_ref(), &options).unwrap();
+    let matches = fitted.matches.len() as u32;
+    assert!(fitted.check().inliers >= 200, "{:?}", fitted.check());
+    let within =
+        topoloc::verify::fit_pair_reaching(stored.as_ref(), stored.as_ref(), &options, matches)
+            .unwrap();
+    assert_eq!(within, fitted);
+    let beyond =
+        topoloc::verify::fit_pair_reaching(stored.as_ref(), stored.as_ref(), &options, matches + 1)
+            .unwrap();
+    assert_eq!(beyond.matches, fitted.matches);
+    assert_eq!(beyond.check().inliers, 0);
+}
+
+#[test]
+fn a_min_cosine_outside_minus_one_to_one_is_refused() {
+    for bad in [1.5f32, -1.01, f32::NAN] {
+        let options = PairOptions {
+            min_cosine: bad,
+            ..PairOptions::default()
+        };
+        let message = options.validate().unwrap_err();
+        assert!(message.contains("min_cosine"), "{bad}: {message}");
+    }
+    assert!(PairOptions::default().validate().is_ok());
+}

@@ -33,8 +33,8 @@ use super::database::{Added, DatabaseOptions, KeyframeDatabase, KeyframeEntry, L
 use super::error::LoopsError;
 use crate::map::{Map, PlaceId};
 use crate::verify::{
-    fit_pair, relative_pose_from_fit, FeatureKind, FundamentalEstimator, Keypoints, PairFit,
-    PairOptions, PinholeCamera, PoseRefusal, RelativePose, RelativePoseOptions,
+    fit_pair_reaching, relative_pose_from_fit, FeatureKind, FundamentalEstimator, Keypoints,
+    PairFit, PairOptions, PinholeCamera, PoseRefusal, RelativePose, RelativePoseOptions,
 };
 use nalgebra::{Isometry3, Point3};
 use std::collections::HashMap;
@@ -699,10 +699,12 @@ impl LoopDetector {
             return Ok(Some(fit.check().inliers));
         }
         checks.work.pair_checks += 1;
-        let fit = fit_pair(
+        // A pair with fewer matches than the inlier gate asks for cannot pass: not fitted.
+        let fit = fit_pair_reaching(
             features.keypoints.as_ref(),
             stored.keypoints.as_ref(),
             self.options.pair_for(kind),
+            self.options.min_inliers,
         )
         .map_err(|e| LoopsError::InvalidKeyframe(e.to_string()))?;
         let inliers = fit.check().inliers;

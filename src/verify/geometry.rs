@@ -31,8 +31,11 @@ pub enum FundamentalEstimator {
 pub struct PairOptions {
     /// The robust estimator. Default RANSAC.
     pub estimator: FundamentalEstimator,
-    /// Largest Hamming distance (of 256 bits) of a kept match. Default 64.
+    /// Largest Hamming distance (of 256 bits) of a kept ORB match. Default 64.
     pub max_hamming: u32,
+    /// Smallest cosine of a kept match of learned descriptors (XFeat, dense cells), in -1..=1;
+    /// -1 keeps every mutual match (XFeat's own matcher without its threshold). Default -1.
+    pub min_cosine: f32,
     /// RANSAC inlier threshold: distance to the epipolar line, pixels. Default 1.5.
     pub ransac_threshold_px: f64,
     /// RANSAC confidence. Default 0.99.
@@ -46,6 +49,7 @@ impl Default for PairOptions {
         Self {
             estimator: FundamentalEstimator::Ransac,
             max_hamming: 64,
+            min_cosine: -1.0,
             ransac_threshold_px: 1.5,
             confidence: 0.99,
             max_iterations: 200,
@@ -70,6 +74,12 @@ impl PairOptions {
             return Err(format!(
                 "max_hamming is {}, must lie in 1..=256",
                 self.max_hamming
+            ));
+        }
+        if !(-1.0..=1.0).contains(&self.min_cosine) {
+            return Err(format!(
+                "min_cosine is {}, must lie in -1..=1",
+                self.min_cosine
             ));
         }
         if !(self.ransac_threshold_px.is_finite() && self.ransac_threshold_px > 0.0) {
@@ -127,20 +137,28 @@ fn descriptor_mat(descriptors: &[Descriptor]) -> opencv::Result<BoxedRef<'_, Mat
 }
 
 /// Mutual nearest-neighbour matches of `query` to `view` (`query_idx` indexes the query,
-/// `train_idx` the view): ORB within `max_hamming` bits, XFeat by cosine (XFeat's own matcher,
-/// no threshold; `distance` is 1 - cosine). Features of two kinds are an invalid argument.
+/// `train_idx` the view): ORB within `max_hamming` bits, XFeat and cells by cosine, at least
+/// `min_cosine` (XFeat's own matcher; `distance` is 1 - cosine). Features of two kinds are an
+/// invalid argument.
 pub(crate) fn mutual_matches(
     query: KeypointsRef<'_>,
     view: KeypointsRef<'_>,
     max_hamming: u32,
+    min_cosine: f32,
 ) -> Result<Vec<DMatch>, VisionError> {
     if query.points.is_empty() || view.points.is_empty() {
         return Ok(Vec::new());
     }
+    let above = |matches: Vec<DMatch>| -> Vec<DMatch> {
+        matches
+            .into_iter()
+            .filter(|m| 1.0 - m.distance >= min_cosine)
+            .collect()
+    };
     match (query.descriptors, view.descriptors) {
         (DescriptorsRef::Orb(q), DescriptorsRef::Orb(v)) => orb_matches(q, v, max_hamming),
-        (DescriptorsRef::XFeat(q), DescriptorsRef::XFeat(v)) => Ok(cosine_matches(q, v)),
-        (DescriptorsRef::Cells(q), DescriptorsRef::Cells(v)) => Ok(cosine_matches(q, v)),
+        (DescriptorsRef::XFeat(q), DescriptorsRef::XFeat(v)) => Ok(above(cosine_matches(q, v))),
+        (DescriptorsRef::Cells(q), DescriptorsRef::Cells(v)) => Ok(above(cosine_matches(q, v))),
         (q, v) => Err(VisionError::InvalidArgument(format!(
             "query keypoints are {} but the view's are {}: a map is verified with the features it stores",
             q.kind().name(),
@@ -235,15 +253,27 @@ pub fn fit_pair(
     view: KeypointsRef<'_>,
     options: &PairOptions,
 ) -> Result<PairFit, VisionError> {
+    fit_pair_reaching(query, view, options, 0)
+}
+
+/// [`fit_pair`] for a caller that accepts only pairs with at least `needed` inliers: with fewer
+/// matches than that (or than [`MIN_MATCHES`]) no fit is tried and no match is an inlier, so a
+/// pair that cannot pass costs only its matching.
+pub fn fit_pair_reaching(
+    query: KeypointsRef<'_>,
+    view: KeypointsRef<'_>,
+    options: &PairOptions,
+    needed: u32,
+) -> Result<PairFit, VisionError> {
     if query.points.len() < MIN_MATCHES || view.points.len() < MIN_MATCHES {
         return Ok(PairFit::default());
     }
-    let kept = mutual_matches(query, view, options.max_hamming)?;
+    let kept = mutual_matches(query, view, options.max_hamming, options.min_cosine)?;
     let matches: Vec<[u32; 2]> = kept
         .iter()
         .map(|m| [m.query_idx as u32, m.train_idx as u32])
         .collect();
-    if kept.len() < MIN_MATCHES {
+    if kept.len() < MIN_MATCHES.max(needed as usize) {
         let inliers = vec![false; matches.len()];
         return Ok(PairFit { matches, inliers });
     }
@@ -312,7 +342,7 @@ pub fn spatial_check(
     view: KeypointsRef<'_>,
     max_hamming: u32,
 ) -> Result<SpatialCheck, VisionError> {
-    let matches = mutual_matches(query, view, max_hamming)?;
+    let matches = mutual_matches(query, view, max_hamming, -1.0)?;
     if matches.is_empty() {
         return Ok(SpatialCheck::default());
     }

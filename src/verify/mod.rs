@@ -27,8 +27,8 @@ pub use cells::{cells_from_map, CELL_TAP, DEFAULT_CELLS};
 pub use depth::{camera_points_from_depth, DepthImage};
 pub use detector::FeatureDetector;
 pub use geometry::{
-    check_pair, fit_pair, spatial_check, FundamentalEstimator, PairCheck, PairFit, PairOptions,
-    SpatialCheck, MIN_MATCHES,
+    check_pair, fit_pair, fit_pair_reaching, spatial_check, FundamentalEstimator, PairCheck,
+    PairFit, PairOptions, SpatialCheck, MIN_MATCHES,
 };
 pub use keypoints::{
     CellDescriptor, Descriptor, Descriptors, DescriptorsRef, FeatureKind, KeypointDetector,

@@ -131,7 +131,7 @@ pub fn relative_pose(
     max_hamming: u32,
     options: &RelativePoseOptions,
 ) -> Result<Result<RelativePose, PoseRefusal>, VisionError> {
-    let matches: Vec<[u32; 2]> = mutual_matches(query, matched, max_hamming)?
+    let matches: Vec<[u32; 2]> = mutual_matches(query, matched, max_hamming, -1.0)?
         .iter()
         .map(|m| [m.query_idx as u32, m.train_idx as u32])
         .collect();

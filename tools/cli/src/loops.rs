@@ -132,6 +132,10 @@ pub struct LoopsArgs {
     /// 1000 for cells].
     #[arg(long)]
     pub pair_iterations: Option<u32>,
+    /// Smallest cosine of a kept XFeat or cells match (-1: every mutual match) [default: the
+    /// library's].
+    #[arg(long, allow_hyphen_values = true)]
+    pub pair_min_cosine: Option<f32>,
     /// With `--poses`: candidates proposed by the odometry (the keyframes nearest the new
     /// one's odometry pose that could pass the odometry gate) besides appearance's.
     #[arg(long, default_value_t = HintOptions::default().odometry_candidates)]
@@ -183,6 +187,7 @@ fn pair_options(args: &LoopsArgs, defaults: PairOptions) -> PairOptions {
             .pair_estimator
             .map_or(defaults.estimator, PairEstimator::estimator),
         max_iterations: args.pair_iterations.unwrap_or(defaults.max_iterations),
+        min_cosine: args.pair_min_cosine.unwrap_or(defaults.min_cosine),
         ..defaults
     }
 }
