@@ -12,6 +12,9 @@ use opencv::core::{DMatch, Mat, Point2f, Vector, NORM_HAMMING};
 use opencv::features2d::BFMatcher;
 use opencv::prelude::*;
 
+/// The [`PairOptions::min_cosine`] that keeps every mutual match of learned descriptors.
+pub(crate) const ANY_COSINE: f32 = -1.0;
+
 /// Fewest matches a fundamental matrix is fitted to (the 8-point algorithm's minimum).
 pub const MIN_MATCHES: usize = 8;
 
@@ -49,7 +52,7 @@ impl Default for PairOptions {
         Self {
             estimator: FundamentalEstimator::Ransac,
             max_hamming: 64,
-            min_cosine: -1.0,
+            min_cosine: ANY_COSINE,
             ransac_threshold_px: 1.5,
             confidence: 0.99,
             max_iterations: 200,
@@ -342,7 +345,7 @@ pub fn spatial_check(
     view: KeypointsRef<'_>,
     max_hamming: u32,
 ) -> Result<SpatialCheck, VisionError> {
-    let matches = mutual_matches(query, view, max_hamming, -1.0)?;
+    let matches = mutual_matches(query, view, max_hamming, ANY_COSINE)?;
     if matches.is_empty() {
         return Ok(SpatialCheck::default());
     }

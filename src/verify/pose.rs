@@ -7,7 +7,7 @@
 //!
 //! [`ViewKeypoints`]: super::ViewKeypoints
 
-use super::geometry::mutual_matches;
+use super::geometry::{mutual_matches, ANY_COSINE};
 use super::keypoints::KeypointsRef;
 use crate::errors::VisionError;
 use nalgebra::{
@@ -237,7 +237,7 @@ fn scene_pairs(
     view_world_points: &[[f32; 3]],
     max_hamming: u32,
 ) -> Result<(Vector<Point2f>, Vector<Point3f>), VisionError> {
-    let matches = mutual_matches(query, view, max_hamming, -1.0)?;
+    let matches = mutual_matches(query, view, max_hamming, ANY_COSINE)?;
     let mut image_points = Vector::<Point2f>::new();
     let mut object_points = Vector::<Point3f>::new();
     for m in &matches {

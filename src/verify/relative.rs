@@ -14,7 +14,7 @@
 //! Sampson distance does not see the translation's length, so a unit-variance prior (1 m^2)
 //! is added along the translation direction: hosts estimate the scale themselves.
 
-use super::geometry::{mutual_matches, PairFit};
+use super::geometry::{mutual_matches, PairFit, ANY_COSINE};
 use super::keypoints::KeypointsRef;
 use super::pose::{locate_pairs_seeded, LocateOptions, PinholeCamera};
 use crate::errors::VisionError;
@@ -131,7 +131,7 @@ pub fn relative_pose(
     max_hamming: u32,
     options: &RelativePoseOptions,
 ) -> Result<Result<RelativePose, PoseRefusal>, VisionError> {
-    let matches: Vec<[u32; 2]> = mutual_matches(query, matched, max_hamming, -1.0)?
+    let matches: Vec<[u32; 2]> = mutual_matches(query, matched, max_hamming, ANY_COSINE)?
         .iter()
         .map(|m| [m.query_idx as u32, m.train_idx as u32])
         .collect();
