@@ -63,9 +63,10 @@
  * (camera intrinsics in the localizer options, `topoloc_map_with_keypoint_points`); 1.7:
  * metric hints (the odometry bound's drift rate, the pose fit's reprojection threshold); 1.8:
  * loop candidates from the odometry (`odometry_candidates`, `odometry_search_m`); 1.9:
- * off-map evidence from verification (`verify_off_map_inliers`, `_inlier_scale`).
+ * off-map evidence from verification (`verify_off_map_inliers`, `_inlier_scale`); 1.10:
+ * confirmed loop hints (`topoloc_loop_detector_confirmed_count`, `_confirmed`).
  */
-#define TOPOLOC_ABI_VERSION_MINOR 9
+#define TOPOLOC_ABI_VERSION_MINOR 10
 
 /**
  * Result of every fallible C function. Values are grouped in ranges and never renumbered;
@@ -968,8 +969,9 @@ typedef struct topoloc_loop_keyframe {
 typedef uint32_t topoloc_gate;
 
 /**
- * The best verified candidate of a keyframe, written by `topoloc_loop_detector_add`. The
- * caller sets `struct_size` with `topoloc_loop_hint_default`; topoloc writes the rest.
+ * The best verified candidate of a keyframe, written by `topoloc_loop_detector_add` (and a
+ * confirmed one by `topoloc_loop_detector_confirmed`). The caller sets `struct_size` with
+ * `topoloc_loop_hint_default`; topoloc writes the rest.
  */
 typedef struct topoloc_loop_hint {
   /**
@@ -977,11 +979,11 @@ typedef struct topoloc_loop_hint {
    */
   size_t struct_size;
   /**
-   * The added keyframe's id.
+   * The query keyframe's id (the added one, or for a confirmed hint the earlier one).
    */
   uint64_t query_id;
   /**
-   * The place the added keyframe joined.
+   * The place the query keyframe joined.
    */
   uint32_t query_place;
   /**
@@ -1658,6 +1660,25 @@ topoloc_status topoloc_loop_hint_init(struct topoloc_loop_hint *hint, size_t siz
  * check per verified candidate (BENCHMARKS.md).
  */
 topoloc_status topoloc_loop_detector_add(struct topoloc_loop_detector *detector, const struct topoloc_loop_keyframe *keyframe, struct topoloc_loop_hint *hint);
+
+/**
+ * How many hints of earlier keyframes the last successful `topoloc_loop_detector_add`
+ * confirmed (ABI 1.10), into `*count`: when a keyframe's hint is accepted because it completes
+ * a consistency streak, the streak's earlier keyframes, refused as `TOPOLOC_GATE_INCONSISTENT`
+ * while it was short, are accepted too. Read each with `topoloc_loop_detector_confirmed`
+ * before the next `_add` replaces them (errors and `_erase` keep them). 0 after an `_add`
+ * whose hint was not accepted. Errors: `_NULL_ARGUMENT`.
+ */
+topoloc_status topoloc_loop_detector_confirmed_count(const struct topoloc_loop_detector *detector, size_t *count);
+
+/**
+ * Writes confirmed hint `index` (0 = oldest; below `topoloc_loop_detector_confirmed_count`)
+ * into `*hint` (ABI 1.10), whose `struct_size` the caller set with
+ * `topoloc_loop_hint_default`: `accepted` 1, `query_id` and `query_place` the earlier
+ * keyframe's, at most one accepted hint per keyframe in all. Errors: `_INVALID_ARGUMENT`
+ * (index out of range; `*hint` unchanged), `_STRUCT_SIZE`, `_NULL_ARGUMENT`.
+ */
+topoloc_status topoloc_loop_detector_confirmed(const struct topoloc_loop_detector *detector, size_t index, struct topoloc_loop_hint *hint);
 
 /**
  * Relocalization candidates for a descriptor that is not added (every keyframe may match),

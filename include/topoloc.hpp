@@ -33,6 +33,8 @@
  *   new loop detector         topoloc_loop_detector_new           LoopDetector::create               LoopDetector(kind, ...)
  *   loop detector from a map  topoloc_loop_detector_from_map      LoopDetector::from_map             LoopDetector.from_map
  *   add a keyframe (a hint)   topoloc_loop_detector_add           LoopDetector::add                  LoopDetector.add
+ *   hints it confirmed        topoloc_loop_detector_confirmed     LoopDetector::confirmed            LoopDetector.confirmed
+ *                             (+ _confirmed_count)
  *   relocalization            topoloc_loop_detector_query         LoopDetector::query                LoopDetector.query
  *   cull a keyframe           topoloc_loop_detector_erase         LoopDetector::erase                LoopDetector.erase
  *   save the session          topoloc_loop_detector_save          LoopDetector::save                 LoopDetector.save
@@ -1455,8 +1457,8 @@ struct LoopKeyframe {
 /// The hint of one added keyframe (the fields of `topoloc_loop_hint`): its best verified loop
 /// candidate, if any, and the gate that decided.
 struct LoopHint {
-  uint64_t query_id = 0;     ///< The added keyframe's id.
-  uint32_t query_place = 0;  ///< The place the added keyframe joined.
+  uint64_t query_id = 0;     ///< The query keyframe's id (the added one, or a confirmed one's).
+  uint32_t query_place = 0;  ///< The place the query keyframe joined.
   bool has_match = false;    ///< A candidate was verified (the fields below describe it).
   bool accepted = false;     ///< Every gate passed: a loop closure for the pose graph.
   Gate gate = Gate::NoCandidate;  ///< The gate that decided: why a candidate was refused.
@@ -1570,6 +1572,32 @@ public:
     topoloc_loop_hint raw;
     check(topoloc_loop_hint_default(&raw));
     check(topoloc_loop_detector_add(get(), &keyframe, &raw));
+    return from_raw(raw);
+  }
+
+  /// The hints of earlier keyframes that the last `add` confirmed (ABI 1.10), oldest first:
+  /// when an added keyframe's hint is accepted because it completes a consistency streak, the
+  /// streak's earlier keyframes, refused as `Gate::Inconsistent` while it was short, are
+  /// accepted too (each with its own `query_id`; at most one accepted hint per keyframe in
+  /// all). Empty after an `add` whose hint was not accepted; replaced by the next `add`, kept
+  /// by a failed one and by `erase`. Throws `Error` (`TOPOLOC_ERR_NULL_ARGUMENT` when empty).
+  [[nodiscard]] std::vector<LoopHint> confirmed() const {
+    std::size_t count = 0;
+    check(topoloc_loop_detector_confirmed_count(get(), &count));
+    std::vector<LoopHint> hints;
+    hints.reserve(count);
+    for (std::size_t i = 0; i < count; ++i) {
+      topoloc_loop_hint raw;
+      check(topoloc_loop_hint_default(&raw));
+      check(topoloc_loop_detector_confirmed(get(), i, &raw));
+      hints.push_back(from_raw(raw));
+    }
+    return hints;
+  }
+
+private:
+  /// The C++ form of a C hint.
+  static LoopHint from_raw(const topoloc_loop_hint &raw) {
     LoopHint hint;
     hint.query_id = raw.query_id;
     hint.query_place = raw.query_place;
@@ -1587,6 +1615,7 @@ public:
     return hint;
   }
 
+public:
   /// Relocalization candidates for `descriptor` (`len` floats, the detector's D), which is not
   /// added: at most `max` keyframes (every keyframe may match), most similar first. Throws
   /// `Error` (`TOPOLOC_ERR_DIMENSION_MISMATCH`, `_NON_FINITE`, `_ZERO_DESCRIPTOR`,

@@ -125,7 +125,63 @@ fn a_second_pass_gets_one_consistent_hint_per_keyframe() {
                 assert_eq!(done.accepted().map(|h| h.query_id), Some(SECOND + p));
             }
         }
+        // The keyframe that completes the streak confirms the two that began it.
+        let confirmed: Vec<(u64, u64)> = done
+            .confirmed
+            .iter()
+            .inspect(|h| assert_eq!(h.gate, Gate::Accepted, "{h:?}"))
+            .map(|h| (h.query_id, h.matched_id))
+            .collect();
+        let expected = match p {
+            2 => vec![(SECOND, 0), (SECOND + 1, 1)],
+            _ => vec![],
+        };
+        assert_eq!(confirmed, expected, "confirmed by keyframe {}", SECOND + p);
     }
+}
+
+#[test]
+fn a_broken_streak_confirms_nothing_and_an_erased_keyframe_is_never_confirmed() {
+    // Broken: the look-alike refuses, the next revisit starts again from one.
+    let mut detector = detector(options());
+    first_pass(&mut detector);
+    revisit_keyframe(&mut detector, 0);
+    let look_alike = unit_vector(1, DIM);
+    detector
+        .process(&entry(SECOND + 1, &look_alike), features(&place_image(777)))
+        .unwrap();
+    for p in 2..5 {
+        let done = revisit_keyframe(&mut detector, p);
+        let expected: Vec<u64> = match p {
+            4 => vec![SECOND + 2, SECOND + 3],
+            _ => vec![],
+        };
+        let got: Vec<u64> = done.confirmed.iter().map(|h| h.query_id).collect();
+        assert_eq!(
+            got,
+            expected,
+            "keyframe {}: the pending ones since the break",
+            SECOND + p
+        );
+    }
+    // Erased: a pending hint from or to an erased keyframe is dropped.
+    let mut detector = detector_with_pending_streak();
+    detector.erase(SECOND).unwrap();
+    detector.erase(1).unwrap();
+    let done = revisit_keyframe(&mut detector, 2);
+    assert_eq!(done.accepted().map(|h| h.matched_id), Some(2), "{done:?}");
+    assert!(done.confirmed.is_empty(), "{:?}", done.confirmed);
+}
+
+/// A detector after the first pass and two revisits (places 0 and 1) refused as inconsistent.
+fn detector_with_pending_streak() -> LoopDetector {
+    let mut detector = detector(options());
+    first_pass(&mut detector);
+    for p in 0..2 {
+        let gate = revisit_keyframe(&mut detector, p).gate();
+        assert!(matches!(gate, Gate::Inconsistent { .. }), "{gate:?}");
+    }
+    detector
 }
 
 #[test]
@@ -202,6 +258,15 @@ fn fits_are_chosen_per_feature_kind_and_refinement_is_bounded() {
     assert_eq!(defaults.pair_for(FeatureKind::Orb), &defaults.pair);
     assert_eq!(defaults.pair_for(FeatureKind::Cells), &defaults.cells_pair);
     assert_eq!(defaults.pair.estimator, FundamentalEstimator::Ransac);
+    assert_eq!(
+        (defaults.pair.min_cosine, defaults.pair.max_iterations),
+        (0.82, 100),
+        "learned matches above XFeat's own floor, RANSAC 100"
+    );
+    assert_eq!(
+        defaults.cells_pair.min_cosine, -1.0,
+        "cells keep every match"
+    );
     assert_eq!(defaults.cells_pair.estimator, FundamentalEstimator::Magsac);
     let too_many = HintOptions {
         refine_keyframes: 65,
@@ -391,6 +456,54 @@ fn metric_revisit_via(
         .process(&posed(10, &d, query_pose), point_features(&q, None))
         .unwrap();
     done.hint.expect("keyframe 0 is the candidate")
+}
+
+/// Keyframes 10 and 11 revisit keyframe 0 (both see its points from `truth()`), with a
+/// 2-keyframe streak; their odometry poses are `truth()` moved by `offsets` (metres along y).
+/// Returns keyframe 11's hint and the ids it confirmed.
+fn streak_of_two(offsets: [f64; 2]) -> (topoloc::loops::LoopHint, Vec<u64>) {
+    let mut detector = detector(HintOptions {
+        camera: Some(CAMERA),
+        consistent_keyframes: 2,
+        ..options()
+    });
+    let (q, m, s) = scene(120, 20, &truth(), 9);
+    let d = unit_vector(1, DIM);
+    detector
+        .process(
+            &posed(0, &d, Isometry3::identity()),
+            point_features(&m, Some(s)),
+        )
+        .unwrap();
+    let mut last = None;
+    for (id, dy) in [10, 11].into_iter().zip(offsets) {
+        let pose = Translation3::new(0.0, dy, 0.0) * truth();
+        last = Some(
+            detector
+                .process(&posed(id, &d, pose), point_features(&q, None))
+                .unwrap(),
+        );
+    }
+    let done = last.unwrap();
+    let confirmed = done.confirmed.iter().map(|h| h.query_id).collect();
+    (done.hint.unwrap(), confirmed)
+}
+
+/// A confirmed hint must agree with the accepted one along the route: two hints that each
+/// pass the 1 m odometry bound alone (0.9 m off, in opposite directions) put keyframe 10 1.8
+/// m from where the odometry has it relative to keyframe 11, so it is not confirmed.
+#[test]
+fn a_streak_member_is_confirmed_only_when_its_pose_agrees_along_the_route() {
+    let (hint, confirmed) = streak_of_two([0.0, 0.0]);
+    assert_eq!(
+        (hint.gate, hint.matched_id),
+        (Gate::Accepted, 0),
+        "{hint:?}"
+    );
+    assert_eq!(confirmed, [10], "the odometry agrees with both hints");
+    let (hint, confirmed) = streak_of_two([0.9, -0.9]);
+    assert_eq!(hint.gate, Gate::Accepted, "0.9 m passes alone: {hint:?}");
+    assert!(confirmed.is_empty(), "1.8 m along the route: {confirmed:?}");
 }
 
 #[test]

@@ -242,6 +242,31 @@ def test_inconsistent_keypoint_arrays_are_refused_before_c(detector, views, monk
     assert detector.add(10, 10.0, descriptor(1), second.tolist(), descriptors.tobytes()).accepted
 
 
+def test_a_completed_streak_confirms_its_first_keyframes(views):
+    first, second, descriptors, _ = views
+    with topoloc.LoopDetector("test", "loops", DIM, **dict(OPTIONS, consistent_keyframes=3)) as det:
+        det.add(0, 0.0, descriptor(1), first, descriptors)
+        assert det.confirmed() == []
+        for kid in (10, 11):
+            hint = det.add(kid, float(kid), descriptor(1), second, descriptors)
+            assert hint.gate is topoloc.Gate.INCONSISTENT and not hint.accepted
+            assert det.confirmed() == []
+        assert det.add(12, 12.0, descriptor(1), second, descriptors).accepted
+        confirmed = det.confirmed()
+        assert [h.query_id for h in confirmed] == [10, 11]
+        for h in confirmed:
+            assert h.accepted and h.gate is topoloc.Gate.ACCEPTED and h.matched_id == 0
+            assert h.inliers >= 30 and h.has_match
+        # A failed add keeps them; the next add replaces them.
+        with pytest.raises(topoloc.InvalidArgumentError):
+            det.add(12, 13.0, descriptor(1), second, descriptors)
+        assert [h.query_id for h in det.confirmed()] == [10, 11]
+        det.add(13, 13.0, descriptor(1), second, descriptors)
+        assert det.confirmed() == []
+    with pytest.raises(ValueError, match="closed"):
+        det.confirmed()
+
+
 def test_erase(detector, views):
     first, second, descriptors, _ = views
     detector.add(0, 0.0, descriptor(1), first, descriptors)

@@ -1744,8 +1744,8 @@ class LoopHint:
     candidate and the gate that decided (``topoloc_loop_hint``).
 
     Attributes:
-        query_id: the added keyframe's id.
-        query_place: the place the added keyframe joined.
+        query_id: the query keyframe's id (the added one; a confirmed hint's earlier one).
+        query_place: the place the query keyframe joined.
         has_match: whether a candidate was verified (the fields below describe it).
         accepted: whether every gate passed: a loop closure for the pose graph.
         gate: the :class:`Gate` that decided.
@@ -2059,24 +2059,31 @@ class LoopDetector(_SingleThreaded):
                 kf.world_T_body = kf.body_T_camera = None
                 kf.keypoint_count = 0
                 kf.keypoints = kf.keypoint_descriptors = kf.camera_points = None
-            return LoopHint(
-                query_id=int(hint.query_id),
-                query_place=int(hint.query_place),
-                has_match=bool(hint.has_match),
-                accepted=bool(hint.accepted),
-                gate=_gate(int(hint.gate)),
-                matched_id=int(hint.matched_id),
-                place=int(hint.place),
-                inliers=int(hint.inliers),
-                confidence=float(hint.confidence),
-                has_pose=bool(hint.has_pose),
-                scale_known=bool(hint.scale_known),
-                matched_T_query=_matrix(hint.matched_T_query, 4),
-                covariance=_matrix(hint.covariance, 6),
-            )
+            return _loop_hint(hint)
         finally:
             self._leave()
             del q, points, descriptors, scene, body, camera
+
+    def confirmed(self) -> List[LoopHint]:
+        """The hints of earlier keyframes that the last :meth:`add` confirmed (ABI 1.10),
+        oldest first: when an added keyframe's hint is accepted because it completes a
+        consistency streak, the streak's earlier keyframes, refused as
+        :attr:`Gate.INCONSISTENT` while it was short, are accepted too (each with its own
+        ``query_id``; at most one accepted hint per keyframe in all). Empty after an
+        :meth:`add` whose hint was not accepted; replaced by the next :meth:`add`, kept by a
+        failed one and by :meth:`erase`."""
+        h = self._enter("confirmed")
+        try:
+            count = c_size_t(0)
+            check(lib.topoloc_loop_detector_confirmed_count(h, byref(count)))
+            hints = []
+            for i in range(int(count.value)):
+                raw = _lib.defaults(_lib.topoloc_loop_hint, lib.topoloc_loop_hint_init)
+                check(lib.topoloc_loop_detector_confirmed(h, i, byref(raw)))
+                hints.append(_loop_hint(raw))
+            return hints
+        finally:
+            self._leave()
 
     def query(self, descriptor: Any, max_results: int) -> List[LoopCandidate]:
         """Relocalization: the (at most ``max_results``) keyframes most similar to
@@ -2115,6 +2122,25 @@ class LoopDetector(_SingleThreaded):
             check(lib.topoloc_loop_detector_save(h, encoded))
         finally:
             self._leave()
+
+
+def _loop_hint(hint: Any) -> LoopHint:
+    """The :class:`LoopHint` of a C ``topoloc_loop_hint``."""
+    return LoopHint(
+        query_id=int(hint.query_id),
+        query_place=int(hint.query_place),
+        has_match=bool(hint.has_match),
+        accepted=bool(hint.accepted),
+        gate=_gate(int(hint.gate)),
+        matched_id=int(hint.matched_id),
+        place=int(hint.place),
+        inliers=int(hint.inliers),
+        confidence=float(hint.confidence),
+        has_pose=bool(hint.has_pose),
+        scale_known=bool(hint.scale_known),
+        matched_T_query=_matrix(hint.matched_T_query, 4),
+        covariance=_matrix(hint.covariance, 6),
+    )
 
 
 def _gate(code: int) -> Union[Gate, int]:

@@ -48,7 +48,7 @@ ABI_VERSION = 1
 
 #: ABI minor version these bindings were written for (``TOPOLOC_ABI_VERSION_MINOR``): they use
 #: items up to "ABI 1.N" of the header.
-ABI_VERSION_MINOR = 9
+ABI_VERSION_MINOR = 10
 
 #: Environment variable naming the shared library to load.
 ENV_VAR = "TOPOLOC_LIBRARY"
@@ -530,6 +530,9 @@ SIGNATURES = {
     "topoloc_loop_detector_erase": (status_t, [LoopDetectorPtr, c_uint64]),
     "topoloc_loop_detector_save": (status_t, [LoopDetectorPtr, c_char_p]),
     "topoloc_loop_detector_len": (status_t, [LoopDetectorPtr, _p(c_size_t)]),
+    # Confirmed loop hints (ABI 1.10)
+    "topoloc_loop_detector_confirmed_count": (status_t, [LoopDetectorPtr, _p(c_size_t)]),
+    "topoloc_loop_detector_confirmed": (status_t, [LoopDetectorPtr, c_size_t, _p(topoloc_loop_hint)]),
     "topoloc_version": (c_char_p, []),
     "topoloc_abi_version": (c_uint32, []),
     "topoloc_abi_version_minor": (c_uint32, []),

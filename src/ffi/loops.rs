@@ -320,17 +320,18 @@ pub extern "C" fn topoloc_loop_keyframe_init(
     init_versioned(keyframe, size, "keyframe")
 }
 
-/// The best verified candidate of a keyframe, written by `topoloc_loop_detector_add`. The
-/// caller sets `struct_size` with `topoloc_loop_hint_default`; topoloc writes the rest.
+/// The best verified candidate of a keyframe, written by `topoloc_loop_detector_add` (and a
+/// confirmed one by `topoloc_loop_detector_confirmed`). The caller sets `struct_size` with
+/// `topoloc_loop_hint_default`; topoloc writes the rest.
 #[allow(non_snake_case)]
 #[repr(C)]
 #[derive(Clone, Copy)]
 pub struct topoloc_loop_hint {
     /// `sizeof(topoloc_loop_hint)`, set by the `_default` function.
     pub struct_size: usize,
-    /// The added keyframe's id.
+    /// The query keyframe's id (the added one, or for a confirmed hint the earlier one).
     pub query_id: u64,
-    /// The place the added keyframe joined.
+    /// The place the query keyframe joined.
     pub query_place: u32,
     /// True when a candidate was verified (the fields below describe it).
     pub has_match: bool,
@@ -440,15 +441,24 @@ fn keyframe_features(k: &topoloc_loop_keyframe) -> Result<KeyframeFeatures, FfiE
     })
 }
 
-/// The C hint of a processed keyframe.
-fn c_hint(query_id: u64, query_place: u32, hint: Option<&LoopHint>) -> topoloc_loop_hint {
+/// The C hint of a processed keyframe: its best candidate, or none (`has_match` 0).
+fn c_hint_of(query_id: u64, query_place: u32, hint: Option<&LoopHint>) -> topoloc_loop_hint {
+    match hint {
+        Some(h) => c_hint(h),
+        None => topoloc_loop_hint {
+            query_id,
+            query_place,
+            ..topoloc_loop_hint::default()
+        },
+    }
+}
+
+/// The C form of a verified candidate.
+fn c_hint(h: &LoopHint) -> topoloc_loop_hint {
     let mut out = topoloc_loop_hint {
-        query_id,
-        query_place,
+        query_id: h.query_id,
+        query_place: h.query_place,
         ..topoloc_loop_hint::default()
-    };
-    let Some(h) = hint else {
-        return out;
     };
     out.has_match = true;
     out.accepted = h.accepted();
@@ -503,9 +513,53 @@ pub extern "C" fn topoloc_loop_detector_add(
         let done = detector.process(&entry, features)?;
         write_versioned(
             hint,
-            c_hint(k.id, done.added.place, done.hint.as_ref()),
+            c_hint_of(k.id, done.added.place, done.hint.as_ref()),
             "hint",
         )
+    })
+}
+
+/// How many hints of earlier keyframes the last successful `topoloc_loop_detector_add`
+/// confirmed (ABI 1.10), into `*count`: when a keyframe's hint is accepted because it completes
+/// a consistency streak, the streak's earlier keyframes, refused as `TOPOLOC_GATE_INCONSISTENT`
+/// while it was short, are accepted too. Read each with `topoloc_loop_detector_confirmed`
+/// before the next `_add` replaces them (errors and `_erase` keep them). 0 after an `_add`
+/// whose hint was not accepted. Errors: `_NULL_ARGUMENT`.
+#[no_mangle]
+pub extern "C" fn topoloc_loop_detector_confirmed_count(
+    detector: *const topoloc_loop_detector,
+    count: *mut usize,
+) -> topoloc_status {
+    run(|| {
+        let detector = try_ref(detector, "detector")?;
+        check_out(count, "count")?;
+        write_out(count, detector.confirmed().len());
+        Ok(())
+    })
+}
+
+/// Writes confirmed hint `index` (0 = oldest; below `topoloc_loop_detector_confirmed_count`)
+/// into `*hint` (ABI 1.10), whose `struct_size` the caller set with
+/// `topoloc_loop_hint_default`: `accepted` 1, `query_id` and `query_place` the earlier
+/// keyframe's, at most one accepted hint per keyframe in all. Errors: `_INVALID_ARGUMENT`
+/// (index out of range; `*hint` unchanged), `_STRUCT_SIZE`, `_NULL_ARGUMENT`.
+#[no_mangle]
+pub extern "C" fn topoloc_loop_detector_confirmed(
+    detector: *const topoloc_loop_detector,
+    index: usize,
+    hint: *mut topoloc_loop_hint,
+) -> topoloc_status {
+    run(|| {
+        let detector = try_ref(detector, "detector")?;
+        read_versioned(hint as *const _, topoloc_loop_hint::default(), "hint")?;
+        let confirmed = detector.confirmed();
+        let Some(h) = confirmed.get(index) else {
+            return Err(FfiError::invalid(format!(
+                "index is {index}, but {} hints were confirmed",
+                confirmed.len()
+            )));
+        };
+        write_versioned(hint, c_hint(h), "hint")
     })
 }
 

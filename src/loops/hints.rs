@@ -26,7 +26,10 @@
 //!    ([`Gate::Inconsistent`], ORB-SLAM's consistency groups on the place graph).
 //!
 //! At most one hint per keyframe. A refused candidate is reported with the gate that refused
-//! it, so the host can log why no loop was closed. Errors (bad features, keyframes out of
+//! it, so the host can log why no loop was closed. The keyframes that began a streak were
+//! refused as inconsistent only because the streak was not long enough yet: when a later
+//! keyframe completes it, their hints are delivered with that keyframe as confirmed
+//! ([`Processed::confirmed`]), so a revisit yields hints from its first keyframe on. Errors (bad features, keyframes out of
 //! order, duplicate ids) leave the detector exactly as it was.
 
 use super::database::{Added, DatabaseOptions, KeyframeDatabase, KeyframeEntry, LoopQuery, Match};
@@ -90,9 +93,11 @@ pub struct HintOptions {
     pub consistent_keyframes: usize,
     /// The odometry agreement gate (applied when both keyframes have poses and the hint a pose).
     pub odometry: Option<OdometryGate>,
-    /// Matching and fundamental-matrix fit for point features (XFeat, ORB): RANSAC at 1.5 px,
-    /// 200 iterations by default (chosen on generated train and tr-t revisits: the precision
-    /// of MAGSAC++ 1,000 at half the time, BENCHMARKS.md).
+    /// Matching and fundamental-matrix fit for point features (XFeat, ORB): by default XFeat
+    /// matches below cosine 0.82 dropped (XFeat's own matcher's floor) and RANSAC at 1.5 px
+    /// with 100 iterations (chosen on generated train and tr-t revisits in bright and dim
+    /// light: the precision of 200 iterations on every match at two thirds of the keyframe
+    /// time, BENCHMARKS.md).
     pub pair: PairOptions,
     /// The same for dense cells. Default [`PairOptions::cells_default`].
     pub cells_pair: PairOptions,
@@ -127,7 +132,8 @@ impl Default for HintOptions {
             odometry: Some(OdometryGate::default()),
             pair: PairOptions {
                 estimator: FundamentalEstimator::Ransac,
-                max_iterations: 200,
+                max_iterations: 100,
+                min_cosine: 0.82,
                 ..PairOptions::default()
             },
             cells_pair: PairOptions::cells_default(),
@@ -268,6 +274,8 @@ impl Gate {
 pub struct LoopHint {
     /// The query keyframe's id.
     pub query_id: u64,
+    /// The place the query keyframe joined.
+    pub query_place: PlaceId,
     /// The matched keyframe's id.
     pub matched_id: u64,
     /// The matched keyframe's place.
@@ -291,12 +299,19 @@ impl LoopHint {
 }
 
 /// What processing a keyframe did.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct Processed {
     /// Where the keyframe went in the place graph.
     pub added: Added,
     /// The best verified candidate; `None` when there was none ([`Gate::NoCandidate`]).
     pub hint: Option<LoopHint>,
+    /// Hints of earlier keyframes that this one confirmed: the keyframes of the streak it
+    /// completed, whose candidates passed every other gate but were refused as
+    /// [`Gate::Inconsistent`] while the streak was short, and whose pose, with odometry,
+    /// agrees with this keyframe's along the route. Now [`Gate::Accepted`], oldest first,
+    /// each with its own `query_id`; empty unless this keyframe's hint was accepted.
+    /// Every keyframe gets at most one accepted hint, as its own or as a confirmed one.
+    pub confirmed: Vec<LoopHint>,
     /// The geometric work it took, for hosts that budget or log the cost.
     pub work: Work,
 }
@@ -330,6 +345,11 @@ pub struct LoopDetector {
     kind: Option<FeatureKind>,
     /// The place the last keyframes' best candidates agreed on, and how many in a row.
     streak: Streak,
+    /// The hints of the current streak's keyframes, refused as inconsistent: confirmed when
+    /// a later keyframe completes the streak, dropped when it breaks.
+    pending: Vec<LoopHint>,
+    /// What the last successful [`LoopDetector::process`] confirmed.
+    confirmed: Vec<LoopHint>,
     /// The largest id of a previous session's keyframes ([`LoopDetector::from_map`]): they are
     /// never inside the exclusion window, whatever this session's ids.
     reloaded_max_id: Option<u64>,
@@ -371,6 +391,8 @@ impl LoopDetector {
             features: HashMap::new(),
             kind: None,
             streak: None,
+            pending: Vec::new(),
+            confirmed: Vec::new(),
             reloaded_max_id: None,
         })
     }
@@ -441,11 +463,14 @@ impl LoopDetector {
         self.check_features(&features)?;
         let mut checks = Checks::default();
         let verified = self.verified_candidates(entry, &features, &mut checks)?;
-        let (hint, streak) = match self.decide(entry, &features, &verified, &mut checks)? {
+        let decided = self.decide(entry, &features, &verified, &mut checks)?;
+        let added = self.database.add(entry)?;
+        let (hint, streak) = match decided {
             None => (None, None),
             Some((best, Gated { gate, pose, streak })) => {
                 let hint = LoopHint {
                     query_id: entry.id,
+                    query_place: added.place,
                     matched_id: best.id,
                     place: best.place,
                     inliers: best.inliers,
@@ -456,22 +481,111 @@ impl LoopDetector {
                 (Some(hint), streak)
             }
         };
-        let added = self.database.add(entry)?;
         self.kind
             .get_or_insert(features.keypoints.descriptors.kind());
         self.features.insert(entry.id, features);
         self.streak = streak;
+        self.confirmed = self.follow_streak(hint.as_ref())?;
         Ok(Processed {
             added,
             hint,
+            confirmed: self.confirmed.clone(),
             work: checks.work,
         })
     }
 
-    /// Removes a keyframe and its features (ORB-SLAM culls keyframes).
+    /// The hints the last successful [`LoopDetector::process`] confirmed
+    /// ([`Processed::confirmed`]); replaced by the next one, kept by errors and erasures.
+    pub fn confirmed(&self) -> &[LoopHint] {
+        &self.confirmed
+    }
+
+    /// Keeps the streak's pending hints in step with the new keyframe's: an inconsistent hint
+    /// joins them (a new streak starts them afresh), an accepted one confirms and returns
+    /// those that agree with it along the route ([`LoopDetector::route_agrees`]), any other
+    /// outcome drops them (the streak broke).
+    fn follow_streak(&mut self, hint: Option<&LoopHint>) -> Result<Vec<LoopHint>, LoopsError> {
+        match hint.map(|h| (h, h.gate)) {
+            Some((h, Gate::Inconsistent { agreeing })) => {
+                if agreeing == 1 {
+                    self.pending.clear();
+                }
+                self.pending.push(*h);
+                Ok(Vec::new())
+            }
+            Some((accepted, Gate::Accepted)) => {
+                let mut confirmed = Vec::new();
+                for earlier in std::mem::take(&mut self.pending) {
+                    if self.route_agrees(&earlier, accepted)? {
+                        confirmed.push(LoopHint {
+                            gate: Gate::Accepted,
+                            ..earlier
+                        });
+                    }
+                }
+                Ok(confirmed)
+            }
+            _ => {
+                self.pending.clear();
+                Ok(Vec::new())
+            }
+        }
+    }
+
+    /// Whether a streak's earlier hint (keyframe a matched to b) and its accepted one (c to
+    /// d) agree along the route: going from a to b by the earlier hint, from b to d by the
+    /// odometry of their session, and from d to c by the accepted hint must bring a where the
+    /// odometry takes it to c, within the odometry gate's bounds (the translation bound
+    /// growing with the path travelled from a to c and from b to d). A look-alike that began
+    /// the streak, beside the true place, fits a pose metres off and fails. The rotation is
+    /// compared whenever both hints have a pose, the translation when both are metric; without
+    /// poses, the odometry gate, or a shared session for b and d, nothing is compared (true).
+    fn route_agrees(&self, earlier: &LoopHint, accepted: &LoopHint) -> Result<bool, LoopsError> {
+        let (Some(gate), Some(pose_ab), Some(pose_dc)) =
+            (self.options.odometry, &earlier.pose, &accepted.pose)
+        else {
+            return Ok(true);
+        };
+        let reloaded = |id: u64| self.reloaded_max_id.is_some_and(|max| id <= max);
+        if reloaded(earlier.matched_id) != reloaded(accepted.matched_id) {
+            return Ok(true);
+        }
+        let camera = |id: u64| self.database.world_t_camera(id);
+        let (Some(a), Some(b), Some(c), Some(d)) = (
+            camera(earlier.query_id)?,
+            camera(earlier.matched_id)?,
+            camera(accepted.query_id)?,
+            camera(accepted.matched_id)?,
+        ) else {
+            return Ok(true);
+        };
+        // a_T_c: by the odometry, and through the matched keyframes.
+        let odometry = a.inverse() * c;
+        let through =
+            pose_ab.matched_t_query.inverse() * (b.inverse() * d) * pose_dc.matched_t_query;
+        if odometry.rotation.angle_to(&through.rotation).to_degrees() > gate.max_rotation_deg {
+            return Ok(false);
+        }
+        if !(pose_ab.scale_known && pose_dc.scale_known) {
+            return Ok(true);
+        }
+        let travelled = |x: u64, y: u64| -> Result<f64, LoopsError> {
+            let (x, y) = (self.database.travelled_m(x)?, self.database.travelled_m(y)?);
+            Ok(x.zip(y).map_or(0.0, |(x, y)| (y - x).abs()))
+        };
+        let path = travelled(earlier.query_id, accepted.query_id)?
+            + travelled(earlier.matched_id, accepted.matched_id)?;
+        let bound = gate.max_translation_m + gate.max_translation_per_m * path;
+        Ok((odometry.translation.vector - through.translation.vector).norm() <= bound)
+    }
+
+    /// Removes a keyframe and its features (ORB-SLAM culls keyframes); a pending hint from or
+    /// to it is dropped, so none is ever confirmed against an erased keyframe.
     pub fn erase(&mut self, id: u64) -> Result<(), LoopsError> {
         self.database.erase(id)?;
         self.features.remove(&id);
+        self.pending
+            .retain(|h| h.query_id != id && h.matched_id != id);
         Ok(())
     }
 

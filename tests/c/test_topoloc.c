@@ -3767,6 +3767,71 @@ static void test_loop_closure(void)
     CHECK(remove(path) == 0);
 }
 
+/* Confirmed hints (ABI 1.10): with a streak of 3, keyframes 10 and 11 revisit keyframe 0 but
+ * are refused as inconsistent; keyframe 12 completes the streak and confirms both. */
+static void test_loop_confirmed(void)
+{
+    topoloc_loop_options options;
+    topoloc_loop_detector *det = NULL;
+    topoloc_loop_keyframe kf;
+    topoloc_loop_hint hint, confirmed;
+    float points[2 * LOOP_POINTS], seen_again[2 * LOOP_POINTS], d[LOOP_DIM];
+    uint8_t descriptors[32 * LOOP_POINTS];
+    size_t count = 99;
+    const uint64_t ids[] = {0, 10, 11, 12, 13};
+
+    CHECK(topoloc_abi_version_minor() >= 10);
+    CHECK_STATUS(topoloc_loop_options_default(&options), TOPOLOC_OK);
+    options.exclude_recent_ids = 5;
+    options.exclude_recent_s = 0.0;
+    CHECK_STATUS(topoloc_loop_detector_new("test", "loops", LOOP_DIM, &options, &det), TOPOLOC_OK);
+    if (det == NULL)
+        return;
+    CHECK_STATUS(topoloc_loop_detector_confirmed_count(det, &count), TOPOLOC_OK);
+    CHECK(count == 0);
+    loop_keypoints(points, seen_again, descriptors);
+    loop_descriptor(d, 1);
+    CHECK_STATUS(topoloc_loop_keyframe_default(&kf), TOPOLOC_OK);
+    CHECK_STATUS(topoloc_loop_hint_default(&hint), TOPOLOC_OK);
+    CHECK_STATUS(topoloc_loop_hint_default(&confirmed), TOPOLOC_OK);
+    kf.descriptor = d;
+    kf.descriptor_len = LOOP_DIM;
+    kf.keypoint_count = LOOP_POINTS;
+    kf.keypoint_descriptors = descriptors;
+    for (size_t k = 0; k < sizeof ids / sizeof ids[0]; k++) {
+        kf.id = ids[k];
+        kf.timestamp = (double)ids[k];
+        kf.keypoints = k == 0 ? points : seen_again;
+        CHECK_STATUS(topoloc_loop_detector_add(det, &kf, &hint), TOPOLOC_OK);
+        CHECK_STATUS(topoloc_loop_detector_confirmed_count(det, &count), TOPOLOC_OK);
+        if (k == 1 || k == 2)
+            CHECK(hint.gate == TOPOLOC_GATE_INCONSISTENT && count == 0);
+        if (k == 3) {
+            CHECK(hint.accepted && hint.query_id == 12 && count == 2);
+            CHECK_STATUS(topoloc_loop_detector_confirmed(det, 0, &confirmed), TOPOLOC_OK);
+            CHECK(confirmed.query_id == 10 && confirmed.matched_id == 0 && confirmed.accepted &&
+                  confirmed.gate == TOPOLOC_GATE_ACCEPTED && confirmed.inliers >= 30);
+            CHECK_STATUS(topoloc_loop_detector_confirmed(det, 1, &confirmed), TOPOLOC_OK);
+            CHECK(confirmed.query_id == 11 && confirmed.accepted);
+            /* Out of range: refused, *hint unchanged. */
+            CHECK_STATUS(topoloc_loop_detector_confirmed(det, 2, &confirmed),
+                         TOPOLOC_ERR_INVALID_ARGUMENT);
+            CHECK_HAS_MESSAGE();
+            CHECK(confirmed.query_id == 11);
+            CHECK_NULL(topoloc_loop_detector_confirmed(det, 0, NULL), "hint");
+            CHECK_NULL(topoloc_loop_detector_confirmed_count(det, NULL), "count");
+            confirmed.struct_size = 3;
+            CHECK_STATUS(topoloc_loop_detector_confirmed(det, 0, &confirmed),
+                         TOPOLOC_ERR_STRUCT_SIZE);
+            confirmed.struct_size = sizeof confirmed;
+        }
+        if (k == 4)
+            CHECK(hint.accepted && count == 0); /* the streak goes on: nothing pending */
+    }
+    CHECK_NULL(topoloc_loop_detector_confirmed_count(NULL, &count), "detector");
+    topoloc_loop_detector_free(det);
+}
+
 int main(void)
 {
     topoloc_map *map;
@@ -3789,6 +3854,7 @@ int main(void)
     test_files();
     test_skeleton_graphs();
     test_loop_closure();
+    test_loop_confirmed();
 
     map = build_world_map();
     CHECK(map != NULL);

@@ -380,4 +380,33 @@ TEST(loop_add_of_a_c_record) {
 
 }  // namespace
 
+// With a streak of 3 (the default), keyframes 10 and 11 revisit keyframe 0 but wait as
+// inconsistent; keyframe 12 completes the streak and `confirmed()` names both (ABI 1.10).
+TEST(a_completed_streak_confirms_its_first_keyframes) {
+  static_assert(TOPOLOC_ABI_VERSION_MINOR >= 10, "confirmed hints are ABI 1.10");
+  topoloc::LoopOptions options = test_options();
+  options.consistent_keyframes = 3;
+  auto detector = topoloc::LoopDetector::create("test", "loops", kLoopDim, options);
+  (void)detector.add(keyframe(0, 0.0, false));
+  CHECK(detector.confirmed().empty());
+  for (uint64_t id : {10, 11}) {
+    const topoloc::LoopHint hint = detector.add(keyframe(id, double(id), true));
+    CHECK(hint.gate == topoloc::Gate::Inconsistent && !hint.accepted);
+    CHECK(detector.confirmed().empty());
+  }
+  const topoloc::LoopHint hint = detector.add(keyframe(12, 12.0, true));
+  CHECK(hint.accepted && hint.query_id == 12);
+  const std::vector<topoloc::LoopHint> confirmed = detector.confirmed();
+  CHECK_EQ(confirmed.size(), std::size_t{2});
+  if (confirmed.size() == 2) {
+    CHECK(confirmed[0].query_id == 10 && confirmed[1].query_id == 11);
+    for (const auto &c : confirmed)
+      CHECK(c.accepted && c.gate == topoloc::Gate::Accepted && c.matched_id == 0 &&
+            c.inliers >= 30);
+  }
+  (void)detector.add(keyframe(13, 13.0, true));
+  CHECK(detector.confirmed().empty());
+  CHECK_THROWS_STATUS(topoloc::LoopDetector().confirmed(), TOPOLOC_ERR_NULL_ARGUMENT);
+}
+
 int main() { return run_all_tests(); }

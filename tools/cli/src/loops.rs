@@ -9,14 +9,15 @@
 //! sequence is replayed online. With `--map` (a map built from images with keypoints) the
 //! map's views are the first session's keyframes and the hints name their keyframe ids.
 //!
-//! `HINTS.csv` has a header line, then one row per accepted hint:
+//! `HINTS.csv` has a header line, then one row per accepted hint, in query order (a hint a
+//! later keyframe confirmed included, [`topoloc::loops::Processed::confirmed`]):
 //! `query_index,matched_index,inliers,confidence,scale_known,tx,ty,tz,qx,qy,qz,qw` where the
 //! pose columns (`matched_T_query`: the query camera in the matched camera's optical frame,
 //! translation then unit quaternion) are empty for hints without a pose. `--intrinsics FILE`
 //! holds `fx fy cx cy` (pixels, whitespace-separated); `--depth DIR` gives keyframes 3D points
 //! and hints metric poses. `--json` prints the hints, the median and p90 time per keyframe (and
-//! the median of its describing part: global descriptor and local features) and the count of
-//! each gate; with `--aligned-tolerance T` (a
+//! the median of its describing part: global descriptor and local features), the count of
+//! each keyframe's own gate and of the confirmed hints; with `--aligned-tolerance T` (a
 //! frame-aligned second session, such as Gardens Point) also precision and recall.
 
 use crate::backend_args::{
@@ -128,12 +129,12 @@ pub struct LoopsArgs {
     /// cells].
     #[arg(long, value_enum)]
     pub pair_estimator: Option<PairEstimator>,
-    /// Iterations of the candidates' fundamental-matrix fit [default: 200 for XFeat and ORB,
+    /// Iterations of the candidates' fundamental-matrix fit [default: 100 for XFeat and ORB,
     /// 1000 for cells].
     #[arg(long)]
     pub pair_iterations: Option<u32>,
-    /// Smallest cosine of a kept XFeat or cells match (-1: every mutual match) [default: the
-    /// library's].
+    /// Smallest cosine of a kept XFeat or cells match (-1: every mutual match) [default: 0.82
+    /// for XFeat, -1 for cells].
     #[arg(long, allow_hyphen_values = true)]
     pub pair_min_cosine: Option<f32>,
     /// With `--poses`: candidates proposed by the odometry (the keyframes nearest the new
@@ -303,6 +304,7 @@ pub fn run(args: &LoopsArgs) -> Result<()> {
     let (mut hints, mut gates, mut times) = (Vec::new(), BTreeMap::new(), Vec::new());
     let mut describe_times = Vec::new();
     let mut work = Work::default();
+    let mut confirmed = 0;
     let mut decisions = String::from("query_index,gate,matched_index,inliers,confidence,detail\n");
     for (index, path) in files.iter().enumerate() {
         let (w, h, rgb) = read_rgb(path)?;
@@ -338,12 +340,17 @@ pub fn run(args: &LoopsArgs) -> Result<()> {
         work.pose_fits += done.work.pose_fits;
         *gates.entry(done.gate().name()).or_insert(0usize) += 1;
         write_decision(&mut decisions, index, done.hint.as_ref(), first_id);
+        for hint in &done.confirmed {
+            hints.push(((hint.query_id - first_id) as usize, *hint));
+        }
+        confirmed += done.confirmed.len();
         if let Some(hint) = done.accepted() {
             hints.push((index, *hint));
         }
         bar.inc(1);
     }
     bar.finish_and_clear();
+    hints.sort_by_key(|(index, _)| *index);
     write_csv(&args.out, &hints, first_id)?;
     if let Some(path) = &args.decisions {
         std::fs::write(path, decisions).with_context(|| format!("writing {}", path.display()))?;
@@ -357,6 +364,7 @@ pub fn run(args: &LoopsArgs) -> Result<()> {
         files.len(),
         first_id,
     );
+    out["confirmed"] = json!(confirmed);
     if let Some(truth) = &truth {
         add_truth(&mut out, args, &hints, truth, first_id);
     }
