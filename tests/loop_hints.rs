@@ -418,6 +418,25 @@ fn bad_features_and_duplicate_ids_change_nothing() {
     );
 }
 
+/// A detector with intrinsics (and `options`) holding keyframe 0 at the identity, with the
+/// scene points of its keypoints; returns it with the pixels of those points seen from
+/// `truth()` and keyframe 0's descriptor.
+fn with_metric_keyframe(options: HintOptions) -> (LoopDetector, Vec<[f32; 2]>, Vec<f32>) {
+    let mut detector = detector(HintOptions {
+        camera: Some(CAMERA),
+        ..options
+    });
+    let (q, m, s) = scene(120, 20, &truth(), 9);
+    let d = unit_vector(1, DIM);
+    detector
+        .process(
+            &posed(0, &d, Isometry3::identity()),
+            point_features(&m, Some(s)),
+        )
+        .unwrap();
+    (detector, q, d)
+}
+
 /// Keyframe 0 with its scene points in its camera frame, then keyframe 10 seeing the same
 /// points from `truth()`; the bodies' odometry poses are the identity and `query_pose`.
 fn metric_revisit(query_pose: Isometry3<f64>) -> topoloc::loops::LoopHint {
@@ -431,20 +450,11 @@ fn metric_revisit_via(
     via: &[Isometry3<f64>],
     query_pose: Isometry3<f64>,
 ) -> topoloc::loops::LoopHint {
-    let mut detector = detector(HintOptions {
-        camera: Some(CAMERA),
+    let (mut detector, q, d) = with_metric_keyframe(HintOptions {
         consistent_keyframes: 1,
         odometry: Some(gate),
         ..options()
     });
-    let (q, m, s) = scene(120, 20, &truth(), 9);
-    let d = unit_vector(1, DIM);
-    detector
-        .process(
-            &posed(0, &d, Isometry3::identity()),
-            point_features(&m, Some(s)),
-        )
-        .unwrap();
     for (i, &pose) in via.iter().enumerate() {
         let id = i as u64 + 1;
         let other = unit_vector(100 + id, DIM);
@@ -462,19 +472,10 @@ fn metric_revisit_via(
 /// 2-keyframe streak; their odometry poses are `truth()` moved by `offsets` (metres along y).
 /// Returns keyframe 11's hint and the ids it confirmed.
 fn streak_of_two(offsets: [f64; 2]) -> (topoloc::loops::LoopHint, Vec<u64>) {
-    let mut detector = detector(HintOptions {
-        camera: Some(CAMERA),
+    let (mut detector, q, d) = with_metric_keyframe(HintOptions {
         consistent_keyframes: 2,
         ..options()
     });
-    let (q, m, s) = scene(120, 20, &truth(), 9);
-    let d = unit_vector(1, DIM);
-    detector
-        .process(
-            &posed(0, &d, Isometry3::identity()),
-            point_features(&m, Some(s)),
-        )
-        .unwrap();
     let mut last = None;
     for (id, dy) in [10, 11].into_iter().zip(offsets) {
         let pose = Translation3::new(0.0, dy, 0.0) * truth();
