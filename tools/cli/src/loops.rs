@@ -376,7 +376,9 @@ pub fn run(args: &LoopsArgs) -> Result<()> {
 /// A keyframe could have closed a loop when an earlier keyframe outside the exclusion window
 /// lies within the radius and the angle; a hint is correct when its matched keyframe does.
 /// The pose errors' medians are over the correct hints; `pose_precision` is the share of
-/// posed hints whose relative pose is right ([`PoseError::is_small`]), wherever they match.
+/// posed hints whose relative pose is right ([`PoseError::is_small`]), wherever they match;
+/// `precision_place_or_pose` counts a hint right when it is correct by place or its pose is
+/// right (a constraint a pose graph can take, though the cameras are beyond the radius).
 fn add_truth(
     out: &mut serde_json::Value,
     args: &LoopsArgs,
@@ -394,6 +396,8 @@ fn add_truth(
         .filter(|&q| (0..q.saturating_sub(window - 1)).any(|m| near(q, m) && m + window <= q))
         .count();
     let mut correct = 0;
+    // Right by place, or by a relative pose a pose graph can take (whatever the distance).
+    let mut right_constraints = 0;
     let (mut posed, mut pose_correct) = (0, 0);
     let (mut rotation, mut translation, mut direction) = (vec![], vec![], vec![]);
     for (q, hint) in hints {
@@ -403,10 +407,14 @@ fn add_truth(
         }
         let loop_correct = near(*q, m);
         correct += usize::from(loop_correct);
-        let Some(pose) = &hint.pose else { continue };
+        let Some(pose) = &hint.pose else {
+            right_constraints += usize::from(loop_correct);
+            continue;
+        };
         let error = PoseError::of(pose, &(truth[m].inverse() * truth[*q]));
         posed += 1;
         pose_correct += usize::from(error.is_small());
+        right_constraints += usize::from(loop_correct || error.is_small());
         if !loop_correct {
             continue;
         }
@@ -431,6 +439,7 @@ fn add_truth(
         "correct": correct,
         "precision": correct as f64 / hints.len().max(1) as f64,
         "recall": correct as f64 / possible.max(1) as f64,
+        "precision_place_or_pose": right_constraints as f64 / hints.len().max(1) as f64,
         "rotation_error_deg_median": median(&rotation),
         "translation_error_m_median": median(&translation),
         "direction_error_deg_median": median(&direction),
