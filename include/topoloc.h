@@ -46,6 +46,8 @@
 #define topoloc_loop_options_default(p) topoloc_loop_options_init((p), sizeof *(p))
 #define topoloc_loop_keyframe_default(p) topoloc_loop_keyframe_init((p), sizeof *(p))
 #define topoloc_loop_hint_default(p) topoloc_loop_hint_init((p), sizeof *(p))
+#define topoloc_trajectory_options_default(p) topoloc_trajectory_options_init((p), sizeof *(p))
+#define topoloc_trajectory_report_default(p) topoloc_trajectory_report_init((p), sizeof *(p))
 
 
 /**
@@ -64,9 +66,10 @@
  * metric hints (the odometry bound's drift rate, the pose fit's reprojection threshold); 1.8:
  * loop candidates from the odometry (`odometry_candidates`, `odometry_search_m`); 1.9:
  * off-map evidence from verification (`verify_off_map_inliers`, `_inlier_scale`); 1.10:
- * confirmed loop hints (`topoloc_loop_detector_confirmed_count`, `_confirmed`).
+ * confirmed loop hints (`topoloc_loop_detector_confirmed_count`, `_confirmed`); 1.11:
+ * trajectory metrics (`topoloc_trajectory_evaluate`, `_evaluate_files`).
  */
-#define TOPOLOC_ABI_VERSION_MINOR 10
+#define TOPOLOC_ABI_VERSION_MINOR 11
 
 /**
  * Result of every fallible C function. Values are grouped in ranges and never renumbered;
@@ -1054,6 +1057,127 @@ typedef struct topoloc_loop_candidate {
 } topoloc_loop_candidate;
 
 /**
+ * An alignment of `topoloc_trajectory_options`: one of the `TOPOLOC_ALIGN_*` values.
+ */
+typedef uint32_t topoloc_alignment;
+
+/**
+ * How trajectories are associated and aligned. Initialise with
+ * `topoloc_trajectory_options_default`.
+ */
+typedef struct topoloc_trajectory_options {
+  /**
+   * `sizeof(topoloc_trajectory_options)`, set by the `_default` function.
+   */
+  size_t struct_size;
+  /**
+   * `TOPOLOC_ALIGN_*`. Default `TOPOLOC_ALIGN_SIM3`.
+   */
+  topoloc_alignment alignment;
+  /**
+   * Largest timestamp difference of an associated pair, seconds (>= 0). Default 0.01.
+   */
+  double max_diff_s;
+  /**
+   * Added to the estimate's timestamps before associating, seconds. Default 0.
+   */
+  double offset_s;
+  /**
+   * The RPE's step in associated poses (>= 1). Default 1.
+   */
+  uint32_t rpe_delta;
+} topoloc_trajectory_options;
+
+/**
+ * Statistics of one error over the associated poses. Array element: its layout never
+ * changes.
+ */
+typedef struct topoloc_error_stats {
+  /**
+   * Root mean square.
+   */
+  double rmse;
+  /**
+   * Mean.
+   */
+  double mean;
+  /**
+   * Median.
+   */
+  double median;
+  /**
+   * Population standard deviation.
+   */
+  double std;
+  /**
+   * Smallest.
+   */
+  double min;
+  /**
+   * Largest.
+   */
+  double max;
+} topoloc_error_stats;
+
+/**
+ * What `topoloc_trajectory_evaluate` measured. The caller sets `struct_size` with
+ * `topoloc_trajectory_report_default`; topoloc writes the rest.
+ */
+typedef struct topoloc_trajectory_report {
+  /**
+   * `sizeof(topoloc_trajectory_report)`, set by the `_default` function.
+   */
+  size_t struct_size;
+  /**
+   * Associated pose pairs.
+   */
+  size_t pairs;
+  /**
+   * The alignment's scale (1 unless `TOPOLOC_ALIGN_SIM3`).
+   */
+  double scale;
+  /**
+   * The alignment's rotation and translation as a row-major 4x4 (identity for
+   * `TOPOLOC_ALIGN_NONE`): an aligned estimate position is `scale * R p + t`.
+   */
+  double alignment[16];
+  /**
+   * ATE: position error, metres.
+   */
+  struct topoloc_error_stats ate_m;
+  /**
+   * ARE: rotation error, degrees.
+   */
+  struct topoloc_error_stats are_deg;
+  /**
+   * RPE over `rpe_delta` poses, translation, metres.
+   */
+  struct topoloc_error_stats rpe_m;
+  /**
+   * RPE, rotation, degrees.
+   */
+  struct topoloc_error_stats rpe_deg;
+  /**
+   * The aligned estimate's path length, metres.
+   */
+  double estimate_length_m;
+  /**
+   * The reference's path length, metres.
+   */
+  double reference_length_m;
+  /**
+   * R_traj: `estimate_length_m / reference_length_m` (0 for a reference of no length).
+   */
+  double length_ratio;
+} topoloc_trajectory_report;
+
+/**
+ * A trajectory file format of `topoloc_trajectory_evaluate_files`: one of the
+ * `TOPOLOC_TRAJECTORY_*` values.
+ */
+typedef uint32_t topoloc_trajectory_format;
+
+/**
  * Filter mode: forward filter over the graph (default).
  */
 #define TOPOLOC_MODE_FILTER 0
@@ -1187,6 +1311,41 @@ typedef struct topoloc_loop_candidate {
  * The pose disagrees with the host's odometry beyond the bounds.
  */
 #define TOPOLOC_GATE_ODOMETRY 5
+
+/**
+ * No alignment: both trajectories are in one world frame.
+ */
+#define TOPOLOC_ALIGN_NONE 0
+
+/**
+ * Rigid Umeyama alignment (rotation, translation).
+ */
+#define TOPOLOC_ALIGN_SE3 1
+
+/**
+ * Umeyama alignment with scale (the seed thesis's; monocular estimates need it).
+ */
+#define TOPOLOC_ALIGN_SIM3 2
+
+/**
+ * Detected from the first data line (8 numbers TUM, 12 KITTI, commas EuRoC).
+ */
+#define TOPOLOC_TRAJECTORY_DETECT 0
+
+/**
+ * TUM: `timestamp tx ty tz qx qy qz qw`.
+ */
+#define TOPOLOC_TRAJECTORY_TUM 1
+
+/**
+ * KITTI odometry: 12 numbers, row-major 3x4; the frame index is the timestamp.
+ */
+#define TOPOLOC_TRAJECTORY_KITTI 2
+
+/**
+ * EuRoC ground-truth CSV: `timestamp_ns, px, py, pz, qw, qx, qy, qz, ...`.
+ */
+#define TOPOLOC_TRAJECTORY_EUROC 3
 
 #ifdef __cplusplus
 extern "C" {
@@ -1706,6 +1865,44 @@ topoloc_status topoloc_loop_detector_save(const struct topoloc_loop_detector *de
  * Number of keyframes held (`*out`). Errors: `_NULL_ARGUMENT`.
  */
 topoloc_status topoloc_loop_detector_len(const struct topoloc_loop_detector *detector, size_t *out);
+
+/* ===============================================================================
+ * Trajectory metrics: ATE, ARE, RPE and R_traj against ground truth (thread-safe)
+ * =============================================================================== */
+
+/**
+ * Fills the first `size` bytes of `*options` with defaults and sets `struct_size`; call it
+ * through the header macro `topoloc_trajectory_options_default(options)`.
+ * Errors: `_NULL_ARGUMENT`, `_STRUCT_SIZE`.
+ */
+topoloc_status topoloc_trajectory_options_init(struct topoloc_trajectory_options *options, size_t size);
+
+/**
+ * Fills the first `size` bytes of `*report` with defaults and sets `struct_size`; call it
+ * through the header macro `topoloc_trajectory_report_default(report)`.
+ * Errors: `_NULL_ARGUMENT`, `_STRUCT_SIZE`.
+ */
+topoloc_status topoloc_trajectory_report_init(struct topoloc_trajectory_report *report, size_t size);
+
+/**
+ * Judges an estimated trajectory against its reference (as `evo_ape` / `evo_rpe`): pairs by
+ * timestamps, aligns, measures. Each trajectory is `count` timestamps (seconds, not
+ * decreasing) and `count` poses of 7 doubles, `tx ty tz qx qy qz qw` (TUM's layout:
+ * `world_T_body`, unit quaternion with w last). `options` may be NULL for defaults. On
+ * success `*report` is written; on error it is unchanged. Thread-safe (no state).
+ * Errors: `_INVALID_ARGUMENT` (counts, decreasing timestamps, a quaternion whose norm is not
+ * 1, no associated pair, fewer than 3 pairs to align or `rpe_delta + 1` to measure,
+ * degenerate positions), `_NON_FINITE`, `_INVALID_OPTION`, `_STRUCT_SIZE`, `_NULL_ARGUMENT`.
+ */
+topoloc_status topoloc_trajectory_evaluate(const double *reference_timestamps, const double *reference_poses, size_t reference_count, const double *estimate_timestamps, const double *estimate_poses, size_t estimate_count, const struct topoloc_trajectory_options *options, struct topoloc_trajectory_report *report);
+
+/**
+ * `topoloc_trajectory_evaluate` of two trajectory files (UTF-8 paths) in `format`
+ * (`TOPOLOC_TRAJECTORY_*`; `_DETECT` tells each file's format from its first data line).
+ * Errors: those of `topoloc_trajectory_evaluate`, `_IO` (unreadable file), `_INVALID_ARGUMENT`
+ * (a malformed line: the message names it; an unknown format), `_INVALID_UTF8`.
+ */
+topoloc_status topoloc_trajectory_evaluate_files(const char *reference_path, const char *estimate_path, topoloc_trajectory_format format, const struct topoloc_trajectory_options *options, struct topoloc_trajectory_report *report);
 
 #ifdef __cplusplus
 }  // extern "C"

@@ -22,8 +22,9 @@
 //! | 2 | [`image`], [`descriptor`], [`onnx_runtime`] | leaf vocabulary: image views and pixel formats, descriptor identity; the ONNX Runtime library |
 //! | 1 | [`errors`] | the error kinds several image-work modules share |
 //!
-//! [`eval`] (metrics: MNA, OHA, R@N, precision-recall, calibration) reads maps and results and
-//! is read by no other module of the library. Generated descriptor worlds for tests and
+//! [`eval`] (metrics: MNA, OHA, R@N, precision-recall, calibration, trajectory ATE/RPE) reads
+//! maps and results and is read by no other module of the library but `ffi`, which exposes its
+//! trajectory metrics to C. Generated descriptor worlds for tests and
 //! benchmarks live in the dev-only crate `topoloc-synthetic` (`tools/synthetic`), not here.
 
 #![warn(missing_docs)]

@@ -128,11 +128,19 @@ DEFAULT_FUNCTIONS = {
     "topoloc_loop_options": "topoloc_loop_options_init",
     "topoloc_loop_keyframe": "topoloc_loop_keyframe_init",
     "topoloc_loop_hint": "topoloc_loop_hint_init",
+    "topoloc_trajectory_options": "topoloc_trajectory_options_init",
+    "topoloc_trajectory_report": "topoloc_trajectory_report_init",
 }
 
 #: Structs the library never fills with defaults: plain data the caller writes (array elements,
 #: or ``topoloc_image``, embedded in ``topoloc_frame`` and zero for "no image").
-NO_DEFAULT_FUNCTION = {"topoloc_keyframe", "topoloc_candidate", "topoloc_image", "topoloc_loop_candidate"}
+NO_DEFAULT_FUNCTION = {
+    "topoloc_keyframe",
+    "topoloc_candidate",
+    "topoloc_image",
+    "topoloc_loop_candidate",
+    "topoloc_error_stats",
+}
 
 
 @pytest.mark.parametrize("struct_name", sorted(DEFAULT_FUNCTIONS))
@@ -571,7 +579,7 @@ def test_status_names_match_the_librarys_table():
 
 
 def test_abi_minor_version():
-    assert topoloc.abi_version_minor() >= _lib.ABI_VERSION_MINOR == 10
+    assert topoloc.abi_version_minor() >= _lib.ABI_VERSION_MINOR == 11
 
 
 EXPECTED_CLASSES = {

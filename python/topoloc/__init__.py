@@ -38,6 +38,10 @@ Loop closure (ABI 1.5): a :class:`LoopDetector` takes SLAM keyframes (global des
 keypoints with binary descriptors, optional poses) and returns one gated :class:`LoopHint` per
 keyframe, with the relative pose when camera intrinsics are given.
 
+Trajectory metrics (ABI 1.11): :func:`evaluate_trajectory` (TUM rows) and
+:func:`evaluate_trajectory_files` (TUM, KITTI, EuRoC) give ATE, ARE, RPE and R_traj of an
+estimate against ground truth, as ``evo_ape`` / ``evo_rpe`` compute them.
+
 Objects and threads: a :class:`Map` is immutable and may be shared by many threads; a
 :class:`Localizer` (one camera), a :class:`LoopDetector` and a :class:`MapBuilder` are
 single-threaded state. Every
@@ -93,6 +97,7 @@ from ._lib import (
 )
 from ._core import (
     Candidate,
+    ErrorStats,
     Gate,
     Graph,
     Localizer,
@@ -103,12 +108,15 @@ from ._core import (
     MapBuilder,
     PoseFix,
     Result,
+    TrajectoryReport,
     ViewInfo,
     abi_version,
     abi_version_minor,
     keyframe_options_default,
     localizer_options_default,
     loop_options_default,
+    evaluate_trajectory,
+    evaluate_trajectory_files,
     map_from_keyframes,
     skeleton_graph,
     skeleton_options_default,
@@ -150,6 +158,11 @@ __all__ = [
     "LoopHint",
     "LoopCandidate",
     "Gate",
+    # trajectory metrics (ABI 1.11)
+    "evaluate_trajectory",
+    "evaluate_trajectory_files",
+    "TrajectoryReport",
+    "ErrorStats",
     # versions and library
     "version",
     "abi_version",

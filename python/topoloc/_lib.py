@@ -48,7 +48,7 @@ ABI_VERSION = 1
 
 #: ABI minor version these bindings were written for (``TOPOLOC_ABI_VERSION_MINOR``): they use
 #: items up to "ABI 1.N" of the header.
-ABI_VERSION_MINOR = 10
+ABI_VERSION_MINOR = 11
 
 #: Environment variable naming the shared library to load.
 ENV_VAR = "TOPOLOC_LIBRARY"
@@ -90,6 +90,17 @@ GATE_TOO_FEW_INLIERS = 2
 GATE_INCONSISTENT = 3
 GATE_NO_POSE = 4
 GATE_ODOMETRY = 5
+
+#: ``TOPOLOC_ALIGN_*`` (ABI 1.11): how a trajectory estimate is aligned to its reference.
+ALIGN_NONE = 0
+ALIGN_SE3 = 1
+ALIGN_SIM3 = 2
+
+#: ``TOPOLOC_TRAJECTORY_*`` (ABI 1.11): trajectory file formats.
+TRAJECTORY_DETECT = 0
+TRAJECTORY_TUM = 1
+TRAJECTORY_KITTI = 2
+TRAJECTORY_EUROC = 3
 
 TOPOLOC_OK = 0
 TOPOLOC_ERR_BUFFER_TOO_SMALL = 3
@@ -393,6 +404,43 @@ class topoloc_loop_candidate(Structure):
     ]
 
 
+class topoloc_trajectory_options(Structure):
+    _fields_ = [
+        ("struct_size", c_size_t),
+        ("alignment", c_uint32),
+        ("max_diff_s", c_double),
+        ("offset_s", c_double),
+        ("rpe_delta", c_uint32),
+    ]
+
+
+class topoloc_error_stats(Structure):
+    _fields_ = [
+        ("rmse", c_double),
+        ("mean", c_double),
+        ("median", c_double),
+        ("std", c_double),
+        ("min", c_double),
+        ("max", c_double),
+    ]
+
+
+class topoloc_trajectory_report(Structure):
+    _fields_ = [
+        ("struct_size", c_size_t),
+        ("pairs", c_size_t),
+        ("scale", c_double),
+        ("alignment", c_double * 16),
+        ("ate_m", topoloc_error_stats),
+        ("are_deg", topoloc_error_stats),
+        ("rpe_m", topoloc_error_stats),
+        ("rpe_deg", topoloc_error_stats),
+        ("estimate_length_m", c_double),
+        ("reference_length_m", c_double),
+        ("length_ratio", c_double),
+    ]
+
+
 #: Every struct of the header, by C name.
 STRUCTS = {
     cls.__name__: cls
@@ -413,6 +461,9 @@ STRUCTS = {
         topoloc_loop_keyframe,
         topoloc_loop_hint,
         topoloc_loop_candidate,
+        topoloc_trajectory_options,
+        topoloc_error_stats,
+        topoloc_trajectory_report,
     )
 }
 
@@ -533,6 +584,21 @@ SIGNATURES = {
     # Confirmed loop hints (ABI 1.10)
     "topoloc_loop_detector_confirmed_count": (status_t, [LoopDetectorPtr, _p(c_size_t)]),
     "topoloc_loop_detector_confirmed": (status_t, [LoopDetectorPtr, c_size_t, _p(topoloc_loop_hint)]),
+    # Trajectory metrics (ABI 1.11)
+    "topoloc_trajectory_options_init": (status_t, [_p(topoloc_trajectory_options), c_size_t]),
+    "topoloc_trajectory_report_init": (status_t, [_p(topoloc_trajectory_report), c_size_t]),
+    "topoloc_trajectory_evaluate": (
+        status_t,
+        [
+            _p(c_double), _p(c_double), c_size_t,
+            _p(c_double), _p(c_double), c_size_t,
+            _p(topoloc_trajectory_options), _p(topoloc_trajectory_report),
+        ],
+    ),
+    "topoloc_trajectory_evaluate_files": (
+        status_t,
+        [c_char_p, c_char_p, c_uint32, _p(topoloc_trajectory_options), _p(topoloc_trajectory_report)],
+    ),
     "topoloc_version": (c_char_p, []),
     "topoloc_abi_version": (c_uint32, []),
     "topoloc_abi_version_minor": (c_uint32, []),

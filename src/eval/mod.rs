@@ -6,6 +6,8 @@
 //! - [`recall_at_n_frames`]: recall with a frame tolerance, for frame-aligned datasets.
 //! - [`precision_recall`]: PR curve, average precision and R@100P from [`ScoredOutcome`]s.
 //! - [`calibration`]: reliability table and expected calibration error of the confidence.
+//! - [`evaluate`] of a [`Trajectory`]: ATE, ARE, RPE and R_traj of a SLAM estimate against
+//!   ground truth, with evo's association and Umeyama alignment ([`trajectory`]).
 //!
 //! Every rate is a fraction in `[0, 1]` of query frames; an empty input gives 0, never a panic.
 
@@ -14,12 +16,17 @@ mod frames;
 mod graph;
 mod hops;
 mod precision_recall;
+pub mod trajectory;
 
 pub use calibration::{calibration, Calibration, CalibrationBin};
 pub use frames::{recall_at_n_frames, FrameRanking};
 pub use graph::{GraphEvaluator, GraphMetrics, Prediction, RecallAtN};
 pub use hops::HopDistances;
 pub use precision_recall::{precision_recall, PrCurve, PrPoint};
+pub use trajectory::{
+    associate, evaluate, umeyama, Alignment, ErrorStats, Similarity, Trajectory, TrajectoryError,
+    TrajectoryFormat, TrajectoryOptions, TrajectoryReport,
+};
 
 use crate::map::PlaceId;
 use serde::{Deserialize, Serialize};

@@ -5,6 +5,7 @@ use super::status::topoloc_status::{self, *};
 use crate::build::ImageMapError;
 use crate::descriptor::{DescriptorError, IdentityError};
 use crate::errors::VisionError;
+use crate::eval::TrajectoryError;
 use crate::localize::{LocalizeError, TimestampError};
 use crate::loops::LoopsError;
 use crate::map::MapError;
@@ -146,6 +147,21 @@ impl From<LoopsError> for FfiError {
             | LoopsError::OutOfOrder(_)
             | LoopsError::UnknownKeyframe(_)
             | LoopsError::InvalidKeyframe(_) => Self::invalid(e.to_string()),
+        }
+    }
+}
+
+impl From<TrajectoryError> for FfiError {
+    fn from(e: TrajectoryError) -> Self {
+        match e {
+            TrajectoryError::Io(_) => Self::new(TOPOLOC_ERR_IO, e.to_string()),
+            TrajectoryError::InvalidOption(_) => {
+                Self::new(TOPOLOC_ERR_INVALID_OPTION, e.to_string())
+            }
+            TrajectoryError::Parse { .. }
+            | TrajectoryError::Invalid(_)
+            | TrajectoryError::TooFewPairs(_)
+            | TrajectoryError::Degenerate => Self::invalid(e.to_string()),
         }
     }
 }

@@ -29,7 +29,7 @@ mod versioned;
 
 // The entry points, declared in the order include/topoloc.h presents them (cbindgen follows
 // this order): versions and errors, maps, map keypoints, the localizer, builders, skeleton graphs, loop
-// closure.
+// closure, trajectory metrics.
 mod version;
 
 mod map;
@@ -46,6 +46,8 @@ mod skeleton;
 
 mod loops;
 
+mod trajectory;
+
 pub use builder::*;
 pub use images::*;
 pub use localizer::*;
@@ -54,6 +56,7 @@ pub use map::*;
 pub use map_keypoints::*;
 pub use skeleton::*;
 pub use status::topoloc_status;
+pub use trajectory::*;
 pub use version::*;
 
 #[cfg(test)]

@@ -67,7 +67,8 @@ minor="$(sed -n 's/^#define TOPOLOC_VERSION_MINOR \([0-9][0-9]*\)$/\1/p' "$repo/
 if [[ "$major" == 0 ]]; then expected_soname="libtopoloc.so.0.$minor"; else expected_soname="libtopoloc.so.$major"; fi
 ln -s "$target/libtopoloc.so" "$build/lib/$expected_soname"
 ln -s "$expected_soname" "$build/lib/libtopoloc.so"
-LINK_SHARED=(-L"$build/lib" -Wl,-rpath,"$build/lib" -ltopoloc -pthread)
+# -lm: the test program itself uses libm (cos, sin).
+LINK_SHARED=(-L"$build/lib" -Wl,-rpath,"$build/lib" -ltopoloc -pthread -lm)
 
 echo "library:   $target"
 echo "build dir: $build"

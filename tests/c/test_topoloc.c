@@ -3832,6 +3832,121 @@ static void test_loop_confirmed(void)
     topoloc_loop_detector_free(det);
 }
 
+/* Trajectory metrics (ABI 1.11): a scaled, moved copy of a circle aligns back exactly with
+ * TOPOLOC_ALIGN_SIM3; bad input is refused with the report unchanged. */
+#define TRAJ_N 40
+static void circle_trajectory(double *stamps, double *poses, double scale, double dx)
+{
+    for (int i = 0; i < TRAJ_N; i++) {
+        double a = 6.283185307179586 * i / TRAJ_N;
+        double *p = poses + 7 * i;
+        stamps[i] = 0.1 * i;
+        p[0] = scale * 3.0 * cos(a) + dx;
+        p[1] = scale * 2.0 * sin(a);
+        p[2] = scale * 0.2 * i / TRAJ_N;
+        p[3] = 0.0; /* qx qy qz qw: a yaw of a */
+        p[4] = 0.0;
+        p[5] = sin(a / 2);
+        p[6] = cos(a / 2);
+    }
+}
+
+static void test_trajectory_metrics(void)
+{
+    double ref_t[TRAJ_N], ref_p[7 * TRAJ_N], est_t[TRAJ_N], est_p[7 * TRAJ_N];
+    topoloc_trajectory_options options;
+    topoloc_trajectory_report report;
+    char ref_path[4200], est_path[4200];
+    FILE *f;
+
+    CHECK(topoloc_abi_version_minor() >= 11);
+    circle_trajectory(ref_t, ref_p, 1.0, 0.0);
+    circle_trajectory(est_t, est_p, 0.5, 4.0);
+    CHECK_STATUS(topoloc_trajectory_options_default(&options), TOPOLOC_OK);
+    CHECK(options.alignment == TOPOLOC_ALIGN_SIM3 && options.max_diff_s == 0.01 &&
+          options.offset_s == 0.0 && options.rpe_delta == 1);
+    CHECK_STATUS(topoloc_trajectory_report_default(&report), TOPOLOC_OK);
+    CHECK_STATUS(topoloc_trajectory_evaluate(ref_t, ref_p, TRAJ_N, est_t, est_p, TRAJ_N, &options,
+                                             &report),
+                 TOPOLOC_OK);
+    CHECK(report.pairs == TRAJ_N && report.ate_m.rmse < 1e-9 && report.are_deg.max < 1e-6);
+    CHECK(fabs(report.scale - 2.0) < 1e-9 && fabs(report.length_ratio - 1.0) < 1e-9);
+    CHECK(fabs(report.alignment[15] - 1.0) < 1e-12);
+    options.alignment = TOPOLOC_ALIGN_SE3;
+    CHECK_STATUS(topoloc_trajectory_evaluate(ref_t, ref_p, TRAJ_N, est_t, est_p, TRAJ_N, &options,
+                                             &report),
+                 TOPOLOC_OK);
+    CHECK(report.scale == 1.0 && report.ate_m.rmse > 0.5);
+
+    /* Bad input: a status, and the report as it was. */
+    options.alignment = 7;
+    CHECK_STATUS(topoloc_trajectory_evaluate(ref_t, ref_p, TRAJ_N, est_t, est_p, TRAJ_N, &options,
+                                             &report),
+                 TOPOLOC_ERR_INVALID_OPTION);
+    options.alignment = TOPOLOC_ALIGN_SIM3;
+    est_p[7 * 5 + 1] = make_nan();
+    CHECK_STATUS(topoloc_trajectory_evaluate(ref_t, ref_p, TRAJ_N, est_t, est_p, TRAJ_N, &options,
+                                             &report),
+                 TOPOLOC_ERR_NON_FINITE);
+    est_p[7 * 5 + 1] = 0.0;
+    est_t[3] = -1.0; /* earlier than the one before */
+    CHECK_STATUS(topoloc_trajectory_evaluate(ref_t, ref_p, TRAJ_N, est_t, est_p, TRAJ_N, &options,
+                                             &report),
+                 TOPOLOC_ERR_INVALID_ARGUMENT);
+    CHECK_HAS_MESSAGE();
+    est_t[3] = 0.3;
+    CHECK_STATUS(topoloc_trajectory_evaluate(ref_t, ref_p, TRAJ_N, est_t, est_p, 2, &options,
+                                             &report),
+                 TOPOLOC_ERR_INVALID_ARGUMENT); /* too few pairs to align */
+    CHECK_NULL(topoloc_trajectory_evaluate(ref_t, NULL, TRAJ_N, est_t, est_p, TRAJ_N, &options,
+                                           &report),
+               "reference_poses");
+    CHECK_NULL(topoloc_trajectory_evaluate(ref_t, ref_p, TRAJ_N, est_t, est_p, TRAJ_N, &options,
+                                           NULL),
+               "report");
+    report.struct_size = 3;
+    CHECK_STATUS(topoloc_trajectory_evaluate(ref_t, ref_p, TRAJ_N, est_t, est_p, TRAJ_N, NULL,
+                                             &report),
+                 TOPOLOC_ERR_STRUCT_SIZE);
+    report.struct_size = sizeof report;
+    CHECK(report.scale == 1.0 && report.pairs == TRAJ_N); /* the SE3 run's, untouched */
+
+    /* Files: TUM text, its format detected. */
+    tmp_path(ref_path, sizeof ref_path, "ref.tum");
+    tmp_path(est_path, sizeof est_path, "est.tum");
+    f = fopen(ref_path, "w");
+    CHECK(f != NULL);
+    if (f == NULL)
+        return;
+    fprintf(f, "# timestamp tx ty tz qx qy qz qw\n");
+    for (int i = 0; i < TRAJ_N; i++)
+        fprintf(f, "%.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g\n", ref_t[i], ref_p[7 * i],
+                ref_p[7 * i + 1], ref_p[7 * i + 2], ref_p[7 * i + 3], ref_p[7 * i + 4],
+                ref_p[7 * i + 5], ref_p[7 * i + 6]);
+    fclose(f);
+    f = fopen(est_path, "w");
+    CHECK(f != NULL);
+    if (f == NULL)
+        return;
+    fprintf(f, "0.0 1 2 3 0 0 0 1\nnot a pose\n");
+    fclose(f);
+    CHECK_STATUS(topoloc_trajectory_evaluate_files(ref_path, ref_path, TOPOLOC_TRAJECTORY_DETECT,
+                                                   NULL, &report),
+                 TOPOLOC_OK);
+    CHECK(report.pairs == TRAJ_N && report.ate_m.rmse < 1e-9);
+    CHECK_STATUS(topoloc_trajectory_evaluate_files(ref_path, est_path, TOPOLOC_TRAJECTORY_TUM,
+                                                   NULL, &report),
+                 TOPOLOC_ERR_INVALID_ARGUMENT); /* line 2 is malformed */
+    CHECK_HAS_MESSAGE();
+    CHECK_STATUS(topoloc_trajectory_evaluate_files(ref_path, ref_path, 9, NULL, &report),
+                 TOPOLOC_ERR_INVALID_ARGUMENT);
+    CHECK(remove(est_path) == 0);
+    CHECK_STATUS(topoloc_trajectory_evaluate_files(ref_path, est_path, TOPOLOC_TRAJECTORY_TUM,
+                                                   NULL, &report),
+                 TOPOLOC_ERR_IO);
+    CHECK(remove(ref_path) == 0);
+}
+
 int main(void)
 {
     topoloc_map *map;
@@ -3855,6 +3970,7 @@ int main(void)
     test_skeleton_graphs();
     test_loop_closure();
     test_loop_confirmed();
+    test_trajectory_metrics();
 
     map = build_world_map();
     CHECK(map != NULL);

@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # C++ layer tests: builds tests/cpp/test_raii.cpp, tests/cpp/test_loops.cpp (loop closure) and
-# tests/cpp/test_pose_fix.cpp (pose fixes) against include/topoloc.hpp and the release library,
+# tests/cpp/test_pose_fix.cpp (pose fixes) and tests/cpp/test_trajectory.cpp (trajectory metrics) against include/topoloc.hpp and the release library,
 # runs each normally and under ASan+UBSan (leak checking on); with OpenCV 4, builds and runs tests/cpp/test_opencv.cpp against
 # include/topoloc_opencv.hpp; checks that topoloc.hpp does not depend on include order and that
 # each C++ header compiles alone; and compiles and runs the C++ examples so that they cannot rot.
@@ -125,7 +125,7 @@ fi
 "$cxx" "${cxxflags[@]}" "$out/status_codes.cpp" -o "$out/status_codes" "${ldflags[@]}"
 "$out/status_codes"
 
-for test in test_raii test_loops test_pose_fix; do
+for test in test_raii test_loops test_pose_fix test_trajectory; do
     step "compile $test (plain)"
     "$cxx" "${cxxflags[@]}" -O1 "$here/$test.cpp" -o "$out/$test" "${ldflags[@]}"
 

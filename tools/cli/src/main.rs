@@ -1,6 +1,7 @@
 //! The `topoloc` command: the demo (the README's main job), maps from images, simulated
 //! datasets, evaluation, and benchmark helpers.
 
+mod ate;
 mod backend_args;
 mod build_map;
 mod demo;
@@ -89,6 +90,9 @@ enum Command {
     /// The seed-style benchmark: MNA and OHA per split (train, tr-t, tr-a, test), mean and
     /// std over generated worlds, for every localizer configuration.
     Suite(suite::SuiteArgs),
+    /// ATE, ARE, RPE and R_traj of an estimated trajectory against its ground truth (TUM,
+    /// KITTI or EuRoC files; evo's association and Umeyama alignment).
+    Ate(ate::AteArgs),
     /// (internal) Child process of bench-memory: load MAP and report its figures as JSON.
     #[command(hide = true)]
     MeasureMap { map: PathBuf },
@@ -111,6 +115,7 @@ fn main() -> Result<()> {
         Command::Loops(args) => loops::run(&args),
         Command::Simulate(args) => simulate::run(&args),
         Command::Suite(args) => suite::run(&args),
+        Command::Ate(args) => ate::run(&args),
         Command::MeasureMap { map } => memory::measure(&map),
     }
 }

@@ -51,6 +51,8 @@ const DEFAULT_MACROS: &str = "
 #define topoloc_loop_options_default(p) topoloc_loop_options_init((p), sizeof *(p))
 #define topoloc_loop_keyframe_default(p) topoloc_loop_keyframe_init((p), sizeof *(p))
 #define topoloc_loop_hint_default(p) topoloc_loop_hint_init((p), sizeof *(p))
+#define topoloc_trajectory_options_default(p) topoloc_trajectory_options_init((p), sizeof *(p))
+#define topoloc_trajectory_report_default(p) topoloc_trajectory_report_init((p), sizeof *(p))
 ";
 
 /// The header's sections of functions, in reading order: a banner and the functions' name
@@ -104,6 +106,10 @@ const SECTIONS: &[(&str, &[&str])] = &[
     (
         "Loop closure: keyframes in, gated hints with relative poses out (one thread at a time)",
         &["topoloc_loop_"],
+    ),
+    (
+        "Trajectory metrics: ATE, ARE, RPE and R_traj against ground truth (thread-safe)",
+        &["topoloc_trajectory_"],
     ),
 ];
 
