@@ -884,3 +884,51 @@ fn loops_follows_the_contract_online_and_against_a_map() {
         "max_iterations",
     );
 }
+
+/// `topoloc ate` on a simulated run: the drifting odometry against its ground truth, every
+/// alignment, the contract keys, and a clear failure on a file that is no trajectory.
+#[test]
+fn ate_judges_the_simulated_odometry_against_its_ground_truth() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("sim");
+    simulate_tiny(&out, &[]);
+    let traj = out.join("traj-000");
+    let (odometry, truth) = (traj.join("odometry.txt"), traj.join("groundtruth.txt"));
+    let (odometry, truth) = (odometry.to_str().unwrap(), truth.to_str().unwrap());
+    let frames = std::fs::read_to_string(truth)
+        .unwrap()
+        .lines()
+        .filter(|l| !l.starts_with('#') && !l.trim().is_empty())
+        .count();
+    let ate = |align: &str| {
+        let report = json(&topoloc(&[
+            "ate", odometry, truth, "--align", align, "--json",
+        ]));
+        for key in ["ate_m", "are_deg", "rpe_m", "rpe_deg"] {
+            for stat in ["rmse", "mean", "median", "std", "min", "max"] {
+                assert!(report[key][stat].is_f64(), "{key}.{stat}: {report}");
+            }
+        }
+        assert_eq!(report["pairs"], frames, "{report}");
+        assert!(report["r_traj"].as_f64().unwrap() > 0.5, "{report}");
+        report["ate_m"]["rmse"].as_f64().unwrap()
+    };
+    let (none, se3, sim3) = (ate("none"), ate("se3"), ate("sim3"));
+    assert!(none > 0.0, "the odometry drifts");
+    assert!(
+        sim3 <= se3 + 1e-12 && se3 <= none + 1e-12,
+        "{none} {se3} {sim3}"
+    );
+    let itself = json(&topoloc(&["ate", truth, truth, "--json"]));
+    assert!(itself["ate_m"]["rmse"].as_f64().unwrap() < 1e-9, "{itself}");
+    // Not a trajectory: the error names the file and says what to pass.
+    let bad = dir.path().join("notes.txt");
+    std::fs::write(&bad, "just some words\n").unwrap();
+    let failed = topoloc(&["ate", bad.to_str().unwrap(), truth]);
+    assert!(!failed.status.success());
+    let stderr = String::from_utf8_lossy(&failed.stderr);
+    assert!(
+        stderr.contains("notes.txt") && stderr.contains("--format"),
+        "{stderr}"
+    );
+}
