@@ -141,6 +141,7 @@ impl From<LoopsError> for FfiError {
         match e {
             LoopsError::Descriptor(d) => d.into(),
             LoopsError::Map(m) => m.into(),
+            LoopsError::Vision(v) => v.into(),
             LoopsError::InvalidOption(_) => Self::new(TOPOLOC_ERR_INVALID_OPTION, e.to_string()),
             LoopsError::NonFinite(_) => Self::new(TOPOLOC_ERR_NON_FINITE, e.to_string()),
             LoopsError::DuplicateId(_)

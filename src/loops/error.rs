@@ -2,6 +2,7 @@
 //! the call.
 
 use crate::descriptor::DescriptorError;
+use crate::errors::VisionError;
 use crate::map::MapError;
 
 /// What can go wrong when adding, querying, erasing or saving keyframes.
@@ -32,4 +33,8 @@ pub enum LoopsError {
     /// Building, saving or reading the map the database is stored as failed.
     #[error(transparent)]
     Map(#[from] MapError),
+    /// Describing a keyframe image failed ([`super::KeyframeDescriber`]): the image, the
+    /// backend, or a missing model (the message names what to install).
+    #[error(transparent)]
+    Vision(#[from] VisionError),
 }

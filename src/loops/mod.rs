@@ -7,12 +7,16 @@
 //! relocalization candidates, erase, save as a topoloc map and reload it for a later session).
 //! [`LoopDetector`] keeps each keyframe's local features beside it and turns the candidates
 //! into verified, gated loop-closure hints with relative poses and covariances.
+//! [`KeyframeDescriber`] turns a keyframe image into both inputs (global descriptor and local
+//! features) for hosts that hand over images.
 
 mod database;
+mod describe;
 mod error;
 mod hints;
 
 pub use database::{Added, DatabaseOptions, KeyframeDatabase, KeyframeEntry, LoopQuery, Match};
+pub use describe::KeyframeDescriber;
 pub use error::LoopsError;
 pub use hints::{
     Gate, HintOptions, KeyframeFeatures, LoopDetector, LoopHint, OdometryGate, Processed, Work,

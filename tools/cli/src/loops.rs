@@ -36,13 +36,12 @@ use topoloc::build::{build_from_images, BuildStage, ImageLayout, ImageMapOptions
 use topoloc::describe::Describer;
 use topoloc::image::{read_rgb, read_u16, ImageView, PixelFormat};
 use topoloc::loops::{
-    DatabaseOptions, Gate, HintOptions, KeyframeDatabase, KeyframeEntry, KeyframeFeatures,
-    LoopDetector, LoopHint, OdometryGate, Work,
+    DatabaseOptions, Gate, HintOptions, KeyframeDatabase, KeyframeDescriber, KeyframeEntry,
+    KeyframeFeatures, LoopDetector, LoopHint, OdometryGate, Work,
 };
 use topoloc::verify::{
-    camera_points_from_depth, cells_from_map, DepthImage, FeatureDetector, FeatureKind,
-    FundamentalEstimator, Keypoints, PairOptions, PinholeCamera, RelativePose, RelativePoseOptions,
-    CELL_TAP, DEFAULT_CELLS, DEFAULT_KEYPOINTS,
+    camera_points_from_depth, DepthImage, FundamentalEstimator, Keypoints, PairOptions,
+    PinholeCamera, RelativePose, RelativePoseOptions,
 };
 use topoloc::{LoadOptions, Map};
 
@@ -298,8 +297,8 @@ pub fn run(args: &LoopsArgs) -> Result<()> {
         .cloned()
         .context("the map stores no describer")?;
     let runtime = &args.backend.runtime;
-    let mut describer = Describer::new(model, &runtime.describer_options(None))?;
-    let mut features = Features::new(kind, &runtime.xfeat_options())?;
+    let describer = Describer::new(model, &runtime.describer_options(None))?;
+    let mut describer = KeyframeDescriber::new(describer, kind, &runtime.xfeat_options())?;
     let bar = progress_bar(files.len(), "keyframes");
     let (mut hints, mut gates, mut times) = (Vec::new(), BTreeMap::new(), Vec::new());
     let mut describe_times = Vec::new();
@@ -311,8 +310,8 @@ pub fn run(args: &LoopsArgs) -> Result<()> {
         let image = ImageView::packed(w, h, PixelFormat::Rgb8, &rgb);
         let start = Instant::now();
         let mut descriptor = Vec::new();
-        let keypoints = features
-            .describe(&mut describer, &image, &mut descriptor)
+        let KeyframeFeatures { keypoints, .. } = describer
+            .describe(&image, &mut descriptor)
             .with_context(|| path.display().to_string())?;
         describe_times.push(start.elapsed().as_secs_f64() * 1e3);
         let entry = KeyframeEntry {
@@ -492,45 +491,6 @@ impl PoseError {
                 Translation::DirectionDeg(d) => d <= 20.0,
                 Translation::NoBaseline => true,
             }
-    }
-}
-
-/// The keyframes' local features: a detector, or dense cells from the describer's pass.
-enum Features {
-    Detector(FeatureDetector),
-    Cells,
-}
-
-impl Features {
-    fn new(kind: FeatureKind, xfeat: &topoloc::verify::XFeatOptions) -> Result<Self> {
-        Ok(match kind {
-            FeatureKind::Cells => Features::Cells,
-            kind => Features::Detector(FeatureDetector::new(kind, DEFAULT_KEYPOINTS, xfeat)?),
-        })
-    }
-
-    /// Describes the image into `descriptor` and returns its keypoints.
-    fn describe(
-        &mut self,
-        describer: &mut Describer,
-        image: &ImageView<'_>,
-        descriptor: &mut Vec<f32>,
-    ) -> Result<Keypoints> {
-        Ok(match self {
-            Features::Cells => {
-                let tap = describer.describe_with_tap(image, descriptor, CELL_TAP)?;
-                cells_from_map(
-                    &tap.values,
-                    [tap.channels, tap.height, tap.width],
-                    tap.cell_size,
-                    DEFAULT_CELLS,
-                )?
-            }
-            Features::Detector(detector) => {
-                describer.describe(image, descriptor)?;
-                detector.detect(image)?
-            }
-        })
     }
 }
 
