@@ -276,7 +276,7 @@ fn bad_files_are_typed_errors_that_name_the_line() {
     assert!(matches!(
         Trajectory::read(
             std::path::Path::new("/nonexistent/t.txt"),
-            TrajectoryFormat::Tum
+            Some(TrajectoryFormat::Tum)
         ),
         Err(TrajectoryError::Io(_))
     ));

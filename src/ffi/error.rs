@@ -160,6 +160,7 @@ impl From<TrajectoryError> for FfiError {
                 Self::new(TOPOLOC_ERR_INVALID_OPTION, e.to_string())
             }
             TrajectoryError::Parse { .. }
+            | TrajectoryError::UnknownFormat
             | TrajectoryError::Invalid(_)
             | TrajectoryError::TooFewPairs(_)
             | TrajectoryError::Degenerate => Self::invalid(e.to_string()),

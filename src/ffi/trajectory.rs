@@ -7,10 +7,10 @@ use super::error::FfiError;
 use super::status::topoloc_status::{self, *};
 use super::versioned::{init_versioned, read_versioned, write_versioned, Versioned};
 use crate::eval::{
-    evaluate, Alignment, ErrorStats, Trajectory, TrajectoryFormat, TrajectoryOptions,
-    TrajectoryReport,
+    evaluate, Alignment, ErrorStats, Trajectory, TrajectoryError, TrajectoryFormat,
+    TrajectoryOptions, TrajectoryReport,
 };
-use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion};
+use nalgebra::{Isometry3, Translation3};
 use std::ffi::c_char;
 
 /// An alignment of `topoloc_trajectory_options`: one of the `TOPOLOC_ALIGN_*` values.
@@ -274,45 +274,25 @@ fn trajectory(
             format!("{name}: value {i} of the poses and timestamps is not finite"),
         ));
     }
-    let mut list = Vec::with_capacity(count);
-    for (i, p) in values.chunks_exact(7).enumerate() {
-        let q = Quaternion::new(p[6], p[3], p[4], p[5]);
-        if (q.norm() - 1.0).abs() > 1e-2 {
-            return Err(FfiError::invalid(format!(
-                "{name} pose {i}: the quaternion's norm is {}, not 1",
-                q.norm()
-            )));
-        }
-        list.push(Isometry3::from_parts(
-            Translation3::new(p[0], p[1], p[2]),
-            UnitQuaternion::from_quaternion(q),
-        ));
-    }
-    Ok(Trajectory::new(stamps.to_vec(), list)?)
+    Ok(Trajectory::from_tum_values(stamps.to_vec(), values)?)
 }
 
 fn read_file(path: &str, format: topoloc_trajectory_format) -> Result<Trajectory, FfiError> {
-    let path = std::path::Path::new(path);
-    let text = std::fs::read_to_string(path)
-        .map_err(|e| FfiError::new(TOPOLOC_ERR_IO, format!("{}: {e}", path.display())))?;
     let format = match format {
-        TOPOLOC_TRAJECTORY_DETECT => TrajectoryFormat::detect(&text).ok_or_else(|| {
-            FfiError::invalid(format!(
-                "{}: cannot tell the format from its first data line",
-                path.display()
-            ))
-        })?,
-        TOPOLOC_TRAJECTORY_TUM => TrajectoryFormat::Tum,
-        TOPOLOC_TRAJECTORY_KITTI => TrajectoryFormat::Kitti,
-        TOPOLOC_TRAJECTORY_EUROC => TrajectoryFormat::Euroc,
+        TOPOLOC_TRAJECTORY_DETECT => None,
+        TOPOLOC_TRAJECTORY_TUM => Some(TrajectoryFormat::Tum),
+        TOPOLOC_TRAJECTORY_KITTI => Some(TrajectoryFormat::Kitti),
+        TOPOLOC_TRAJECTORY_EUROC => Some(TrajectoryFormat::Euroc),
         other => {
             return Err(FfiError::invalid(format!(
                 "format is {other}, not a TOPOLOC_TRAJECTORY_* value"
             )))
         }
     };
-    Trajectory::parse(&text, format)
-        .map_err(|e| FfiError::invalid(format!("{}: {e}", path.display())))
+    Trajectory::read(std::path::Path::new(path), format).map_err(|e| match e {
+        TrajectoryError::Io(_) => e.into(),
+        e => FfiError::invalid(format!("{path}: {e}")),
+    })
 }
 
 fn c_stats(s: &ErrorStats) -> topoloc_error_stats {

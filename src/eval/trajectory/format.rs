@@ -111,7 +111,7 @@ fn number(field: &str) -> Result<f64, String> {
 }
 
 /// A pose from a position and a quaternion `[w, x, y, z]` whose norm is 1 up to rounding.
-fn pose(t: [f64; 3], q: [f64; 4]) -> Result<Isometry3<f64>, String> {
+pub(super) fn pose(t: [f64; 3], q: [f64; 4]) -> Result<Isometry3<f64>, String> {
     let q = Quaternion::new(q[0], q[1], q[2], q[3]);
     if (q.norm() - 1.0).abs() > ROTATION_TOLERANCE {
         return Err(format!("the quaternion's norm is {}, not 1", q.norm()));

@@ -1,7 +1,7 @@
 //! ATE, ARE, RPE and R_traj of an estimate against its reference.
 
 use super::align::{associate, umeyama, Alignment, Similarity};
-use super::{Trajectory, TrajectoryError};
+use super::{path_length, Trajectory, TrajectoryError};
 use nalgebra::{Isometry3, Translation3, Vector3};
 
 /// How [`evaluate`] associates and aligns.
@@ -121,26 +121,34 @@ pub fn evaluate(
     }
     let reference_poses: Vec<Isometry3<f64>> =
         pairs.iter().map(|&(r, _)| reference.poses[r]).collect();
-    let positions = |poses: &[Isometry3<f64>]| -> Vec<Vector3<f64>> {
-        poses.iter().map(|p| p.translation.vector).collect()
-    };
-    let estimate_poses: Vec<Isometry3<f64>> =
-        pairs.iter().map(|&(_, e)| estimate.poses[e]).collect();
     let alignment = match options.alignment {
         Alignment::None => Similarity::identity(),
-        Alignment::Se3 | Alignment::Sim3 => umeyama(
-            &positions(&estimate_poses),
-            &positions(&reference_poses),
-            options.alignment == Alignment::Sim3,
-        )?,
+        Alignment::Se3 | Alignment::Sim3 => {
+            let positions = |poses: &[Isometry3<f64>], pick: fn(&(usize, usize)) -> usize| {
+                pairs
+                    .iter()
+                    .map(|p| poses[pick(p)].translation.vector)
+                    .collect::<Vec<Vector3<f64>>>()
+            };
+            umeyama(
+                &positions(&estimate.poses, |p| p.1),
+                &positions(&reference.poses, |p| p.0),
+                options.alignment == Alignment::Sim3,
+            )?
+        }
     };
-    let aligned = |p: &Isometry3<f64>| {
-        Isometry3::from_parts(
-            Translation3::from(alignment.transform_point(&p.translation.vector)),
-            alignment.rotation * p.rotation,
-        )
-    };
-    let estimate_poses: Vec<Isometry3<f64>> = estimate_poses.iter().map(aligned).collect();
+    // Every estimated pose aligned once: the associated ones are measured, all make the path.
+    let aligned: Vec<Isometry3<f64>> = estimate
+        .poses
+        .iter()
+        .map(|p| {
+            Isometry3::from_parts(
+                Translation3::from(alignment.transform_point(&p.translation.vector)),
+                alignment.rotation * p.rotation,
+            )
+        })
+        .collect();
+    let estimate_poses: Vec<Isometry3<f64>> = pairs.iter().map(|&(_, e)| aligned[e]).collect();
     let (mut ate, mut are) = (Vec::new(), Vec::new());
     for (r, e) in reference_poses.iter().zip(&estimate_poses) {
         let error = r.inverse() * e;
@@ -157,12 +165,7 @@ pub fn evaluate(
         rpe_t.push(error.translation.vector.norm());
         rpe_r.push(error.rotation.angle().to_degrees());
     }
-    let aligned_estimate = Trajectory {
-        timestamps: estimate.timestamps.clone(),
-        poses: estimate.poses.iter().map(aligned).collect(),
-    };
-    let (estimate_length_m, reference_length_m) =
-        (aligned_estimate.path_length(), reference.path_length());
+    let (estimate_length_m, reference_length_m) = (path_length(&aligned), reference.path_length());
     Ok(TrajectoryReport {
         pairs: pairs.len(),
         alignment,

@@ -71,11 +71,40 @@ impl Trajectory {
         format::parse(text, format)
     }
 
-    /// Reads and parses the file at `path`.
-    pub fn read(path: &std::path::Path, format: TrajectoryFormat) -> Result<Self, TrajectoryError> {
+    /// Reads and parses the file at `path` in `format`, or in the format its first data line
+    /// shows when `None` ([`TrajectoryFormat::detect`]; [`TrajectoryError::UnknownFormat`]
+    /// when it shows none).
+    pub fn read(
+        path: &std::path::Path,
+        format: Option<TrajectoryFormat>,
+    ) -> Result<Self, TrajectoryError> {
         let text = std::fs::read_to_string(path)
             .map_err(|e| TrajectoryError::Io(format!("{}: {e}", path.display())))?;
+        let format = format
+            .or_else(|| TrajectoryFormat::detect(&text))
+            .ok_or(TrajectoryError::UnknownFormat)?;
         Self::parse(&text, format)
+    }
+
+    /// A trajectory from `timestamps` and, per pose, the 7 values of a TUM line after its
+    /// timestamp (`tx ty tz qx qy qz qw`), validated as [`Trajectory::parse`] does.
+    pub fn from_tum_values(timestamps: Vec<f64>, values: &[f64]) -> Result<Self, TrajectoryError> {
+        if values.len() != 7 * timestamps.len() {
+            return Err(TrajectoryError::Invalid(format!(
+                "{} pose values for {} timestamps, 7 each",
+                values.len(),
+                timestamps.len()
+            )));
+        }
+        let poses = values
+            .chunks_exact(7)
+            .enumerate()
+            .map(|(i, p)| {
+                format::pose([p[0], p[1], p[2]], [p[6], p[3], p[4], p[5]])
+                    .map_err(|m| TrajectoryError::Invalid(format!("pose {i}: {m}")))
+            })
+            .collect::<Result<_, _>>()?;
+        Self::new(timestamps, poses)
     }
 
     /// The same poses at `timestamps` (e.g. KITTI's `times.txt` for its frame-indexed poses).
@@ -95,11 +124,16 @@ impl Trajectory {
 
     /// Path length: the sum of the distances between consecutive positions, metres.
     pub fn path_length(&self) -> f64 {
-        self.poses
-            .windows(2)
-            .map(|w| (w[1].translation.vector - w[0].translation.vector).norm())
-            .sum()
+        path_length(&self.poses)
     }
+}
+
+/// The sum of the distances between consecutive positions of `poses`, metres.
+fn path_length(poses: &[Isometry3<f64>]) -> f64 {
+    poses
+        .windows(2)
+        .map(|w| (w[1].translation.vector - w[0].translation.vector).norm())
+        .sum()
 }
 
 /// Why a trajectory could not be read or judged.
@@ -108,6 +142,9 @@ pub enum TrajectoryError {
     /// The file could not be read.
     #[error("cannot read the trajectory: {0}")]
     Io(String),
+    /// The first data line matches no format (8 numbers: TUM, 12: KITTI, commas: EuRoC).
+    #[error("cannot tell the trajectory format from the first data line (8 numbers: TUM, 12: KITTI, commas: EuRoC)")]
+    UnknownFormat,
     /// A line of the text is malformed.
     #[error("line {line}: {message}")]
     Parse {

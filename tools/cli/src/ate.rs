@@ -15,7 +15,8 @@ use clap::{Args, ValueEnum};
 use serde_json::json;
 use std::path::{Path, PathBuf};
 use topoloc::eval::{
-    evaluate, Alignment, ErrorStats, Trajectory, TrajectoryFormat, TrajectoryOptions,
+    evaluate, Alignment, ErrorStats, Trajectory, TrajectoryError, TrajectoryFormat,
+    TrajectoryOptions,
 };
 
 /// Options of `ate`.
@@ -138,21 +139,15 @@ pub fn run(args: &AteArgs) -> Result<()> {
 
 /// A trajectory file in `format` (detected when `None`), with KITTI timestamps from `times`.
 fn read(path: &Path, format: Option<FormatArg>, times: Option<&Path>) -> Result<Trajectory> {
-    let text =
-        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-    let format = match format {
-        Some(FormatArg::Tum) => TrajectoryFormat::Tum,
-        Some(FormatArg::Kitti) => TrajectoryFormat::Kitti,
-        Some(FormatArg::Euroc) => TrajectoryFormat::Euroc,
-        None => TrajectoryFormat::detect(&text).with_context(|| {
-            format!(
-                "{}: cannot tell the format (8 numbers: TUM, 12: KITTI, commas: EuRoC); pass --format",
-                path.display()
-            )
-        })?,
-    };
-    let trajectory =
-        Trajectory::parse(&text, format).with_context(|| path.display().to_string())?;
+    let format = format.map(|f| match f {
+        FormatArg::Tum => TrajectoryFormat::Tum,
+        FormatArg::Kitti => TrajectoryFormat::Kitti,
+        FormatArg::Euroc => TrajectoryFormat::Euroc,
+    });
+    let trajectory = Trajectory::read(path, format).map_err(|e| match e {
+        TrajectoryError::UnknownFormat => anyhow::anyhow!("{}: {e}; pass --format", path.display()),
+        e => anyhow::Error::new(e).context(path.display().to_string()),
+    })?;
     let Some(times) = times else {
         return Ok(trajectory);
     };
