@@ -42,6 +42,7 @@
 #define topoloc_result_default(p) topoloc_result_init((p), sizeof *(p))
 #define topoloc_view_info_default(p) topoloc_view_info_init((p), sizeof *(p))
 #define topoloc_image_map_options_default(p) topoloc_image_map_options_init((p), sizeof *(p))
+#define topoloc_describer_options_default(p) topoloc_describer_options_init((p), sizeof *(p))
 #define topoloc_skeleton_options_default(p) topoloc_skeleton_options_init((p), sizeof *(p))
 #define topoloc_loop_options_default(p) topoloc_loop_options_init((p), sizeof *(p))
 #define topoloc_loop_keyframe_default(p) topoloc_loop_keyframe_init((p), sizeof *(p))
@@ -67,9 +68,10 @@
  * loop candidates from the odometry (`odometry_candidates`, `odometry_search_m`); 1.9:
  * off-map evidence from verification (`verify_off_map_inliers`, `_inlier_scale`); 1.10:
  * confirmed loop hints (`topoloc_loop_detector_confirmed_count`, `_confirmed`); 1.11:
- * trajectory metrics (`topoloc_trajectory_evaluate`, `_evaluate_files`).
+ * trajectory metrics (`topoloc_trajectory_evaluate`, `_evaluate_files`); 1.12: describers
+ * (`topoloc_describer_*`: images to a map's global descriptors).
  */
-#define TOPOLOC_ABI_VERSION_MINOR 11
+#define TOPOLOC_ABI_VERSION_MINOR 12
 
 /**
  * Result of every fallible C function. Values are grouped in ranges and never renumbered;
@@ -198,6 +200,13 @@ enum topoloc_status
 #ifndef __cplusplus
 typedef uint32_t topoloc_status;
 #endif // __cplusplus
+
+/**
+ * Describes images as a map's views were described. Created by `topoloc_describer_new`,
+ * released by `topoloc_describer_free`; it does not keep the map alive (the describer model
+ * is shared). Single-threaded state: one thread at a time (it may move between threads).
+ */
+typedef struct topoloc_describer topoloc_describer;
 
 /**
  * A topological graph built from an occupancy grid: places (position, kind) and undirected
@@ -755,6 +764,34 @@ typedef uint32_t topoloc_stage;
  * catch inside the callback and return `false` instead.
  */
 typedef bool (*topoloc_progress_fn)(void *user_data, topoloc_stage stage, size_t done, size_t total);
+
+/**
+ * Where the describer finds its runtime files. Initialise with
+ * `topoloc_describer_options_default`.
+ */
+typedef struct topoloc_describer_options {
+  /**
+   * `sizeof(topoloc_describer_options)`, set by the `_default` function.
+   */
+  size_t struct_size;
+  /**
+   * `TOPOLOC_BACKEND_AUTO` (default) accepts the map's backend; `_ONNX` or `_VLAD_*`
+   * require it (else `_DESCRIPTOR_MISMATCH`); `_NONE` is `_INVALID_OPTION`.
+   */
+  topoloc_backend backend;
+  /**
+   * ONNX model file; NULL or "" = the cache's default. Must be the map's model (by hash).
+   */
+  const char *onnx_model_path;
+  /**
+   * ONNX Runtime library; NULL or "" = `TOPOLOC_ORT_LIBRARY`, `ORT_DYLIB_PATH`, the cache.
+   */
+  const char *onnx_runtime_path;
+  /**
+   * ONNX Runtime intra-op threads, 1..=64. Default 1.
+   */
+  uint32_t threads;
+} topoloc_describer_options;
 
 /**
  * Parameters of `topoloc_graph_from_occupancy`. Initialise with
@@ -1685,6 +1722,46 @@ topoloc_status topoloc_map_build_from_image_files(const char *const *paths, size
  * Errors: as `topoloc_map_build_from_image_files`, with `_INVALID_IMAGE` for a bad buffer.
  */
 topoloc_status topoloc_map_build_from_images(const struct topoloc_image *images, size_t count, const struct topoloc_image_map_options *options, topoloc_progress_fn progress, void *user_data, struct topoloc_map **out);
+
+/* =======================================================================
+ * Describers: images to a map's global descriptors (one thread at a time)
+ * ======================================================================= */
+
+/**
+ * Fills `*options` with the defaults. Call through the header macro
+ * `topoloc_describer_options_default(options)`, which passes `sizeof *(options)`.
+ * Errors: `_NULL_ARGUMENT`, `_STRUCT_SIZE`.
+ */
+topoloc_status topoloc_describer_options_init(struct topoloc_describer_options *options, size_t size);
+
+/**
+ * Loads the describer `map` stores (for ONNX: the runtime and the model, checked by hash).
+ * `options` may be NULL for defaults. On success `*out` owns a new describer.
+ * Errors: `_NO_DESCRIBER` (the map was built from descriptors), `_BACKEND_UNAVAILABLE`
+ * (paths tried in the message), `_DESCRIPTOR_MISMATCH`, `_MODEL`, `_INVALID_OPTION`,
+ * `_STRUCT_SIZE`, `_NULL_ARGUMENT`, `_INVALID_UTF8`.
+ */
+topoloc_status topoloc_describer_new(const struct topoloc_map *map, const struct topoloc_describer_options *options, struct topoloc_describer **out);
+
+/**
+ * Releases a describer; NULL is a no-op.
+ */
+void topoloc_describer_free(struct topoloc_describer *describer);
+
+/**
+ * Writes the descriptor dimension D (the map's) to `*out`.
+ * Errors: `_NULL_ARGUMENT`.
+ */
+topoloc_status topoloc_describer_dim(const struct topoloc_describer *describer, size_t *out);
+
+/**
+ * Describes `image` into `descriptor` (capacity `capacity` floats): D values of unit norm,
+ * comparable with the map's. `*len` (if not NULL) receives D, also on
+ * `_BUFFER_TOO_SMALL`. The image is read only during the call.
+ * Errors: `_INVALID_IMAGE` (also `TOPOLOC_PIXEL_NONE`), `_UNINFORMATIVE_IMAGE` (no content,
+ * e.g. a constant image), `_BUFFER_TOO_SMALL`, `_MODEL`, `_NULL_ARGUMENT`.
+ */
+topoloc_status topoloc_describer_describe(struct topoloc_describer *describer, const struct topoloc_image *image, float *descriptor, size_t capacity, size_t *len);
 
 /* ========================================
  * Skeleton graphs from occupancy grids

@@ -374,6 +374,10 @@ using SkeletonOptions = topoloc_skeleton_options;
 /// `LoopDetector::create` / `LoopDetector::from_map`.
 using LoopOptions = topoloc_loop_options;
 
+/// Where a `Describer` finds its runtime files (the C struct, ABI 1.12). Start from
+/// `default_describer_options()`; the string fields are borrowed only during the constructor.
+using DescriberOptions = topoloc_describer_options;
+
 /// Load options that accept any map (`topoloc_map_load_options_default`). Throws `Error`
 /// (`TOPOLOC_ERR_STRUCT_SIZE`) only on a header/library layout mismatch.
 [[nodiscard]] inline LoadOptions default_load_options() {
@@ -419,6 +423,15 @@ using LoopOptions = topoloc_loop_options;
 [[nodiscard]] inline LoopOptions default_loop_options() {
   LoopOptions options;
   check(topoloc_loop_options_default(&options));
+  return options;
+}
+
+/// Default describer options (`topoloc_describer_options_default`: the map's backend, the
+/// cache's model and runtime, one thread). Throws `Error` (`TOPOLOC_ERR_STRUCT_SIZE`) only on a
+/// header/library layout mismatch.
+[[nodiscard]] inline DescriberOptions default_describer_options() {
+  DescriberOptions options;
+  check(topoloc_describer_options_default(&options));
   return options;
 }
 
@@ -1478,6 +1491,56 @@ struct LoopHint {
   std::array<double, 36> covariance{};
 };
 
+/// Owner of a describer (`topoloc_describer*`, ABI 1.12): a map's describer on its own, which
+/// turns images into global descriptors exactly as the map's views were described, e.g. for
+/// `LoopKeyframe::descriptor` or `Frame::descriptor`. Move-only; the destructor calls
+/// `topoloc_describer_free`; it does not keep the map.
+///
+/// Thread safety: single-threaded state; use from one thread at a time (it may move between
+/// threads); one describer per thread for parallel work.
+/// Errors: every method that calls the library throws `Error` (or its status subclass); a
+/// failed `describe` leaves the output untouched.
+class Describer : public detail::Owner<topoloc_describer, &topoloc_describer_free> {
+public:
+  /// An empty owner (`!describer`).
+  Describer() noexcept = default;
+
+  /// Loads `map`'s describer (for ONNX: the runtime and the model, checked by hash). Throws
+  /// `NoDescriberError` (a map built from descriptors), `BackendUnavailableError` (paths tried
+  /// in the message), `ModelError`, `Error` (`TOPOLOC_ERR_DESCRIPTOR_MISMATCH` for another
+  /// backend or model than the map's, `_INVALID_OPTION`, `_STRUCT_SIZE`, `_NULL_ARGUMENT` for
+  /// an empty map).
+  explicit Describer(const Map &map,
+                     const DescriberOptions &options = default_describer_options()) {
+    topoloc_describer *raw = nullptr;
+    check(topoloc_describer_new(map.capi(), &options, &raw));
+    adopt(raw);
+    check(topoloc_describer_dim(get(), &dim_));
+  }
+
+  /// The descriptor dimension D (the map's).
+  [[nodiscard]] std::size_t dim() const noexcept { return dim_; }
+
+  /// Describes `image` into `out` (resized to D; its storage is reused from call to call).
+  /// Throws `InvalidImageError` (also for no image), `UninformativeImageError` (no content),
+  /// `ModelError`, `Error` (`TOPOLOC_ERR_NULL_ARGUMENT` when empty).
+  void describe(const Image &image, std::vector<float> &out) {
+    std::vector<float> next(dim_);
+    check(topoloc_describer_describe(get(), &image, next.data(), next.size(), nullptr));
+    out.swap(next);
+  }
+
+  /// Describes `image`: D floats of unit norm. Same errors as the other overload.
+  [[nodiscard]] std::vector<float> describe(const Image &image) {
+    std::vector<float> out;
+    describe(image, out);
+    return out;
+  }
+
+private:
+  std::size_t dim_ = 0;
+};
+
 /// Owner of a loop detector (`topoloc_loop_detector*`): a keyframe database with each
 /// keyframe's local features that turns every added keyframe into at most one gated hint, for
 /// one SLAM run and, from a map, against an earlier one. Move-only; the destructor calls
@@ -1508,6 +1571,14 @@ public:
     topoloc_loop_detector *raw = nullptr;
     check(topoloc_loop_detector_new(kind.c_str(), model.c_str(), dim, &options, &raw));
     return LoopDetector(raw);
+  }
+
+  /// An empty detector for the descriptors of `map`'s describer (its kind, model and D), for a
+  /// host that describes its keyframe images with a `Describer` of the same map (ABI 1.12).
+  /// The map is not kept. Same errors as `create`.
+  [[nodiscard]] static LoopDetector for_descriptors_of(
+      const Map &map, const LoopOptions &options = default_loop_options()) {
+    return create(map.descriptor_kind(), map.descriptor_model(), map.dim(), options);
   }
 
   /// A detector whose first session is `map`'s views (with their stored keypoints and, where

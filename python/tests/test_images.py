@@ -840,3 +840,43 @@ def test_the_off_map_flag_reads_verification_inliers_when_told(vlad_map, images)
         topoloc.Localizer(vlad_map, verify_candidates=3, verify_off_map_inliers=float("nan"))
     with pytest.raises(topoloc.InvalidOptionError):
         topoloc.Localizer(vlad_map, verify_candidates=3, verify_off_map_inlier_scale=0.0)
+
+
+def test_describer_describes_as_the_map_and_feeds_a_loop_detector(vlad_map, images):
+    with topoloc.Describer(vlad_map) as describer:
+        assert describer.dim == vlad_map.dim
+        for i, img in enumerate(images):
+            d = describer.describe(img)
+            assert d.dtype == np.float32 and d.shape == (vlad_map.dim,)
+            assert float(d @ vlad_map.view_descriptor(i)) > 0.9999  # the same image again
+        # A revisit is nearest its own view.
+        q = describer.describe(revisit(images[3], 7))
+        sims = [float(q @ vlad_map.view_descriptor(i)) for i in range(len(images))]
+        assert int(np.argmax(sims)) == 3
+        with topoloc.LoopDetector(vlad_map.descriptor_kind, vlad_map.descriptor_model, vlad_map.dim) as det:
+            hint = det.add(1, 0.0, q)
+            assert not hint.has_match and len(det) == 1
+        with pytest.raises(topoloc.UninformativeImageError):
+            describer.describe(np.full((H, W), 128, np.uint8))
+        with pytest.raises(topoloc.InvalidImageError):
+            describer.describe(np.zeros((0, W), np.uint8))
+        with pytest.raises(TypeError):
+            describer.describe(images[0].astype(np.float32))
+    with pytest.raises(ValueError):
+        describer.describe(images[0])
+
+
+def test_describer_errors(vlad_map):
+    with topoloc.MapBuilder("ext", "m", dim=4) as b:
+        b.add_view(b.add_place(), [1, 0, 0, 0])
+        plain = b.build()
+    with pytest.raises(topoloc.NoDescriberError):
+        topoloc.Describer(plain)
+    with pytest.raises(topoloc.DescriptorMismatchError):
+        topoloc.Describer(vlad_map, backend="onnx")
+    with pytest.raises(topoloc.InvalidOptionError):
+        topoloc.Describer(vlad_map, backend="none")
+    with pytest.raises(topoloc.InvalidOptionError):
+        topoloc.Describer(vlad_map, threads=0)
+    with pytest.raises(TypeError):
+        topoloc.Describer("not a map")

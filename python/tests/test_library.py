@@ -125,6 +125,7 @@ DEFAULT_FUNCTIONS = {
     "topoloc_map_load_options": "topoloc_map_load_options_init",
     "topoloc_image_map_options": "topoloc_image_map_options_init",
     "topoloc_skeleton_options": "topoloc_skeleton_options_init",
+    "topoloc_describer_options": "topoloc_describer_options_init",
     "topoloc_loop_options": "topoloc_loop_options_init",
     "topoloc_loop_keyframe": "topoloc_loop_keyframe_init",
     "topoloc_loop_hint": "topoloc_loop_hint_init",
@@ -579,7 +580,7 @@ def test_status_names_match_the_librarys_table():
 
 
 def test_abi_minor_version():
-    assert topoloc.abi_version_minor() >= _lib.ABI_VERSION_MINOR == 11
+    assert topoloc.abi_version_minor() >= _lib.ABI_VERSION_MINOR == 12
 
 
 EXPECTED_CLASSES = {

@@ -38,6 +38,10 @@ Loop closure (ABI 1.5): a :class:`LoopDetector` takes SLAM keyframes (global des
 keypoints with binary descriptors, optional poses) and returns one gated :class:`LoopHint` per
 keyframe, with the relative pose when camera intrinsics are given.
 
+A :class:`Describer` (ABI 1.12) turns images into the global descriptors of a map built from
+images, for a loop detector made for that map's descriptors (``LoopDetector(m.descriptor_kind,
+m.descriptor_model, m.dim)``).
+
 Trajectory metrics (ABI 1.11): :func:`evaluate_trajectory` (TUM rows) and
 :func:`evaluate_trajectory_files` (TUM, KITTI, EuRoC) give ATE, ARE, RPE and R_traj of an
 estimate against ground truth, as ``evo_ape`` / ``evo_rpe`` compute them.
@@ -97,6 +101,7 @@ from ._lib import (
 )
 from ._core import (
     Candidate,
+    Describer,
     ErrorStats,
     Gate,
     Graph,
@@ -152,6 +157,8 @@ __all__ = [
     "MODE_FILTER",
     "MODE_SINGLE_FRAME",
     "MODE_METRIC",
+    # describers (ABI 1.12)
+    "Describer",
     # loop closure (ABI 1.5)
     "LoopDetector",
     "loop_options_default",

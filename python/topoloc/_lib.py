@@ -48,7 +48,7 @@ ABI_VERSION = 1
 
 #: ABI minor version these bindings were written for (``TOPOLOC_ABI_VERSION_MINOR``): they use
 #: items up to "ABI 1.N" of the header.
-ABI_VERSION_MINOR = 11
+ABI_VERSION_MINOR = 12
 
 #: Environment variable naming the shared library to load.
 ENV_VAR = "TOPOLOC_LIBRARY"
@@ -157,6 +157,13 @@ class topoloc_loop_detector(Structure):
 LocalizerPtr = POINTER(topoloc_localizer)
 GraphPtr = POINTER(topoloc_graph)
 LoopDetectorPtr = POINTER(topoloc_loop_detector)
+
+
+class topoloc_describer(Structure):
+    """Opaque ``topoloc_describer`` (ABI 1.12)."""
+
+
+DescriberPtr = POINTER(topoloc_describer)
 
 
 class topoloc_view_attributes(Structure):
@@ -404,6 +411,16 @@ class topoloc_loop_candidate(Structure):
     ]
 
 
+class topoloc_describer_options(Structure):
+    _fields_ = [
+        ("struct_size", c_size_t),
+        ("backend", c_uint32),
+        ("onnx_model_path", c_char_p),
+        ("onnx_runtime_path", c_char_p),
+        ("threads", c_uint32),
+    ]
+
+
 class topoloc_trajectory_options(Structure):
     _fields_ = [
         ("struct_size", c_size_t),
@@ -457,6 +474,7 @@ STRUCTS = {
         topoloc_map_load_options,
         topoloc_view_info,
         topoloc_skeleton_options,
+        topoloc_describer_options,
         topoloc_loop_options,
         topoloc_loop_keyframe,
         topoloc_loop_hint,
@@ -470,7 +488,14 @@ STRUCTS = {
 #: Opaque handle types, by C name.
 HANDLES = {
     cls.__name__: cls
-    for cls in (topoloc_map, topoloc_map_builder, topoloc_localizer, topoloc_graph, topoloc_loop_detector)
+    for cls in (
+        topoloc_map,
+        topoloc_map_builder,
+        topoloc_localizer,
+        topoloc_graph,
+        topoloc_loop_detector,
+        topoloc_describer,
+    )
 }
 
 # --------------------------------------------------------------------------------------------
@@ -560,6 +585,15 @@ SIGNATURES = {
     "topoloc_graph_place": (status_t, [GraphPtr, c_uint32, _p(c_double), _p(c_uint32)]),
     "topoloc_graph_edge": (status_t, [GraphPtr, c_size_t, _p(c_uint32), _p(c_uint32), _p(c_double)]),
     "topoloc_graph_skeleton": (status_t, [GraphPtr, _p(c_uint32), c_size_t, _p(c_size_t)]),
+    # Describers (ABI 1.12)
+    "topoloc_describer_options_init": (status_t, [_p(topoloc_describer_options), c_size_t]),
+    "topoloc_describer_new": (status_t, [MapPtr, _p(topoloc_describer_options), _p(DescriberPtr)]),
+    "topoloc_describer_free": (None, [DescriberPtr]),
+    "topoloc_describer_dim": (status_t, [DescriberPtr, _p(c_size_t)]),
+    "topoloc_describer_describe": (
+        status_t,
+        [DescriberPtr, _p(topoloc_image), _p(c_float), c_size_t, _p(c_size_t)],
+    ),
     # Loop closure (ABI 1.5)
     "topoloc_loop_options_init": (status_t, [_p(topoloc_loop_options), c_size_t]),
     "topoloc_loop_detector_new": (

@@ -1,17 +1,17 @@
 //! C functions of the localizer: create, process a frame, reset, free.
 
-use super::boundary::{check_out, optional_string, run, slice, write_out};
+use super::boundary::{check_out, run, slice, write_out};
 use super::convert::{expected_descriptor, optional_camera, optional_pose, pose_to_row_major};
+use super::describer::describer_options;
 use super::error::FfiError;
 use super::handles::{clone_arc, free_box, new_box, try_mut, Castable, Opaque, OwnedBox};
 use super::images::{
-    backend_family, backend_kind, image_view, topoloc_backend, topoloc_image, TOPOLOC_BACKEND_AUTO,
+    backend_kind, image_view, topoloc_backend, topoloc_image, TOPOLOC_BACKEND_AUTO,
     TOPOLOC_BACKEND_NONE,
 };
 use super::map::topoloc_map;
 use super::topoloc_status;
 use super::versioned::{init_versioned, read_versioned, write_versioned, Versioned};
-use crate::describe::DescriberOptions;
 use crate::localize::{Frame, Localization, Localizer, LocalizerOptions, MetricOptions, Mode};
 use crate::verify::{LocateOptions, VerificationOptions};
 use nalgebra::Isometry3;
@@ -214,24 +214,15 @@ pub extern "C" fn topoloc_localizer_new(
         };
         let options = localizer_options(&o)?;
         let has_describer = map.describer().is_some();
-        let wanted = backend_kind(o.image_backend, None)?;
+        // Unknown backend codes are refused before the map is looked at.
+        backend_kind(o.image_backend, None)?;
         let localizer = match (o.image_backend, has_describer) {
             (TOPOLOC_BACKEND_NONE, _) | (TOPOLOC_BACKEND_AUTO, false) => {
                 Localizer::new(map, options)?
             }
             _ => {
-                let describer = DescriberOptions {
-                    backend: wanted,
-                    family: backend_family(o.image_backend).map(Into::into),
-                    onnx_runtime: optional_string(
-                        o.onnx_runtime_path,
-                        "options.onnx_runtime_path",
-                    )?
-                    .map(Into::into),
-                    onnx_model: optional_string(o.onnx_model_path, "options.onnx_model_path")?
-                        .map(Into::into),
-                    threads: 1,
-                };
+                let describer =
+                    describer_options(o.image_backend, o.onnx_model_path, o.onnx_runtime_path, 1)?;
                 Localizer::with_describer(map, options, &describer)?
             }
         };

@@ -28,7 +28,7 @@ mod status;
 mod versioned;
 
 // The entry points, declared in the order include/topoloc.h presents them (cbindgen follows
-// this order): versions and errors, maps, map keypoints, the localizer, builders, skeleton graphs, loop
+// this order): versions and errors, maps, map keypoints, the localizer, builders, describers, skeleton graphs, loop
 // closure, trajectory metrics.
 mod version;
 
@@ -42,6 +42,8 @@ mod builder;
 
 mod images;
 
+mod describer;
+
 mod skeleton;
 
 mod loops;
@@ -49,6 +51,7 @@ mod loops;
 mod trajectory;
 
 pub use builder::*;
+pub use describer::*;
 pub use images::*;
 pub use localizer::*;
 pub use loops::*;

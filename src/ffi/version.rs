@@ -18,8 +18,9 @@ pub const TOPOLOC_ABI_VERSION: u32 = 1;
 /// loop candidates from the odometry (`odometry_candidates`, `odometry_search_m`); 1.9:
 /// off-map evidence from verification (`verify_off_map_inliers`, `_inlier_scale`); 1.10:
 /// confirmed loop hints (`topoloc_loop_detector_confirmed_count`, `_confirmed`); 1.11:
-/// trajectory metrics (`topoloc_trajectory_evaluate`, `_evaluate_files`).
-pub const TOPOLOC_ABI_VERSION_MINOR: u32 = 11;
+/// trajectory metrics (`topoloc_trajectory_evaluate`, `_evaluate_files`); 1.12: describers
+/// (`topoloc_describer_*`: images to a map's global descriptors).
+pub const TOPOLOC_ABI_VERSION_MINOR: u32 = 12;
 
 static VERSION: &CStr =
     match CStr::from_bytes_with_nul(concat!(env!("CARGO_PKG_VERSION"), "\0").as_bytes()) {

@@ -3272,6 +3272,86 @@ static void test_metric_mode(const topoloc_map *world)
     topoloc_map_free(posed);
 }
 
+/* A describer from the image map describes each map image as its view was described, refuses
+ * what it cannot describe and leaves its buffer untouched on errors. */
+static void test_describer(const topoloc_map *map, const topoloc_map *world)
+{
+    topoloc_describer_options options;
+    topoloc_describer *describer = NULL, *untouched = (topoloc_describer *)0x1;
+    topoloc_image image, none;
+    float got[IMG_PLACES], view[IMG_PLACES], small[2] = {7.0f, 7.0f};
+    size_t dim = 0, len = 0;
+    uint32_t i, map_dim = 0;
+
+    section("describers: images to the map's descriptors (ABI 1.12)");
+    memset(&options, 0x5A, sizeof options);
+    CHECK_OK(topoloc_describer_options_default(&options));
+    CHECK(options.struct_size == sizeof options && options.backend == TOPOLOC_BACKEND_AUTO &&
+          options.onnx_model_path == NULL && options.onnx_runtime_path == NULL &&
+          options.threads == 1);
+    CHECK_STATUS(topoloc_describer_options_init(&options, 3), TOPOLOC_ERR_STRUCT_SIZE);
+
+    /* A map built from descriptors stores no describer. */
+    CHECK_STATUS(topoloc_describer_new(world, NULL, &untouched), TOPOLOC_ERR_NO_DESCRIBER);
+    CHECK_HAS_MESSAGE();
+    CHECK(untouched == (topoloc_describer *)0x1);
+    /* Options it cannot honour. */
+    options.backend = TOPOLOC_BACKEND_NONE;
+    CHECK_STATUS(topoloc_describer_new(map, &options, &untouched), TOPOLOC_ERR_INVALID_OPTION);
+    options.backend = TOPOLOC_BACKEND_ONNX; /* the map is VLAD-ORB */
+    CHECK_STATUS(topoloc_describer_new(map, &options, &untouched),
+                 TOPOLOC_ERR_DESCRIPTOR_MISMATCH);
+    options.backend = TOPOLOC_BACKEND_AUTO;
+    options.threads = 0;
+    CHECK_STATUS(topoloc_describer_new(map, &options, &untouched), TOPOLOC_ERR_INVALID_OPTION);
+    options.threads = 1;
+    CHECK(untouched == (topoloc_describer *)0x1);
+    CHECK_NULL(topoloc_describer_new(NULL, &options, &describer), "map");
+    CHECK_NULL(topoloc_describer_new(map, &options, NULL), "out");
+
+    CHECK_OK(topoloc_describer_new(map, &options, &describer));
+    if (describer == NULL) {
+        return;
+    }
+    CHECK_OK(topoloc_describer_dim(describer, &dim));
+    CHECK_OK(topoloc_map_descriptor_dim(map, &map_dim));
+    CHECK(dim == map_dim && dim == IMG_PLACES - 1);
+    for (i = 0; i < IMG_PLACES; i++) {
+        double dot = 0.0;
+        uint32_t k;
+        image = gray_image(g_place_px[i]);
+        CHECK_OK(topoloc_describer_describe(describer, &image, got, IMG_PLACES, &len));
+        CHECK(len == dim);
+        CHECK_OK(topoloc_map_view_descriptor(map, i, view, IMG_PLACES));
+        for (k = 0; k < dim; k++) {
+            dot += (double)got[k] * view[k];
+        }
+        CHECK(dot > 0.9999); /* the same image, described again */
+    }
+
+    /* Errors: the caller's buffer and the describer are left as they were. */
+    len = 0;
+    CHECK_STATUS(topoloc_describer_describe(describer, &image, small, 2, &len),
+                 TOPOLOC_ERR_BUFFER_TOO_SMALL);
+    CHECK(len == dim && small[0] == 7.0f && small[1] == 7.0f);
+    memset(&none, 0, sizeof none);
+    CHECK_STATUS(topoloc_describer_describe(describer, &none, got, IMG_PLACES, NULL),
+                 TOPOLOC_ERR_INVALID_IMAGE);
+    none = image;
+    none.stride = 1; /* shorter than a row */
+    CHECK_STATUS(topoloc_describer_describe(describer, &none, got, IMG_PLACES, NULL),
+                 TOPOLOC_ERR_INVALID_IMAGE);
+    CHECK_NULL(topoloc_describer_describe(describer, NULL, got, IMG_PLACES, NULL), "image");
+    CHECK_NULL(topoloc_describer_describe(NULL, &image, got, IMG_PLACES, NULL), "describer");
+    CHECK_NULL(topoloc_describer_dim(describer, NULL), "out");
+    image = gray_image(g_place_px[0]);
+    CHECK_OK(topoloc_describer_describe(describer, &image, got, IMG_PLACES, NULL));
+    CHECK_OK(topoloc_map_view_descriptor(map, 0, view, IMG_PLACES));
+    CHECK(fabsf(got[0] - view[0]) < 1e-4f); /* still describing as before */
+    topoloc_describer_free(describer);
+    topoloc_describer_free(NULL);
+}
+
 static void test_images(const topoloc_map *world)
 {
     topoloc_map *map;
@@ -3282,6 +3362,7 @@ static void test_images(const topoloc_map *world)
     CHECK(map != NULL);
     if (map != NULL) {
         test_image_localize(map, world);
+        test_describer(map, world);
         test_verification(map, world);
         test_pose_fix(map);
         test_bad_images(map);

@@ -378,6 +378,55 @@ TEST(loop_add_of_a_c_record) {
   CHECK(hint.accepted && hint.matched_id == 0);
 }
 
+// A describer of an image map (ABI 1.12) describes each map image as its view was described,
+// feeds a detector made for the map's descriptors, moves, and throws typed errors.
+TEST(describer_feeds_a_loop_detector) {
+  const topoloc::Map &map = image_map();
+  topoloc::Describer describer(map);
+  CHECK(static_cast<bool>(describer));
+  CHECK_EQ(describer.dim(), std::size_t{map.dim()});
+  std::vector<float> out;
+  for (uint32_t p = 0; p < kImgPlaces; ++p) {
+    describer.describe(gray(places_pixels()[p]), out);
+    const std::vector<float> view = map.view_descriptor(p);
+    CHECK_EQ(out.size(), view.size());
+    double dot = 0.0;
+    for (std::size_t k = 0; k < out.size() && k < view.size(); ++k) dot += double(out[k]) * view[k];
+    CHECK(dot > 0.9999);
+  }
+
+  topoloc::LoopDetector detector = topoloc::LoopDetector::for_descriptors_of(map);
+  topoloc::LoopKeyframe keyframe;
+  keyframe.id = 1;
+  keyframe.descriptor = describer.describe(gray(places_pixels()[0]));
+  const topoloc::LoopHint hint = detector.add(keyframe);
+  CHECK(!hint.has_match && !hint.accepted);
+  CHECK_EQ(detector.size(), std::size_t{1});
+
+  // A failed describe leaves the output untouched.
+  const std::vector<float> before = out;
+  CHECK_THROWS_STATUS(describer.describe(topoloc::Image{}, out), TOPOLOC_ERR_INVALID_IMAGE);
+  CHECK(out == before);
+  std::vector<uint8_t> flat(kImgW * kImgH, 128);
+  CHECK_THROWS_STATUS(describer.describe(gray(flat), out), TOPOLOC_ERR_UNINFORMATIVE_IMAGE);
+  CHECK(out == before);
+
+  topoloc::Describer moved(std::move(describer));
+  CHECK(!describer && static_cast<bool>(moved));
+  CHECK_EQ(moved.describe(gray(places_pixels()[1])).size(), std::size_t{map.dim()});
+
+  // Maps built from descriptors store no describer; options it cannot honour.
+  topoloc::MapBuilder builder("ext", "m", 4);
+  (void)builder.add_place();
+  const std::array<float, 4> d{1, 0, 0, 0};
+  (void)builder.add_view(0, d.data(), d.size());
+  const topoloc::Map plain = builder.build();
+  CHECK_THROWS_STATUS(topoloc::Describer{plain}, TOPOLOC_ERR_NO_DESCRIBER);
+  topoloc::DescriberOptions options = topoloc::default_describer_options();
+  options.backend = TOPOLOC_BACKEND_ONNX;
+  CHECK_THROWS_STATUS((topoloc::Describer{map, options}), TOPOLOC_ERR_DESCRIPTOR_MISMATCH);
+}
+
 }  // namespace
 
 // With a streak of 3 (the default), keyframes 10 and 11 revisit keyframe 0 but wait as

@@ -47,6 +47,7 @@ const DEFAULT_MACROS: &str = "
 #define topoloc_result_default(p) topoloc_result_init((p), sizeof *(p))
 #define topoloc_view_info_default(p) topoloc_view_info_init((p), sizeof *(p))
 #define topoloc_image_map_options_default(p) topoloc_image_map_options_init((p), sizeof *(p))
+#define topoloc_describer_options_default(p) topoloc_describer_options_init((p), sizeof *(p))
 #define topoloc_skeleton_options_default(p) topoloc_skeleton_options_init((p), sizeof *(p))
 #define topoloc_loop_options_default(p) topoloc_loop_options_init((p), sizeof *(p))
 #define topoloc_loop_keyframe_default(p) topoloc_loop_keyframe_init((p), sizeof *(p))
@@ -98,6 +99,10 @@ const SECTIONS: &[(&str, &[&str])] = &[
             "topoloc_image_map_options_",
             "topoloc_map_build_from_",
         ],
+    ),
+    (
+        "Describers: images to a map's global descriptors (one thread at a time)",
+        &["topoloc_describer_"],
     ),
     (
         "Skeleton graphs from occupancy grids",
