@@ -12,55 +12,10 @@
 namespace {
 
 // ---------------------------------------------------------------------------------------------
-// Fixtures: two views of the same keypoints (the generator of tests/c/test_topoloc.c)
+// Fixtures: descriptors and keyframes over the two views of harness.hpp
 // ---------------------------------------------------------------------------------------------
 
 constexpr uint32_t kLoopDim = 8;
-constexpr std::size_t kLoopPoints = 60;
-
-// kLoopPoints scene points 3-8 m in front of a 300-pixel pinhole camera (principal point
-// 160, 120), seen from it (`first`) and from a camera 0.3 m to the right and 0.1 m ahead,
-// turned 3 degrees (`second`); each point has the same random 32-byte descriptor in both views.
-struct TwoViews {
-  std::vector<float> first;         // 2 per point
-  std::vector<float> second;        // 2 per point
-  std::vector<uint8_t> descriptors; // 32 per point
-  std::vector<float> scene;         // 3 per point, in the first camera's frame
-};
-
-const TwoViews &two_views() {
-  static const TwoViews views = [] {
-    TwoViews v;
-    uint32_t state = 12345u;
-    const double c = 0.99862953475, s = 0.05233595624;  // cos, sin of 3 degrees
-    auto next = [&state] {
-      state = state * 1664525u + 1013904223u;
-      return static_cast<double>(state >> 8) / 16777216.0;
-    };
-    while (v.first.size() < 2 * kLoopPoints) {
-      const double z = 3.0 + 5.0 * next();
-      const double x = (next() - 0.5) * z;
-      const double y = (next() - 0.5) * 0.7 * z;
-      // The second camera: p' = R^T (p - t), R a yaw about y.
-      const double qx = c * (x - 0.3) - s * (z - 0.1);
-      const double qz = s * (x - 0.3) + c * (z - 0.1);
-      const double u1 = 300.0 * x / z + 160.0, v1 = 300.0 * y / z + 120.0;
-      const double u2 = 300.0 * qx / qz + 160.0, v2 = 300.0 * y / qz + 120.0;
-      if (qz < 0.5 || u1 < 0 || u1 > 319 || v1 < 0 || v1 > 239 || u2 < 0 || u2 > 319 ||
-          v2 < 0 || v2 > 239)
-        continue;
-      v.first.insert(v.first.end(), {float(u1), float(v1)});
-      v.second.insert(v.second.end(), {float(u2), float(v2)});
-      v.scene.insert(v.scene.end(), {float(x), float(y), float(z)});
-      for (int b = 0; b < 32; ++b) {
-        state = state * 1664525u + 1013904223u;
-        v.descriptors.push_back(static_cast<uint8_t>(state >> 24));
-      }
-    }
-    return v;
-  }();
-  return views;
-}
 
 // The global descriptor of scene `scene` (as loop_descriptor of the C test).
 std::vector<float> loop_descriptor(uint32_t scene) {
