@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Runs every test layer: formatting and lints, Rust (unit, integration, FFI, the layer order),
 # the header check, C (plain, ASan+UBSan, valgrind, static), C++ RAII, the CMake consumer against
-# the installed package, and Python.
+# the installed package (with the SLAM adapters and drift demos, shared and static), and Python.
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$root"
@@ -20,8 +20,8 @@ cargo test --workspace --quiet
 section "C header is current"
 cargo run --quiet -p topoloc-gen-header -- --check
 
-section "Release library"
-cargo build --release --lib --quiet
+section "Release library and tools (the CLI generates the demos' sequences)"
+cargo build --release --workspace --quiet
 export TOPOLOC_TARGET_DIR="$root/target/release"
 
 section "C ABI tests"

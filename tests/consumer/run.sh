@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Installs topoloc with CMake into a temporary prefix and builds a separate consumer project
 # against it with find_package(Topoloc): C (shared and static), C++ (when topoloc.hpp is
-# installed) and C++ with OpenCV (when topoloc_opencv.hpp is installed and OpenCV is found).
+# installed) and C++ with OpenCV (when topoloc_opencv.hpp is installed and OpenCV is found);
+# then cpp-examples (the SLAM adapters, their tests and demos), shared and static.
 # Also checks the installed layout, the SONAME, pkg-config, and that the installed tree still
 # works after being moved elsewhere.
 #
@@ -123,6 +124,25 @@ build_consumer "$prefix" "$work/consumer-build"
 if [[ ! -f "$includedir/topoloc.hpp" ]]; then
     echo "note: consumer_cpp not built (topoloc.hpp is not installed)"
 fi
+
+# The C++ examples (VINS and ORB-SLAM adapters, their tests and drift demos) as a host builds
+# them: a separate project against the installed package, linked shared and static.
+build_examples() {
+    local link="$1" build="$work/examples-$1"
+    cmake -S "$repo/cpp-examples" -B "$build" "${generator_args[@]}" \
+        -DCMAKE_PREFIX_PATH="$prefix" -DCMAKE_BUILD_TYPE=RelWithDebInfo -DTOPOLOC_EXAMPLES_LINK="$link"
+    cmake --build "$build"
+    ( cd "$build" && ctest --output-on-failure )
+    if [[ "$link" == static ]] && readelf -d "$build/vins_drift_demo" | grep -q 'libtopoloc'; then
+        fail "the static vins_drift_demo depends on a shared libtopoloc"
+    fi
+}
+section "cpp-examples against $prefix: shared"
+build_examples shared
+section "drift-correction demos (valgrind included)"
+bash "$repo/tests/slam/run.sh" "$work/examples-shared"
+section "cpp-examples against $prefix: static"
+build_examples static
 
 section "consumer project against the install moved elsewhere (relocatable package)"
 mv "$prefix" "$work/moved-install"
