@@ -155,11 +155,14 @@ struct Features {
   std::vector<Eigen::Vector3d> camera_points;
 };
 
-/// ORB features of `grey` with their depth points.
+/// ORB features of `grey` with their depth points; `clahe` (if set) equalises the image first,
+/// as front ends do for dark scenes.
 inline Features extract(cv::ORB &orb, const cv::Mat &grey, const cv::Mat &depth,
-                        const Intrinsics &k) {
+                        const Intrinsics &k, cv::CLAHE *clahe = nullptr) {
   Features f;
-  orb.detectAndCompute(grey, cv::noArray(), f.keypoints, f.descriptors);
+  cv::Mat input = grey;
+  if (clahe != nullptr) clahe->apply(grey, input);
+  orb.detectAndCompute(input, cv::noArray(), f.keypoints, f.descriptors);
   const double nan = std::numeric_limits<double>::quiet_NaN();
   for (const cv::KeyPoint &kp : f.keypoints) {
     const int u = cvRound(kp.pt.x), v = cvRound(kp.pt.y);
@@ -172,17 +175,24 @@ inline Features extract(cv::ORB &orb, const cv::Mat &grey, const cv::Mat &depth,
   return f;
 }
 
-/// ATE of `poses` against the sequence's ground truth after a Sim3 (Umeyama) alignment, the
-/// seed's chapter 3 definition, computed by topoloc's evo-equivalent metrics.
-inline topoloc::TrajectoryReport ate_sim3(const Sequence &seq, const std::vector<Pose> &poses) {
+/// ATE of `poses` (the first frames of the sequence) against the sequence's ground truth after
+/// `alignment` (a `TOPOLOC_ALIGN_*`), computed by topoloc's evo-equivalent metrics. Throws
+/// `topoloc::Error` (`TOPOLOC_ERR_INVALID_ARGUMENT` for positions too degenerate to align).
+inline topoloc::TrajectoryReport ate(const Sequence &seq, const std::vector<Pose> &poses, uint32_t alignment) {
   std::vector<topoloc::TimedPose> est, ref;
   for (std::size_t i = 0; i < poses.size(); ++i) {
     est.push_back(poses[i].timed(seq.stamps[i]));
     ref.push_back(seq.truth[i].timed(seq.stamps[i]));
   }
   topoloc::TrajectoryOptions options = topoloc::default_trajectory_options();
-  options.alignment = TOPOLOC_ALIGN_SIM3;
+  options.alignment = alignment;
   return topoloc::evaluate_trajectory(ref, est, options);
+}
+
+/// ATE of `poses` against the sequence's ground truth after a Sim3 (Umeyama) alignment, the
+/// seed's chapter 3 definition.
+inline topoloc::TrajectoryReport ate_sim3(const Sequence &seq, const std::vector<Pose> &poses) {
+  return ate(seq, poses, TOPOLOC_ALIGN_SIM3);
 }
 
 /// `p` moved by the report's alignment (`scale * R p + t`).
