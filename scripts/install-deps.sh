@@ -7,7 +7,8 @@ set -euo pipefail
 
 # OpenCV 4.6 (image work) needs clang + libclang for the opencv crate's binding generator.
 # fonts-dejavu-core: the TrueType font the CLI's evaluation plots (tools/cli/src/plot.rs) draw text with.
-packages=(build-essential cmake pkg-config valgrind libopencv-dev clang libclang-dev fonts-dejavu-core libceres-dev libeigen3-dev)
+# libclang-rt-14-dev: libFuzzer and the sanitizer runtimes of clang 14 (fuzz/run.sh).
+packages=(build-essential cmake pkg-config valgrind libopencv-dev clang libclang-dev libclang-rt-14-dev fonts-dejavu-core libceres-dev libeigen3-dev)
 missing=()
 for p in "${packages[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")

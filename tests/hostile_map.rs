@@ -185,6 +185,28 @@ fn an_edited_but_resigned_file_still_loads() {
 }
 
 #[test]
+fn the_fuzzers_reseal_makes_an_edited_file_pass_the_checksum() {
+    // An edit without re-signing fails the checksum; the library's reseal (used by the fuzzers'
+    // mutator) fixes exactly that, and agrees with this file's own checksum code.
+    let mut bytes = image_map_bytes().to_vec();
+    let (meta, _) = split(&bytes);
+    let creator = meta["creator"].as_str().unwrap().to_string();
+    let at = bytes
+        .windows(creator.len())
+        .position(|w| w == creator.as_bytes())
+        .unwrap();
+    bytes[at] ^= 0x20;
+    expect_corrupt(&bytes, "checksum");
+    let resealed = topoloc::map::reseal(&bytes).expect("framing and metadata still parse");
+    let map = load(&resealed).expect("resealed file loads");
+    assert_ne!(map.creator(), creator);
+    let (meta, tensors) = split(&resealed);
+    let oracle = crc_of(&meta, tensors.values().map(|(_, _, b)| b.as_slice()));
+    assert_eq!(meta["crc32"].as_str(), Some(oracle.as_str()));
+    assert!(topoloc::map::reseal(b"not a map").is_none());
+}
+
+#[test]
 fn huge_onnx_describer_shapes_are_refused_at_load_before_any_model_is_needed() {
     let cases = [
         (

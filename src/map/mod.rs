@@ -15,6 +15,9 @@ mod file;
 
 pub use builder::{MapBuilder, ViewAttributes};
 pub use error::MapError;
+/// Not a stable API: for topoloc's fuzzers and hostile-file tests.
+#[doc(hidden)]
+pub use file::reseal;
 pub use file::{
     LoadOptions, FORMAT_NAME, FORMAT_VERSION_MAJOR, FORMAT_VERSION_MINOR, MAX_DESCRIPTOR_DIM,
 };

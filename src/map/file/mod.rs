@@ -217,16 +217,15 @@ impl ParsedMap {
     }
 }
 
-/// Parses and validates a file: framing and metadata ([`header`]), checksum, then each
-/// section.
-fn parse(bytes: &[u8], options: &LoadOptions) -> Result<ParsedMap, MapError> {
-    let meta_json = header::frame(bytes)?;
-    let (mut meta, meta_object) = header::read_meta(&meta_json)?;
-    let st = SafeTensors::deserialize(bytes)
-        .map_err(|e| MapError::Corrupt(format!("safetensors: {e}")))?;
-    let stored_crc = meta.crc32.take().unwrap_or_default();
+/// The checksum a file with this metadata (`crc32` taken out) and these tensors must carry:
+/// 1.0 checksummed its own struct's serialisation, later versions the generic JSON value.
+fn file_checksum(
+    st: &SafeTensors<'_>,
+    meta: &FileMeta,
+    meta_object: serde_json::Value,
+) -> Result<String, MapError> {
     let unsigned_json = if meta.version == "1.0" {
-        serde_json::to_string(&meta).expect("map metadata serialises")
+        serde_json::to_string(meta).expect("map metadata serialises")
     } else {
         canonical_json(meta_object)
     };
@@ -237,7 +236,56 @@ fn parse(bytes: &[u8], options: &LoadOptions) -> Result<ParsedMap, MapError> {
         .map(|n| st.tensor(n))
         .collect::<Result<_, _>>()
         .map_err(|e| MapError::Corrupt(e.to_string()))?;
-    let crc = checksum(&unsigned_json, tensors.iter().map(|t| t.data()));
+    Ok(checksum(&unsigned_json, tensors.iter().map(|t| t.data())))
+}
+
+/// Rewrites the `crc32` of a file whose framing, metadata and tensor table parse, so that
+/// the loader's later checks see it (for the fuzzers' structure-aware mutator and for tests
+/// of hostile files: a valid checksum proves nothing). `None` when the file does not get as
+/// far as the checksum anyway.
+pub fn reseal(bytes: &[u8]) -> Option<Vec<u8>> {
+    let meta_json = header::frame(bytes).ok()?;
+    let (mut meta, mut meta_object) = header::read_meta(&meta_json).ok()?;
+    let st = SafeTensors::deserialize(bytes).ok()?;
+    meta.crc32 = None;
+    let crc = file_checksum(&st, &meta, meta_object.clone()).ok()?;
+    meta_object
+        .as_object_mut()?
+        .insert("crc32".into(), serde_json::Value::String(crc));
+    let header_len = usize::try_from(u64::from_le_bytes(bytes.get(..8)?.try_into().ok()?)).ok()?;
+    let data = bytes.get(8usize.checked_add(header_len)?..)?;
+    let mut table: serde_json::Value = serde_json::from_slice(&bytes[8..8 + header_len]).ok()?;
+    table
+        .get_mut("__metadata__")?
+        .as_object_mut()?
+        .insert(META_KEY.into(), meta_object.to_string().into());
+    // `__metadata__` first, as safetensors writes it (the loader's "looks like a map" test).
+    let mut tensors = table.as_object()?.clone();
+    let metadata = tensors.remove("__metadata__")?;
+    let mut header = format!("{{\"__metadata__\":{metadata}");
+    for (name, entry) in tensors {
+        header.push_str(&format!(",{}:{entry}", serde_json::Value::String(name)));
+    }
+    header.push('}');
+    while header.len() % 8 != 0 {
+        header.push(' ');
+    }
+    let mut out = Vec::with_capacity(8 + header.len() + data.len());
+    out.extend_from_slice(&(header.len() as u64).to_le_bytes());
+    out.extend_from_slice(header.as_bytes());
+    out.extend_from_slice(data);
+    Some(out)
+}
+
+/// Parses and validates a file: framing and metadata ([`header`]), checksum, then each
+/// section.
+fn parse(bytes: &[u8], options: &LoadOptions) -> Result<ParsedMap, MapError> {
+    let meta_json = header::frame(bytes)?;
+    let (mut meta, meta_object) = header::read_meta(&meta_json)?;
+    let st = SafeTensors::deserialize(bytes)
+        .map_err(|e| MapError::Corrupt(format!("safetensors: {e}")))?;
+    let stored_crc = meta.crc32.take().unwrap_or_default();
+    let crc = file_checksum(&st, &meta, meta_object)?;
     if crc != stored_crc {
         return Err(MapError::Corrupt(format!(
             "checksum mismatch (stored '{stored_crc}', computed '{crc}')"
