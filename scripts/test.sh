@@ -36,4 +36,11 @@ bash tests/consumer/run.sh
 section "Python shim"
 TOPOLOC_LIBRARY="$root/target/release/libtopoloc.so" python3 -m pytest -q python/tests
 
+section "Python package (wheel installed into target/py-venv)"
+bash python/tests/run_installed.sh
+
+section "Fuzzing (libFuzzer on the C ABI: kept crashers, then a minute per target)"
+bash fuzz/run.sh build
+bash fuzz/run.sh smoke 60
+
 section "All test layers passed"

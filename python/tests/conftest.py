@@ -1,8 +1,10 @@
-"""Shared fixtures: the package is imported from the source tree, and small synthetic maps are
-built with known descriptors so that tests can compute the expected answers with numpy."""
+"""Shared fixtures: the package is imported from the source tree (or, with
+``TOPOLOC_TEST_INSTALLED=1``, as installed: see ``run_installed.sh``), and small synthetic maps
+are built with known descriptors so that tests can compute the expected answers with numpy."""
 
 from __future__ import annotations
 
+import os
 import sys
 from dataclasses import dataclass
 from pathlib import Path
@@ -12,10 +14,21 @@ import numpy as np
 import pytest
 
 PYTHON_DIR = Path(__file__).resolve().parents[1]
-if str(PYTHON_DIR) not in sys.path:
+#: Whether the suite tests an installed package (a wheel in a venv) rather than the source tree.
+INSTALLED = os.environ.get("TOPOLOC_TEST_INSTALLED", "") not in ("", "0")
+if not INSTALLED and str(PYTHON_DIR) not in sys.path:
     sys.path.insert(0, str(PYTHON_DIR))
 
 import topoloc  # noqa: E402
+
+#: The directory holding the imported ``topoloc`` package: what a child interpreter needs on
+#: ``PYTHONPATH`` to import the same package (the source tree's ``python/``, or site-packages).
+PACKAGE_PARENT = Path(topoloc.__file__).resolve().parents[1]
+if INSTALLED and PACKAGE_PARENT == PYTHON_DIR:
+    raise ImportError(
+        f"TOPOLOC_TEST_INSTALLED is set but topoloc was imported from the source tree "
+        f"({topoloc.__file__}): run the tests from a directory where {PYTHON_DIR} is not on sys.path"
+    )
 
 
 def find_repo_root() -> Optional[Path]:

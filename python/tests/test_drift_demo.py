@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from conftest import PYTHON_DIR, REPO_ROOT
+from conftest import PACKAGE_PARENT, PYTHON_DIR, REPO_ROOT
 
 pytest.importorskip("gtsam", reason="the drift demo needs gtsam (python/requirements-dev.txt)")
 pytest.importorskip("cv2", reason="the drift demo needs opencv-python-headless (python/requirements-dev.txt)")
@@ -34,9 +34,9 @@ def simulate(out: Path, *args: str) -> None:
 
 
 def run_demo(*args: str) -> subprocess.CompletedProcess:
-    """The demo in a child Python on this checkout's package and library."""
+    """The demo in a child Python on the package under test (this checkout's, or the installed one)."""
     env = dict(os.environ)
-    env["PYTHONPATH"] = os.pathsep.join([str(PYTHON_DIR), env.get("PYTHONPATH", "")])
+    env["PYTHONPATH"] = os.pathsep.join([str(PACKAGE_PARENT), env.get("PYTHONPATH", "")])
     return subprocess.run(
         [sys.executable, str(DEMO), *args], env=env, capture_output=True, text=True, timeout=300
     )

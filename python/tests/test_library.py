@@ -31,7 +31,7 @@ import pytest
 import topoloc
 from topoloc import _errors, _lib
 
-from conftest import HEADER, PYTHON_DIR, REPO_ROOT
+from conftest import HEADER, PACKAGE_PARENT, REPO_ROOT
 
 needs_header = pytest.mark.skipif(HEADER is None or not HEADER.is_file(), reason="not a source checkout")
 
@@ -789,7 +789,7 @@ def test_abi_mismatch_is_refused():
 
 
 def test_import_fails_cleanly_without_the_library(tmp_path):
-    env = dict(os.environ, TOPOLOC_LIBRARY=str(tmp_path / "missing.so"), PYTHONPATH=str(PYTHON_DIR))
+    env = dict(os.environ, TOPOLOC_LIBRARY=str(tmp_path / "missing.so"), PYTHONPATH=str(PACKAGE_PARENT))
     proc = subprocess.run(
         [sys.executable, "-c", "import topoloc"], env=env, capture_output=True, text=True, cwd=tmp_path
     )
@@ -799,7 +799,7 @@ def test_import_fails_cleanly_without_the_library(tmp_path):
 
 
 def test_import_with_env_override_in_a_fresh_interpreter(tmp_path):
-    env = dict(os.environ, TOPOLOC_LIBRARY=topoloc.library_path, PYTHONPATH=str(PYTHON_DIR))
+    env = dict(os.environ, TOPOLOC_LIBRARY=topoloc.library_path, PYTHONPATH=str(PACKAGE_PARENT))
     code = "import topoloc; print(topoloc.library_path); print(topoloc.abi_version())"
     proc = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr

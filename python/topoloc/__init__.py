@@ -130,8 +130,8 @@ from ._core import (
     version,
 )
 
-#: Version of the loaded shared library.
-__version__ = version()
+#: Version of the loaded shared library (a wheel's own version: both are Cargo.toml's).
+__version__: str = version()
 
 __all__ = [
     # maps

@@ -12,9 +12,10 @@ import threading
 from ctypes import POINTER, byref, c_bool, c_char_p, c_double, c_float, c_size_t, c_uint8, c_uint32
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple, Type, Union
+from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple, Type, TypeVar, Union
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from . import _lib
 from ._errors import (
@@ -347,7 +348,7 @@ _BUILD_BACKENDS = {
     "vlad-sift": _lib.BACKEND_VLAD_SIFT,
 }
 #: Build stage codes -> names given to progress callbacks.
-_STAGES = {_lib.STAGE_DESCRIBING: "describing", _lib.STAGE_FITTING: "fitting"}
+_STAGES: Dict[int, str] = {_lib.STAGE_DESCRIBING: "describing", _lib.STAGE_FITTING: "fitting"}
 #: File name extensions listed by :meth:`Map.build_from_image_files` given a folder.
 IMAGE_EXTENSIONS = (".jpg", ".jpeg", ".png", ".bmp", ".pgm", ".ppm")
 
@@ -390,7 +391,8 @@ class _Progress:
                 return False
             if self.progress is None:
                 return True
-            answer = self.progress(_STAGES.get(stage, stage), int(done), int(total))
+            name: Any = _STAGES.get(stage, stage)  # a newer library's stage stays an int
+            answer = self.progress(name, int(done), int(total))
             return answer is None or bool(answer)
         except BaseException as e:  # noqa: B902 - KeyboardInterrupt too: cancel, re-raise later
             self.error = e
@@ -473,14 +475,18 @@ def _image_files(paths: Union[PathLike, Sequence[PathLike]]) -> List[bytes]:
     return [_path(p, f"paths[{i}]") for i, p in enumerate(paths)]
 
 
+_H = TypeVar("_H", bound="_Handle")
+
+
 class _Handle:
     """Owns one C handle: ``_ptr`` released with ``_free`` by :meth:`close`, the ``with``
     statement, or garbage collection. Methods called after :meth:`close` raise ``ValueError``."""
 
     _ptr: Any = None
+    _free: Callable[[Any], Any]
 
     @property
-    def _h(self):
+    def _h(self) -> Any:
         if not self._ptr:
             raise ValueError(f"operation on a closed topoloc.{type(self).__name__}")
         return self._ptr
@@ -496,7 +502,7 @@ class _Handle:
         if ptr:
             self._free(ptr)
 
-    def __enter__(self):
+    def __enter__(self: _H) -> _H:
         self._h  # refuse a closed object
         return self
 
@@ -591,7 +597,7 @@ class Map(_Handle):
     @classmethod
     def build_from_images(
         cls,
-        images: Sequence[Any],
+        images: Sequence[ArrayLike],
         backend: Union[str, int] = "onnx",
         dim: int = 512,
         views_per_place: int = 1,
@@ -854,7 +860,7 @@ class Map(_Handle):
             lib.topoloc_map_view_keypoints, self._h, view, ctype=c_float, dtype=np.float32, width=2
         )
 
-    def with_keypoint_points(self, xyz: Any) -> "Map":
+    def with_keypoint_points(self, xyz: ArrayLike) -> "Map":
         """A new :class:`Map`, a copy of this one whose keypoints carry their scene points: with
         it and camera intrinsics, a :class:`Localizer` reports pose fixes (:class:`PoseFix`).
 
@@ -927,7 +933,7 @@ class MapBuilder(_SingleThreaded):
         )
         self._ptr = out
 
-    def add_place(self, position: Optional[Any] = None) -> int:
+    def add_place(self, position: Optional[ArrayLike] = None) -> int:
         """Adds a place, optionally at ``position`` (3 floats, metres); returns its id."""
         pos = None
         if position is not None:
@@ -945,9 +951,9 @@ class MapBuilder(_SingleThreaded):
     def add_view(
         self,
         place: int,
-        descriptor: Any,
+        descriptor: ArrayLike,
         keyframe_id: Optional[int] = None,
-        world_T_camera: Optional[Any] = None,
+        world_T_camera: Optional[ArrayLike] = None,
         image: Optional[Union[str, "os.PathLike[str]"]] = None,
     ) -> int:
         """Adds a view to ``place`` and returns its id.
@@ -1013,16 +1019,16 @@ class MapBuilder(_SingleThreaded):
 def keyframe_options_default() -> Dict[str, Any]:
     """The library's defaults for :func:`map_from_keyframes` options, as a dict."""
     o = _lib.defaults(_lib.topoloc_keyframe_options, lib.topoloc_keyframe_options_init)
-    return {name: getattr(o, name) for name, _ in o._fields_ if name != "struct_size"}
+    return {f[0]: getattr(o, f[0]) for f in o._fields_ if f[0] != "struct_size"}
 
 
 def map_from_keyframes(
     kind: str,
     model: Optional[str],
     dim: int,
-    descriptors: Any,
-    ids: Optional[Any] = None,
-    poses: Optional[Any] = None,
+    descriptors: ArrayLike,
+    ids: Optional[ArrayLike] = None,
+    poses: Optional[ArrayLike] = None,
     place_spacing_m: Optional[float] = None,
     novelty_similarity: Optional[float] = None,
     neighbour_radius_m: Optional[float] = None,
@@ -1173,9 +1179,9 @@ def skeleton_options_default() -> Dict[str, Any]:
     ``None``: the whole grid)."""
     o = _lib.defaults(_lib.topoloc_skeleton_options, lib.topoloc_skeleton_options_init)
     out: Dict[str, Any] = {"z_band": (o.z_min_m, o.z_max_m) if o.use_z_band else None}
-    for name, _ in o._fields_:
-        if name not in ("struct_size", "use_z_band", "z_min_m", "z_max_m"):
-            out[name] = getattr(o, name)
+    for f in o._fields_:
+        if f[0] not in ("struct_size", "use_z_band", "z_min_m", "z_max_m"):
+            out[f[0]] = getattr(o, f[0])
     return out
 
 
@@ -1201,9 +1207,9 @@ def _occupancy_cells(occupied: Any) -> Tuple[np.ndarray, Tuple[int, int, int]]:
 
 
 def skeleton_graph(
-    occupied: Any,
+    occupied: ArrayLike,
     voxel_size: float,
-    origin: Any = (0.0, 0.0, 0.0),
+    origin: ArrayLike = (0.0, 0.0, 0.0),
     *,
     z_band: Optional[Tuple[float, float]] = None,
     min_clearance_m: Optional[float] = None,
@@ -1609,11 +1615,11 @@ class Localizer(_SingleThreaded):
 
     def process(
         self,
-        descriptor: Optional[Any] = None,
+        descriptor: Optional[ArrayLike] = None,
         timestamp: Optional[float] = None,
-        odometry: Optional[Any] = None,
+        odometry: Optional[ArrayLike] = None,
         *,
-        image: Optional[Any] = None,
+        image: Optional[ArrayLike] = None,
         pixel_format: Optional[str] = None,
     ) -> Result:
         """Localizes one frame, given either its descriptor or its camera image.
@@ -1772,7 +1778,7 @@ class LoopHint:
     query_place: int
     has_match: bool
     accepted: bool
-    gate: Gate
+    gate: Union[Gate, int]
     matched_id: int
     place: int
     inliers: int
@@ -1948,7 +1954,7 @@ class Describer(_SingleThreaded):
         """Descriptor dimension D (the map's)."""
         return self._dim
 
-    def describe(self, image: Any, pixel_format: Optional[str] = None) -> np.ndarray:
+    def describe(self, image: ArrayLike, pixel_format: Optional[str] = None) -> np.ndarray:
         """The global descriptor of ``image`` (a uint8 array, (H, W) grey or (H, W, 3) /
         (H, W, 4) colour; ``pixel_format`` as for :meth:`Localizer.process`): D float32 values
         of unit norm. Raises ``TypeError`` (not uint8), :class:`InvalidImageError`,
@@ -2067,12 +2073,12 @@ class LoopDetector(_SingleThreaded):
         self,
         id: int,
         timestamp: float,
-        descriptor: Any,
-        keypoints: Optional[Any] = None,
-        keypoint_descriptors: Optional[Any] = None,
-        camera_points: Optional[Any] = None,
-        world_T_body: Optional[Any] = None,
-        body_T_camera: Optional[Any] = None,
+        descriptor: ArrayLike,
+        keypoints: Optional[ArrayLike] = None,
+        keypoint_descriptors: Optional[ArrayLike] = None,
+        camera_points: Optional[ArrayLike] = None,
+        world_T_body: Optional[ArrayLike] = None,
+        body_T_camera: Optional[ArrayLike] = None,
     ) -> LoopHint:
         """Adds keyframe ``id`` and returns its :class:`LoopHint` (``has_match`` False when no
         candidate was verified; ``accepted`` True for a loop closure).
@@ -2160,7 +2166,7 @@ class LoopDetector(_SingleThreaded):
         finally:
             self._leave()
 
-    def query(self, descriptor: Any, max_results: int) -> List[LoopCandidate]:
+    def query(self, descriptor: ArrayLike, max_results: int) -> List[LoopCandidate]:
         """Relocalization: the (at most ``max_results``) keyframes most similar to
         ``descriptor`` (D floats; not added, and every keyframe may match), most similar
         first. Raises :class:`DimensionMismatchError`, :class:`NonFiniteError`,
@@ -2315,8 +2321,8 @@ def _tum_rows(values: Any, name: str) -> np.ndarray:
 
 
 def evaluate_trajectory(
-    reference: Any,
-    estimate: Any,
+    reference: ArrayLike,
+    estimate: ArrayLike,
     alignment: str = "sim3",
     max_diff_s: float = 0.01,
     offset_s: float = 0.0,

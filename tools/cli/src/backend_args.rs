@@ -152,17 +152,22 @@ impl BackendArgs {
     }
 }
 
+/// File extensions (any case) taken as images in an image folder.
+pub const IMAGE_EXTENSIONS: [&str; 6] = ["jpg", "jpeg", "png", "bmp", "pgm", "ppm"];
+
+/// True when `path` has one of [`IMAGE_EXTENSIONS`].
+pub fn has_image_extension(path: &Path) -> bool {
+    path.extension()
+        .and_then(|e| e.to_str())
+        .is_some_and(|e| IMAGE_EXTENSIONS.contains(&e.to_ascii_lowercase().as_str()))
+}
+
 /// Image files (jpg, jpeg, png, bmp, pgm, ppm) in `dir`, sorted by name.
 pub fn image_files(dir: &Path) -> Result<Vec<PathBuf>> {
     let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
         .with_context(|| format!("reading image folder {}", dir.display()))?
         .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| {
-            p.extension().and_then(|e| e.to_str()).is_some_and(|e| {
-                ["jpg", "jpeg", "png", "bmp", "pgm", "ppm"]
-                    .contains(&e.to_ascii_lowercase().as_str())
-            })
-        })
+        .filter(|p| has_image_extension(p))
         .collect();
     files.sort();
     if files.is_empty() {

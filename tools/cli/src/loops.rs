@@ -545,7 +545,7 @@ fn depth_points(
 }
 
 /// `fx fy cx cy` from a file, validated.
-fn read_intrinsics(path: &Path) -> Result<PinholeCamera> {
+pub(crate) fn read_intrinsics(path: &Path) -> Result<PinholeCamera> {
     let text =
         std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
     let values: Vec<f64> = text

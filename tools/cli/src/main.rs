@@ -6,8 +6,11 @@ mod backend_args;
 mod build_map;
 mod demo;
 mod eval;
+mod frames;
+mod localize;
 mod loops;
 mod memory;
+mod odometry;
 mod off_world;
 mod plot;
 mod process;
@@ -77,6 +80,9 @@ enum Command {
     /// from images and report R@N, R@100P, latency (and MNA/OHA with ground-truth nodes or a
     /// dataset), single-frame and filtered.
     Eval(eval::EvalArgs),
+    /// Localize a stream of frames (an image folder or a video) against a map, printing one
+    /// result per frame as it goes (text, or JSON lines), optionally with TUM odometry.
+    Localize(Box<localize::LocalizeArgs>),
     /// Verify the appearance top places of every query image against a map with keypoints
     /// and report how well inliers tell the true place from look-alikes (inlier medians,
     /// R@1 before and after re-ranking, times).
@@ -111,6 +117,7 @@ fn main() -> Result<()> {
         Command::Scaling(args) => scaling::run(&args),
         Command::BuildMap(args) => build_map::run(&args),
         Command::Eval(args) => eval::run(&args),
+        Command::Localize(args) => localize::run(&args),
         Command::EvalVerify(args) => verify_eval::run(&args),
         Command::Loops(args) => loops::run(&args),
         Command::Simulate(args) => simulate::run(&args),

@@ -3,54 +3,9 @@
 //! images, so it needs no model and no shared data.
 
 use std::path::Path;
-use std::process::Command;
 
-const W: usize = 320;
-const H: usize = 240;
-
-/// A textured grey "place" (rectangles of pseudo-random shades over a gradient).
-fn place(seed: u64) -> Vec<u8> {
-    let mut state = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15).wrapping_add(11);
-    let mut next = move |m: usize| {
-        state = state
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        (state >> 33) as usize % m
-    };
-    let mut data: Vec<u8> = (0..W * H).map(|i| ((i % W) * 120 / W + 30) as u8).collect();
-    for _ in 0..150 {
-        let (x0, y0, w, h) = (next(W), next(H), 6 + next(50), 6 + next(50));
-        let shade = next(256) as u8;
-        for y in y0..(y0 + h).min(H) {
-            for x in x0..(x0 + w).min(W) {
-                data[y * W + x] = shade;
-            }
-        }
-    }
-    data
-}
-
-fn write_pgm(path: &Path, pixels: &[u8]) {
-    let mut bytes = format!("P5\n{W} {H}\n255\n").into_bytes();
-    bytes.extend_from_slice(pixels);
-    std::fs::write(path, bytes).unwrap();
-}
-
-fn topoloc(args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_topoloc"))
-        .args(args)
-        .output()
-        .expect("topoloc runs")
-}
-
-fn json(output: &std::process::Output) -> serde_json::Value {
-    assert!(
-        output.status.success(),
-        "stderr: {}",
-        String::from_utf8_lossy(&output.stderr)
-    );
-    serde_json::from_slice(&output.stdout).expect("one JSON object on stdout")
-}
+mod common;
+use common::{build_vlad_map, json, place, seen_again, simulate_tiny, topoloc, write_pgm};
 
 #[test]
 fn build_map_and_eval_follow_the_contract() {
@@ -63,27 +18,13 @@ fn build_map_and_eval_follow_the_contract() {
         let image = place(i);
         write_pgm(&map_dir.join(format!("{i:03}.pgm")), &image);
         // The query: the same place, brighter and shifted by 4 pixels.
-        let query: Vec<u8> = (0..W * H)
-            .map(|k| {
-                let (x, y) = (k % W, k / W);
-                (u16::from(image[y * W + (x + 4).min(W - 1)]) * 9 / 10 + 20) as u8
-            })
-            .collect();
+        let query = seen_again(&image);
         write_pgm(&query_dir.join(format!("{i:03}.pgm")), &query);
     }
     let map = dir.path().join("places.topoloc");
     let s = |p: &Path| p.to_str().unwrap().to_string();
 
-    let built = json(&topoloc(&[
-        "build-map",
-        "--images",
-        &s(&map_dir),
-        "--backend",
-        "vlad",
-        "--out",
-        &s(&map),
-        "--json",
-    ]));
+    let built = build_vlad_map(&map_dir, &map);
     assert_eq!(built["places"], places);
     assert_eq!(built["views"], places);
     assert!(built["descriptor"]
@@ -298,39 +239,12 @@ fn demo_runs_the_whole_pipeline_and_reports_the_contract_keys() {
     assert!(String::from_utf8_lossy(&out.stderr).contains("--condition foggy"));
 }
 
-/// `topoloc simulate` of a tiny world (one storey, two rooms; two legs at 4 Hz keep it fast)
-/// into `out`, with `extra` arguments; its JSON summary.
-fn simulate_tiny(out: &Path, extra: &[&str]) -> serde_json::Value {
-    let mut args = vec![
-        "simulate",
-        "--backend",
-        "vlad",
-        "--rooms",
-        "2",
-        "--floors",
-        "1",
-        "--legs",
-        "2",
-        "--rate-hz",
-        "4",
-        "--trajectories",
-        "1",
-        "--views-per-place",
-        "4",
-        "--out",
-        out.to_str().unwrap(),
-        "--json",
-    ];
-    args.extend_from_slice(extra);
-    json(&topoloc(&args))
-}
-
 #[test]
 fn simulate_writes_a_dataset_that_eval_reads() {
     let dir = tempfile::tempdir().unwrap();
     let s = |p: &Path| p.to_str().unwrap().to_string();
     let out = dir.path().join("sim");
-    let summary = simulate_tiny(&out, &[]);
+    let summary = simulate_tiny(&out, 4, &[]);
     let places = summary["places"].as_u64().unwrap();
     assert!(places >= 4, "{summary}");
     assert_eq!(summary["views"].as_u64(), Some(4 * places));
@@ -438,16 +352,7 @@ fn simulate_writes_a_dataset_that_eval_reads() {
         write_pgm(&images.join(format!("{i:03}.pgm")), &place(i));
     }
     let other = dir.path().join("other.topoloc");
-    json(&topoloc(&[
-        "build-map",
-        "--images",
-        &s(&images),
-        "--backend",
-        "vlad",
-        "--out",
-        &s(&other),
-        "--json",
-    ]));
+    build_vlad_map(&images, &other);
     let eval = |map: &Path, dataset: &Path| {
         let out = topoloc(&["eval", "--map", &s(map), "--dataset", &s(dataset), "--json"]);
         assert!(!out.status.success());
@@ -610,7 +515,7 @@ fn loops_with_depth_images_give_metric_hints() {
     let dir = tempfile::tempdir().unwrap();
     let s = |p: &Path| p.to_str().unwrap().to_string();
     let out = dir.path().join("sim");
-    let summary = simulate_tiny(&out, &["--depth"]);
+    let summary = simulate_tiny(&out, 4, &["--depth"]);
     let traj = out.join("traj-000");
     let frames = summary["trajectories"][0]["frames"].as_u64().unwrap() as usize;
     assert_eq!(
@@ -760,12 +665,7 @@ fn loops_follows_the_contract_online_and_against_a_map() {
     let places = 12;
     for i in 0..places {
         let image = place(i);
-        let query: Vec<u8> = (0..W * H)
-            .map(|k| {
-                let (x, y) = (k % W, k / W);
-                (u16::from(image[y * W + (x + 4).min(W - 1)]) * 9 / 10 + 20) as u8
-            })
-            .collect();
+        let query = seen_again(&image);
         write_pgm(&map_dir.join(format!("{i:03}.pgm")), &image);
         write_pgm(&query_dir.join(format!("{i:03}.pgm")), &query);
         write_pgm(&both.join(format!("a{i:03}.pgm")), &image);
@@ -773,16 +673,7 @@ fn loops_follows_the_contract_online_and_against_a_map() {
     }
     let s = |p: &Path| p.to_str().unwrap().to_string();
     let map = dir.path().join("places.topoloc");
-    json(&topoloc(&[
-        "build-map",
-        "--images",
-        &s(&map_dir),
-        "--backend",
-        "vlad",
-        "--out",
-        &s(&map),
-        "--json",
-    ]));
+    build_vlad_map(&map_dir, &map);
     let header = "query_index,matched_index,inliers,confidence,scale_known,tx,ty,tz,qx,qy,qz,qw";
     // A second session against the map: hints name the map's keyframe ids.
     let decisions = dir.path().join("decisions.csv");
@@ -891,7 +782,7 @@ fn loops_follows_the_contract_online_and_against_a_map() {
 fn ate_judges_the_simulated_odometry_against_its_ground_truth() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("sim");
-    simulate_tiny(&out, &[]);
+    simulate_tiny(&out, 4, &[]);
     let traj = out.join("traj-000");
     let (odometry, truth) = (traj.join("odometry.txt"), traj.join("groundtruth.txt"));
     let (odometry, truth) = (odometry.to_str().unwrap(), truth.to_str().unwrap());
