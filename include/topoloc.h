@@ -11,8 +11,9 @@
  *  - Versions: check topoloc_abi_version() == TOPOLOC_ABI_VERSION at start-up; an item marked
  *    "ABI 1.N" exists when topoloc_abi_version_minor() >= N.
  *  - Thread safety: a const topoloc_map* (and a const topoloc_graph*) may be used from many
- *    threads at once; builders and localizers are used from one thread at a time (they may
- *    move between threads). The last error message is per thread.
+ *    threads at once; builders, localizers, describers and loop detectors are used from one
+ *    thread at a time (they may move between threads), and a second, concurrent call on one of
+ *    them fails with TOPOLOC_ERR_CONCURRENT_USE (ABI 1.13). The last error message is per thread.
  *  - Callbacks (topoloc_progress_fn) must return normally: never unwind (C++ exceptions) or
  *    longjmp through topoloc.
  *  - Reading order: versions and errors, maps, the localizer, builders, skeleton graphs; the
@@ -69,9 +70,11 @@
  * off-map evidence from verification (`verify_off_map_inliers`, `_inlier_scale`); 1.10:
  * confirmed loop hints (`topoloc_loop_detector_confirmed_count`, `_confirmed`); 1.11:
  * trajectory metrics (`topoloc_trajectory_evaluate`, `_evaluate_files`); 1.12: describers
- * (`topoloc_describer_*`: images to a map's global descriptors).
+ * (`topoloc_describer_*`: images to a map's global descriptors); 1.13: host logging
+ * (`topoloc_set_log_callback`) and `TOPOLOC_ERR_CONCURRENT_USE` for a handle used by two calls
+ * at once.
  */
-#define TOPOLOC_ABI_VERSION_MINOR 12
+#define TOPOLOC_ABI_VERSION_MINOR 13
 
 /**
  * Result of every fallible C function. Values are grouped in ranges and never renumbered;
@@ -106,6 +109,12 @@ enum topoloc_status
    * A string argument is not valid UTF-8.
    */
   TOPOLOC_ERR_INVALID_UTF8 = 5,
+  /**
+   * The handle is in use by another call (ABI 1.13): two threads used one localizer, loop
+   * detector, describer or map builder at once, or a callback re-entered it. The call did
+   * nothing; the other call goes on unaffected.
+   */
+  TOPOLOC_ERR_CONCURRENT_USE = 6,
   /**
    * Reading or writing a file failed.
    */
@@ -204,7 +213,9 @@ typedef uint32_t topoloc_status;
 /**
  * Describes images as a map's views were described. Created by `topoloc_describer_new`,
  * released by `topoloc_describer_free`; it does not keep the map alive (the describer model
- * is shared). Single-threaded state: one thread at a time (it may move between threads).
+ * is shared). Single-threaded state: one thread at a time (it may move between threads). A call made while another call uses it
+ * (another thread, or a callback re-entering it) fails with `TOPOLOC_ERR_CONCURRENT_USE` and
+ * changes nothing (ABI 1.13).
  */
 typedef struct topoloc_describer topoloc_describer;
 
@@ -219,14 +230,18 @@ typedef struct topoloc_graph topoloc_graph;
 /**
  * Follows one camera through a map. Created by `topoloc_localizer_new`, released by
  * `topoloc_localizer_free`. Holds per-camera state: use it from one thread at a time (it may
- * move between threads). It keeps its own reference to the map.
+ * move between threads). It keeps its own reference to the map. A call made while another call uses it
+ * (another thread, or a callback re-entering it) fails with `TOPOLOC_ERR_CONCURRENT_USE` and
+ * changes nothing (ABI 1.13).
  */
 typedef struct topoloc_localizer topoloc_localizer;
 
 /**
  * Finds loop closures for one SLAM run (and, from a map, against an earlier one). Created by
  * `topoloc_loop_detector_new` or `_from_map`, released by `topoloc_loop_detector_free`.
- * Single-threaded state: one thread at a time (it may move between threads).
+ * Single-threaded state: one thread at a time (it may move between threads). A call made while another call uses it
+ * (another thread, or a callback re-entering it) fails with `TOPOLOC_ERR_CONCURRENT_USE` and
+ * changes nothing (ABI 1.13).
  */
 typedef struct topoloc_loop_detector topoloc_loop_detector;
 
@@ -241,9 +256,30 @@ typedef struct topoloc_map topoloc_map;
 
 /**
  * Collects places, views and edges for a new map. Created by `topoloc_map_builder_new`,
- * released by `topoloc_map_builder_free`. Not thread-safe: use from one thread at a time.
+ * released by `topoloc_map_builder_free`. Not thread-safe: use from one thread at a time. A call made while another call uses it
+ * (another thread, or a callback re-entering it) fails with `TOPOLOC_ERR_CONCURRENT_USE` and
+ * changes nothing (ABI 1.13).
  */
 typedef struct topoloc_map_builder topoloc_map_builder;
+
+/**
+ * Severity of a log record, and the most verbose level a host asks for: a `TOPOLOC_LOG_*`
+ * value.
+ */
+typedef uint32_t topoloc_log_level;
+
+/**
+ * Receives one log record: its `level` (`TOPOLOC_LOG_ERROR` ..= `TOPOLOC_LOG_TRACE`), its
+ * `target` (the emitting module, e.g. `"topoloc::map::file"`, or `"onnxruntime"`), the
+ * formatted `message` (both NUL-terminated UTF-8, valid only during the call), and the
+ * `user_data` given to `topoloc_set_log_callback`. Called on whichever thread logs (a thread
+ * of the host calling into topoloc, or a worker thread topoloc or ONNX Runtime runs), possibly
+ * from several threads at once: it must be thread-safe, must return normally (no C++
+ * exception, no `longjmp`), and must not call `topoloc_set_log_callback` (that call fails
+ * with `TOPOLOC_ERR_CONCURRENT_USE`). Records that topoloc emits while the callback runs on
+ * the same thread are dropped.
+ */
+typedef void (*topoloc_log_fn)(topoloc_log_level level, const char *target, const char *message, void *user_data);
 
 /**
  * Options of `topoloc_map_load`. Initialise with `topoloc_map_load_options_default`.
@@ -1215,6 +1251,36 @@ typedef struct topoloc_trajectory_report {
 typedef uint32_t topoloc_trajectory_format;
 
 /**
+ * No records (the callback is not called).
+ */
+#define TOPOLOC_LOG_OFF 0
+
+/**
+ * An operation failed in a way the returned status does not fully explain.
+ */
+#define TOPOLOC_LOG_ERROR 1
+
+/**
+ * Something the host should know: a degraded result, a file cleaned up, a backend's warning.
+ */
+#define TOPOLOC_LOG_WARN 2
+
+/**
+ * Rare, useful events: maps loaded and saved (sizes, times), backends loaded (paths).
+ */
+#define TOPOLOC_LOG_INFO 3
+
+/**
+ * Decisions per keyframe or per map build step (loop candidates, rejected hints).
+ */
+#define TOPOLOC_LOG_DEBUG 4
+
+/**
+ * Per-frame detail.
+ */
+#define TOPOLOC_LOG_TRACE 5
+
+/**
  * Filter mode: forward filter over the graph (default).
  */
 #define TOPOLOC_MODE_FILTER 0
@@ -1431,6 +1497,22 @@ const char *topoloc_status_name(uint32_t status);
  * has its own last error.
  */
 topoloc_status topoloc_last_error_message(char *buf, size_t len, size_t *needed);
+
+/* =================================================================
+ * Host logging (records to a callback; nothing on stdout or stderr)
+ * ================================================================= */
+
+/**
+ * Sends the library's log records of `max_level` and more severe to `callback` (with
+ * `user_data`), replacing any previous callback; `NULL` (or `TOPOLOC_LOG_OFF`) turns logging
+ * off, which is the default: topoloc writes nothing to stdout or stderr. Takes effect for all
+ * threads; when it returns, no thread is still inside the previous callback, so its user data
+ * may be freed. See `topoloc_log_fn` for what the callback must do. Thread-safe. Errors:
+ * `_INVALID_ARGUMENT` (a level above `TOPOLOC_LOG_TRACE`; another `log` logger registered by a
+ * Rust host), `_CONCURRENT_USE` (called from inside the callback). On error the previous
+ * callback stays.
+ */
+topoloc_status topoloc_set_log_callback(topoloc_log_fn callback, topoloc_log_level max_level, void *user_data);
 
 /* ============================================================================
  * Maps: load, save, query (a const topoloc_map* may be shared by many threads)

@@ -94,6 +94,7 @@ pub(crate) fn environment(
         None => {
             let environment = ort::init_from(path)
                 .map_err(|e| unavailable(format!("loading {}: {e}", path.display())))?
+                .with_logger(std::sync::Arc::new(forward_runtime_log))
                 .build()
                 .map_err(|e| {
                     unavailable(format!(
@@ -101,6 +102,7 @@ pub(crate) fn environment(
                         path.display()
                     ))
                 })?;
+            log::info!("ONNX Runtime loaded from {}", path.display());
             RUNTIME.get_or_init(|| LoadedRuntime {
                 path: path.clone(),
                 environment,
@@ -144,4 +146,23 @@ pub(crate) fn session(
         .commit_from_memory(&bytes)
         .map_err(onnx)?;
     Ok((session, format!("{:x}", Sha256::digest(&bytes))))
+}
+
+/// ONNX Runtime's own messages, as `log` records of target `onnxruntime` (its INFO messages,
+/// a dozen per session, as DEBUG): never on stderr.
+fn forward_runtime_log(
+    level: ort::logging::LogLevel,
+    category: &str,
+    _id: &str,
+    code_location: &str,
+    message: &str,
+) {
+    use ort::logging::LogLevel;
+    let level = match level {
+        LogLevel::Verbose => log::Level::Trace,
+        LogLevel::Info => log::Level::Debug,
+        LogLevel::Warning => log::Level::Warn,
+        LogLevel::Error | LogLevel::Fatal => log::Level::Error,
+    };
+    log::log!(target: "onnxruntime", level, "[{category}] {code_location}: {message}");
 }

@@ -271,6 +271,7 @@ def _ctype_for(c_type: str):
         "double": c_double,
         "topoloc_status": c_uint32,
         "topoloc_progress_fn": _lib.topoloc_progress_fn,
+        "topoloc_log_fn": _lib.topoloc_log_fn,
         "void": None,
     }
     table.update(_lib.STRUCTS)
@@ -490,16 +491,23 @@ def _header_callbacks():
     return out
 
 
+#: The callback typedefs of the header, their ctypes prototypes and their C signatures.
+CALLBACKS = {
+    "topoloc_progress_fn": (_lib.topoloc_progress_fn, (c_bool, [c_void_p, c_uint32, c_size_t, c_size_t])),
+    "topoloc_log_fn": (_lib.topoloc_log_fn, (None, [c_uint32, c_char_p, c_char_p, c_void_p])),
+}
+
+
 @needs_header
-def test_progress_fn_typedef_matches_ctypes():
+def test_callback_typedefs_match_ctypes():
     callbacks = _header_callbacks()
-    assert set(callbacks) == {"topoloc_progress_fn"}, "callback typedefs added to or removed from the header"
-    restype, argtypes = callbacks["topoloc_progress_fn"]
-    assert (restype, argtypes) == (c_bool, [c_void_p, c_uint32, c_size_t, c_size_t])
-    fn = _lib.topoloc_progress_fn
-    assert fn._restype_ is restype
-    assert list(fn._argtypes_) == argtypes
-    assert fn._flags_ == CFUNCTYPE(c_bool)._flags_  # C calling convention, errno not swapped
+    assert set(callbacks) == set(CALLBACKS), "callback typedefs added to or removed from the header"
+    for name, (fn, signature) in CALLBACKS.items():
+        restype, argtypes = callbacks[name]
+        assert (restype, argtypes) == signature, name
+        assert fn._restype_ is restype, name
+        assert list(fn._argtypes_) == argtypes, name
+        assert fn._flags_ == CFUNCTYPE(c_bool)._flags_, name  # C calling convention, errno not swapped
 
 
 @needs_header
@@ -580,7 +588,7 @@ def test_status_names_match_the_librarys_table():
 
 
 def test_abi_minor_version():
-    assert topoloc.abi_version_minor() >= _lib.ABI_VERSION_MINOR == 12
+    assert topoloc.abi_version_minor() >= _lib.ABI_VERSION_MINOR == 13
 
 
 EXPECTED_CLASSES = {
@@ -589,6 +597,7 @@ EXPECTED_CLASSES = {
     3: "BufferTooSmallError",
     4: "StructSizeError",
     5: "InvalidUTF8Error",
+    6: "ConcurrentUseError",
     100: "MapIOError",
     101: "NotAMapError",
     102: "TruncatedMapError",

@@ -46,6 +46,11 @@ Trajectory metrics (ABI 1.11): :func:`evaluate_trajectory` (TUM rows) and
 :func:`evaluate_trajectory_files` (TUM, KITTI, EuRoC) give ATE, ARE, RPE and R_traj of an
 estimate against ground truth, as ``evo_ape`` / ``evo_rpe`` compute them.
 
+Logging (ABI 1.13): the library's records go to :mod:`logging` (loggers ``topoloc.*`` and
+``onnxruntime``), from ``WARNING`` by default; :func:`set_log_level` asks for more
+(``logging.INFO``: maps loaded and saved; ``logging.DEBUG``: loop decisions; :data:`TRACE`:
+per frame). The library itself never prints.
+
 Objects and threads: a :class:`Map` is immutable and may be shared by many threads; a
 :class:`Localizer` (one camera), a :class:`LoopDetector` and a :class:`MapBuilder` are
 single-threaded state. Every
@@ -60,6 +65,7 @@ from ._errors import (
     BackendUnavailableError,
     BufferTooSmallError,
     CancelledError,
+    ConcurrentUseError,
     CorruptMapError,
     DescriptorMismatchError,
     DimensionMismatchError,
@@ -99,6 +105,7 @@ from ._lib import (
     LibraryNotFoundError,
     library_path,
 )
+from ._logging import TRACE, log_level, set_log_level
 from ._core import (
     Candidate,
     Describer,
@@ -172,6 +179,10 @@ __all__ = [
     "ErrorStats",
     # versions and library
     "version",
+    # host logging (ABI 1.13)
+    "set_log_level",
+    "log_level",
+    "TRACE",
     "abi_version",
     "abi_version_minor",
     "status_name",
@@ -208,5 +219,6 @@ __all__ = [
     "ModelError",
     "NoDescriberError",
     "CancelledError",
+    "ConcurrentUseError",
     "PanicError",
 ]

@@ -42,6 +42,7 @@ __all__ = [
     "ModelError",
     "NoDescriberError",
     "CancelledError",
+    "ConcurrentUseError",
     "PanicError",
     "STATUS_NAMES",
     "error_class_for_status",
@@ -56,6 +57,7 @@ STATUS_NAMES: Dict[int, str] = {
     3: "TOPOLOC_ERR_BUFFER_TOO_SMALL",
     4: "TOPOLOC_ERR_STRUCT_SIZE",
     5: "TOPOLOC_ERR_INVALID_UTF8",
+    6: "TOPOLOC_ERR_CONCURRENT_USE",
     100: "TOPOLOC_ERR_IO",
     101: "TOPOLOC_ERR_NOT_A_MAP",
     102: "TOPOLOC_ERR_TRUNCATED",
@@ -146,6 +148,13 @@ class InvalidUTF8Error(TopolocError, ValueError):
     """A string argument (e.g. a ``bytes`` path) is not valid UTF-8."""
 
     STATUS = 5
+
+
+class ConcurrentUseError(TopolocError, RuntimeError):
+    """A handle was used by two calls at once (two threads, or a callback re-entering it; ABI
+    1.13). The shim refuses a second thread itself; the library's own check backs it up."""
+
+    STATUS = 6
 
 
 class MapIOError(TopolocError):
@@ -298,6 +307,7 @@ _BY_STATUS: Dict[int, Type[TopolocError]] = {
         BufferTooSmallError,
         StructSizeError,
         InvalidUTF8Error,
+        ConcurrentUseError,
         MapIOError,
         NotAMapError,
         TruncatedMapError,

@@ -48,7 +48,7 @@ ABI_VERSION = 1
 
 #: ABI minor version these bindings were written for (``TOPOLOC_ABI_VERSION_MINOR``): they use
 #: items up to "ABI 1.N" of the header.
-ABI_VERSION_MINOR = 12
+ABI_VERSION_MINOR = 13
 
 #: Environment variable naming the shared library to load.
 ENV_VAR = "TOPOLOC_LIBRARY"
@@ -216,6 +216,8 @@ class topoloc_image_map_options(Structure):
 
 #: ``topoloc_progress_fn``: ``bool (*)(void *user_data, uint32_t stage, size_t done, size_t total)``.
 topoloc_progress_fn = CFUNCTYPE(c_bool, c_void_p, c_uint32, c_size_t, c_size_t)
+#: ``topoloc_log_fn`` (ABI 1.13): level, target, message, user_data.
+topoloc_log_fn = CFUNCTYPE(None, c_uint32, c_char_p, c_char_p, c_void_p)
 
 
 class topoloc_image(Structure):
@@ -639,6 +641,7 @@ SIGNATURES = {
     "topoloc_status_str": (c_char_p, [c_uint32]),
     "topoloc_status_name": (c_char_p, [c_uint32]),
     "topoloc_last_error_message": (status_t, [_p(c_char), c_size_t, _p(c_size_t)]),
+    "topoloc_set_log_callback": (status_t, [topoloc_log_fn, c_uint32, c_void_p]),
 }
 
 # --------------------------------------------------------------------------------------------

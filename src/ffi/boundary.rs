@@ -17,6 +17,11 @@ fn set_last_error(message: &str) {
     LAST_ERROR.with(|e| *e.borrow_mut() = text);
 }
 
+/// Records `error` as the calling thread's last error, for entry points that return no status.
+pub(crate) fn record_error(error: &FfiError) {
+    set_last_error(&error.message);
+}
+
 /// Copies the calling thread's last error message into `buf` (see `topoloc_last_error_message`).
 /// Does not itself change the last error.
 pub(crate) fn copy_last_error(buf: *mut c_char, len: usize, needed: *mut usize) -> topoloc_status {

@@ -3,7 +3,7 @@
 use super::boundary::{check_out, optional_string, run, slice, string, write_out};
 use super::convert::optional_pose;
 use super::error::FfiError;
-use super::handles::{free_box, new_box, try_mut, try_ref, Castable, Opaque, OwnedBox};
+use super::handles::{enter, free_exclusive, new_exclusive, Castable, Opaque, OwnedExclusive};
 use super::map::{map_handle, topoloc_map};
 use super::topoloc_status;
 use super::versioned::{init_versioned, read_versioned, Versioned};
@@ -14,13 +14,15 @@ use nalgebra::Point3;
 use std::ffi::c_char;
 
 /// Collects places, views and edges for a new map. Created by `topoloc_map_builder_new`,
-/// released by `topoloc_map_builder_free`. Not thread-safe: use from one thread at a time.
+/// released by `topoloc_map_builder_free`. Not thread-safe: use from one thread at a time. A call made while another call uses it
+/// (another thread, or a callback re-entering it) fails with `TOPOLOC_ERR_CONCURRENT_USE` and
+/// changes nothing (ABI 1.13).
 pub struct topoloc_map_builder {
     _opaque: Opaque,
 }
 
 impl Castable for topoloc_map_builder {
-    type Ownership = OwnedBox;
+    type Ownership = OwnedExclusive;
     type RustType = MapBuilder;
 }
 
@@ -39,7 +41,7 @@ pub extern "C" fn topoloc_map_builder_new(
         check_out(out, "out")?;
         write_out(
             out,
-            new_box::<topoloc_map_builder>(MapBuilder::new(identity)),
+            new_exclusive::<topoloc_map_builder>(MapBuilder::new(identity)),
         );
         Ok(())
     })
@@ -58,7 +60,7 @@ fn identity(
 /// Releases a builder. `NULL` is a no-op.
 #[no_mangle]
 pub extern "C" fn topoloc_map_builder_free(builder: *mut topoloc_map_builder) {
-    free_box(builder)
+    free_exclusive(builder)
 }
 
 /// Adds a place; `position` (3 doubles, metres) may be NULL. `*place_out` receives its id.
@@ -69,7 +71,7 @@ pub extern "C" fn topoloc_map_builder_add_place(
     place_out: *mut u32,
 ) -> topoloc_status {
     run(|| {
-        let builder = try_mut(builder, "builder")?;
+        let mut builder = enter(builder, "builder")?;
         check_out(place_out, "place_out")?;
         let position = match position.is_null() {
             true => None,
@@ -140,7 +142,7 @@ pub extern "C" fn topoloc_map_builder_add_view(
     view_out: *mut u32,
 ) -> topoloc_status {
     run(|| {
-        let builder = try_mut(builder, "builder")?;
+        let mut builder = enter(builder, "builder")?;
         let descriptor = slice(descriptor, len, "descriptor")?;
         check_out(view_out, "view_out")?;
         let attributes = if attributes.is_null() {
@@ -167,7 +169,7 @@ pub extern "C" fn topoloc_map_builder_add_edge(
     weight: f32,
 ) -> topoloc_status {
     run(|| {
-        try_mut(builder, "builder")?.add_edge(a, b, weight)?;
+        enter(builder, "builder")?.add_edge(a, b, weight)?;
         Ok(())
     })
 }
@@ -180,7 +182,7 @@ pub extern "C" fn topoloc_map_builder_build(
     out: *mut *mut topoloc_map,
 ) -> topoloc_status {
     run(|| {
-        let builder = try_ref(builder, "builder")?;
+        let builder = enter(builder, "builder")?;
         check_out(out, "out")?;
         write_out(out, map_handle(builder.build()?));
         Ok(())

@@ -4,7 +4,9 @@
 
 use super::boundary::{check_out, optional_string, run, slice, write_array, write_out};
 use super::error::FfiError;
-use super::handles::{clone_arc, free_box, new_box, try_mut, try_ref, Castable, Opaque, OwnedBox};
+use super::handles::{
+    clone_arc, enter, free_exclusive, new_exclusive, Castable, Opaque, OwnedExclusive,
+};
 use super::images::{backend_family, backend_kind, image_view, topoloc_backend, topoloc_image};
 use super::map::topoloc_map;
 use super::topoloc_status;
@@ -15,7 +17,9 @@ use std::ffi::c_char;
 
 /// Describes images as a map's views were described. Created by `topoloc_describer_new`,
 /// released by `topoloc_describer_free`; it does not keep the map alive (the describer model
-/// is shared). Single-threaded state: one thread at a time (it may move between threads).
+/// is shared). Single-threaded state: one thread at a time (it may move between threads). A call made while another call uses it
+/// (another thread, or a callback re-entering it) fails with `TOPOLOC_ERR_CONCURRENT_USE` and
+/// changes nothing (ABI 1.13).
 pub struct topoloc_describer {
     _opaque: Opaque,
 }
@@ -27,7 +31,7 @@ pub(crate) struct DescriberState {
 }
 
 impl Castable for topoloc_describer {
-    type Ownership = OwnedBox;
+    type Ownership = OwnedExclusive;
     type RustType = DescriberState;
 }
 
@@ -140,7 +144,7 @@ pub extern "C" fn topoloc_describer_new(
         let describer = Describer::new(model, &options)?;
         write_out(
             out,
-            new_box::<topoloc_describer>(DescriberState {
+            new_exclusive::<topoloc_describer>(DescriberState {
                 describer,
                 scratch: Vec::new(),
             }),
@@ -152,7 +156,7 @@ pub extern "C" fn topoloc_describer_new(
 /// Releases a describer; NULL is a no-op.
 #[no_mangle]
 pub extern "C" fn topoloc_describer_free(describer: *mut topoloc_describer) {
-    free_box(describer);
+    free_exclusive(describer);
 }
 
 /// Writes the descriptor dimension D (the map's) to `*out`.
@@ -163,7 +167,7 @@ pub extern "C" fn topoloc_describer_dim(
     out: *mut usize,
 ) -> topoloc_status {
     run(|| {
-        let state = try_ref(describer, "describer")?;
+        let state = enter(describer, "describer")?;
         check_out(out, "out")?;
         write_out(out, state.describer.identity().dim as usize);
         Ok(())
@@ -184,7 +188,8 @@ pub extern "C" fn topoloc_describer_describe(
     len: *mut usize,
 ) -> topoloc_status {
     run(|| {
-        let state = try_mut(describer, "describer")?;
+        let mut in_use = enter(describer, "describer")?;
+        let state = &mut *in_use;
         let image = &slice(image, 1, "image")?[0];
         let view = image_view(image, "image")?.ok_or_else(|| {
             FfiError::new(

@@ -37,6 +37,17 @@ impl FfiError {
     pub fn invalid(message: impl Into<String>) -> Self {
         Self::new(TOPOLOC_ERR_INVALID_ARGUMENT, message)
     }
+
+    /// `name` is in use by another call (another thread, or a callback re-entering it).
+    pub fn concurrent_use(name: &str) -> Self {
+        Self::new(
+            TOPOLOC_ERR_CONCURRENT_USE,
+            format!(
+                "'{name}' is in use by another call (another thread, or a callback re-entering \
+                 it): use it from one thread at a time"
+            ),
+        )
+    }
 }
 
 impl From<DescriptorError> for FfiError {

@@ -4,7 +4,9 @@ use super::boundary::{check_out, run, slice, write_out};
 use super::convert::{expected_descriptor, optional_camera, optional_pose, pose_to_row_major};
 use super::describer::describer_options;
 use super::error::FfiError;
-use super::handles::{clone_arc, free_box, new_box, try_mut, Castable, Opaque, OwnedBox};
+use super::handles::{
+    clone_arc, enter, free_exclusive, new_exclusive, Castable, Opaque, OwnedExclusive,
+};
 use super::images::{
     backend_kind, image_view, topoloc_backend, topoloc_image, TOPOLOC_BACKEND_AUTO,
     TOPOLOC_BACKEND_NONE,
@@ -31,7 +33,9 @@ pub const TOPOLOC_MODE_METRIC: topoloc_mode = 2;
 
 /// Follows one camera through a map. Created by `topoloc_localizer_new`, released by
 /// `topoloc_localizer_free`. Holds per-camera state: use it from one thread at a time (it may
-/// move between threads). It keeps its own reference to the map.
+/// move between threads). It keeps its own reference to the map. A call made while another call uses it
+/// (another thread, or a callback re-entering it) fails with `TOPOLOC_ERR_CONCURRENT_USE` and
+/// changes nothing (ABI 1.13).
 pub struct topoloc_localizer {
     _opaque: Opaque,
 }
@@ -43,7 +47,7 @@ pub(crate) struct LocalizerState {
 }
 
 impl Castable for topoloc_localizer {
-    type Ownership = OwnedBox;
+    type Ownership = OwnedExclusive;
     type RustType = LocalizerState;
 }
 
@@ -228,7 +232,7 @@ pub extern "C" fn topoloc_localizer_new(
         };
         write_out(
             out,
-            new_box::<topoloc_localizer>(LocalizerState {
+            new_exclusive::<topoloc_localizer>(LocalizerState {
                 localizer,
                 scratch: Localization::default(),
             }),
@@ -291,14 +295,14 @@ fn localizer_options(o: &topoloc_localizer_options) -> Result<LocalizerOptions, 
 /// Releases a localizer. `NULL` is a no-op.
 #[no_mangle]
 pub extern "C" fn topoloc_localizer_free(localizer: *mut topoloc_localizer) {
-    free_box(localizer)
+    free_exclusive(localizer)
 }
 
 /// Forgets all history; the next frame is treated as the first.
 #[no_mangle]
 pub extern "C" fn topoloc_localizer_reset(localizer: *mut topoloc_localizer) -> topoloc_status {
     run(|| {
-        try_mut(localizer, "localizer")?.localizer.reset();
+        enter(localizer, "localizer")?.localizer.reset();
         Ok(())
     })
 }
@@ -476,7 +480,8 @@ pub extern "C" fn topoloc_localizer_process(
     result: *mut topoloc_result,
 ) -> topoloc_status {
     run(|| {
-        let state = try_mut(localizer, "localizer")?;
+        let mut in_use = enter(localizer, "localizer")?;
+        let state = &mut *in_use;
         let f = read_versioned(frame, topoloc_frame::default(), "frame")?;
         // The caller's result is read through its own layout only (it may be an older one).
         let caller = read_versioned(

@@ -4,7 +4,9 @@
 use super::boundary::{check_out, run, slice, string, write_array, write_out};
 use super::convert::{optional_camera, optional_pose, pose_to_row_major};
 use super::error::FfiError;
-use super::handles::{free_box, new_box, try_mut, try_ref, Castable, Opaque, OwnedBox};
+use super::handles::{
+    enter, free_exclusive, new_exclusive, try_ref, Castable, Opaque, OwnedExclusive,
+};
 use super::map::topoloc_map;
 use super::topoloc_status;
 use super::versioned::{init_versioned, read_versioned, write_versioned, Versioned};
@@ -18,13 +20,15 @@ use std::ffi::c_char;
 
 /// Finds loop closures for one SLAM run (and, from a map, against an earlier one). Created by
 /// `topoloc_loop_detector_new` or `_from_map`, released by `topoloc_loop_detector_free`.
-/// Single-threaded state: one thread at a time (it may move between threads).
+/// Single-threaded state: one thread at a time (it may move between threads). A call made while another call uses it
+/// (another thread, or a callback re-entering it) fails with `TOPOLOC_ERR_CONCURRENT_USE` and
+/// changes nothing (ABI 1.13).
 pub struct topoloc_loop_detector {
     _opaque: Opaque,
 }
 
 impl Castable for topoloc_loop_detector {
-    type Ownership = OwnedBox;
+    type Ownership = OwnedExclusive;
     type RustType = LoopDetector;
 }
 
@@ -223,7 +227,7 @@ pub extern "C" fn topoloc_loop_detector_new(
         )?;
         let (hints, database) = loop_options(options)?;
         let detector = LoopDetector::new(KeyframeDatabase::new(identity, database)?, hints)?;
-        write_out(out, new_box::<topoloc_loop_detector>(detector));
+        write_out(out, new_exclusive::<topoloc_loop_detector>(detector));
         Ok(())
     })
 }
@@ -244,7 +248,7 @@ pub extern "C" fn topoloc_loop_detector_from_map(
         check_out(out, "out")?;
         let (hints, database) = loop_options(options)?;
         let detector = LoopDetector::from_map(map, database, hints)?;
-        write_out(out, new_box::<topoloc_loop_detector>(detector));
+        write_out(out, new_exclusive::<topoloc_loop_detector>(detector));
         Ok(())
     })
 }
@@ -252,7 +256,7 @@ pub extern "C" fn topoloc_loop_detector_from_map(
 /// Releases a loop detector. `NULL` is a no-op.
 #[no_mangle]
 pub extern "C" fn topoloc_loop_detector_free(detector: *mut topoloc_loop_detector) {
-    free_box(detector)
+    free_exclusive(detector)
 }
 
 /// One keyframe as the host gives it. Initialise with `topoloc_loop_keyframe_default`.
@@ -498,7 +502,7 @@ pub extern "C" fn topoloc_loop_detector_add(
     hint: *mut topoloc_loop_hint,
 ) -> topoloc_status {
     run(|| {
-        let detector = try_mut(detector, "detector")?;
+        let mut detector = enter(detector, "detector")?;
         let k = read_versioned(keyframe, topoloc_loop_keyframe::default(), "keyframe")?;
         // Checks the caller's hint struct before anything changes.
         read_versioned(hint as *const _, topoloc_loop_hint::default(), "hint")?;
@@ -531,7 +535,7 @@ pub extern "C" fn topoloc_loop_detector_confirmed_count(
     count: *mut usize,
 ) -> topoloc_status {
     run(|| {
-        let detector = try_ref(detector, "detector")?;
+        let detector = enter(detector, "detector")?;
         check_out(count, "count")?;
         write_out(count, detector.confirmed().len());
         Ok(())
@@ -550,7 +554,7 @@ pub extern "C" fn topoloc_loop_detector_confirmed(
     hint: *mut topoloc_loop_hint,
 ) -> topoloc_status {
     run(|| {
-        let detector = try_ref(detector, "detector")?;
+        let detector = enter(detector, "detector")?;
         read_versioned(hint as *const _, topoloc_loop_hint::default(), "hint")?;
         let confirmed = detector.confirmed();
         let Some(h) = confirmed.get(index) else {
@@ -589,7 +593,7 @@ pub extern "C" fn topoloc_loop_detector_query(
     count: *mut usize,
 ) -> topoloc_status {
     run(|| {
-        let detector = try_ref(detector, "detector")?;
+        let detector = enter(detector, "detector")?;
         check_out(count, "count")?;
         let descriptor = slice(descriptor, descriptor_len, "descriptor")?;
         let found: Vec<topoloc_loop_candidate> = detector
@@ -614,7 +618,7 @@ pub extern "C" fn topoloc_loop_detector_erase(
     id: u64,
 ) -> topoloc_status {
     run(|| {
-        try_mut(detector, "detector")?.erase(id)?;
+        enter(detector, "detector")?.erase(id)?;
         Ok(())
     })
 }
@@ -629,7 +633,7 @@ pub extern "C" fn topoloc_loop_detector_save(
     path: *const c_char,
 ) -> topoloc_status {
     run(|| {
-        let detector = try_ref(detector, "detector")?;
+        let detector = enter(detector, "detector")?;
         detector.database().save(string(path, "path")?)?;
         Ok(())
     })
@@ -642,7 +646,7 @@ pub extern "C" fn topoloc_loop_detector_len(
     out: *mut usize,
 ) -> topoloc_status {
     run(|| {
-        let detector = try_ref(detector, "detector")?;
+        let detector = enter(detector, "detector")?;
         check_out(out, "out")?;
         write_out(out, detector.database().len());
         Ok(())

@@ -9,8 +9,9 @@
 //! `*_default()`; no panic crosses the boundary (`TOPOLOC_ERR_PANIC`).
 //!
 //! Thread safety: `const topoloc_map*` and `const topoloc_graph*` may be used from many threads
-//! at once; builders, localizers and loop detectors are single-threaded state (one thread at a time; they may
-//! move between threads).
+//! at once; builders, localizers, describers and loop detectors are single-threaded state (one
+//! thread at a time; they may move between threads), entered through a busy flag that turns a
+//! concurrent call into `TOPOLOC_ERR_CONCURRENT_USE` (`handles.rs`).
 
 #![deny(missing_docs)]
 #![allow(non_camel_case_types)]
@@ -28,9 +29,11 @@ mod status;
 mod versioned;
 
 // The entry points, declared in the order include/topoloc.h presents them (cbindgen follows
-// this order): versions and errors, maps, map keypoints, the localizer, builders, describers, skeleton graphs, loop
+// this order): versions and errors, host logging, maps, map keypoints, the localizer, builders, describers, skeleton graphs, loop
 // closure, trajectory metrics.
 mod version;
+
+mod logging;
 
 mod map;
 
@@ -54,6 +57,7 @@ pub use builder::*;
 pub use describer::*;
 pub use images::*;
 pub use localizer::*;
+pub use logging::*;
 pub use loops::*;
 pub use map::*;
 pub use map_keypoints::*;

@@ -24,6 +24,10 @@ pub enum topoloc_status {
     TOPOLOC_ERR_STRUCT_SIZE = 4,
     /// A string argument is not valid UTF-8.
     TOPOLOC_ERR_INVALID_UTF8 = 5,
+    /// The handle is in use by another call (ABI 1.13): two threads used one localizer, loop
+    /// detector, describer or map builder at once, or a callback re-entered it. The call did
+    /// nothing; the other call goes on unaffected.
+    TOPOLOC_ERR_CONCURRENT_USE = 6,
     // 100..199: maps and map files
     /// Reading or writing a file failed.
     TOPOLOC_ERR_IO = 100,
@@ -87,6 +91,7 @@ impl topoloc_status {
         TOPOLOC_ERR_BUFFER_TOO_SMALL,
         TOPOLOC_ERR_STRUCT_SIZE,
         TOPOLOC_ERR_INVALID_UTF8,
+        TOPOLOC_ERR_CONCURRENT_USE,
         TOPOLOC_ERR_IO,
         TOPOLOC_ERR_NOT_A_MAP,
         TOPOLOC_ERR_TRUNCATED,
@@ -128,6 +133,10 @@ impl topoloc_status {
             TOPOLOC_ERR_BUFFER_TOO_SMALL => (c"TOPOLOC_ERR_BUFFER_TOO_SMALL", c"buffer too small"),
             TOPOLOC_ERR_STRUCT_SIZE => (c"TOPOLOC_ERR_STRUCT_SIZE", c"unknown struct_size"),
             TOPOLOC_ERR_INVALID_UTF8 => (c"TOPOLOC_ERR_INVALID_UTF8", c"string is not valid UTF-8"),
+            TOPOLOC_ERR_CONCURRENT_USE => (
+                c"TOPOLOC_ERR_CONCURRENT_USE",
+                c"handle in use by another call",
+            ),
             TOPOLOC_ERR_IO => (c"TOPOLOC_ERR_IO", c"I/O error"),
             TOPOLOC_ERR_NOT_A_MAP => (c"TOPOLOC_ERR_NOT_A_MAP", c"not a topoloc map"),
             TOPOLOC_ERR_TRUNCATED => (c"TOPOLOC_ERR_TRUNCATED", c"truncated map file"),

@@ -19,8 +19,10 @@ pub const TOPOLOC_ABI_VERSION: u32 = 1;
 /// off-map evidence from verification (`verify_off_map_inliers`, `_inlier_scale`); 1.10:
 /// confirmed loop hints (`topoloc_loop_detector_confirmed_count`, `_confirmed`); 1.11:
 /// trajectory metrics (`topoloc_trajectory_evaluate`, `_evaluate_files`); 1.12: describers
-/// (`topoloc_describer_*`: images to a map's global descriptors).
-pub const TOPOLOC_ABI_VERSION_MINOR: u32 = 12;
+/// (`topoloc_describer_*`: images to a map's global descriptors); 1.13: host logging
+/// (`topoloc_set_log_callback`) and `TOPOLOC_ERR_CONCURRENT_USE` for a handle used by two calls
+/// at once.
+pub const TOPOLOC_ABI_VERSION_MINOR: u32 = 13;
 
 static VERSION: &CStr =
     match CStr::from_bytes_with_nul(concat!(env!("CARGO_PKG_VERSION"), "\0").as_bytes()) {

@@ -193,6 +193,15 @@ impl Localizer {
         out.frame_index = self.frames;
         self.frames += 1;
         self.report(out);
+        log::trace!(
+            "frame {} (t = {}): place {}, view {}, confidence {:.3}, off-map {}",
+            out.frame_index,
+            frame.timestamp,
+            out.place,
+            out.view,
+            out.confidence,
+            out.off_map
+        );
         Ok(())
     }
 

@@ -486,6 +486,18 @@ impl LoopDetector {
         self.features.insert(entry.id, features);
         self.streak = streak;
         self.confirmed = self.follow_streak(hint.as_ref())?;
+        match &hint {
+            Some(h) => log::debug!(
+                "keyframe {}: candidate keyframe {} (place {}), {} inliers, gate {:?}; {} confirmed",
+                entry.id,
+                h.matched_id,
+                h.place,
+                h.inliers,
+                h.gate,
+                self.confirmed.len()
+            ),
+            None => log::trace!("keyframe {}: no candidate verified", entry.id),
+        }
         Ok(Processed {
             added,
             hint,

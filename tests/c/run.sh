@@ -118,6 +118,17 @@ fi
 run_test "$build/asan.log" env ASAN_OPTIONS=detect_leaks=1 \
     UBSAN_OPTIONS=halt_on_error=1:print_stacktrace=1 "${lsan_env[@]}" "$build/test_topoloc_asan"
 
+section "test_topoloc: ThreadSanitizer (the C side: callers' threads, shared maps, busy handles)"
+# The Rust library is not instrumented (that needs a nightly toolchain), so TSan cannot see its
+# synchronisation (Rust atomics: the handles' busy flag, rayon's and std's thread hand-offs) and
+# would report the library's intercepted memcpy/memset as races. tsan.supp ignores interceptor
+# calls made from libtopoloc.so; TSan then checks every access of the C side (results,
+# descriptors, callbacks' state, the threads' own data) against pthread's synchronisation.
+"$CC" "${CFLAGS_STRICT[@]}" -g -O1 -fsanitize=thread -I"$repo/include" "$here/test_topoloc.c" \
+    -o "$build/test_topoloc_tsan" "${LINK_SHARED[@]}"
+run_test "$build/tsan.log" env TSAN_OPTIONS="halt_on_error=1:second_deadlock_stack=1:suppressions=$here/tsan.supp" \
+    "$build/test_topoloc_tsan"
+
 section "test_topoloc: valgrind"
 if command -v valgrind >/dev/null 2>&1; then
     # valgrind.supp holds only a commented one-time allocation of the Rust runtime.

@@ -434,9 +434,10 @@ static void test_status_str(void)
         TOPOLOC_ERR_MODEL,
         TOPOLOC_ERR_NO_DESCRIBER,
         TOPOLOC_ERR_CANCELLED,
+        TOPOLOC_ERR_CONCURRENT_USE,
         TOPOLOC_ERR_PANIC,
     };
-    static const uint32_t unknown[] = {6u,   99u,  110u, 199u, 205u,   299u,
+    static const uint32_t unknown[] = {7u,   99u,  110u, 199u, 205u,   299u,
                                        306u, 899u, 901u, 65536u, 0xFFFFFFFFu};
     const size_t n_known = sizeof known / sizeof known[0];
     size_t i, j;
@@ -2010,6 +2011,171 @@ static void test_threads(const topoloc_map *map)
             CHECK(jobs[i].failures == 0);
         }
     }
+}
+
+/* Two threads on ONE localizer (a caller's bug): every call either runs alone or is refused
+ * with TOPOLOC_ERR_CONCURRENT_USE; the calls that ran got distinct, consecutive frame indices. */
+enum { SHARED_CALLS = 3000 };
+
+struct shared_job {
+    topoloc_localizer *loc;
+    unsigned id;
+    unsigned ok, busy, other;
+    uint64_t *indices; /* frame indices of the calls that ran, SHARED_CALLS slots */
+    bool busy_message_ok;
+};
+
+static void *shared_main(void *arg)
+{
+    struct shared_job *job = arg;
+    topoloc_frame frame;
+    topoloc_result result;
+    topoloc_candidate candidates[3];
+    char msg[256];
+    unsigned i;
+
+    topoloc_frame_default(&frame);
+    topoloc_result_default(&result);
+    result.candidates = candidates;
+    result.candidates_capacity = 3;
+    frame.descriptor = g_view_desc[job->id];
+    frame.descriptor_len = DIM;
+    frame.timestamp = 0.0; /* equal timestamps: neither thread's frames go backwards */
+    job->busy_message_ok = true;
+    for (i = 0; i < SHARED_CALLS; i++) {
+        topoloc_status status = topoloc_localizer_process(job->loc, &frame, &result);
+        if (status == TOPOLOC_OK) {
+            job->indices[job->ok++] = result.frame_index;
+        } else if (status == TOPOLOC_ERR_CONCURRENT_USE) {
+            job->busy++;
+            if (topoloc_last_error_message(msg, sizeof msg, NULL) != TOPOLOC_OK ||
+                strstr(msg, "'localizer' is in use by another call") == NULL) {
+                job->busy_message_ok = false;
+            }
+        } else {
+            job->other++;
+        }
+    }
+    return NULL;
+}
+
+static int compare_u64(const void *a, const void *b)
+{
+    uint64_t x = *(const uint64_t *)a, y = *(const uint64_t *)b;
+    return x < y ? -1 : x > y;
+}
+
+static void test_shared_localizer(const topoloc_map *map)
+{
+    pthread_t threads[2];
+    struct shared_job jobs[2];
+    topoloc_localizer *loc = NULL;
+    uint64_t *all = malloc(2 * SHARED_CALLS * sizeof *all);
+    unsigned i, ran = 0;
+    bool consecutive = true;
+
+    section("threads: one localizer used by two threads at once is refused, never raced");
+    CHECK(all != NULL);
+    CHECK_OK(topoloc_localizer_new(map, NULL, &loc));
+    if (all == NULL || loc == NULL) {
+        free(all);
+        topoloc_localizer_free(loc);
+        return;
+    }
+    for (i = 0; i < 2; i++) {
+        memset(&jobs[i], 0, sizeof jobs[i]);
+        jobs[i].loc = loc;
+        jobs[i].id = i;
+        jobs[i].indices = all + i * SHARED_CALLS;
+    }
+    CHECK(pthread_create(&threads[0], NULL, shared_main, &jobs[0]) == 0);
+    CHECK(pthread_create(&threads[1], NULL, shared_main, &jobs[1]) == 0);
+    CHECK(pthread_join(threads[0], NULL) == 0);
+    CHECK(pthread_join(threads[1], NULL) == 0);
+    for (i = 0; i < 2; i++) {
+        CHECK(jobs[i].other == 0);
+        CHECK(jobs[i].ok + jobs[i].busy == SHARED_CALLS);
+        CHECK(jobs[i].busy_message_ok);
+    }
+    /* The calls that ran are the localizer's frames 0, 1, 2, ...: no index twice, none lost. */
+    memmove(all + jobs[0].ok, all + SHARED_CALLS, jobs[1].ok * sizeof *all);
+    ran = jobs[0].ok + jobs[1].ok;
+    qsort(all, ran, sizeof *all, compare_u64);
+    for (i = 0; i < ran; i++) {
+        consecutive = consecutive && all[i] == i;
+    }
+    CHECK(consecutive);
+    printf("    %u calls ran, %u refused as concurrent\n", ran, jobs[0].busy + jobs[1].busy);
+    free(all);
+    topoloc_localizer_free(loc);
+}
+
+/* ------------------------------------------------------------------------------------------ */
+/* Host logging                                                                                */
+/* ------------------------------------------------------------------------------------------ */
+
+struct log_sink {
+    unsigned records, info_map_records, above_level;
+    uint32_t max_level;
+    char last_message[512];
+    char last_target[64];
+};
+
+static void collect_log(topoloc_log_level level, const char *target, const char *message,
+                        void *user_data)
+{
+    struct log_sink *sink = user_data;
+    sink->records++;
+    if (level > sink->max_level || level < TOPOLOC_LOG_ERROR) {
+        sink->above_level++;
+    }
+    if (level == TOPOLOC_LOG_INFO && strcmp(target, "topoloc::map::file") == 0) {
+        sink->info_map_records++;
+    }
+    snprintf(sink->last_message, sizeof sink->last_message, "%s", message);
+    snprintf(sink->last_target, sizeof sink->last_target, "%s", target);
+    /* The callback may not replace itself. */
+    if (topoloc_set_log_callback(NULL, TOPOLOC_LOG_OFF, NULL) != TOPOLOC_ERR_CONCURRENT_USE) {
+        sink->above_level++;
+    }
+}
+
+static void test_logging(const topoloc_map *map)
+{
+    struct log_sink sink;
+    char path[4200];
+    topoloc_map *loaded = NULL;
+
+    section("host logging: records reach the callback up to its level, none when off");
+    memset(&sink, 0, sizeof sink);
+    tmp_path(path, sizeof path, "logged.topoloc");
+    CHECK_STATUS(topoloc_set_log_callback(collect_log, 6, &sink), TOPOLOC_ERR_INVALID_ARGUMENT);
+    sink.max_level = TOPOLOC_LOG_INFO;
+    CHECK_OK(topoloc_set_log_callback(collect_log, TOPOLOC_LOG_INFO, &sink));
+    CHECK_OK(topoloc_map_save(map, path));
+    CHECK(sink.info_map_records == 1);
+    CHECK(strncmp(sink.last_message, "saved ", 6) == 0);
+    CHECK_OK(topoloc_map_load(path, NULL, &loaded));
+    topoloc_map_free(loaded);
+    CHECK(sink.info_map_records == 2);
+    CHECK(strncmp(sink.last_message, "loaded ", 7) == 0 && strstr(sink.last_message, path) != NULL);
+    CHECK(strcmp(sink.last_target, "topoloc::map::file") == 0);
+
+    /* WARN: the map records (INFO) are dropped. */
+    sink.max_level = TOPOLOC_LOG_WARN;
+    CHECK_OK(topoloc_set_log_callback(collect_log, TOPOLOC_LOG_WARN, &sink));
+    CHECK_OK(topoloc_map_load(path, NULL, &loaded));
+    topoloc_map_free(loaded);
+    CHECK(sink.info_map_records == 2);
+
+    /* Off: nothing more, at any level. */
+    CHECK_OK(topoloc_set_log_callback(NULL, TOPOLOC_LOG_TRACE, &sink));
+    CHECK_OK(topoloc_map_load(path, NULL, &loaded));
+    topoloc_map_free(loaded);
+    CHECK(sink.info_map_records == 2);
+    CHECK(sink.records == 2);
+    CHECK(sink.above_level == 0);
+    CHECK(remove(path) == 0);
 }
 
 /* ------------------------------------------------------------------------------------------ */
@@ -4063,6 +4229,8 @@ int main(void)
         test_options_errors(map);
         test_versioned_structs(map);
         test_threads(map);
+        test_shared_localizer(map);
+        test_logging(map);
         test_metric_mode(map);
         test_images(map);
     }

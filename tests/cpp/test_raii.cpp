@@ -352,6 +352,32 @@ TEST(localizer_outlives_map_owner) {
   CHECK(!localizer.has_value());
 }
 
+TEST(log_handler_receives_records_up_to_its_level) {
+  TempDir dir;
+  const std::string path = (dir.path / "logged.topoloc").string();
+  std::mutex mutex;
+  std::vector<std::tuple<topoloc::LogLevel, std::string, std::string>> records;
+  auto collect = [&](topoloc::LogLevel level, std::string_view target, std::string_view message) {
+    std::lock_guard<std::mutex> lock(mutex);
+    records.emplace_back(level, std::string(target), std::string(message));
+    throw std::runtime_error("a handler's exception is dropped, not propagated into topoloc");
+  };
+  topoloc::set_log_handler(collect, topoloc::LogLevel::Info);
+  chain_map().save(path);
+  (void)topoloc::Map::load(path);
+  topoloc::set_log_handler(collect, topoloc::LogLevel::Warn);  // info records stop here
+  (void)topoloc::Map::load(path);
+  topoloc::set_log_handler(nullptr);  // off
+  (void)topoloc::Map::load(path);
+  CHECK_EQ(records.size(), std::size_t{2});
+  if (records.size() == 2) {
+    CHECK(std::get<0>(records[0]) == topoloc::LogLevel::Info);
+    CHECK(std::get<1>(records[0]) == "topoloc::map::file");
+    CHECK(std::get<2>(records[0]).find("saved " + path) == 0);
+    CHECK(std::get<2>(records[1]).find("loaded " + path) == 0);
+  }
+}
+
 TEST(map_from_keyframes) {
   // A robot driving along x, one keyframe every 0.5 m; places every 2 m.
   std::vector<topoloc::Keyframe> keyframes;

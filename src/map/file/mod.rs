@@ -130,8 +130,18 @@ impl Map {
     /// files are named `.{name}.topoloc-tmp-XXXXXX`; those left by interrupted saves of the
     /// same map are removed after a successful save.
     pub fn save(&self, path: impl AsRef<Path>) -> Result<(), MapError> {
+        let started = std::time::Instant::now();
         let bytes = self.to_bytes()?;
-        save::write_atomically(path.as_ref(), &bytes)
+        save::write_atomically(path.as_ref(), &bytes)?;
+        log::info!(
+            "saved {}: {} places, {} views, {} bytes in {:.1} ms",
+            path.as_ref().display(),
+            self.place_count(),
+            self.view_count(),
+            bytes.len(),
+            started.elapsed().as_secs_f64() * 1e3
+        );
+        Ok(())
     }
 
     /// Loads and validates a map file, memory-mapping it: descriptors are read in place, not
@@ -139,6 +149,7 @@ impl Map {
     /// replaces files by rename, which is safe).
     pub fn load(path: impl AsRef<Path>, options: &LoadOptions) -> Result<Map, MapError> {
         let path = path.as_ref();
+        let started = std::time::Instant::now();
         let io = |source| MapError::Io {
             path: path.to_path_buf(),
             source,
@@ -162,7 +173,22 @@ impl Map {
         } else {
             DescriptorStore::Owned(decode_f32(&mmap[range]))
         };
-        parsed.into_map(store)
+        let map = parsed.into_map(store)?;
+        log::info!(
+            "loaded {}: {} places, {} views, D = {}, {} bytes{} in {:.1} ms",
+            path.display(),
+            map.place_count(),
+            map.view_count(),
+            map.dim(),
+            len,
+            if aligned {
+                " (descriptors mapped)"
+            } else {
+                " (descriptors copied)"
+            },
+            started.elapsed().as_secs_f64() * 1e3
+        );
+        Ok(map)
     }
 
     /// Parses and validates a map from bytes in the file format (copies the descriptors).

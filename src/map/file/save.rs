@@ -74,8 +74,11 @@ fn remove_stale_temporaries(dir: &Path, prefix: &OsString) {
         let name = entry.file_name();
         let stale = name.as_encoded_bytes().starts_with(prefix)
             && entry.file_type().is_ok_and(|t| t.is_file());
-        if stale {
-            let _ = std::fs::remove_file(entry.path());
+        if stale && std::fs::remove_file(entry.path()).is_ok() {
+            log::warn!(
+                "removed {}, a temporary file left by an interrupted save",
+                entry.path().display()
+            );
         }
     }
 }

@@ -1,6 +1,7 @@
 //! The demo's picture: a generated world from above with its skeleton graph, the query
-//! trajectory, and where the filter put each frame (a line from the camera to the predicted
-//! place: green when it is the true place, orange within one graph hop, red otherwise).
+//! trajectory, and where one localizer configuration put each frame (a line from the camera to
+//! the predicted place: green when it is the true place, orange within one graph hop, red
+//! otherwise), under a caption naming that configuration.
 
 use crate::plot::{ensure_font, FONT_FAMILY};
 use anyhow::{anyhow, Result};
@@ -17,12 +18,14 @@ use topoloc_sim::scenario::{Flight, Scene};
 const MIN_SIDE: u32 = 700;
 
 /// Writes the top view of storey 0 of `scene` with `flight` and `predicted` (one place per
-/// frame, `PlaceId::MAX` for none) to `path` (PNG).
+/// frame, `PlaceId::MAX` for none) to `path` (PNG); `caption`, the first line of the legend,
+/// says whose predictions they are.
 pub fn write_top_view(
     path: &Path,
     scene: &Scene,
     flight: &Flight,
     predicted: &[PlaceId],
+    caption: &str,
 ) -> Result<()> {
     ensure_font()?;
     let plan = scene.world.top_view(0);
@@ -100,25 +103,38 @@ pub fn write_top_view(
         };
         root.draw(&Circle::new(to_px(&place.position), 5, colour.filled()))?;
     }
+    let every = match step {
+        1 => "every frame".to_string(),
+        n => format!("one frame in {n}"),
+    };
+    let lines = format!("blue: query trajectory; lines: camera to predicted place, {every}");
     let legend = [
+        (caption, BLACK),
         (
             "places: end (cyan), corner (green), branch (red), intermediate (grey)",
             BLACK,
         ),
-        (
-            "blue: query trajectory; lines: predicted place (filter)",
-            BLUE,
-        ),
+        (lines.as_str(), BLUE),
         (
             "green = true place, orange = one hop, red = wrong",
             RGBColor(40, 120, 40),
         ),
     ];
+    // A white backdrop keeps the legend readable over walls and corridors.
+    let font = (FONT_FAMILY, 15).into_font();
+    let mut width = 0;
+    for (text, _) in &legend {
+        width = width.max(root.estimate_text_size(text, &font.clone().into())?.0);
+    }
+    root.draw(&Rectangle::new(
+        [(4, 4), (12 + width as i32, 10 + 18 * legend.len() as i32)],
+        WHITE.mix(0.85).filled(),
+    ))?;
     for (k, (text, colour)) in legend.iter().enumerate() {
         root.draw(&Text::new(
             *text,
             (8, 8 + 18 * k as i32),
-            (FONT_FAMILY, 15).into_font().color(colour),
+            font.clone().color(colour),
         ))?;
     }
     root.present()

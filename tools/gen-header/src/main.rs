@@ -70,6 +70,10 @@ const SECTIONS: &[(&str, &[&str])] = &[
         ],
     ),
     (
+        "Host logging (records to a callback; nothing on stdout or stderr)",
+        &["topoloc_set_log_callback"],
+    ),
+    (
         "Maps: load, save, query (a const topoloc_map* may be shared by many threads)",
         &[
             "topoloc_map_load",
