@@ -19,6 +19,7 @@ from numpy.typing import ArrayLike
 
 from . import _lib
 from ._errors import (
+    ConcurrentUseError,
     DimensionMismatchError,
     InvalidArgumentError,
     InvalidImageError,
@@ -885,14 +886,15 @@ class Map(_Handle):
 
 class _SingleThreaded(_Handle):
     """Detects concurrent use of a single-threaded C object (which would be undefined
-    behaviour) and raises ``RuntimeError`` instead."""
+    behaviour) and raises :class:`ConcurrentUseError` (a ``RuntimeError``) instead, as the library
+    itself does (``TOPOLOC_ERR_CONCURRENT_USE``)."""
 
     def _init_guard(self) -> None:
         self._busy = threading.Lock()
 
     def _enter(self, what: str):
         if not self._busy.acquire(blocking=False):
-            raise RuntimeError(f"{type(self).__name__}.{what} called while another thread uses this object")
+            raise ConcurrentUseError(f"{type(self).__name__}.{what} called while another thread uses this object")
         if not self._ptr:
             self._busy.release()
             raise ValueError(f"operation on a closed topoloc.{type(self).__name__}")
