@@ -7,13 +7,11 @@
 
 mod common;
 
-use common::images::{gray, place_image, revisit};
+use common::images::{gray, place_image, revisit, vlad_image_map};
 use common::{chain_map, mix, unit_vector};
 use nalgebra::{Isometry3, Vector3};
 use std::sync::Arc;
-use topoloc::build::{build_from_images, ImageLayout, ImageMapOptions, ImageSource};
-use topoloc::describe::vlad::VladOptions;
-use topoloc::describe::{BackendConfig, DescriberOptions};
+use topoloc::describe::DescriberOptions;
 use topoloc::descriptor::DescriptorIdentity;
 use topoloc::loops::{
     DatabaseOptions, HintOptions, KeyframeDatabase, KeyframeEntry, KeyframeFeatures, LoopDetector,
@@ -107,20 +105,7 @@ fn descriptor_estimators_on_four_threads_match_a_sequential_run() {
 #[test]
 fn image_frames_described_and_verified_on_four_threads_match_a_sequential_run() {
     let images: Vec<Vec<u8>> = (0..10).map(place_image).collect();
-    let sources: Vec<ImageSource> = images
-        .iter()
-        .map(|d| ImageSource::Pixels(gray(d)))
-        .collect();
-    let options = ImageMapOptions {
-        backend: BackendConfig::Vlad(VladOptions::default()),
-        threads: 2,
-        ..ImageMapOptions::default()
-    };
-    let (map, _) = build_from_images(&sources, ImageLayout::Sequence, &options, &mut |_, _, _| {
-        true
-    })
-    .unwrap();
-    let map = Arc::new(map);
+    let map = Arc::new(vlad_image_map(&images));
     same_on_threads_as_in_sequence("VLAD image frames, top 3 verified", |k| {
         let mut localizer = Localizer::with_describer(
             map.clone(),

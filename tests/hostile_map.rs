@@ -8,16 +8,14 @@
 mod common;
 
 use common::chain_map;
-use common::images::{gray, place_image};
+use common::images::{place_image, vlad_image_map};
 use safetensors::{Dtype, SafeTensors};
 use serde_json::{json, Value};
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::collections::{BTreeMap, HashMap};
 use std::sync::{Arc, OnceLock};
-use topoloc::build::{build_from_images, BuildStage, ImageLayout, ImageMapOptions, ImageSource};
 use topoloc::describe::limits::{MAX_INPUT_SIDE, MAX_POOL_GRID, MAX_TAPS};
-use topoloc::describe::vlad::VladOptions;
-use topoloc::describe::{BackendConfig, BackendSpec, DescriberModel};
+use topoloc::describe::{BackendSpec, DescriberModel};
 use topoloc::errors::VisionError;
 use topoloc::image::{ImageView, PixelFormat};
 use topoloc::map::{LoadOptions, MapError, ViewAttributes, MAX_DESCRIPTOR_DIM};
@@ -67,19 +65,7 @@ fn image_map_bytes() -> &'static [u8] {
 
 fn image_map() -> Map {
     let images: Vec<Vec<u8>> = (0..4).map(place_image).collect();
-    let sources: Vec<ImageSource> = images
-        .iter()
-        .map(|d| ImageSource::Pixels(gray(d)))
-        .collect();
-    let options = ImageMapOptions {
-        backend: BackendConfig::Vlad(VladOptions::default()),
-        threads: 2,
-        ..ImageMapOptions::default()
-    };
-    let mut progress = |_: BuildStage, _: usize, _: usize| true;
-    build_from_images(&sources, ImageLayout::Sequence, &options, &mut progress)
-        .unwrap()
-        .0
+    vlad_image_map(&images)
 }
 
 /// A file's tensors by name: dtype, shape, bytes.

@@ -52,3 +52,24 @@ pub fn revisit(image: &[u8], seed: u64) -> Vec<u8> {
 pub fn gray(data: &[u8]) -> ImageView<'_> {
     ImageView::packed(W as u32, H as u32, PixelFormat::Gray8, data)
 }
+
+/// A map of `images` (one place each) built with the VLAD backend on two threads: describer
+/// (PCA, codebook) and keypoints included.
+pub fn vlad_image_map(images: &[Vec<u8>]) -> topoloc::Map {
+    use topoloc::build::{build_from_images, ImageLayout, ImageMapOptions, ImageSource};
+    use topoloc::describe::{vlad::VladOptions, BackendConfig};
+    let sources: Vec<ImageSource> = images
+        .iter()
+        .map(|d| ImageSource::Pixels(gray(d)))
+        .collect();
+    let options = ImageMapOptions {
+        backend: BackendConfig::Vlad(VladOptions::default()),
+        threads: 2,
+        ..ImageMapOptions::default()
+    };
+    build_from_images(&sources, ImageLayout::Sequence, &options, &mut |_, _, _| {
+        true
+    })
+    .unwrap()
+    .0
+}
