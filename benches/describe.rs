@@ -16,7 +16,7 @@ use std::sync::Arc;
 use std::time::Duration;
 use topoloc::describe::describer::RawFeatures;
 use topoloc::describe::onnx::{cache_dir, OnnxOptions, DEFAULT_MODEL_FILE};
-use topoloc::describe::pca::Pca;
+use topoloc::describe::pca::{Components, Pca, PcaPrecision};
 use topoloc::describe::vlad::{Codebook, VladOptions};
 use topoloc::describe::{BackendConfig, Describer, DescriberModel, Extractor};
 use topoloc::image::{read_rgb, ImageView, PixelFormat};
@@ -97,8 +97,9 @@ fn model(config: &BackendConfig, image: &ImageView) -> Option<DescriberModel> {
             input_dim,
             output_dim: DIM,
             mean: vec![0.0; input_dim],
-            components,
-        },
+            components: Components::F32(components),
+        }
+        .with_precision(PcaPrecision::default()),
         codebook,
     })
 }
@@ -163,6 +164,34 @@ fn describe(c: &mut Criterion) {
     group.finish();
 }
 
+/// The projection alone, D = 512 rows of the multi-level vector (F = 27,648), stored as f32
+/// and as i8: the part of describing that grows with the map's PCA.
+fn pca_project(c: &mut Criterion) {
+    const F: usize = 27_648;
+    let exact = Pca {
+        input_dim: F,
+        output_dim: DIM,
+        mean: vec![0.01; F],
+        components: Components::F32(
+            (0..DIM * F)
+                .map(|i| ((i * 2654435761) % 1000) as f32 / 1000.0 - 0.5)
+                .collect(),
+        ),
+    };
+    let x: Vec<f32> = (0..F).map(|i| (i % 97) as f32 / 97.0).collect();
+    let mut group = c.benchmark_group("pca_project_512x27648");
+    group
+        .sample_size(30)
+        .measurement_time(Duration::from_secs(5));
+    for precision in [PcaPrecision::F32, PcaPrecision::I8] {
+        let pca = exact.clone().with_precision(precision);
+        group.bench_function(precision.name(), |b| {
+            b.iter(|| pca.project(black_box(&x)).unwrap())
+        });
+    }
+    group.finish();
+}
+
 /// `pixels` (RGB, W x H) moved `dx` pixels left, or mirrored left-right when `dx` is `None`.
 fn moved(pixels: &[u8], dx: Option<usize>) -> Vec<u8> {
     let w = W as usize;
@@ -209,5 +238,5 @@ fn verify(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, describe, verify);
+criterion_group!(benches, describe, pca_project, verify);
 criterion_main!(benches);

@@ -143,6 +143,10 @@ pub(crate) fn session(
         .map_err(onnx)?
         .with_intra_threads(threads.max(1))
         .map_err(|e| onnx(e.into()))?
+        // Memory patterns pre-plan one arena block per input shape; off, a frame's activations
+        // reuse the arena's blocks (BENCHMARKS.md, "Memory budget").
+        .with_memory_pattern(false)
+        .map_err(|e| onnx(e.into()))?
         .commit_from_memory(&bytes)
         .map_err(onnx)?;
     Ok((session, format!("{:x}", Sha256::digest(&bytes))))

@@ -8,7 +8,7 @@
 
 use super::limits;
 use super::onnx::{DenseTap, OnnxMlf, OnnxOptions};
-use super::pca::Pca;
+use super::pca::{Components, Pca, PcaPrecision};
 use super::vlad::{Codebook, LocalExtractor, LocalFeature, LocalFeatures, VladOptions};
 use crate::descriptor::DescriptorIdentity;
 use crate::errors::VisionError;
@@ -213,12 +213,23 @@ impl DescriberModel {
                 pca.output_dim, pca.input_dim
             ));
         }
-        if !pca
-            .mean
-            .iter()
-            .chain(&pca.components)
-            .all(|x| x.is_finite())
-        {
+        let finite = match &pca.components {
+            Components::F32(rows) => pca.mean.iter().chain(rows).all(|x| x.is_finite()),
+            Components::I8 { scales, .. } => {
+                if scales.len() != pca.output_dim {
+                    return bad(format!(
+                        "PCA has {} row scales for {} rows",
+                        scales.len(),
+                        pca.output_dim
+                    ));
+                }
+                if scales.iter().any(|&s| s < 0.0) {
+                    return bad("PCA row scales must not be negative".into());
+                }
+                pca.mean.iter().chain(scales).all(|x| x.is_finite())
+            }
+        };
+        if !finite {
             return bad("PCA holds NaN or infinite values".into());
         }
         match (&self.spec, &self.codebook) {
@@ -261,18 +272,26 @@ impl DescriberModel {
     /// fingerprint of the fitted arrays (two PCA fits give incompatible spaces).
     pub fn identity(&self) -> DescriptorIdentity {
         let mut hasher = crc32fast::Hasher::new();
-        for values in [&self.pca.mean, &self.pca.components] {
-            values.iter().for_each(|x| hasher.update(&x.to_le_bytes()));
-        }
+        hash_f32s(&mut hasher, &self.pca.mean);
+        // f32 rows keep the fingerprint of maps written before i8 rows existed.
+        let precision = match &self.pca.components {
+            Components::F32(rows) => {
+                hash_f32s(&mut hasher, rows);
+                ""
+            }
+            Components::I8 { values, scales } => {
+                hasher.update(bytemuck::cast_slice(values));
+                hash_f32s(&mut hasher, scales);
+                "/i8"
+            }
+        };
         if let Some(c) = &self.codebook {
-            c.centres
-                .iter()
-                .for_each(|x| hasher.update(&x.to_le_bytes()));
+            hash_f32s(&mut hasher, &c.centres);
         }
         DescriptorIdentity {
             kind: self.spec.family().into(),
             model: format!(
-                "{} pca={}x{} fit={:08x}",
+                "{} pca={}x{}{precision} fit={:08x}",
                 self.spec.summary(),
                 self.pca.output_dim,
                 self.pca.input_dim,
@@ -280,6 +299,17 @@ impl DescriberModel {
             ),
             dim: self.pca.output_dim as u32,
         }
+    }
+}
+
+/// Feeds `values` to `hasher` as their little-endian bytes (in blocks, not value by value: a
+/// 512 x 27,648 PCA is 14 million values).
+fn hash_f32s(hasher: &mut crc32fast::Hasher, values: &[f32]) {
+    let mut bytes = Vec::with_capacity(4096 * 4);
+    for block in values.chunks(4096) {
+        bytes.clear();
+        bytes.extend(block.iter().flat_map(|x| x.to_le_bytes()));
+        hasher.update(&bytes);
     }
 }
 
@@ -432,6 +462,10 @@ pub struct FitOptions {
     /// equidistant and throws their structure away (it lowered single-frame R@1 on Gardens
     /// Point; BENCHMARKS.md, "Real images").
     pub whiten: bool,
+    /// How the PCA rows are stored: `i8` (default) is a quarter of `f32`'s size; the map's own
+    /// views are projected with the stored rows, so that they and the queries share one
+    /// projection (BENCHMARKS.md, "Memory budget").
+    pub pca_precision: PcaPrecision,
 }
 
 impl Default for FitOptions {
@@ -441,6 +475,7 @@ impl Default for FitOptions {
             pca_samples: 1000,
             codebook_samples: 100_000,
             whiten: false,
+            pca_precision: PcaPrecision::default(),
         }
     }
 }
@@ -499,7 +534,8 @@ pub fn fit(
     }
     let step = vectors.len().div_ceil(options.pca_samples.max(2));
     let rows: Vec<f32> = vectors.iter().step_by(step).flatten().copied().collect();
-    let pca = Pca::fit(&rows, raw_dim, options.dim, options.whiten)?;
+    let pca = Pca::fit(&rows, raw_dim, options.dim, options.whiten)?
+        .with_precision(options.pca_precision);
     let descriptors = vectors
         .iter()
         .map(|v| pca.project(v))

@@ -16,3 +16,4 @@ pub use describer::{
     BackendConfig, BackendKind, BackendSpec, Describer, DescriberModel, DescriberOptions,
     Extractor, FitOptions, RawFeatures,
 };
+pub use pca::PcaPrecision;

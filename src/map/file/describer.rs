@@ -1,14 +1,24 @@
 //! Section `describer_*` (1.1): the describer's PCA and VLAD codebook; its backend spec lives
-//! in the metadata.
+//! in the metadata. The PCA rows are `describer_pca_components` (F32) or, since 1.5,
+//! `describer_pca_components_i8` (I8) with `describer_pca_scales` (F32, one per row): exactly
+//! one of the two forms.
 
 use super::container::{decode_f32, le_bytes, OutTensor, OutTensors, TensorReader};
 use crate::describe::describer::{BackendSpec, DescriberModel};
-use crate::describe::pca::Pca;
+use crate::describe::pca::{Components, Pca};
 use crate::describe::vlad::Codebook;
 use crate::map::{Map, MapError};
 use safetensors::Dtype;
+use std::borrow::Cow;
 
-/// Adds `describer_pca_mean`, `describer_pca_components` and, for VLAD, `describer_codebook`.
+/// The PCA rows as `f32` (1.1).
+const F32_ROWS: &str = "describer_pca_components";
+/// The PCA rows as `i8` (1.5), with their per-row scales.
+const I8_ROWS: &str = "describer_pca_components_i8";
+const I8_SCALES: &str = "describer_pca_scales";
+
+/// Adds `describer_pca_mean`, the PCA rows in their stored form and, for VLAD,
+/// `describer_codebook`.
 pub(super) fn write<'a>(map: &'a Map, out: &mut OutTensors<'a>) {
     let Some(model) = map.describer() else {
         return;
@@ -22,14 +32,31 @@ pub(super) fn write<'a>(map: &'a Map, out: &mut OutTensors<'a>) {
             le_bytes(&pca.mean, f32::to_le_bytes),
         ),
     ));
-    out.push((
-        "describer_pca_components",
-        OutTensor::new(
-            Dtype::F32,
-            vec![pca.output_dim, pca.input_dim],
-            le_bytes(&pca.components, f32::to_le_bytes),
-        ),
-    ));
+    let shape = vec![pca.output_dim, pca.input_dim];
+    match &pca.components {
+        Components::F32(rows) => out.push((
+            F32_ROWS,
+            OutTensor::new(Dtype::F32, shape, le_bytes(rows, f32::to_le_bytes)),
+        )),
+        Components::I8 { values, scales } => {
+            out.push((
+                I8_ROWS,
+                OutTensor::new(
+                    Dtype::I8,
+                    shape,
+                    Cow::Borrowed(bytemuck::cast_slice(values)),
+                ),
+            ));
+            out.push((
+                I8_SCALES,
+                OutTensor::new(
+                    Dtype::F32,
+                    vec![pca.output_dim],
+                    le_bytes(scales, f32::to_le_bytes),
+                ),
+            ));
+        }
+    }
     if let Some(c) = &model.codebook {
         out.push((
             "describer_codebook",
@@ -53,7 +80,22 @@ pub(super) fn read(
     spec.validate().map_err(corrupt)?;
     let mean = decode_f32(reader.get_any_len("describer_pca_mean", Dtype::F32)?);
     let input_dim = mean.len();
-    let components = reader.f32s("describer_pca_components", &[dim, input_dim])?;
+    let components = match (reader.has(F32_ROWS), reader.has(I8_ROWS)) {
+        (true, false) => Components::F32(reader.f32s(F32_ROWS, &[dim, input_dim])?),
+        (false, true) => Components::I8 {
+            values: bytemuck::cast_slice(reader.get(I8_ROWS, Dtype::I8, &[dim, input_dim])?)
+                .to_vec(),
+            scales: reader.f32s(I8_SCALES, &[dim])?,
+        },
+        (true, true) => return Err(MapError::Corrupt(format!(
+            "both '{F32_ROWS}' and '{I8_ROWS}' are present; a map holds one form of the PCA rows"
+        ))),
+        (false, false) => {
+            return Err(MapError::Corrupt(format!(
+                "tensor '{F32_ROWS}' is missing (nor is '{I8_ROWS}' there)"
+            )))
+        }
+    };
     let codebook = match &spec {
         BackendSpec::Vlad(o) => {
             let local_dim = input_dim / o.clusters.max(1);

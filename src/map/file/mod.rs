@@ -17,7 +17,9 @@
 //! | `edges` | U32 | E x 2 | undirected edges, a < b, sorted |
 //! | `edge_weight` | F32 | E | edge weights |
 //! | `describer_pca_mean` | F32 | F | (1.1, maps built from images) PCA mean of the raw vectors |
-//! | `describer_pca_components` | F32 | D x F | (1.1) PCA projection rows |
+//! | `describer_pca_components` | F32 | D x F | (1.1) PCA projection rows, or |
+//! | `describer_pca_components_i8` | I8 | D x F | (1.5) those rows quantised, row k times `describer_pca_scales[k]`; exactly one of the two |
+//! | `describer_pca_scales` | F32 | D | (1.5) with the I8 rows: each row's scale (its largest magnitude / 127) |
 //! | `describer_codebook` | F32 | K x L | (1.1, VLAD only) codebook of K centres of local descriptors |
 //! | `view_keypoint_offsets` | U64 | N+1 | (1.2, optional) ranges of each view's keypoints |
 //! | `view_keypoint_points` | F32 | T x 2 | (1.2) keypoint pixel positions x, y |
@@ -34,7 +36,8 @@
 //! JSON is the metadata object re-serialised as a generic JSON value without `crc32`, so that
 //! fields added by newer minor versions stay covered (1.0 re-serialised its own struct). Readers accept any file of the
 //! same major version; a newer minor version may add tensors, which older readers ignore
-//! (a 1.3 reader refuses a 1.4 map with XFeat keypoints as missing `view_keypoint_descriptors`).
+//! (a 1.3 reader refuses a 1.4 map with XFeat keypoints as missing `view_keypoint_descriptors`,
+//! and a 1.4 reader a 1.5 map with I8 PCA rows as missing `describer_pca_components`).
 //!
 //! One module per concern: [`header`] (framing, metadata, version, checksum), one reader/writer
 //! per section ([`descriptors`], [`views`], [`places`], [`edges`], [`describer`],
@@ -71,7 +74,7 @@ pub const FORMAT_NAME: &str = "topoloc-map";
 /// Major format version written and read by this build.
 pub const FORMAT_VERSION_MAJOR: u32 = 1;
 /// Minor format version written by this build.
-pub const FORMAT_VERSION_MINOR: u32 = 4;
+pub const FORMAT_VERSION_MINOR: u32 = 5;
 
 /// Largest descriptor dimension D a map may have (built or loaded): 65,536 floats are 256 KB
 /// per view, 128 times the default describer's 512 and far above any global descriptor in use
@@ -162,6 +165,7 @@ impl Map {
         // SAFETY: the mapping is read-only; see the doc comment on concurrent modification.
         let mmap = unsafe { memmap2::Mmap::map(&file) }.map_err(io)?;
         let parsed = parse(&mmap, options)?;
+        release_pages(&mmap);
         let range = parsed.descriptor_bytes.clone();
         let aligned = (mmap.as_ptr() as usize + range.start) % std::mem::align_of::<f32>() == 0;
         let store = if aligned && cfg!(target_endian = "little") {
@@ -199,6 +203,20 @@ impl Map {
         let parsed = parse(bytes, options)?;
         let store = DescriptorStore::Owned(decode_f32(&bytes[parsed.descriptor_bytes.clone()]));
         parsed.into_map(store)
+    }
+}
+
+/// Returns the pages of a parsed file to the page cache. The checksum read every page, but
+/// from now on only the descriptors are read from the mapping (everything else was copied
+/// out), and they fault back in as frames touch them: so the loaded map costs no more resident
+/// memory than its file. Failing to advise costs memory, not correctness (logged).
+fn release_pages(mmap: &memmap2::Mmap) {
+    #[cfg(unix)]
+    // SAFETY: no borrow of the mapping is alive (parsing copied what it keeps and returned byte
+    // ranges), and the mapping is a read-only file mapping, so dropped pages are re-read from
+    // the file, whose contents must not change while the map lives (see `Map::load`).
+    if let Err(e) = unsafe { mmap.unchecked_advise(memmap2::UncheckedAdvice::DontNeed) } {
+        log::debug!("madvise(MADV_DONTNEED) on a loaded map failed: {e}");
     }
 }
 

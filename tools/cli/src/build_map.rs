@@ -5,13 +5,13 @@ use crate::backend_args::{
     image_files, poses_for_images, progress_bar, BackendArgs, LocalFeatures,
 };
 use anyhow::Result;
-use clap::Args;
+use clap::{Args, ValueEnum};
 use serde_json::json;
 use std::path::PathBuf;
 use topoloc::build::{
     build_from_images, BuildStage, ImageLayout, ImageMapOptions, ImageSource, KeyframeOptions,
 };
-use topoloc::describe::FitOptions;
+use topoloc::describe::{FitOptions, PcaPrecision};
 
 /// Options of `build-map`.
 #[derive(Args, Clone, Debug)]
@@ -41,6 +41,10 @@ pub struct BuildMapArgs {
     /// Whiten the PCA (unit variance per component; see FitOptions::whiten).
     #[arg(long)]
     pub whiten: bool,
+    /// How the PCA rows are stored: i8 (a quarter of the size; the views are projected with
+    /// the stored rows) or f32 (exact).
+    #[arg(long, value_enum, default_value_t = PcaPrecisionArg::I8)]
+    pub pca_precision: PcaPrecisionArg,
     /// Describing threads (0: one per core).
     #[arg(long, default_value_t = 0)]
     pub threads: usize,
@@ -56,6 +60,24 @@ pub struct BuildMapArgs {
     /// Print one JSON object instead of text.
     #[arg(long)]
     pub json: bool,
+}
+
+/// `--pca-precision`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum PcaPrecisionArg {
+    /// Exact, 4 bytes per value.
+    F32,
+    /// 1 byte per value and one scale per row.
+    I8,
+}
+
+impl From<PcaPrecisionArg> for PcaPrecision {
+    fn from(p: PcaPrecisionArg) -> Self {
+        match p {
+            PcaPrecisionArg::F32 => PcaPrecision::F32,
+            PcaPrecisionArg::I8 => PcaPrecision::I8,
+        }
+    }
 }
 
 /// Runs the command.
@@ -76,6 +98,7 @@ pub fn run(args: &BuildMapArgs) -> Result<()> {
             dim: args.dim,
             pca_samples: args.pca_samples,
             whiten: args.whiten,
+            pca_precision: args.pca_precision.into(),
             ..FitOptions::default()
         },
         views_per_place: args.views_per_place,

@@ -25,7 +25,6 @@ mod verify_eval;
 
 use anyhow::Result;
 use clap::{Parser, Subcommand};
-use std::path::PathBuf;
 
 #[derive(Parser)]
 #[command(
@@ -43,18 +42,9 @@ enum Command {
     /// Generate an indoor world, build its graph and map, fly a query trajectory under other
     /// light, localize every frame; print MNA/OHA/R@N, latency and memory; write a top view.
     Demo(demo::DemoArgs),
-    /// Measure map file size, load time and resident memory of a loaded map plus localizer.
-    BenchMemory {
-        /// Views in the generated map (4 per place).
-        #[arg(long, default_value_t = 10_000)]
-        views: usize,
-        /// Descriptor dimension.
-        #[arg(long, default_value_t = 512)]
-        dim: usize,
-        /// Print JSON.
-        #[arg(long)]
-        json: bool,
-    },
+    /// Measure map file size, load time and resident memory, stage by stage: the map, its
+    /// localizer (with the map's describer for maps built from images) and frames.
+    BenchMemory(memory::BenchMemoryArgs),
     /// Sweep temperature and off-map margin on generated worlds (how the defaults were chosen).
     Sweep {
         /// Number of generated worlds (seeds 100..100+N, held out from the demo).
@@ -101,13 +91,13 @@ enum Command {
     Ate(ate::AteArgs),
     /// (internal) Child process of bench-memory: load MAP and report its figures as JSON.
     #[command(hide = true)]
-    MeasureMap { map: PathBuf },
+    MeasureMap(memory::MeasureArgs),
 }
 
 fn main() -> Result<()> {
     match Cli::parse().command {
         Command::Demo(args) => demo::run(&args),
-        Command::BenchMemory { views, dim, json } => memory::run(views, dim, json),
+        Command::BenchMemory(args) => memory::run(&args),
         Command::Sweep {
             worlds,
             frames,
@@ -123,6 +113,6 @@ fn main() -> Result<()> {
         Command::Simulate(args) => simulate::run(&args),
         Command::Suite(args) => suite::run(&args),
         Command::Ate(args) => ate::run(&args),
-        Command::MeasureMap { map } => memory::measure(&map),
+        Command::MeasureMap(args) => memory::measure(&args),
     }
 }
