@@ -4,9 +4,9 @@
 //! cargo run --release --example fuzz_seeds -- OUT_DIR
 //! ```
 //!
-//! `OUT_DIR/map_load/`: real maps of every format version (1.0 to 1.4) and backend: external
+//! `OUT_DIR/map_load/`: real maps of every format version (1.0 to 1.5) and backend: external
 //! descriptors with keyframe ids, poses, positions and image references; VLAD from images with
-//! ORB keypoints, with and without scene points; and, when scripts/setup-models.sh has filled
+//! ORB keypoints, with and without scene points, with i8 PCA rows (1.5) and f32 ones (older); and, when scripts/setup-models.sh has filled
 //! the cache, ONNX with dense cells and with XFeat keypoints. `OUT_DIR/describer_spec/`: the
 //! describer specs of those maps (JSON). `OUT_DIR/keyframe_db/`: small operation programs.
 //! `OUT_DIR/base/`: the maps the describer and image targets start from.
@@ -20,7 +20,7 @@ use std::path::Path;
 use topoloc::build::{build_from_images, ImageLayout, ImageMapOptions, ImageSource};
 use topoloc::describe::onnx::{cache_dir, OnnxOptions, DEFAULT_MODEL_FILE};
 use topoloc::describe::vlad::VladOptions;
-use topoloc::describe::{BackendConfig, FitOptions};
+use topoloc::describe::{BackendConfig, FitOptions, PcaPrecision};
 use topoloc::map::ViewAttributes;
 use topoloc::verify::xfeat::DEFAULT_XFEAT_MODEL_FILE;
 use topoloc::verify::{FeatureKind, DEFAULT_CELLS};
@@ -39,44 +39,45 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     };
 
     let plain = plain_map()?.to_bytes()?;
-    write("map_load", "plain-1.4", &plain)?;
-    for minor in 0..4 {
+    write("map_load", "plain-1.5", &plain)?;
+    for minor in 0..5 {
         let older = with_version(&plain, minor).ok_or("could not rewrite the version")?;
         Map::from_bytes(&older, &Default::default())?;
         write("map_load", &format!("plain-1.{minor}"), &older)?;
     }
 
-    let vlad = image_map(
-        BackendConfig::Vlad(VladOptions {
-            clusters: 8,
-            max_features: 200,
-            input_size: (160, 120),
-            ..VladOptions::default()
-        }),
-        FeatureKind::Orb,
-        48,
-    )?;
+    let vlad_config = BackendConfig::Vlad(VladOptions {
+        clusters: 8,
+        max_features: 200,
+        input_size: (160, 120),
+        ..VladOptions::default()
+    });
+    let vlad = image_map(vlad_config.clone(), FeatureKind::Orb, 48, PcaPrecision::I8)?;
     let vlad_bytes = vlad.to_bytes()?;
-    write("map_load", "vlad-orb-1.4", &vlad_bytes)?;
+    write("map_load", "vlad-orb-1.5", &vlad_bytes)?;
+    // Before 1.5 the PCA rows were f32.
+    let vlad_f32 = image_map(vlad_config, FeatureKind::Orb, 48, PcaPrecision::F32)?;
+    let vlad_f32_bytes = vlad_f32.to_bytes()?;
     write(
         "map_load",
         "vlad-orb-1.2",
-        &with_version(&vlad_bytes, 2).ok_or("version")?,
+        &with_version(&vlad_f32_bytes, 2).ok_or("version")?,
     )?;
-    let total = vlad.keypoints().map_or(0, |k| k.total());
-    let points: Vec<[f32; 3]> = (0..total)
-        .map(|i| match i % 5 {
-            0 => [f32::NAN; 3],
-            _ => [i as f32 * 0.01, 0.5, 2.0 + (i % 7) as f32 * 0.1],
-        })
-        .collect();
-    let with_points = vlad.with_keypoint_world_points(points)?.to_bytes()?;
-    write("map_load", "vlad-orb-points-1.4", &with_points)?;
-    write(
-        "map_load",
-        "vlad-orb-points-1.3",
-        &with_version(&with_points, 3).ok_or("version")?,
-    )?;
+    for (map, name, older) in [(&vlad, "1.5", None), (&vlad_f32, "1.3", Some(3))] {
+        let total = map.keypoints().map_or(0, |k| k.total());
+        let points: Vec<[f32; 3]> = (0..total)
+            .map(|i| match i % 5 {
+                0 => [f32::NAN; 3],
+                _ => [i as f32 * 0.01, 0.5, 2.0 + (i % 7) as f32 * 0.1],
+            })
+            .collect();
+        let with_points = map.with_keypoint_world_points(points)?.to_bytes()?;
+        let bytes = match older {
+            Some(minor) => with_version(&with_points, minor).ok_or("version")?,
+            None => with_points,
+        };
+        write("map_load", &format!("vlad-orb-points-{name}"), &bytes)?;
+    }
     write("base", "vlad.topoloc", &vlad_bytes)?;
     write(
         "describer_spec",
@@ -89,14 +90,23 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             grid: (1, 1),
             ..OnnxOptions::default()
         });
-        let cells =
-            image_map(onnx.clone(), FeatureKind::Cells, DEFAULT_CELLS.min(32))?.to_bytes()?;
-        write("map_load", "onnx-cells-1.4", &cells)?;
+        let cells = image_map(
+            onnx.clone(),
+            FeatureKind::Cells,
+            DEFAULT_CELLS.min(32),
+            PcaPrecision::I8,
+        )?
+        .to_bytes()?;
+        write("map_load", "onnx-cells-1.5", &cells)?;
         write("base", "onnx.topoloc", &cells)?;
         write("describer_spec", "onnx.json", spec_of(&cells)?.as_bytes())?;
         if cache_dir().join(DEFAULT_XFEAT_MODEL_FILE).is_file() {
-            let xfeat = image_map(onnx, FeatureKind::XFeat, 32)?.to_bytes()?;
-            write("map_load", "onnx-xfeat-1.4", &xfeat)?;
+            let xfeat = image_map(onnx, FeatureKind::XFeat, 32, PcaPrecision::F32)?.to_bytes()?;
+            write(
+                "map_load",
+                "onnx-xfeat-1.4",
+                &with_version(&xfeat, 4).ok_or("version")?,
+            )?;
         } else {
             eprintln!("fuzz_seeds: no XFeat model: no XFeat seed (run scripts/setup-models.sh)");
         }
@@ -157,6 +167,7 @@ fn image_map(
     backend: BackendConfig,
     features: FeatureKind,
     keypoints: usize,
+    precision: PcaPrecision,
 ) -> Result<Map, Box<dyn std::error::Error>> {
     let pixels: Vec<Vec<u8>> = (0..6).map(images::place_image).collect();
     let sources: Vec<ImageSource> = pixels
@@ -167,6 +178,7 @@ fn image_map(
         backend,
         fit: FitOptions {
             dim: 4,
+            pca_precision: precision,
             ..FitOptions::default()
         },
         keypoints,

@@ -15,6 +15,7 @@ use std::alloc::{GlobalAlloc, Layout, System};
 use std::collections::{BTreeMap, HashMap};
 use std::sync::{Arc, OnceLock};
 use topoloc::describe::limits::{MAX_INPUT_SIDE, MAX_POOL_GRID, MAX_TAPS};
+use topoloc::describe::pca::Components;
 use topoloc::describe::{BackendSpec, DescriberModel};
 use topoloc::errors::VisionError;
 use topoloc::image::{ImageView, PixelFormat};
@@ -316,6 +317,86 @@ fn pca_and_codebook_shapes_must_agree_with_the_dimensions() {
     // PCA components for another descriptor dimension than the map's.
     let dim = edited(bytes, |meta, _| meta["descriptor"]["dim"] = json!(2));
     assert!(matches!(load(&dim), Err(MapError::Corrupt(_))));
+}
+
+#[test]
+fn pca_rows_are_exactly_one_form_with_sound_scales() {
+    // Image maps store i8 rows with one scale per row (format 1.5).
+    let bytes = image_map_bytes();
+    let (_, tensors) = split(bytes);
+    let (dtype, shape, rows) = tensors["describer_pca_components_i8"].clone();
+    assert_eq!(dtype, Dtype::I8);
+    assert!(!tensors.contains_key("describer_pca_components"));
+    let (d, f) = (shape[0], shape[1]);
+    assert_eq!(tensors["describer_pca_scales"].1, vec![d]);
+    let scales = |values: Vec<f32>| {
+        edited(bytes, |_, t| {
+            t.insert(
+                "describer_pca_scales".into(),
+                (Dtype::F32, vec![values.len()], f32_bytes(values)),
+            );
+        })
+    };
+    expect_corrupt(&scales(vec![0.01; d + 1]), "describer_pca_scales");
+    expect_corrupt(&scales(vec![-0.01; d]), "scales must not be negative");
+    expect_corrupt(&scales(vec![f32::NAN; d]), "NaN or infinite");
+    expect_corrupt(&scales(vec![f32::INFINITY; d]), "NaN or infinite");
+    let without_scales = edited(bytes, |_, t| {
+        t.remove("describer_pca_scales");
+    });
+    expect_corrupt(&without_scales, "describer_pca_scales");
+    // Both forms, or neither.
+    let both = edited(bytes, |_, t| {
+        t.insert(
+            "describer_pca_components".into(),
+            (Dtype::F32, vec![d, f], f32_bytes(vec![0.0; d * f])),
+        );
+    });
+    expect_corrupt(&both, "both");
+    let neither = edited(bytes, |_, t| {
+        t.remove("describer_pca_components_i8");
+    });
+    expect_corrupt(&neither, "describer_pca_components");
+    // Rows of another dtype or shape.
+    let as_u8 = edited(bytes, |_, t| {
+        t.insert(
+            "describer_pca_components_i8".into(),
+            (Dtype::U8, shape.clone(), rows.clone()),
+        );
+    });
+    expect_corrupt(&as_u8, "dtype");
+    let transposed = edited(bytes, |_, t| {
+        t.insert(
+            "describer_pca_components_i8".into(),
+            (Dtype::I8, vec![f, d], rows.clone()),
+        );
+    });
+    expect_corrupt(&transposed, "shape");
+    // Every i8 value is a valid row value (the fingerprint is what refuses edited rows):
+    // the extremes describe to finite unit descriptors.
+    let rows_edited = edited(bytes, |_, t| {
+        let mut changed = rows.clone();
+        changed[0] ^= 1;
+        t.insert(
+            "describer_pca_components_i8".into(),
+            (Dtype::I8, shape.clone(), changed),
+        );
+    });
+    expect_corrupt(&rows_edited, "descriptor mismatch");
+    let mut pca = image_map().describer().unwrap().pca.clone();
+    pca.components = Components::I8 {
+        values: (0..d * f)
+            .map(|i| if i % 2 == 0 { 0x80u8 } else { 0x7f })
+            .collect::<Vec<u8>>()
+            .into(),
+        scales: vec![1.0; d],
+    };
+    let y = pca.project(&vec![0.5; f]).unwrap();
+    assert!(
+        (y.iter().map(|v| v * v).sum::<f32>() - 1.0).abs() < 1e-5,
+        "{y:?}"
+    );
+    assert!(y.iter().all(|v| v.is_finite()), "{y:?}");
 }
 
 /// Replaces the keypoints of a file with `per_view[v]` points per view at `point`.

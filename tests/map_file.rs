@@ -4,6 +4,8 @@
 mod common;
 
 use common::chain_map;
+use common::images::{place_image, vlad_image_map_with};
+use topoloc::describe::PcaPrecision;
 use topoloc::map::{LoadOptions, MapError, FORMAT_VERSION_MINOR};
 use topoloc::{ExpectedDescriptor, Map};
 
@@ -251,4 +253,60 @@ fn files_written_by_format_1_0_still_load() {
     let last = flipped.len() - 1;
     flipped[last] ^= 1;
     assert!(matches!(load_bytes(&flipped), Err(MapError::Corrupt(_))));
+}
+
+#[test]
+fn i8_pca_rows_round_trip_in_place_and_describe_as_before() {
+    let images: Vec<Vec<u8>> = (0..6).map(place_image).collect();
+    let dir = tempfile::tempdir().unwrap();
+    let mut sizes = Vec::new();
+    let mut rows = 0;
+    for precision in [PcaPrecision::I8, PcaPrecision::F32] {
+        let built = vlad_image_map_with(&images, precision);
+        let model = built.describer().unwrap().clone();
+        rows = model.pca.output_dim * model.pca.input_dim;
+        assert_eq!(model.pca.components.precision(), precision);
+        // The identity tells the two forms apart (their projections differ slightly).
+        assert_eq!(
+            built.descriptor().model.contains("/i8 fit="),
+            precision == PcaPrecision::I8,
+            "{}",
+            built.descriptor().model
+        );
+        let path = dir.path().join(format!("{}.topoloc", precision.name()));
+        built.save(&path).unwrap();
+        sizes.push(std::fs::metadata(&path).unwrap().len());
+        for loaded in [
+            Map::load(&path, &LoadOptions::default()).unwrap(),
+            load_bytes(&std::fs::read(&path).unwrap()).unwrap(),
+        ] {
+            assert_eq!(loaded.descriptor(), built.descriptor());
+            let again = loaded.describer().unwrap();
+            assert_eq!(again.pca, model.pca, "rows, scales and mean are bit-exact");
+            // The map's own views were projected with the stored rows: projecting a view's
+            // raw vector with the loaded model gives the stored descriptor.
+            let raw: Vec<f32> = (0..model.pca.input_dim)
+                .map(|j| ((j * 13) % 7) as f32 * 0.01)
+                .collect();
+            assert_eq!(
+                again.pca.project(&raw).unwrap(),
+                model.pca.project(&raw).unwrap()
+            );
+            for v in 0..built.view_count() as u32 {
+                assert_eq!(
+                    loaded.view_descriptor(v).unwrap(),
+                    built.view_descriptor(v).unwrap()
+                );
+            }
+        }
+    }
+    // The i8 rows take a quarter of the f32 rows' bytes (plus a scale per row and a longer
+    // tensor table).
+    let saved = sizes[1] as i64 - sizes[0] as i64;
+    assert!(
+        (saved - 3 * rows as i64).abs() < 1024,
+        "i8 {} vs f32 {} bytes for {rows} values",
+        sizes[0],
+        sizes[1]
+    );
 }

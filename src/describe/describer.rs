@@ -280,7 +280,7 @@ impl DescriberModel {
                 ""
             }
             Components::I8 { values, scales } => {
-                hasher.update(bytemuck::cast_slice(values));
+                hasher.update(values);
                 hash_f32s(&mut hasher, scales);
                 "/i8"
             }

@@ -6,6 +6,7 @@
 //! (F = 27,648) that is 14 MB instead of 57 MB, the largest part of a map built from images.
 
 use crate::errors::VisionError;
+use bytes::Bytes;
 use faer::linalg::matmul::matmul;
 use faer::{Accum, Mat, MatMut, MatRef, Par};
 
@@ -37,8 +38,9 @@ pub enum Components {
     /// Row `k` is `scales[k] * values[k * F..(k + 1) * F]`; `scales[k]` is the row's largest
     /// magnitude over 127, so every row uses the whole `i8` range.
     I8 {
-        /// `D x F` quantised values.
-        values: Vec<i8>,
+        /// `D x F` quantised values, as bytes: in a loaded map, a slice of the mapped file
+        /// (read in place, not copied).
+        values: Bytes,
         /// One finite, non-negative scale per row (D values).
         scales: Vec<f32>,
     },
@@ -66,6 +68,14 @@ impl Components {
         self.len() == 0
     }
 
+    /// The quantised rows and their scales, when stored as `i8`.
+    pub fn as_i8(&self) -> Option<(&[i8], &[f32])> {
+        match self {
+            Components::F32(_) => None,
+            Components::I8 { values, scales } => Some((bytemuck::cast_slice(values), scales)),
+        }
+    }
+
     /// The exact rows, when stored as `f32`.
     pub fn as_f32(&self) -> Option<&[f32]> {
         match self {
@@ -74,7 +84,7 @@ impl Components {
         }
     }
 
-    /// Bytes held in memory.
+    /// Bytes of the stored rows and scales.
     pub fn memory_bytes(&self) -> usize {
         match self {
             Components::F32(v) => v.len() * 4,
@@ -163,11 +173,14 @@ impl Pca {
                     let largest = row.iter().fold(0.0f32, |m, x| m.max(x.abs()));
                     let scale = largest / 127.0;
                     let inverse = if scale > 0.0 { 1.0 / scale } else { 0.0 };
-                    values.extend(row.iter().map(|x| (x * inverse).round() as i8));
+                    values.extend(row.iter().map(|x| (x * inverse).round() as i8 as u8));
                     scales.push(scale);
                 }
                 Self {
-                    components: Components::I8 { values, scales },
+                    components: Components::I8 {
+                        values: values.into(),
+                        scales,
+                    },
                     ..self
                 }
             }
@@ -197,7 +210,7 @@ impl Pca {
                 Par::Seq,
             ),
             Components::I8 { values, scales } => {
-                int8::project(values, scales, &centred, &mut y);
+                int8::project(bytemuck::cast_slice(values), scales, &centred, &mut y);
             }
         }
         super::mlf::l2_normalize(&mut y);
@@ -391,9 +404,7 @@ mod tests {
             components: Components::F32(rows.clone()),
         }
         .with_precision(PcaPrecision::I8);
-        let Components::I8 { values, scales } = &pca.components else {
-            panic!("not quantised");
-        };
+        let (values, scales) = pca.components.as_i8().expect("quantised");
         assert_eq!((values.len(), scales.len()), (d * f, d));
         for k in 0..2 {
             let row = &values[k * f..(k + 1) * f];
@@ -420,9 +431,7 @@ mod tests {
                 components: Components::F32(values(d * f, 3)),
             };
             let quantised = exact.clone().with_precision(PcaPrecision::I8);
-            let Components::I8 { values: q, scales } = &quantised.components else {
-                panic!("not quantised");
-            };
+            let (q, scales) = quantised.components.as_i8().expect("quantised");
             let dequantised = Pca {
                 components: Components::F32(
                     q.chunks_exact(f)

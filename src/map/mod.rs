@@ -58,31 +58,18 @@ pub struct ViewRecord {
     pub image: Option<String>,
 }
 
-/// Row-major descriptor matrix, either owned or borrowed zero-copy from a memory-mapped file.
+/// Row-major descriptor matrix, either owned or a zero-copy view of a memory-mapped file.
 pub(crate) enum DescriptorStore {
     Owned(Vec<f32>),
-    Mapped {
-        mmap: memmap2::Mmap,
-        byte_offset: usize,
-        len: usize,
-    },
+    /// Little-endian `f32`s, 4-byte aligned (checked when the store was made, file/mod.rs).
+    Mapped(bytes::Bytes),
 }
 
 impl DescriptorStore {
     pub(crate) fn as_slice(&self) -> &[f32] {
         match self {
             DescriptorStore::Owned(v) => v,
-            DescriptorStore::Mapped {
-                mmap,
-                byte_offset,
-                len,
-            } => {
-                let bytes = &mmap[*byte_offset..*byte_offset + *len * 4];
-                // Alignment and length were checked when the store was made (file.rs).
-                let (prefix, floats, suffix) = unsafe { bytes.align_to::<f32>() };
-                debug_assert!(prefix.is_empty() && suffix.is_empty());
-                floats
-            }
+            DescriptorStore::Mapped(bytes) => bytemuck::cast_slice(bytes),
         }
     }
 }

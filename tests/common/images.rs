@@ -56,14 +56,26 @@ pub fn gray(data: &[u8]) -> ImageView<'_> {
 /// A map of `images` (one place each) built with the VLAD backend on two threads: describer
 /// (PCA, codebook) and keypoints included.
 pub fn vlad_image_map(images: &[Vec<u8>]) -> topoloc::Map {
+    vlad_image_map_with(images, Default::default())
+}
+
+/// As [`vlad_image_map`], with the PCA rows stored at `precision`.
+pub fn vlad_image_map_with(
+    images: &[Vec<u8>],
+    precision: topoloc::describe::PcaPrecision,
+) -> topoloc::Map {
     use topoloc::build::{build_from_images, ImageLayout, ImageMapOptions, ImageSource};
-    use topoloc::describe::{vlad::VladOptions, BackendConfig};
+    use topoloc::describe::{vlad::VladOptions, BackendConfig, FitOptions};
     let sources: Vec<ImageSource> = images
         .iter()
         .map(|d| ImageSource::Pixels(gray(d)))
         .collect();
     let options = ImageMapOptions {
         backend: BackendConfig::Vlad(VladOptions::default()),
+        fit: FitOptions {
+            pca_precision: precision,
+            ..FitOptions::default()
+        },
         threads: 2,
         ..ImageMapOptions::default()
     };

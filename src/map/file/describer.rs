@@ -8,6 +8,7 @@ use crate::describe::describer::{BackendSpec, DescriberModel};
 use crate::describe::pca::{Components, Pca};
 use crate::describe::vlad::Codebook;
 use crate::map::{Map, MapError};
+use bytes::Bytes;
 use safetensors::Dtype;
 use std::borrow::Cow;
 
@@ -71,10 +72,12 @@ pub(super) fn write<'a>(map: &'a Map, out: &mut OutTensors<'a>) {
 
 /// Reads the describer's arrays (PCA, codebook) for a map of descriptor dimension `dim`. The
 /// spec's declared sizes are bounded ([`BackendSpec::validate`]) before any array is read.
+/// `share` keeps the i8 rows: a view of the mapped file, or a copy.
 pub(super) fn read(
     reader: &TensorReader<'_, '_>,
     spec: BackendSpec,
     dim: usize,
+    share: &dyn Fn(&[u8]) -> Bytes,
 ) -> Result<DescriberModel, MapError> {
     let corrupt = |e| MapError::Corrupt(format!("describer: {e}"));
     spec.validate().map_err(corrupt)?;
@@ -83,13 +86,14 @@ pub(super) fn read(
     let components = match (reader.has(F32_ROWS), reader.has(I8_ROWS)) {
         (true, false) => Components::F32(reader.f32s(F32_ROWS, &[dim, input_dim])?),
         (false, true) => Components::I8 {
-            values: bytemuck::cast_slice(reader.get(I8_ROWS, Dtype::I8, &[dim, input_dim])?)
-                .to_vec(),
+            values: share(reader.get(I8_ROWS, Dtype::I8, &[dim, input_dim])?),
             scales: reader.f32s(I8_SCALES, &[dim])?,
         },
-        (true, true) => return Err(MapError::Corrupt(format!(
+        (true, true) => {
+            return Err(MapError::Corrupt(format!(
             "both '{F32_ROWS}' and '{I8_ROWS}' are present; a map holds one form of the PCA rows"
-        ))),
+        )))
+        }
         (false, false) => {
             return Err(MapError::Corrupt(format!(
                 "tensor '{F32_ROWS}' is missing (nor is '{I8_ROWS}' there)"

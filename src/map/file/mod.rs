@@ -61,6 +61,7 @@ use super::{DescriptorStore, Edge, Map, MapError, ViewRecord};
 use crate::describe::describer::DescriberModel;
 use crate::descriptor::{DescriptorIdentity, ExpectedDescriptor};
 use crate::verify::ViewKeypoints;
+use bytes::Bytes;
 use container::{decode_f32, OutTensors, TensorReader};
 use header::{canonical_json, checksum, FileMeta, META_KEY};
 use nalgebra::Point3;
@@ -163,19 +164,16 @@ impl Map {
             return Err(MapError::NotAMap(format!("'{}' is empty", path.display())));
         }
         // SAFETY: the mapping is read-only; see the doc comment on concurrent modification.
-        let mmap = unsafe { memmap2::Mmap::map(&file) }.map_err(io)?;
-        let parsed = parse(&mmap, options)?;
+        let mmap = Arc::new(unsafe { memmap2::Mmap::map(&file) }.map_err(io)?);
+        let shared = Bytes::from_owner(MappedFile(mmap.clone()));
+        let parsed = parse(&shared, &|data| shared.slice_ref(data), options)?;
         release_pages(&mmap);
-        let range = parsed.descriptor_bytes.clone();
-        let aligned = (mmap.as_ptr() as usize + range.start) % std::mem::align_of::<f32>() == 0;
+        let descriptors = shared.slice(parsed.descriptor_bytes.clone());
+        let aligned = descriptors.as_ptr() as usize % std::mem::align_of::<f32>() == 0;
         let store = if aligned && cfg!(target_endian = "little") {
-            DescriptorStore::Mapped {
-                mmap,
-                byte_offset: range.start,
-                len: range.len() / 4,
-            }
+            DescriptorStore::Mapped(descriptors)
         } else {
-            DescriptorStore::Owned(decode_f32(&mmap[range]))
+            DescriptorStore::Owned(decode_f32(&descriptors))
         };
         let map = parsed.into_map(store)?;
         log::info!(
@@ -200,21 +198,30 @@ impl Map {
         if bytes.is_empty() {
             return Err(MapError::NotAMap("no bytes".into()));
         }
-        let parsed = parse(bytes, options)?;
+        let parsed = parse(bytes, &Bytes::copy_from_slice, options)?;
         let store = DescriptorStore::Owned(decode_f32(&bytes[parsed.descriptor_bytes.clone()]));
         parsed.into_map(store)
     }
 }
 
-/// Returns the pages of a parsed file to the page cache. The checksum read every page, but
-/// from now on only the descriptors are read from the mapping (everything else was copied
-/// out), and they fault back in as frames touch them: so the loaded map costs no more resident
-/// memory than its file. Failing to advise costs memory, not correctness (logged).
+/// A mapped map file as the owner of [`Bytes`] views into it (descriptors, i8 PCA rows).
+struct MappedFile(Arc<memmap2::Mmap>);
+
+impl AsRef<[u8]> for MappedFile {
+    fn as_ref(&self) -> &[u8] {
+        &self.0
+    }
+}
+
+/// Returns the pages of a parsed file to the page cache. The checksum read every page; from
+/// now on only the parts the map uses in place (descriptors, i8 PCA rows) are read from the
+/// mapping, and they fault back in as frames touch them, so the loaded map's resident pages
+/// of the file never exceed the file. Failing to advise costs memory, not correctness (logged).
 fn release_pages(mmap: &memmap2::Mmap) {
     #[cfg(unix)]
-    // SAFETY: no borrow of the mapping is alive (parsing copied what it keeps and returned byte
-    // ranges), and the mapping is a read-only file mapping, so dropped pages are re-read from
-    // the file, whose contents must not change while the map lives (see `Map::load`).
+    // SAFETY: the mapping is a read-only shared file mapping: MADV_DONTNEED only drops the
+    // process's page-table entries, and the next read of a page re-reads the file's contents
+    // (unchanged while the map lives, see `Map::load`), so views into it stay valid.
     if let Err(e) = unsafe { mmap.unchecked_advise(memmap2::UncheckedAdvice::DontNeed) } {
         log::debug!("madvise(MADV_DONTNEED) on a loaded map failed: {e}");
     }
@@ -323,7 +330,13 @@ pub fn reseal(bytes: &[u8]) -> Option<Vec<u8>> {
 
 /// Parses and validates a file: framing and metadata ([`header`]), checksum, then each
 /// section.
-fn parse(bytes: &[u8], options: &LoadOptions) -> Result<ParsedMap, MapError> {
+/// `share` keeps a part of `bytes` that the map uses in place (a view of a mapped file, or a
+/// copy).
+fn parse(
+    bytes: &[u8],
+    share: &dyn Fn(&[u8]) -> Bytes,
+    options: &LoadOptions,
+) -> Result<ParsedMap, MapError> {
     let meta_json = header::frame(bytes)?;
     let (mut meta, meta_object) = header::read_meta(&meta_json)?;
     let st = SafeTensors::deserialize(bytes)
@@ -352,7 +365,7 @@ fn parse(bytes: &[u8], options: &LoadOptions) -> Result<ParsedMap, MapError> {
         place_positions: places::read(&reader, m)?,
         edges: edges::read(&reader, e)?,
         describer: match meta.describer {
-            Some(spec) => Some(describer::read(&reader, spec, d)?),
+            Some(spec) => Some(describer::read(&reader, spec, d, share)?),
             None => None,
         },
         keypoints: keypoints::read(&reader, n)?,

@@ -89,9 +89,6 @@ enum Command {
     /// ATE, ARE, RPE and R_traj of an estimated trajectory against its ground truth (TUM,
     /// KITTI or EuRoC files; evo's association and Umeyama alignment).
     Ate(ate::AteArgs),
-    /// (internal) Child process of bench-memory: load MAP and report its figures as JSON.
-    #[command(hide = true)]
-    MeasureMap(memory::MeasureArgs),
 }
 
 fn main() -> Result<()> {
@@ -113,6 +110,5 @@ fn main() -> Result<()> {
         Command::Simulate(args) => simulate::run(&args),
         Command::Suite(args) => suite::run(&args),
         Command::Ate(args) => ate::run(&args),
-        Command::MeasureMap(args) => memory::measure(&args),
     }
 }

@@ -1,18 +1,13 @@
 //! `topoloc bench-memory`: map file size, load time and resident memory of a loaded map, its
 //! localizer (with the map's describer: ONNX Runtime and the model, for maps built from images)
-//! and frames, measured stage by stage in a fresh child process so that nothing the parent did
-//! (generating a map, parsing arguments) counts.
+//! and frames, measured stage by stage in a fresh child process, `topoloc-measure`
+//! (src/bin/measure.rs): a lean binary that links what a host linking the library links (not
+//! the CLI's video decoding, plots or simulator), so that its bare process is a host's.
 
 use crate::backend_args::RuntimeArgs;
-use crate::frames::{open_images, Clock, StemUnit};
-use crate::process::{median_and_p90, resident_memory_mib};
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use std::path::PathBuf;
-use std::sync::Arc;
-use std::time::Instant;
-use topoloc::map::LoadOptions;
-use topoloc::{Frame, Localization, Localizer, LocalizerOptions, Map};
 
 /// Options of `bench-memory`.
 #[derive(Args, Clone, Debug)]
@@ -41,21 +36,6 @@ pub struct BenchMemoryArgs {
     pub json: bool,
 }
 
-/// Arguments of the hidden child command `measure-map`.
-#[derive(Args, Clone, Debug)]
-pub struct MeasureArgs {
-    /// The map to measure.
-    pub map: PathBuf,
-    /// Query images (maps built from images); without them, frames are view descriptors.
-    #[arg(long)]
-    pub images: Option<PathBuf>,
-    /// Frames localized before the last reading.
-    #[arg(long, default_value_t = 50)]
-    pub frames: usize,
-    #[command(flatten)]
-    pub runtime: RuntimeArgs,
-}
-
 /// Generates a map (or takes `--map`), then measures it in a child process.
 pub fn run(args: &BenchMemoryArgs) -> Result<()> {
     let dir = tempfile::tempdir()?;
@@ -70,9 +50,15 @@ pub fn run(args: &BenchMemoryArgs) -> Result<()> {
     let file_bytes = std::fs::metadata(&path)
         .with_context(|| format!("--map {}", path.display()))?
         .len();
-    let mut child = std::process::Command::new(std::env::current_exe()?);
+    let measure = std::env::current_exe()?.with_file_name("topoloc-measure");
+    if !measure.is_file() {
+        bail!(
+            "{} is missing: it is built with the CLI (cargo build --release -p topoloc-cli)",
+            measure.display()
+        );
+    }
+    let mut child = std::process::Command::new(&measure);
     child
-        .arg("measure-map")
         .arg(&path)
         .arg("--frames")
         .arg(args.frames.to_string());
@@ -88,12 +74,12 @@ pub fn run(args: &BenchMemoryArgs) -> Result<()> {
     let output = child.output()?;
     if !output.status.success() {
         bail!(
-            "measure-map failed: {}",
+            "topoloc-measure failed: {}",
             String::from_utf8_lossy(&output.stderr)
         );
     }
     let mut report: serde_json::Value =
-        serde_json::from_slice(&output.stdout).context("measure-map output")?;
+        serde_json::from_slice(&output.stdout).context("topoloc-measure output")?;
     let file_mib = file_bytes as f64 / (1 << 20) as f64;
     let extra = serde_json::json!({
         "map": path,
@@ -156,107 +142,4 @@ fn print_report(r: &serde_json::Value) {
     );
     println!("    peak              {:.1}", f("peak_rss_mib"));
     println!("  frame time (median) {:.2} ms", f("frame_ms_median"));
-}
-
-fn resident() -> Result<(f64, f64)> {
-    resident_memory_mib().context("needs /proc/self/status")
-}
-
-/// Child side: loads the map once (the map's cost), then 10 more times for the load time,
-/// makes a localizer (with the map's describer when frames are images), localizes the frames,
-/// and prints every stage's resident memory as JSON.
-pub fn measure(args: &MeasureArgs) -> Result<()> {
-    let (rss_start, _) = resident()?;
-    let map = Arc::new(Map::load(&args.map, &LoadOptions::default())?);
-    let (rss_map, _) = resident()?;
-    let mut load_ms = Vec::new();
-    for _ in 0..10 {
-        let start = Instant::now();
-        let again = Map::load(&args.map, &LoadOptions::default())?;
-        load_ms.push(start.elapsed().as_secs_f64() * 1e3);
-        drop(again);
-    }
-    let (rss_after_loads, _) = resident()?;
-
-    let mut localizer = match &args.images {
-        Some(_) => Localizer::with_describer(
-            map.clone(),
-            LocalizerOptions::default(),
-            &args.runtime.describer_options(None),
-        )?,
-        None => Localizer::new(map.clone(), LocalizerOptions::default())?,
-    };
-    let (rss_localizer, _) = resident()?;
-
-    let mut out = Localization::default();
-    let mut frame_ms = Vec::new();
-    match &args.images {
-        Some(dir) => {
-            let clock = Clock {
-                fps: Some(10.0),
-                start: 0.0,
-                stem_unit: StemUnit::S,
-            };
-            let mut source = open_images(dir, &clock)?.source;
-            while frame_ms.len() < args.frames {
-                let Some(frame) = source.next_frame()? else {
-                    break;
-                };
-                let pixels = frame.pixels.map_err(anyhow::Error::msg)?;
-                let start = Instant::now();
-                localizer.process(
-                    &Frame {
-                        timestamp: frame.timestamp,
-                        descriptor: &[],
-                        odometry: None,
-                        image: Some(pixels.view()),
-                    },
-                    &mut out,
-                )?;
-                frame_ms.push(start.elapsed().as_secs_f64() * 1e3);
-            }
-        }
-        None => {
-            for i in 0..args.frames {
-                let view = (i * 97 % map.view_count()) as u32;
-                let descriptor = map.view_descriptor(view)?.to_vec();
-                let start = Instant::now();
-                localizer.process(
-                    &Frame {
-                        timestamp: i as f64,
-                        descriptor: &descriptor,
-                        odometry: None,
-                        image: None,
-                    },
-                    &mut out,
-                )?;
-                frame_ms.push(start.elapsed().as_secs_f64() * 1e3);
-            }
-        }
-    }
-    let (rss_frames, peak) = resident()?;
-    let (load_median, _) = median_and_p90(&load_ms);
-    let (frame_median, _) = median_and_p90(&frame_ms);
-    println!(
-        "{}",
-        serde_json::json!({
-            "places": map.place_count(),
-            "views": map.view_count(),
-            "dim": map.dim(),
-            "describer": map.describer().map(|_| map.descriptor().to_string()),
-            "load_ms_median": load_median,
-            "frames": frame_ms.len(),
-            "frame_ms_median": frame_median,
-            "rss_start_mib": rss_start,
-            "rss_map_mib": rss_map,
-            "rss_after_loads_mib": rss_after_loads,
-            "rss_localizer_mib": rss_localizer,
-            "rss_frames_mib": rss_frames,
-            "peak_rss_mib": peak,
-            "map_mib": rss_map - rss_start,
-            "localizer_mib": rss_localizer - rss_after_loads,
-            "frames_mib": rss_frames - rss_localizer,
-        })
-    );
-    Ok(())
 }
