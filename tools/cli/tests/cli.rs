@@ -846,3 +846,95 @@ fn ate_judges_the_simulated_odometry_against_its_ground_truth() {
         "{stderr}"
     );
 }
+
+#[test]
+fn bench_memory_measures_every_stage_of_an_image_map() {
+    let dir = tempfile::tempdir().unwrap();
+    let (map_dir, query_dir) = (dir.path().join("map"), dir.path().join("query"));
+    std::fs::create_dir_all(&map_dir).unwrap();
+    std::fs::create_dir_all(&query_dir).unwrap();
+    for i in 0..8 {
+        write_pgm(&map_dir.join(format!("{i:03}.pgm")), &place(i));
+        write_pgm(
+            &query_dir.join(format!("{i:03}.pgm")),
+            &seen_again(&place(i)),
+        );
+    }
+    let s = |p: &Path| p.to_str().unwrap().to_string();
+    // The PCA rows: i8 by default, f32 on request (larger file, another identity).
+    let map = dir.path().join("i8.topoloc");
+    let built = build_vlad_map(&map_dir, &map);
+    assert!(built["descriptor"].as_str().unwrap().contains("/i8 fit="));
+    let exact = dir.path().join("f32.topoloc");
+    let built_f32 = json(&topoloc(&[
+        "build-map",
+        "--images",
+        &s(&map_dir),
+        "--backend",
+        "vlad",
+        "--pca-precision",
+        "f32",
+        "--out",
+        &s(&exact),
+        "--json",
+    ]));
+    assert!(!built_f32["descriptor"].as_str().unwrap().contains("/i8"));
+    let size = |p: &Path| std::fs::metadata(p).unwrap().len();
+    assert!(
+        size(&map) < size(&exact),
+        "{} vs {}",
+        size(&map),
+        size(&exact)
+    );
+
+    let report = json(&topoloc(&[
+        "bench-memory",
+        "--map",
+        &s(&map),
+        "--images",
+        &s(&query_dir),
+        "--frames",
+        "5",
+        "--json",
+    ]));
+    assert_eq!(report["frames"], 5);
+    assert_eq!(report["places"], 8);
+    assert_eq!(report["generated"], false);
+    assert_eq!(report["file_bytes"], size(&map));
+    assert!(report["describer"]
+        .as_str()
+        .unwrap()
+        .starts_with("vlad-orb"));
+    for key in [
+        "rss_start_mib",
+        "rss_map_mib",
+        "rss_localizer_mib",
+        "rss_frames_mib",
+        "peak_rss_mib",
+        "load_ms_median",
+        "frame_ms_median",
+    ] {
+        let v = report[key].as_f64().unwrap_or(-1.0);
+        assert!(v > 0.0, "'{key}' = {v} in {report}");
+    }
+    assert!(report["peak_rss_mib"].as_f64() >= report["rss_frames_mib"].as_f64());
+    // A map needs its query images, and a folder of non-images is refused by name.
+    let alone = topoloc(&["bench-memory", "--map", &s(&map)]);
+    assert!(!alone.status.success());
+    std::fs::write(query_dir.join("notes.txt"), "not an image").unwrap();
+    let refused = topoloc(&[
+        "bench-memory",
+        "--map",
+        &s(&map),
+        "--images",
+        &s(&query_dir),
+        "--frames",
+        "50",
+    ]);
+    assert!(!refused.status.success());
+    assert!(
+        String::from_utf8_lossy(&refused.stderr).contains("notes.txt"),
+        "{}",
+        String::from_utf8_lossy(&refused.stderr)
+    );
+}
