@@ -220,7 +220,8 @@ fn pca_of_the_mlf_vector_matches_a_direct_computation() {
     }
     // Rows of W orthonormal; variance along them non-increasing; together (n - 1 of them) they
     // keep all of every centred sample's energy.
-    let row = |k: usize| &pca.components[k * f..(k + 1) * f];
+    let rows = pca.components.as_f32().expect("Pca::fit gives f32 rows");
+    let row = |k: usize| &rows[k * f..(k + 1) * f];
     let dot = |a: &[f32], b: &[f64]| {
         a.iter()
             .zip(b)
