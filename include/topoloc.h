@@ -72,9 +72,9 @@
  * trajectory metrics (`topoloc_trajectory_evaluate`, `_evaluate_files`); 1.12: describers
  * (`topoloc_describer_*`: images to a map's global descriptors); 1.13: host logging
  * (`topoloc_set_log_callback`) and `TOPOLOC_ERR_CONCURRENT_USE` for a handle used by two calls
- * at once.
+ * at once; 1.14: `pca_precision` in the image map options (`TOPOLOC_PCA_I8`, `_F32`).
  */
-#define TOPOLOC_ABI_VERSION_MINOR 13
+#define TOPOLOC_ABI_VERSION_MINOR 14
 
 /**
  * Result of every fallible C function. Values are grouped in ranges and never renumbered;
@@ -721,6 +721,11 @@ typedef struct topoloc_keyframe {
 } topoloc_keyframe;
 
 /**
+ * How a built map stores its PCA rows (ABI 1.14, `topoloc_image_map_options.pca_precision`).
+ */
+typedef uint32_t topoloc_pca_precision;
+
+/**
  * How `topoloc_map_build_from_image_files` / `_from_images` build a map. Initialise with
  * `topoloc_image_map_options_default`.
  */
@@ -784,6 +789,11 @@ typedef struct topoloc_image_map_options {
    * Place spacing in metres when poses are given. Default 2.0.
    */
   double place_spacing_m;
+  /**
+   * (ABI 1.14) How the map stores its PCA rows: `TOPOLOC_PCA_I8` (default; map format 1.5,
+   * which readers before it refuse) or `TOPOLOC_PCA_F32` (exact, four times larger).
+   */
+  topoloc_pca_precision pca_precision;
 } topoloc_image_map_options;
 
 /**
@@ -1352,6 +1362,16 @@ typedef uint32_t topoloc_trajectory_format;
  * VLAD of OpenCV SIFT features.
  */
 #define TOPOLOC_BACKEND_VLAD_SIFT 4
+
+/**
+ * int8 rows with one scale per row (the default): a quarter of the size of f32 rows.
+ */
+#define TOPOLOC_PCA_I8 0
+
+/**
+ * Exact f32 rows.
+ */
+#define TOPOLOC_PCA_F32 1
 
 /**
  * Build stage reported to the progress callback: describing images (`done` of `total`).

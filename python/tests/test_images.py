@@ -145,6 +145,20 @@ def test_views_per_place_groups_consecutive_images(images):
         assert list(m.place_views(2)) == [4, 5]
 
 
+def test_pca_rows_are_i8_by_default_and_f32_on_request(vlad_map, images, tmp_path):
+    assert "/i8 fit=" in vlad_map.descriptor_model
+    with topoloc.Map.build_from_images(images, backend="vlad-orb", threads=2, pca_precision="f32") as m:
+        assert "/i8" not in m.descriptor_model
+        exact, small = tmp_path / "f32.topoloc", tmp_path / "i8.topoloc"
+        m.save(exact)
+        vlad_map.save(small)
+        assert small.stat().st_size < exact.stat().st_size
+        with topoloc.Localizer(m, mode="single_frame") as loc:
+            assert loc.process(image=revisit(images[4], 7), timestamp=0.0).place == 4
+    with pytest.raises(topoloc.InvalidArgumentError, match="pca_precision"):
+        topoloc.Map.build_from_images(images, backend="vlad-orb", pca_precision="f16")
+
+
 def test_vlad_sift_backend(images):
     with topoloc.Map.build_from_images(images[:6], backend="vlad_sift", threads=2) as m:
         assert m.descriptor_kind == "vlad-sift" and m.dim == 5

@@ -588,7 +588,7 @@ def test_status_names_match_the_librarys_table():
 
 
 def test_abi_minor_version():
-    assert topoloc.abi_version_minor() >= _lib.ABI_VERSION_MINOR == 13
+    assert topoloc.abi_version_minor() >= _lib.ABI_VERSION_MINOR == 14
 
 
 EXPECTED_CLASSES = {

@@ -427,6 +427,7 @@ def _image_map_options(
     poses_tum_path: Optional[PathLike],
     place_spacing_m: Optional[float],
     vlad_dense: Optional[bool] = None,
+    pca_precision: Optional[str] = None,
 ) -> _lib.topoloc_image_map_options:
     o = _lib.defaults(_lib.topoloc_image_map_options, lib.topoloc_image_map_options_init)
     o.backend = _backend_code(backend, _BUILD_BACKENDS, "backend", InvalidArgumentError)
@@ -453,7 +454,17 @@ def _image_map_options(
         o.poses_tum_path = _path(poses_tum_path, "poses_tum_path")
     if place_spacing_m is not None:
         o.place_spacing_m = float(place_spacing_m)
+    if pca_precision is not None:
+        if pca_precision not in _PCA_PRECISIONS:
+            raise InvalidArgumentError(
+                f"pca_precision {pca_precision!r}: use one of {sorted(_PCA_PRECISIONS)}"
+            )
+        o.pca_precision = _PCA_PRECISIONS[pca_precision]
     return o
+
+
+#: ``pca_precision`` names -> ``TOPOLOC_PCA_*`` (ABI 1.14).
+_PCA_PRECISIONS = {"i8": _lib.PCA_I8, "f32": _lib.PCA_F32}
 
 
 def _image_files(paths: Union[PathLike, Sequence[PathLike]]) -> List[bytes]:
@@ -615,6 +626,7 @@ class Map(_Handle):
         vlad_dense: Optional[bool] = None,
         poses_tum_path: Optional[PathLike] = None,
         place_spacing_m: Optional[float] = None,
+        pca_precision: Optional[str] = None,
     ) -> "Map":
         """Builds a map from camera images in memory (``topoloc_map_build_from_images``).
 
@@ -636,7 +648,9 @@ class Map(_Handle):
         ``views_per_place`` consecutive images form a place and places are chained in order; with a TUM trajectory
         (one pose per image, same order), places are made by ``place_spacing_m`` and hold at
         most ``views_per_place`` views. View ``v`` records its image index as keyframe id.
-        Options left as ``None`` take the library defaults.
+        ``pca_precision`` stores the PCA rows as ``"i8"`` (the default: a quarter of the size,
+        map format 1.5) or ``"f32"`` (exact). Options left as ``None`` take the library
+        defaults.
 
         ``progress(stage, done, total)``, if given, is called on this thread about ten times a
         second with ``stage`` ``"describing"`` (``done`` of ``total`` images) or ``"fitting"``
@@ -657,6 +671,7 @@ class Map(_Handle):
         options = _image_map_options(
             backend, dim, views_per_place, threads, onnx_model_path, onnx_runtime_path, onnx_taps,
             grid_rows, grid_cols, vlad_clusters, poses_tum_path, place_spacing_m, vlad_dense,
+            pca_precision,
         )
         reporter = _Progress(progress)
         out = _lib.MapPtr()
@@ -684,6 +699,7 @@ class Map(_Handle):
         vlad_dense: Optional[bool] = None,
         poses_tum_path: Optional[PathLike] = None,
         place_spacing_m: Optional[float] = None,
+        pca_precision: Optional[str] = None,
     ) -> "Map":
         """Builds a map from image files (``topoloc_map_build_from_image_files``): any format
         OpenCV decodes, read and described in parallel.
@@ -701,6 +717,7 @@ class Map(_Handle):
         options = _image_map_options(
             backend, dim, views_per_place, threads, onnx_model_path, onnx_runtime_path, onnx_taps,
             grid_rows, grid_cols, vlad_clusters, poses_tum_path, place_spacing_m, vlad_dense,
+            pca_precision,
         )
         reporter = _Progress(progress)
         out = _lib.MapPtr()

@@ -48,10 +48,14 @@ ABI_VERSION = 1
 
 #: ABI minor version these bindings were written for (``TOPOLOC_ABI_VERSION_MINOR``): they use
 #: items up to "ABI 1.N" of the header.
-ABI_VERSION_MINOR = 13
+ABI_VERSION_MINOR = 14
 
 #: Environment variable naming the shared library to load.
 ENV_VAR = "TOPOLOC_LIBRARY"
+
+#: ``TOPOLOC_PCA_I8`` / ``TOPOLOC_PCA_F32`` (ABI 1.14): how a built map stores its PCA rows.
+PCA_I8 = 0
+PCA_F32 = 1
 
 #: ``TOPOLOC_MODE_FILTER`` / ``TOPOLOC_MODE_SINGLE_FRAME`` / ``TOPOLOC_MODE_METRIC`` (ABI 1.3).
 MODE_FILTER = 0
@@ -211,6 +215,7 @@ class topoloc_image_map_options(Structure):
         ("vlad_dense", c_bool),
         ("poses_tum_path", c_char_p),
         ("place_spacing_m", c_double),
+        ("pca_precision", c_uint32),  # ABI 1.14
     ]
 
 

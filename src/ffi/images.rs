@@ -11,7 +11,7 @@ use crate::build::{
 };
 use crate::describe::onnx::OnnxOptions;
 use crate::describe::vlad::{LocalFeature, VladOptions};
-use crate::describe::{BackendConfig, BackendKind, FitOptions};
+use crate::describe::{BackendConfig, BackendKind, FitOptions, PcaPrecision};
 use crate::image::{ImageView, PixelFormat};
 use std::ffi::{c_char, c_void};
 use std::path::Path;
@@ -48,6 +48,13 @@ pub const TOPOLOC_BACKEND_ONNX: topoloc_backend = 2;
 pub const TOPOLOC_BACKEND_VLAD_ORB: topoloc_backend = 3;
 /// VLAD of OpenCV SIFT features.
 pub const TOPOLOC_BACKEND_VLAD_SIFT: topoloc_backend = 4;
+
+/// How a built map stores its PCA rows (ABI 1.14, `topoloc_image_map_options.pca_precision`).
+pub type topoloc_pca_precision = u32;
+/// int8 rows with one scale per row (the default): a quarter of the size of f32 rows.
+pub const TOPOLOC_PCA_I8: topoloc_pca_precision = 0;
+/// Exact f32 rows.
+pub const TOPOLOC_PCA_F32: topoloc_pca_precision = 1;
 
 /// Build stage reported to the progress callback: describing images (`done` of `total`).
 pub const TOPOLOC_STAGE_DESCRIBING: topoloc_stage = 0;
@@ -179,10 +186,16 @@ pub struct topoloc_image_map_options {
     pub poses_tum_path: *const c_char,
     /// Place spacing in metres when poses are given. Default 2.0.
     pub place_spacing_m: f64,
+    /// (ABI 1.14) How the map stores its PCA rows: `TOPOLOC_PCA_I8` (default; map format 1.5,
+    /// which readers before it refuse) or `TOPOLOC_PCA_F32` (exact, four times larger).
+    pub pca_precision: topoloc_pca_precision,
 }
 
 impl Versioned for topoloc_image_map_options {
-    const LAYOUTS: &'static [usize] = &[std::mem::size_of::<Self>()];
+    const LAYOUTS: &'static [usize] = &[
+        std::mem::offset_of!(Self, pca_precision),
+        std::mem::size_of::<Self>(),
+    ];
 }
 
 impl Default for topoloc_image_map_options {
@@ -203,6 +216,7 @@ impl Default for topoloc_image_map_options {
             vlad_dense: VladOptions::default().dense,
             poses_tum_path: std::ptr::null(),
             place_spacing_m: 2.0,
+            pca_precision: TOPOLOC_PCA_I8,
         }
     }
 }
@@ -284,10 +298,20 @@ fn image_map_options(
             )))
         }
     };
+    let pca_precision = match o.pca_precision {
+        TOPOLOC_PCA_I8 => PcaPrecision::I8,
+        TOPOLOC_PCA_F32 => PcaPrecision::F32,
+        other => {
+            return Err(FfiError::invalid(format!(
+                "options.pca_precision is {other}: use TOPOLOC_PCA_I8 or TOPOLOC_PCA_F32"
+            )))
+        }
+    };
     let mut built = ImageMapOptions {
         backend,
         fit: FitOptions {
             dim: o.dim as usize,
+            pca_precision,
             ..FitOptions::default()
         },
         views_per_place: o.views_per_place as usize,

@@ -2423,6 +2423,15 @@ static void test_image_defaults(void)
     CHECK(options.onnx_model_path == NULL && options.onnx_runtime_path == NULL &&
           options.onnx_taps == NULL && options.poses_tum_path == NULL);
     CHECK(options.place_spacing_m == 2.0);
+    /* ABI 1.14: the PCA rows' storage, i8 by default; a caller of the 1.13 layout gets it. */
+    CHECK(TOPOLOC_PCA_I8 == 0 && TOPOLOC_PCA_F32 == 1);
+    CHECK(options.pca_precision == TOPOLOC_PCA_I8);
+    CHECK(offsetof(topoloc_image_map_options, pca_precision) >
+          offsetof(topoloc_image_map_options, place_spacing_m));
+    options.pca_precision = 77;
+    CHECK_OK(topoloc_image_map_options_init(&options,
+                                            offsetof(topoloc_image_map_options, pca_precision)));
+    CHECK(options.pca_precision == 77); /* beyond the older layout: not written */
     CHECK_STATUS(topoloc_image_map_options_init(&options, 0), TOPOLOC_ERR_STRUCT_SIZE);
     CHECK_HAS_MESSAGE();
     CHECK_STATUS(topoloc_image_map_options_init(&options, sizeof options - 1),
@@ -2489,7 +2498,7 @@ static topoloc_map *test_image_map_build(void)
     CHECK_OK(topoloc_map_descriptor_kind(built, kind, sizeof kind, NULL));
     CHECK(strcmp(kind, "vlad-orb") == 0);
     CHECK_OK(topoloc_map_descriptor_model(built, model, sizeof model, NULL));
-    CHECK(model[0] != '\0');
+    CHECK(strstr(model, "/i8 fit=") != NULL); /* i8 PCA rows by default */
     for (i = 0; i < IMG_PLACES; i++) {
         topoloc_view_info info;
         char image[16];
@@ -2514,6 +2523,23 @@ static topoloc_map *test_image_map_build(void)
         loaded = NULL;
     }
     options.threads = 1;
+
+    /* f32 PCA rows on request (another identity); an unknown precision is refused. */
+    options.pca_precision = TOPOLOC_PCA_F32;
+    CHECK_OK(topoloc_map_build_from_images(images, IMG_PLACES, &options, NULL, NULL, &loaded));
+    if (loaded != NULL) {
+        CHECK_OK(topoloc_map_descriptor_model(loaded, model2, sizeof model2, NULL));
+        CHECK(strstr(model2, "/i8") == NULL && strcmp(model, model2) != 0);
+        topoloc_map_free(loaded);
+        loaded = NULL;
+    }
+    options.pca_precision = 2;
+    out = untouched_map();
+    CHECK_STATUS(topoloc_map_build_from_images(images, IMG_PLACES, &options, NULL, NULL, &out),
+                 TOPOLOC_ERR_INVALID_ARGUMENT);
+    CHECK(strstr(last_error(), "pca_precision") != NULL);
+    CHECK(out == untouched_map());
+    options.pca_precision = TOPOLOC_PCA_I8;
 
     /* The describer survives the file. */
     tmp_path(path, sizeof path, "images.topoloc");

@@ -91,8 +91,8 @@ pub(super) fn read(
         },
         (true, true) => {
             return Err(MapError::Corrupt(format!(
-            "both '{F32_ROWS}' and '{I8_ROWS}' are present; a map holds one form of the PCA rows"
-        )))
+                "both '{F32_ROWS}' and '{I8_ROWS}' are present: a map holds one form of its rows"
+            )))
         }
         (false, false) => {
             return Err(MapError::Corrupt(format!(
