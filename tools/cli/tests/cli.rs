@@ -5,7 +5,9 @@
 use std::path::Path;
 
 mod common;
-use common::{build_vlad_map, json, place, seen_again, simulate_tiny, topoloc, write_pgm};
+use common::{
+    build_vlad_map, fails_with, json, place, seen_again, simulate_tiny, topoloc, write_pgm,
+};
 
 #[test]
 fn build_map_and_eval_follow_the_contract() {
@@ -522,12 +524,7 @@ fn suite_refuses_unknown_or_empty_configuration_lists() {
         "--configurations",
         "metric+odometry+verification",
     ]);
-    assert!(!out.status.success());
-    assert!(
-        String::from_utf8_lossy(&out.stderr).contains("no configuration to run"),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    fails_with(&out, "no configuration to run");
 }
 
 /// With depth images (`simulate --depth`, `loops --depth`), keyframes carry 3D points and hints
@@ -931,10 +928,5 @@ fn bench_memory_measures_every_stage_of_an_image_map() {
         "--frames",
         "50",
     ]);
-    assert!(!refused.status.success());
-    assert!(
-        String::from_utf8_lossy(&refused.stderr).contains("notes.txt"),
-        "{}",
-        String::from_utf8_lossy(&refused.stderr)
-    );
+    fails_with(&refused, "notes.txt");
 }

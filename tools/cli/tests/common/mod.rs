@@ -45,6 +45,14 @@ pub fn topoloc(args: &[&str]) -> Output {
 }
 
 /// The one JSON object on the stdout of a successful run.
+/// Asserts that a run failed and that its stderr names `needle`.
+#[track_caller]
+pub fn fails_with(output: &Output, needle: &str) {
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(!output.status.success(), "succeeded: {stderr}");
+    assert!(stderr.contains(needle), "'{needle}' not in: {stderr}");
+}
+
 pub fn json(output: &Output) -> serde_json::Value {
     assert!(
         output.status.success(),
