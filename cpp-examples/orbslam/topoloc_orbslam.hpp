@@ -57,44 +57,44 @@ using Pose = topoloc::Pose;
 /// Pinhole intrinsics of the undistorted keypoints (`mvKeysUn`), pixels: ORB-SLAM's `fx`,
 /// `fy`, `cx`, `cy` (the `Camera.fx` ... entries of its settings file).
 struct Intrinsics {
-  double fx = 0.0;  ///< Focal length x, pixels (> 0).
-  double fy = 0.0;  ///< Focal length y, pixels (> 0).
-  double cx = 0.0;  ///< Principal point x, pixels.
-  double cy = 0.0;  ///< Principal point y, pixels.
+    double fx = 0.0; ///< Focal length x, pixels (> 0).
+    double fy = 0.0; ///< Focal length y, pixels (> 0).
+    double cx = 0.0; ///< Principal point x, pixels.
+    double cy = 0.0; ///< Principal point y, pixels.
 };
 
 /// Behaviour of the adapter itself (the topoloc detector's options are `topoloc::LoopOptions`).
 struct Settings {
-  /// Most keyframes `DetectRelocalizationCandidates` returns, most similar first. Default 5.
-  std::size_t relocalization_candidates = 5;
-  /// Receives every error message (see the top of this header); empty = none. Called without
-  /// the database's mutex held, possibly from the tracking and the loop closing thread at once:
-  /// it must be thread-safe and must not throw (an exception it throws is swallowed).
-  std::function<void(const std::string &)> logger;
+    /// Most keyframes `DetectRelocalizationCandidates` returns, most similar first. Default 5.
+    std::size_t relocalization_candidates = 5;
+    /// Receives every error message (see the top of this header); empty = none. Called without
+    /// the database's mutex held, possibly from the tracking and the loop closing thread at once:
+    /// it must be thread-safe and must not throw (an exception it throws is swallowed).
+    std::function<void(const std::string &)> logger;
 };
 
 /// topoloc's verdict on one keyframe, with the keyframes resolved to the host's pointers.
 /// A plain value: it does not own the keyframes, which ORB-SLAM may delete later.
 template <typename KeyFrame> struct LoopMatch {
-  KeyFrame *query = nullptr;    ///< The keyframe the hint is about.
-  KeyFrame *matched = nullptr;  ///< The keyframe it matched; null once that one is erased or bad.
-  bool accepted = false;        ///< Every topoloc gate passed: a loop (or merge) closure.
-  topoloc::Gate gate = topoloc::Gate::NoCandidate;  ///< The gate that decided (for logs).
-  uint32_t inliers = 0;         ///< Keypoint inliers between the two keyframes.
-  float confidence = 0.f;       ///< The match's share of the inliers of all verified ones.
-  bool has_pose = false;        ///< The two poses below and `covariance` are set.
-  /// The translation is in the map's units (the matched keyframe had map points); else it is
-  /// a unit direction.
-  bool scale_known = false;
-  /// The query camera in the matched camera's frame: `Tmq = Tmw * Twq` in ORB-SLAM notation
-  /// (`X_matched = Tmq * X_query`), topoloc's `matched_T_query`.
-  Pose matched_T_query{1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1};
-  /// Its inverse `Tqm`, current-from-candidate: what ORB-SLAM's `Sim3Solver` estimates as
-  /// `gScm` (with scale 1) and `ComputeSim3` composes with the candidate's `Tcw`.
-  Pose query_T_matched{1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1};
-  /// Covariance of `matched_T_query` for a right perturbation, 6x6 row-major, rotation (rad)
-  /// x y z then translation x y z (g2o's SE3 tangent order); zero unless `has_pose`.
-  std::array<double, 36> covariance{};
+    KeyFrame *query = nullptr;   ///< The keyframe the hint is about.
+    KeyFrame *matched = nullptr; ///< The keyframe it matched; null once that one is erased or bad.
+    bool accepted = false;       ///< Every topoloc gate passed: a loop (or merge) closure.
+    topoloc::Gate gate = topoloc::Gate::NoCandidate; ///< The gate that decided (for logs).
+    uint32_t inliers = 0;   ///< Keypoint inliers between the two keyframes.
+    float confidence = 0.f; ///< The match's share of the inliers of all verified ones.
+    bool has_pose = false;  ///< The two poses below and `covariance` are set.
+    /// The translation is in the map's units (the matched keyframe had map points); else it is
+    /// a unit direction.
+    bool scale_known = false;
+    /// The query camera in the matched camera's frame: `Tmq = Tmw * Twq` in ORB-SLAM notation
+    /// (`X_matched = Tmq * X_query`), topoloc's `matched_T_query`.
+    Pose matched_T_query{1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1};
+    /// Its inverse `Tqm`, current-from-candidate: what ORB-SLAM's `Sim3Solver` estimates as
+    /// `gScm` (with scale 1) and `ComputeSim3` composes with the candidate's `Tcw`.
+    Pose query_T_matched{1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1};
+    /// Covariance of `matched_T_query` for a right perturbation, 6x6 row-major, rotation (rad)
+    /// x y z then translation x y z (g2o's SE3 tangent order); zero unless `has_pose`.
+    std::array<double, 36> covariance{};
 };
 
 // ---------------------------------------------------------------------------------------------
@@ -104,70 +104,81 @@ template <typename KeyFrame> struct LoopMatch {
 /// A pose from a 4x4 (or 3x4) single-channel CV_32F / CV_64F `cv::Mat` such as ORB-SLAM2's
 /// `KeyFrame::GetPose()`; `std::nullopt` for an empty Mat (no pose). Throws
 /// `std::invalid_argument` for any other shape or type (the adapter reports it as an error).
-[[nodiscard]] inline std::optional<Pose> pose_from_mat(const cv::Mat &mat) {
-  if (mat.empty()) return std::nullopt;
-  const bool shape = mat.dims == 2 && mat.cols == 4 && (mat.rows == 4 || mat.rows == 3);
-  if (!shape || (mat.type() != CV_32FC1 && mat.type() != CV_64FC1)) {
-    throw std::invalid_argument("pose cv::Mat must be 4x4 or 3x4 CV_32F/CV_64F, got " +
-                                std::to_string(mat.rows) + "x" + std::to_string(mat.cols) +
-                                " of type " + std::to_string(mat.type()));
-  }
-  Pose pose{0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 1};
-  for (int r = 0; r < mat.rows; ++r)
-    for (int c = 0; c < 4; ++c)
-      pose[static_cast<std::size_t>(4 * r + c)] =
-          mat.type() == CV_32FC1 ? double(mat.at<float>(r, c)) : mat.at<double>(r, c);
-  return pose;
+[[nodiscard]] inline std::optional<Pose> pose_from_mat(const cv::Mat &mat)
+{
+    if (mat.empty())
+        return std::nullopt;
+    const bool shape = mat.dims == 2 && mat.cols == 4 && (mat.rows == 4 || mat.rows == 3);
+    if (!shape || (mat.type() != CV_32FC1 && mat.type() != CV_64FC1)) {
+        throw std::invalid_argument("pose cv::Mat must be 4x4 or 3x4 CV_32F/CV_64F, got " +
+                                    std::to_string(mat.rows) + "x" + std::to_string(mat.cols) +
+                                    " of type " + std::to_string(mat.type()));
+    }
+    Pose pose{0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 1};
+    for (int r = 0; r < mat.rows; ++r)
+        for (int c = 0; c < 4; ++c)
+            pose[static_cast<std::size_t>(4 * r + c)] =
+                mat.type() == CV_32FC1 ? double(mat.at<float>(r, c)) : mat.at<double>(r, c);
+    return pose;
 }
 
 /// A pose from any 4x4 matrix type with `m(row, col)`, e.g. ORB-SLAM3's
 /// `Sophus::SE3f::matrix()` (an `Eigen::Matrix4f`).
-template <typename Matrix> [[nodiscard]] Pose pose_from_matrix(const Matrix &m) {
-  Pose pose{};
-  for (int r = 0; r < 4; ++r)
-    for (int c = 0; c < 4; ++c) pose[static_cast<std::size_t>(4 * r + c)] = double(m(r, c));
-  return pose;
+template <typename Matrix> [[nodiscard]] Pose pose_from_matrix(const Matrix &m)
+{
+    Pose pose{};
+    for (int r = 0; r < 4; ++r)
+        for (int c = 0; c < 4; ++c)
+            pose[static_cast<std::size_t>(4 * r + c)] = double(m(r, c));
+    return pose;
 }
 
 /// A point from a 3-element single-channel CV_32F / CV_64F `cv::Mat` such as ORB-SLAM2's
 /// `MapPoint::GetWorldPos()`; false for an empty Mat. Throws `std::invalid_argument` for any
 /// other shape or type.
-inline bool point_from_mat(const cv::Mat &mat, std::array<double, 3> &out) {
-  if (mat.empty()) return false;
-  if (mat.total() != 3 || (mat.type() != CV_32FC1 && mat.type() != CV_64FC1)) {
-    throw std::invalid_argument("map point cv::Mat must hold 3 CV_32F/CV_64F values");
-  }
-  const cv::Mat m = mat.reshape(1, 3);
-  for (int i = 0; i < 3; ++i)
-    out[static_cast<std::size_t>(i)] =
-        m.type() == CV_32FC1 ? double(m.at<float>(i, 0)) : m.at<double>(i, 0);
-  return true;
+inline bool point_from_mat(const cv::Mat &mat, std::array<double, 3> &out)
+{
+    if (mat.empty())
+        return false;
+    if (mat.total() != 3 || (mat.type() != CV_32FC1 && mat.type() != CV_64FC1)) {
+        throw std::invalid_argument("map point cv::Mat must hold 3 CV_32F/CV_64F values");
+    }
+    const cv::Mat m = mat.reshape(1, 3);
+    for (int i = 0; i < 3; ++i)
+        out[static_cast<std::size_t>(i)] =
+            m.type() == CV_32FC1 ? double(m.at<float>(i, 0)) : m.at<double>(i, 0);
+    return true;
 }
 
 /// A pose as ORB-SLAM2 keeps poses: a new 4x4 CV_32F `cv::Mat`.
-[[nodiscard]] inline cv::Mat to_mat(const Pose &pose) {
-  cv::Mat mat(4, 4, CV_32F);
-  for (int i = 0; i < 16; ++i) mat.at<float>(i / 4, i % 4) = float(pose[static_cast<std::size_t>(i)]);
-  return mat;
+[[nodiscard]] inline cv::Mat to_mat(const Pose &pose)
+{
+    cv::Mat mat(4, 4, CV_32F);
+    for (int i = 0; i < 16; ++i)
+        mat.at<float>(i / 4, i % 4) = float(pose[static_cast<std::size_t>(i)]);
+    return mat;
 }
 
 /// The inverse of a rigid transform (`R^T`, `-R^T t`).
-[[nodiscard]] inline Pose inverse_rigid(const Pose &T) {
-  Pose inv{0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 1};
-  for (std::size_t r = 0; r < 3; ++r) {
-    for (std::size_t c = 0; c < 3; ++c) inv[4 * r + c] = T[4 * c + r];
-    inv[4 * r + 3] = -(T[r] * T[3] + T[4 + r] * T[7] + T[8 + r] * T[11]);
-  }
-  return inv;
+[[nodiscard]] inline Pose inverse_rigid(const Pose &T)
+{
+    Pose inv{0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 1};
+    for (std::size_t r = 0; r < 3; ++r) {
+        for (std::size_t c = 0; c < 3; ++c)
+            inv[4 * r + c] = T[4 * c + r];
+        inv[4 * r + 3] = -(T[r] * T[3] + T[4 + r] * T[7] + T[8 + r] * T[11]);
+    }
+    return inv;
 }
 
 /// `T * p` for a point `p`.
 [[nodiscard]] inline std::array<double, 3> transform_point(const Pose &T,
-                                                           const std::array<double, 3> &p) {
-  std::array<double, 3> out{};
-  for (std::size_t r = 0; r < 3; ++r)
-    out[r] = T[4 * r] * p[0] + T[4 * r + 1] * p[1] + T[4 * r + 2] * p[2] + T[4 * r + 3];
-  return out;
+                                                           const std::array<double, 3> &p)
+{
+    std::array<double, 3> out{};
+    for (std::size_t r = 0; r < 3; ++r)
+        out[r] = T[4 * r] * p[0] + T[4 * r + 1] * p[1] + T[4 * r + 2] * p[2] + T[4 * r + 3];
+    return out;
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -181,34 +192,39 @@ inline bool point_from_mat(const cv::Mat &mat, std::array<double, 3> &out) {
 /// getters lock and are not const), is called with the database's mutex held, and may throw:
 /// the adapter turns an exception into an error of the call.
 template <typename KeyFrame, typename Frame = KeyFrame> struct DefaultAccess {
-  /// The keyframe id (`mnId`); must increase from one added keyframe to the next.
-  static uint64_t id(KeyFrame &kf) { return static_cast<uint64_t>(kf.mnId); }
-  /// Seconds (`mTimeStamp`); must not decrease.
-  static double timestamp(KeyFrame &kf) { return kf.mTimeStamp; }
-  /// The undistorted keypoints (`mvKeysUn`), in the pixels of `Intrinsics`.
-  static const std::vector<cv::KeyPoint> &keypoints(KeyFrame &kf) { return kf.mvKeysUn; }
-  /// The ORB descriptors (`mDescriptors`): N x 32 CV_8U, row i = keypoint i.
-  static const cv::Mat &descriptors(KeyFrame &kf) { return kf.mDescriptors; }
-  /// The keyframe's 8-bit image (grey, BGR or BGRA): the member the host adds.
-  static const cv::Mat &image(KeyFrame &kf) { return kf.mImGray; }
-  /// The frame's 8-bit image, for relocalization: the member the host adds to `Frame`.
-  static const cv::Mat &frame_image(Frame &f) { return f.mImGray; }
-  /// `Tcw` (world to camera) or `std::nullopt` for none (every keyframe has one or none has).
-  static std::optional<Pose> camera_from_world(KeyFrame &kf) { return pose_from_mat(kf.GetPose()); }
-  /// The map point of each keypoint (`GetMapPointMatches()`), null where none.
-  static auto map_points(KeyFrame &kf) { return kf.GetMapPointMatches(); }
-  /// The world position of one entry of `map_points` into `out`; false for none (null, bad).
-  template <typename MapPoint> static bool world_position(MapPoint *mp, std::array<double, 3> &out) {
-    return mp != nullptr && !mp->isBad() && point_from_mat(mp->GetWorldPos(), out);
-  }
-  /// True for a culled keyframe: skipped by `add`, never returned as a candidate.
-  static bool is_bad(KeyFrame &kf) { return kf.isBad(); }
-  /// Called once `kf` is in topoloc, which keeps what it needs: frees the image member the
-  /// integration added (nothing else in ORB-SLAM reads it; a VGA image is 300 KB a keyframe).
-  /// An exception it throws is ignored (the keyframe is added by then).
-  static void added(KeyFrame &kf) { kf.mImGray.release(); }
-  /// The map (session) the keyframe belongs to now: ORB-SLAM2 has one (null for all).
-  static const void *map_of(KeyFrame &) { return nullptr; }
+    /// The keyframe id (`mnId`); must increase from one added keyframe to the next.
+    static uint64_t id(KeyFrame &kf) { return static_cast<uint64_t>(kf.mnId); }
+    /// Seconds (`mTimeStamp`); must not decrease.
+    static double timestamp(KeyFrame &kf) { return kf.mTimeStamp; }
+    /// The undistorted keypoints (`mvKeysUn`), in the pixels of `Intrinsics`.
+    static const std::vector<cv::KeyPoint> &keypoints(KeyFrame &kf) { return kf.mvKeysUn; }
+    /// The ORB descriptors (`mDescriptors`): N x 32 CV_8U, row i = keypoint i.
+    static const cv::Mat &descriptors(KeyFrame &kf) { return kf.mDescriptors; }
+    /// The keyframe's 8-bit image (grey, BGR or BGRA): the member the host adds.
+    static const cv::Mat &image(KeyFrame &kf) { return kf.mImGray; }
+    /// The frame's 8-bit image, for relocalization: the member the host adds to `Frame`.
+    static const cv::Mat &frame_image(Frame &f) { return f.mImGray; }
+    /// `Tcw` (world to camera) or `std::nullopt` for none (every keyframe has one or none has).
+    static std::optional<Pose> camera_from_world(KeyFrame &kf)
+    {
+        return pose_from_mat(kf.GetPose());
+    }
+    /// The map point of each keypoint (`GetMapPointMatches()`), null where none.
+    static auto map_points(KeyFrame &kf) { return kf.GetMapPointMatches(); }
+    /// The world position of one entry of `map_points` into `out`; false for none (null, bad).
+    template <typename MapPoint>
+    static bool world_position(MapPoint *mp, std::array<double, 3> &out)
+    {
+        return mp != nullptr && !mp->isBad() && point_from_mat(mp->GetWorldPos(), out);
+    }
+    /// True for a culled keyframe: skipped by `add`, never returned as a candidate.
+    static bool is_bad(KeyFrame &kf) { return kf.isBad(); }
+    /// Called once `kf` is in topoloc, which keeps what it needs: frees the image member the
+    /// integration added (nothing else in ORB-SLAM reads it; a VGA image is 300 KB a keyframe).
+    /// An exception it throws is ignored (the keyframe is added by then).
+    static void added(KeyFrame &kf) { kf.mImGray.release(); }
+    /// The map (session) the keyframe belongs to now: ORB-SLAM2 has one (null for all).
+    static const void *map_of(KeyFrame &) { return nullptr; }
 };
 
 // ---------------------------------------------------------------------------------------------
@@ -227,518 +243,597 @@ template <typename KeyFrame, typename Frame = KeyFrame,
           typename Access = DefaultAccess<KeyFrame, Frame>>
 class KeyFrameDatabase {
 public:
-  using Match = LoopMatch<KeyFrame>;  ///< A keyframe's hint with the keyframes resolved.
+    using Match = LoopMatch<KeyFrame>; ///< A keyframe's hint with the keyframes resolved.
 
-  /// A database for keyframes described with `map`'s describer (a map built from images, e.g.
-  /// `topoloc::Map::build_from_images`; neither map nor options are kept). The intrinsics
-  /// replace `options.fx..cy`, so hints carry relative poses. Throws `topoloc::Error` (a map
-  /// without describer, invalid options or intrinsics): the one member that throws.
-  KeyFrameDatabase(const topoloc::Map &map, const Intrinsics &intrinsics,
-                   const topoloc::LoopOptions &options = topoloc::default_loop_options(),
-                   Settings settings = Settings())
-      : kind_(map.descriptor_kind()), model_(map.descriptor_model()), dim_(map.dim()),
-        options_(with_intrinsics(options, intrinsics)), describer_(map),
-        detector_(new_detector()), settings_(std::move(settings)) {}
+    /// A database for keyframes described with `map`'s describer (a map built from images, e.g.
+    /// `topoloc::Map::build_from_images`; neither map nor options are kept). The intrinsics
+    /// replace `options.fx..cy`, so hints carry relative poses. Throws `topoloc::Error` (a map
+    /// without describer, invalid options or intrinsics): the one member that throws.
+    KeyFrameDatabase(const topoloc::Map &map, const Intrinsics &intrinsics,
+                     const topoloc::LoopOptions &options = topoloc::default_loop_options(),
+                     Settings settings = Settings())
+        : kind_(map.descriptor_kind()), model_(map.descriptor_model()), dim_(map.dim()),
+          options_(with_intrinsics(options, intrinsics)), describer_(map),
+          detector_(new_detector()), settings_(std::move(settings))
+    {
+    }
 
-  KeyFrameDatabase(const KeyFrameDatabase &) = delete;
-  KeyFrameDatabase &operator=(const KeyFrameDatabase &) = delete;
+    KeyFrameDatabase(const KeyFrameDatabase &) = delete;
+    KeyFrameDatabase &operator=(const KeyFrameDatabase &) = delete;
 
-  /// Adds `pKF` (ORB-SLAM's `add`): a no-op when it is already held (e.g. after a `Detect*`
-  /// call for it) and for a culled (`isBad`) keyframe, which ORB-SLAM may still have queued for
-  /// loop closing. Then calls `Access::added` (the default frees the keyframe's image).
-  /// Errors: null keyframe, id not above the last added one, duplicate id, earlier timestamp,
-  /// a keyframe held before `clear()`, unusable image, descriptors, keypoints, pose or map
-  /// points, a topoloc error.
-  void add(KeyFrame *pKF) noexcept {
-    run("add", [&] { (void)ensure_added(pKF); });
-  }
+    /// Adds `pKF` (ORB-SLAM's `add`): a no-op when it is already held (e.g. after a `Detect*`
+    /// call for it) and for a culled (`isBad`) keyframe, which ORB-SLAM may still have queued for
+    /// loop closing. Then calls `Access::added` (the default frees the keyframe's image).
+    /// Errors: null keyframe, id not above the last added one, duplicate id, earlier timestamp,
+    /// a keyframe held before `clear()`, unusable image, descriptors, keypoints, pose or map
+    /// points, a topoloc error.
+    void add(KeyFrame *pKF) noexcept
+    {
+        run("add", [&] { (void)ensure_added(pKF); });
+    }
 
-  /// Removes `pKF` (ORB-SLAM's `erase`, from `KeyFrame::SetBadFlag`). As in ORB-SLAM's own
-  /// database, a keyframe never added or already erased is a no-op. Errors: null keyframe, a
-  /// keyframe held before `clear()` (its id and timestamp are read to tell).
-  void erase(KeyFrame *pKF) noexcept {
-    run("erase", [&] { erase_if_held(pKF); });
-  }
+    /// Removes `pKF` (ORB-SLAM's `erase`, from `KeyFrame::SetBadFlag`). As in ORB-SLAM's own
+    /// database, a keyframe never added or already erased is a no-op. Errors: null keyframe, a
+    /// keyframe held before `clear()` (its id and timestamp are read to tell).
+    void erase(KeyFrame *pKF) noexcept
+    {
+        run("erase", [&] { erase_if_held(pKF); });
+    }
 
-  /// Forgets every keyframe and starts a fresh topoloc detector (ORB-SLAM's `clear`, on reset:
-  /// keyframe ids may start again). Keyframes held before it are refused afterwards. Errors: a
-  /// topoloc error creating the detector (the database is then unchanged).
-  void clear() noexcept {
-    run("clear", [&] { reset(); });
-  }
+    /// Forgets every keyframe and starts a fresh topoloc detector (ORB-SLAM's `clear`, on reset:
+    /// keyframe ids may start again). Keyframes held before it are refused afterwards. Errors: a
+    /// topoloc error creating the detector (the database is then unchanged).
+    void clear() noexcept
+    {
+        run("clear", [&] { reset(); });
+    }
 
-  /// Removes every keyframe of map `pMap` (ORB-SLAM3's `clearMap`; compared with
-  /// `Access::map_of`). Errors: an accessor that throws (nothing is removed then).
-  template <typename MapT> void clearMap(MapT *pMap) noexcept {
-    run("clearMap", [&] {
-      for (uint64_t id : ids_in_map(static_cast<const void *>(pMap))) erase_held(id);
-    });
-  }
+    /// Removes every keyframe of map `pMap` (ORB-SLAM3's `clearMap`; compared with
+    /// `Access::map_of`). Errors: an accessor that throws (nothing is removed then).
+    template <typename MapT> void clearMap(MapT *pMap) noexcept
+    {
+        run("clearMap", [&] {
+            for (uint64_t id : ids_in_map(static_cast<const void *>(pMap)))
+                erase_held(id);
+        });
+    }
 
-  /// ORB-SLAM2's loop query: adds `pKF` if needed and returns the keyframe of its accepted hint
-  /// (in the same map), or nothing. `minScore` is ignored: topoloc's gates replace the DBoW2
-  /// score threshold. Errors: those of `add`.
-  std::vector<KeyFrame *> DetectLoopCandidates(KeyFrame *pKF, float minScore) noexcept {
-    static_cast<void>(minScore);
-    std::vector<KeyFrame *> found;
-    run("DetectLoopCandidates", [&] {
-      KeyFrame *matched = accepted_match(ensure_added(pKF));
-      if (matched != nullptr && Access::map_of(*matched) == Access::map_of(*pKF))
-        found.push_back(matched);
-    });
-    return found;
-  }
+    /// ORB-SLAM2's loop query: adds `pKF` if needed and returns the keyframe of its accepted hint
+    /// (in the same map), or nothing. `minScore` is ignored: topoloc's gates replace the DBoW2
+    /// score threshold. Errors: those of `add`.
+    std::vector<KeyFrame *> DetectLoopCandidates(KeyFrame *pKF, float minScore) noexcept
+    {
+        static_cast<void>(minScore);
+        std::vector<KeyFrame *> found;
+        run("DetectLoopCandidates", [&] {
+            KeyFrame *matched = accepted_match(ensure_added(pKF));
+            if (matched != nullptr && Access::map_of(*matched) == Access::map_of(*pKF))
+                found.push_back(matched);
+        });
+        return found;
+    }
 
-  /// ORB-SLAM3's loop and merge query: adds `pKF` if needed and appends the keyframe of its
-  /// accepted hint to `vpLoopCand` (same map as `pKF`) or `vpMergeCand` (another map), at most
-  /// `nNumCandidates` in each (topoloc gives at most one). On error nothing is appended.
-  void DetectNBestCandidates(KeyFrame *pKF, std::vector<KeyFrame *> &vpLoopCand,
-                             std::vector<KeyFrame *> &vpMergeCand, int nNumCandidates) noexcept {
-    KeyFrame *matched = nullptr;
-    bool same_map = false;
-    const bool ok = run("DetectNBestCandidates", [&] {
-      matched = accepted_match(ensure_added(pKF));
-      if (matched != nullptr) same_map = Access::map_of(*matched) == Access::map_of(*pKF);
-    });
-    if (!ok || matched == nullptr || nNumCandidates <= 0) return;
-    append(same_map ? vpLoopCand : vpMergeCand, matched);
-  }
+    /// ORB-SLAM3's loop and merge query: adds `pKF` if needed and appends the keyframe of its
+    /// accepted hint to `vpLoopCand` (same map as `pKF`) or `vpMergeCand` (another map), at most
+    /// `nNumCandidates` in each (topoloc gives at most one). On error nothing is appended.
+    void DetectNBestCandidates(KeyFrame *pKF, std::vector<KeyFrame *> &vpLoopCand,
+                               std::vector<KeyFrame *> &vpMergeCand, int nNumCandidates) noexcept
+    {
+        KeyFrame *matched = nullptr;
+        bool same_map = false;
+        const bool ok = run("DetectNBestCandidates", [&] {
+            matched = accepted_match(ensure_added(pKF));
+            if (matched != nullptr)
+                same_map = Access::map_of(*matched) == Access::map_of(*pKF);
+        });
+        if (!ok || matched == nullptr || nNumCandidates <= 0)
+            return;
+        append(same_map ? vpLoopCand : vpMergeCand, matched);
+    }
 
-  /// ORB-SLAM2's relocalization query: the held keyframes most similar to `F`'s image (global
-  /// descriptors), most similar first, at most `Settings::relocalization_candidates`; erased
-  /// and bad keyframes never. `F` is not added. Errors: null frame, unusable image or one of
-  /// another size than the keyframes', a topoloc error.
-  std::vector<KeyFrame *> DetectRelocalizationCandidates(Frame *F) noexcept {
-    return relocalize(F, nullptr, false);
-  }
+    /// ORB-SLAM2's relocalization query: the held keyframes most similar to `F`'s image (global
+    /// descriptors), most similar first, at most `Settings::relocalization_candidates`; erased
+    /// and bad keyframes never. `F` is not added. Errors: null frame, unusable image or one of
+    /// another size than the keyframes', a topoloc error.
+    std::vector<KeyFrame *> DetectRelocalizationCandidates(Frame *F) noexcept
+    {
+        return relocalize(F, nullptr, false);
+    }
 
-  /// ORB-SLAM3's relocalization query: as the other overload, keeping keyframes of `pMap`
-  /// only (`Access::map_of`).
-  template <typename MapT>
-  std::vector<KeyFrame *> DetectRelocalizationCandidates(Frame *F, MapT *pMap) noexcept {
-    return relocalize(F, static_cast<const void *>(pMap), true);
-  }
+    /// ORB-SLAM3's relocalization query: as the other overload, keeping keyframes of `pMap`
+    /// only (`Access::map_of`).
+    template <typename MapT>
+    std::vector<KeyFrame *> DetectRelocalizationCandidates(Frame *F, MapT *pMap) noexcept
+    {
+        return relocalize(F, static_cast<const void *>(pMap), true);
+    }
 
-  /// The hint topoloc gave `pKF` when it was added (accepted or not), or `std::nullopt` when it
-  /// had no verified match. Errors: a keyframe not held.
-  [[nodiscard]] std::optional<Match> GetHint(KeyFrame *pKF) noexcept {
-    std::optional<Match> out;
-    run("GetHint", [&] {
-      const Entry &entry = by_id_.at(held_id(pKF));
-      if (entry.hint.has_match) out = to_match(entry.hint, entry.kf);
-    });
-    return out;
-  }
+    /// The hint topoloc gave `pKF` when it was added (accepted or not), or `std::nullopt` when it
+    /// had no verified match. Errors: a keyframe not held.
+    [[nodiscard]] std::optional<Match> GetHint(KeyFrame *pKF) noexcept
+    {
+        std::optional<Match> out;
+        run("GetHint", [&] {
+            const Entry &entry = by_id_.at(held_id(pKF));
+            if (entry.hint.has_match)
+                out = to_match(entry.hint, entry.kf);
+        });
+        return out;
+    }
 
-  /// The hints of earlier keyframes that topoloc accepted after the fact since the last call,
-  /// oldest first: when a keyframe completes a consistency streak (`consistent_keyframes`),
-  /// the streak's earlier keyframes, refused while it was short, are accepted too. ORB-SLAM had
-  /// already processed those keyframes; a host can add them as extra loop constraints. Hints
-  /// whose keyframes were erased since are dropped.
-  [[nodiscard]] std::vector<Match> TakeConfirmed() noexcept {
-    std::vector<Match> out;
-    run("TakeConfirmed", [&] {
-      out = std::move(confirmed_);
-      confirmed_.clear();
-    });
-    return out;
-  }
+    /// The hints of earlier keyframes that topoloc accepted after the fact since the last call,
+    /// oldest first: when a keyframe completes a consistency streak (`consistent_keyframes`),
+    /// the streak's earlier keyframes, refused while it was short, are accepted too. ORB-SLAM had
+    /// already processed those keyframes; a host can add them as extra loop constraints. Hints
+    /// whose keyframes were erased since are dropped.
+    [[nodiscard]] std::vector<Match> TakeConfirmed() noexcept
+    {
+        std::vector<Match> out;
+        run("TakeConfirmed", [&] {
+            out = std::move(confirmed_);
+            confirmed_.clear();
+        });
+        return out;
+    }
 
-  /// Number of keyframes held.
-  [[nodiscard]] std::size_t size() const noexcept {
-    std::lock_guard<std::mutex> lock(mutex_);
-    return by_id_.size();
-  }
+    /// Number of keyframes held.
+    [[nodiscard]] std::size_t size() const noexcept
+    {
+        std::lock_guard<std::mutex> lock(mutex_);
+        return by_id_.size();
+    }
 
-  /// Whether `pKF` is held (added and not erased or cleared).
-  [[nodiscard]] bool contains(KeyFrame *pKF) const noexcept {
-    std::lock_guard<std::mutex> lock(mutex_);
-    return by_ptr_.count(pKF) != 0;
-  }
+    /// Whether `pKF` is held (added and not erased or cleared).
+    [[nodiscard]] bool contains(KeyFrame *pKF) const noexcept
+    {
+        std::lock_guard<std::mutex> lock(mutex_);
+        return by_ptr_.count(pKF) != 0;
+    }
 
-  /// The error of the calling thread's last call ("" when it succeeded): "<call>: <reason>".
-  [[nodiscard]] std::string last_error() const {
-    std::lock_guard<std::mutex> lock(mutex_);
-    const auto it = status_.find(std::this_thread::get_id());
-    return it == status_.end() ? std::string() : it->second;
-  }
+    /// The error of the calling thread's last call ("" when it succeeded): "<call>: <reason>".
+    [[nodiscard]] std::string last_error() const
+    {
+        std::lock_guard<std::mutex> lock(mutex_);
+        const auto it = status_.find(std::this_thread::get_id());
+        return it == status_.end() ? std::string() : it->second;
+    }
 
-  /// How many calls failed since construction (all threads).
-  [[nodiscard]] std::size_t error_count() const noexcept {
-    std::lock_guard<std::mutex> lock(mutex_);
-    return errors_;
-  }
+    /// How many calls failed since construction (all threads).
+    [[nodiscard]] std::size_t error_count() const noexcept
+    {
+        std::lock_guard<std::mutex> lock(mutex_);
+        return errors_;
+    }
 
-  /// Replaces the logger of `Settings::logger` (empty = none).
-  void SetLogger(std::function<void(const std::string &)> logger) noexcept {
-    std::lock_guard<std::mutex> lock(mutex_);
-    settings_.logger.swap(logger);
-  }
+    /// Replaces the logger of `Settings::logger` (empty = none).
+    void SetLogger(std::function<void(const std::string &)> logger) noexcept
+    {
+        std::lock_guard<std::mutex> lock(mutex_);
+        settings_.logger.swap(logger);
+    }
 
 private:
-  /// One held keyframe and the hint topoloc gave it.
-  struct Entry {
-    KeyFrame *kf = nullptr;
-    double timestamp = 0.0;  // as added: `clear()` reads nothing from the keyframes
-    topoloc::LoopHint hint;
-  };
+    /// One held keyframe and the hint topoloc gave it.
+    struct Entry {
+        KeyFrame *kf = nullptr;
+        double timestamp = 0.0; // as added: `clear()` reads nothing from the keyframes
+        topoloc::LoopHint hint;
+    };
 
-  /// What identifies a keyframe held before `clear()`: its address, id and timestamp (an
-  /// address alone may be reused by a new keyframe).
-  using Identity = std::tuple<const KeyFrame *, uint64_t, double>;
+    /// What identifies a keyframe held before `clear()`: its address, id and timestamp (an
+    /// address alone may be reused by a new keyframe).
+    using Identity = std::tuple<const KeyFrame *, uint64_t, double>;
 
-  static topoloc::LoopOptions with_intrinsics(topoloc::LoopOptions options, const Intrinsics &k) {
-    options.fx = k.fx;
-    options.fy = k.fy;
-    options.cx = k.cx;
-    options.cy = k.cy;
-    return options;
-  }
-
-  topoloc::LoopDetector new_detector() const {
-    return topoloc::LoopDetector::create(kind_, model_, dim_, options_);
-  }
-
-  static void fail(const std::string &message) { throw std::runtime_error(message); }
-
-  /// Runs `body` under the mutex, records its outcome for the calling thread, and logs a
-  /// failure after unlocking. Returns whether it succeeded.
-  template <typename Body> bool run(const char *call, Body &&body) noexcept {
-    std::string error;
-    std::function<void(const std::string &)> logger;
+    static topoloc::LoopOptions with_intrinsics(topoloc::LoopOptions options, const Intrinsics &k)
     {
-      std::lock_guard<std::mutex> lock(mutex_);
-      error = attempt(call, body);
-      logger = record(error);
+        options.fx = k.fx;
+        options.fy = k.fy;
+        options.cx = k.cx;
+        options.cy = k.cy;
+        return options;
     }
-    if (!error.empty() && logger) {
-      try {
-        logger(error);
-      } catch (...) {  // a logger must not throw; ignore it if it does
-      }
+
+    topoloc::LoopDetector new_detector() const
+    {
+        return topoloc::LoopDetector::create(kind_, model_, dim_, options_);
     }
-    return error.empty();
-  }
 
-  /// `body()`, its failure turned into "<call>: <reason>" ("" on success).
-  template <typename Body> static std::string attempt(const char *call, Body &body) noexcept {
-    try {
-      body();
-      return std::string();
-    } catch (const std::exception &e) {
-      return describe_failure(call, e.what());
-    } catch (...) {
-      return describe_failure(call, "unknown exception");
+    static void fail(const std::string &message) { throw std::runtime_error(message); }
+
+    /// Runs `body` under the mutex, records its outcome for the calling thread, and logs a
+    /// failure after unlocking. Returns whether it succeeded.
+    template <typename Body> bool run(const char *call, Body &&body) noexcept
+    {
+        std::string error;
+        std::function<void(const std::string &)> logger;
+        {
+            std::lock_guard<std::mutex> lock(mutex_);
+            error = attempt(call, body);
+            logger = record(error);
+        }
+        if (!error.empty() && logger) {
+            try {
+                logger(error);
+            } catch (...) { // a logger must not throw; ignore it if it does
+            }
+        }
+        return error.empty();
     }
-  }
 
-  static std::string describe_failure(const char *call, const char *reason) noexcept {
-    try {
-      return std::string(call) + ": " + reason;
-    } catch (...) {
-      return std::string();  // out of memory: nothing better to report
+    /// `body()`, its failure turned into "<call>: <reason>" ("" on success).
+    template <typename Body> static std::string attempt(const char *call, Body &body) noexcept
+    {
+        try {
+            body();
+            return std::string();
+        } catch (const std::exception &e) {
+            return describe_failure(call, e.what());
+        } catch (...) {
+            return describe_failure(call, "unknown exception");
+        }
     }
-  }
 
-  /// Stores `error` as the calling thread's status; returns the logger to call (if any).
-  std::function<void(const std::string &)> record(const std::string &error) noexcept {
-    try {
-      if (!error.empty()) ++errors_;
-      status_[std::this_thread::get_id()] = error;
-      return error.empty() ? nullptr : settings_.logger;
-    } catch (...) {
-      return nullptr;
+    static std::string describe_failure(const char *call, const char *reason) noexcept
+    {
+        try {
+            return std::string(call) + ": " + reason;
+        } catch (...) {
+            return std::string(); // out of memory: nothing better to report
+        }
     }
-  }
 
-  // --- keyframes in ---------------------------------------------------------------------------
-
-  /// The entry of `kf`, adding it first when it is not held; null for a culled keyframe
-  /// (skipped). Throws on any refusal, before anything changed.
-  const Entry *ensure_added(KeyFrame *kf) {
-    if (kf == nullptr) fail("null keyframe");
-    const auto held = by_ptr_.find(kf);
-    if (held != by_ptr_.end()) return &by_id_.at(held->second);
-    const uint64_t id = Access::id(*kf);
-    const double timestamp = Access::timestamp(*kf);
-    if (retired_.count(Identity(kf, id, timestamp)) != 0) fail(retired_message(id));
-    if (Access::is_bad(*kf)) return nullptr;
-    check_order(id, timestamp);
-    topoloc::LoopKeyframe keyframe = assemble(*kf, id, timestamp);
-    const cv::Size size = Access::image(*kf).size();
-    const topoloc::LoopHint hint = detector_.add(keyframe);
-    const Entry &entry = commit(kf, id, timestamp, size, hint);
-    try {
-      Access::added(*kf);
-    } catch (...) {  // documented as ignored: the keyframe is in the database
+    /// Stores `error` as the calling thread's status; returns the logger to call (if any).
+    std::function<void(const std::string &)> record(const std::string &error) noexcept
+    {
+        try {
+            if (!error.empty())
+                ++errors_;
+            status_[std::this_thread::get_id()] = error;
+            return error.empty() ? nullptr : settings_.logger;
+        } catch (...) {
+            return nullptr;
+        }
     }
-    return &entry;
-  }
 
-  static std::string retired_message(uint64_t id) {
-    return "keyframe " + std::to_string(id) + " was added before clear(): the database was reset since";
-  }
+    // --- keyframes in ---------------------------------------------------------------------------
 
-  /// Refuses a keyframe out of order: a held id, an id not above the last, an earlier time.
-  void check_order(uint64_t id, double timestamp) const {
-    const std::string name = "keyframe " + std::to_string(id);
-    if (by_id_.count(id) != 0) fail(name + ": another keyframe with this id is held");
-    if (last_id_ && id <= *last_id_)
-      fail(name + " after keyframe " + std::to_string(*last_id_) + ": ids must increase");
-    if (!std::isfinite(timestamp)) fail(name + ": timestamp is not finite");
-    if (last_id_ && timestamp < last_timestamp_)
-      fail(name + ": timestamp " + std::to_string(timestamp) + " is earlier than the last one");
-  }
-
-  /// The topoloc keyframe of `kf`: keypoints, ORB descriptors, image descriptor, pose and
-  /// scene points. Throws on unusable data.
-  topoloc::LoopKeyframe assemble(KeyFrame &kf, uint64_t id, double timestamp) {
-    topoloc::LoopKeyframe out;
-    out.id = id;
-    out.timestamp = timestamp;
-    const std::vector<cv::KeyPoint> &keys = Access::keypoints(kf);
-    out.keypoints = keypoint_positions(keys);
-    out.keypoint_descriptors = descriptor_bytes(Access::descriptors(kf), keys.size());
-    out.descriptor = describe(Access::image(kf), "keyframe image");
-    const std::optional<Pose> Tcw = Access::camera_from_world(kf);
-    if (Tcw) {
-      check_pose(*Tcw);
-      out.world_T_body = inverse_rigid(*Tcw);  // Twc; the body is the camera
-      out.camera_points = camera_points(kf, *Tcw, keys.size());
+    /// The entry of `kf`, adding it first when it is not held; null for a culled keyframe
+    /// (skipped). Throws on any refusal, before anything changed.
+    const Entry *ensure_added(KeyFrame *kf)
+    {
+        if (kf == nullptr)
+            fail("null keyframe");
+        const auto held = by_ptr_.find(kf);
+        if (held != by_ptr_.end())
+            return &by_id_.at(held->second);
+        const uint64_t id = Access::id(*kf);
+        const double timestamp = Access::timestamp(*kf);
+        if (retired_.count(Identity(kf, id, timestamp)) != 0)
+            fail(retired_message(id));
+        if (Access::is_bad(*kf))
+            return nullptr;
+        check_order(id, timestamp);
+        topoloc::LoopKeyframe keyframe = assemble(*kf, id, timestamp);
+        const cv::Size size = Access::image(*kf).size();
+        const topoloc::LoopHint hint = detector_.add(keyframe);
+        const Entry &entry = commit(kf, id, timestamp, size, hint);
+        try {
+            Access::added(*kf);
+        } catch (...) { // documented as ignored: the keyframe is in the database
+        }
+        return &entry;
     }
-    return out;
-  }
 
-  static std::vector<float> keypoint_positions(const std::vector<cv::KeyPoint> &keys) {
-    std::vector<float> xy;
-    xy.reserve(2 * keys.size());
-    for (const cv::KeyPoint &k : keys) {
-      xy.push_back(k.pt.x);
-      xy.push_back(k.pt.y);
+    static std::string retired_message(uint64_t id)
+    {
+        return "keyframe " + std::to_string(id) +
+               " was added before clear(): the database was reset since";
     }
-    return xy;
-  }
 
-  static std::vector<uint8_t> descriptor_bytes(const cv::Mat &d, std::size_t keypoints) {
-    if (keypoints == 0 && d.empty()) return {};
-    if (d.dims != 2 || d.type() != CV_8UC1 || d.cols != 32 ||
-        static_cast<std::size_t>(d.rows) != keypoints) {
-      fail("descriptors must be " + std::to_string(keypoints) + " x 32 CV_8U (one row per " +
-           "keypoint), got " + std::to_string(d.rows) + " x " + std::to_string(d.cols) +
-           " of type " + std::to_string(d.type()));
+    /// Refuses a keyframe out of order: a held id, an id not above the last, an earlier time.
+    void check_order(uint64_t id, double timestamp) const
+    {
+        const std::string name = "keyframe " + std::to_string(id);
+        if (by_id_.count(id) != 0)
+            fail(name + ": another keyframe with this id is held");
+        if (last_id_ && id <= *last_id_)
+            fail(name + " after keyframe " + std::to_string(*last_id_) + ": ids must increase");
+        if (!std::isfinite(timestamp))
+            fail(name + ": timestamp is not finite");
+        if (last_id_ && timestamp < last_timestamp_)
+            fail(name + ": timestamp " + std::to_string(timestamp) +
+                 " is earlier than the last one");
     }
-    std::vector<uint8_t> bytes(32 * keypoints);
-    for (int r = 0; r < d.rows; ++r)
-      std::copy(d.ptr<uint8_t>(r), d.ptr<uint8_t>(r) + 32, bytes.begin() + 32 * r);
-    return bytes;
-  }
 
-  static void check_pose(const Pose &T) {
-    for (double v : T)
-      if (!std::isfinite(v)) fail("pose Tcw has a NaN or infinite value");
-    if (T[12] != 0.0 || T[13] != 0.0 || T[14] != 0.0 || T[15] != 1.0)
-      fail("pose Tcw's last row is not 0 0 0 1");
-  }
-
-  /// Each keypoint's map point in the camera frame (`Tcw * Xw`), NaN x3 where none.
-  std::vector<float> camera_points(KeyFrame &kf, const Pose &Tcw, std::size_t keypoints) {
-    const auto points = Access::map_points(kf);
-    if (static_cast<std::size_t>(points.size()) != keypoints)
-      fail(std::to_string(points.size()) + " map point matches for " +
-           std::to_string(keypoints) + " keypoints");
-    const float nan = std::numeric_limits<float>::quiet_NaN();
-    std::vector<float> xyz(3 * keypoints, nan);
-    std::size_t i = 0;
-    for (const auto &mp : points) {
-      std::array<double, 3> Xw{};
-      if (Access::world_position(mp, Xw)) write_point(transform_point(Tcw, Xw), &xyz[3 * i]);
-      ++i;
+    /// The topoloc keyframe of `kf`: keypoints, ORB descriptors, image descriptor, pose and
+    /// scene points. Throws on unusable data.
+    topoloc::LoopKeyframe assemble(KeyFrame &kf, uint64_t id, double timestamp)
+    {
+        topoloc::LoopKeyframe out;
+        out.id = id;
+        out.timestamp = timestamp;
+        const std::vector<cv::KeyPoint> &keys = Access::keypoints(kf);
+        out.keypoints = keypoint_positions(keys);
+        out.keypoint_descriptors = descriptor_bytes(Access::descriptors(kf), keys.size());
+        out.descriptor = describe(Access::image(kf), "keyframe image");
+        const std::optional<Pose> Tcw = Access::camera_from_world(kf);
+        if (Tcw) {
+            check_pose(*Tcw);
+            out.world_T_body = inverse_rigid(*Tcw); // Twc; the body is the camera
+            out.camera_points = camera_points(kf, *Tcw, keys.size());
+        }
+        return out;
     }
-    return xyz;
-  }
 
-  /// Writes a finite point (a non-finite one stays NaN: unknown).
-  static void write_point(const std::array<double, 3> &p, float *out) {
-    if (!std::isfinite(p[0]) || !std::isfinite(p[1]) || !std::isfinite(p[2])) return;
-    for (std::size_t k = 0; k < 3; ++k) out[k] = float(p[k]);
-  }
-
-  /// The global descriptor of an image, which must have the first keyframe's size.
-  std::vector<float> describe(const cv::Mat &image, const char *what) {
-    if (image.empty()) fail(std::string(what) + " is empty (is the image member set?)");
-    if (image_size_ && image.size() != *image_size_)
-      fail(std::string(what) + " is " + std::to_string(image.cols) + "x" +
-           std::to_string(image.rows) + ", the first keyframe's was " +
-           std::to_string(image_size_->width) + "x" + std::to_string(image_size_->height));
-    return describer_.describe(topoloc::image_view(image));
-  }
-
-  /// Records an added keyframe (topoloc has it), and the hints it confirmed.
-  const Entry &commit(KeyFrame *kf, uint64_t id, double timestamp, cv::Size size,
-                      const topoloc::LoopHint &hint) {
-    try {
-      Entry &entry = by_id_[id];
-      entry.kf = kf;
-      entry.timestamp = timestamp;
-      entry.hint = hint;
-      by_ptr_[kf] = id;
-      take_confirmed_hints();
-    } catch (...) {  // out of memory: undo, so that topoloc and the index agree
-      forget(id, kf);
-      throw;
+    static std::vector<float> keypoint_positions(const std::vector<cv::KeyPoint> &keys)
+    {
+        std::vector<float> xy;
+        xy.reserve(2 * keys.size());
+        for (const cv::KeyPoint &k : keys) {
+            xy.push_back(k.pt.x);
+            xy.push_back(k.pt.y);
+        }
+        return xy;
     }
-    last_id_ = id;
-    last_timestamp_ = timestamp;
-    if (!image_size_) image_size_ = size;
-    return by_id_.at(id);
-  }
 
-  /// Moves the detector's confirmed hints into the entries and the `TakeConfirmed` queue.
-  void take_confirmed_hints() {
-    for (const topoloc::LoopHint &hint : detector_.confirmed()) {
-      const auto it = by_id_.find(hint.query_id);
-      if (it == by_id_.end()) continue;
-      it->second.hint = hint;
-      confirmed_.push_back(to_match(hint, it->second.kf));
+    static std::vector<uint8_t> descriptor_bytes(const cv::Mat &d, std::size_t keypoints)
+    {
+        if (keypoints == 0 && d.empty())
+            return {};
+        if (d.dims != 2 || d.type() != CV_8UC1 || d.cols != 32 ||
+            static_cast<std::size_t>(d.rows) != keypoints) {
+            fail("descriptors must be " + std::to_string(keypoints) + " x 32 CV_8U (one row per " +
+                 "keypoint), got " + std::to_string(d.rows) + " x " + std::to_string(d.cols) +
+                 " of type " + std::to_string(d.type()));
+        }
+        std::vector<uint8_t> bytes(32 * keypoints);
+        for (int r = 0; r < d.rows; ++r)
+            std::copy(d.ptr<uint8_t>(r), d.ptr<uint8_t>(r) + 32, bytes.begin() + 32 * r);
+        return bytes;
     }
-  }
 
-  void forget(uint64_t id, KeyFrame *kf) noexcept {
-    try {
-      detector_.erase(id);
-    } catch (...) {
+    static void check_pose(const Pose &T)
+    {
+        for (double v : T)
+            if (!std::isfinite(v))
+                fail("pose Tcw has a NaN or infinite value");
+        if (T[12] != 0.0 || T[13] != 0.0 || T[14] != 0.0 || T[15] != 1.0)
+            fail("pose Tcw's last row is not 0 0 0 1");
     }
-    by_id_.erase(id);
-    by_ptr_.erase(kf);
-  }
 
-  // --- keyframes out --------------------------------------------------------------------------
-
-  void erase_if_held(KeyFrame *kf) {
-    if (kf == nullptr) fail("null keyframe");
-    const auto it = by_ptr_.find(kf);
-    if (it != by_ptr_.end()) return erase_held(it->second);
-    const auto retired = retired_.lower_bound(
-        Identity(kf, 0, -std::numeric_limits<double>::infinity()));
-    if (retired == retired_.end() || std::get<0>(*retired) != kf) return;  // never added
-    const uint64_t id = Access::id(*kf);
-    if (retired_.count(Identity(kf, id, Access::timestamp(*kf))) != 0) fail(retired_message(id));
-  }
-
-  uint64_t held_id(KeyFrame *kf) const {
-    const auto it = by_ptr_.find(kf);
-    if (it == by_ptr_.end())
-      fail(kf == nullptr ? std::string("null keyframe")
-                         : "keyframe is not in the database (never added, erased, or added "
-                           "before clear())");
-    return it->second;
-  }
-
-  /// Erases held keyframe `id` from topoloc and the index, and drops hints naming it.
-  void erase_held(uint64_t id) {
-    detector_.erase(id);  // throws (and changes nothing) if topoloc does not hold it
-    KeyFrame *kf = by_id_.at(id).kf;
-    by_id_.erase(id);
-    by_ptr_.erase(kf);
-    std::vector<Match> kept;
-    for (Match &m : confirmed_)
-      if (m.query != kf && m.matched != kf) kept.push_back(m);
-    confirmed_.swap(kept);
-  }
-
-  std::vector<uint64_t> ids_in_map(const void *map) const {
-    std::vector<uint64_t> ids;
-    for (const auto &[id, entry] : by_id_)
-      if (Access::map_of(*entry.kf) == map) ids.push_back(id);
-    return ids;
-  }
-
-  void reset() {
-    topoloc::LoopDetector fresh = new_detector();  // may throw: nothing changed yet
-    std::set<Identity> retired;
-    for (const auto &[id, entry] : by_id_)
-      retired.insert(Identity(entry.kf, id, entry.timestamp));
-    detector_ = std::move(fresh);
-    retired_.swap(retired);
-    by_id_.clear();
-    by_ptr_.clear();
-    confirmed_.clear();
-    last_id_.reset();
-    last_timestamp_ = 0.0;
-    image_size_.reset();
-  }
-
-  /// The held, good keyframe with id `id`, or null.
-  KeyFrame *usable(uint64_t id) const {
-    const auto it = by_id_.find(id);
-    if (it == by_id_.end() || Access::is_bad(*it->second.kf)) return nullptr;
-    return it->second.kf;
-  }
-
-  /// The matched keyframe of an accepted hint, if still usable (null for no entry).
-  KeyFrame *accepted_match(const Entry *entry) const {
-    return entry != nullptr && entry->hint.accepted ? usable(entry->hint.matched_id) : nullptr;
-  }
-
-  static void append(std::vector<KeyFrame *> &to, KeyFrame *kf) noexcept {
-    try {
-      to.push_back(kf);
-    } catch (...) {
+    /// Each keypoint's map point in the camera frame (`Tcw * Xw`), NaN x3 where none.
+    std::vector<float> camera_points(KeyFrame &kf, const Pose &Tcw, std::size_t keypoints)
+    {
+        const auto points = Access::map_points(kf);
+        if (static_cast<std::size_t>(points.size()) != keypoints)
+            fail(std::to_string(points.size()) + " map point matches for " +
+                 std::to_string(keypoints) + " keypoints");
+        const float nan = std::numeric_limits<float>::quiet_NaN();
+        std::vector<float> xyz(3 * keypoints, nan);
+        std::size_t i = 0;
+        for (const auto &mp : points) {
+            std::array<double, 3> Xw{};
+            if (Access::world_position(mp, Xw))
+                write_point(transform_point(Tcw, Xw), &xyz[3 * i]);
+            ++i;
+        }
+        return xyz;
     }
-  }
 
-  std::vector<KeyFrame *> relocalize(Frame *F, const void *map, bool by_map) noexcept {
-    std::vector<KeyFrame *> found;
-    const bool ok = run("DetectRelocalizationCandidates", [&] {
-      if (F == nullptr) fail("null frame");
-      const std::vector<float> d = describe(Access::frame_image(*F), "frame image");
-      if (by_id_.empty()) return;
-      for (const topoloc::LoopCandidate &c : detector_.query(d, by_id_.size())) {
-        if (found.size() >= settings_.relocalization_candidates) break;
-        KeyFrame *kf = usable(c.keyframe_id);
-        if (kf != nullptr && (!by_map || Access::map_of(*kf) == map)) found.push_back(kf);
-      }
-    });
-    if (!ok) found.clear();
-    return found;
-  }
+    /// Writes a finite point (a non-finite one stays NaN: unknown).
+    static void write_point(const std::array<double, 3> &p, float *out)
+    {
+        if (!std::isfinite(p[0]) || !std::isfinite(p[1]) || !std::isfinite(p[2]))
+            return;
+        for (std::size_t k = 0; k < 3; ++k)
+            out[k] = float(p[k]);
+    }
 
-  Match to_match(const topoloc::LoopHint &hint, KeyFrame *query) const {
-    Match m;
-    m.query = query;
-    m.matched = hint.has_match ? usable(hint.matched_id) : nullptr;
-    m.accepted = hint.accepted;
-    m.gate = hint.gate;
-    m.inliers = hint.inliers;
-    m.confidence = hint.confidence;
-    m.has_pose = hint.has_pose;
-    m.scale_known = hint.scale_known;
-    m.matched_T_query = hint.matched_T_query;
-    m.query_T_matched = inverse_rigid(hint.matched_T_query);
-    m.covariance = hint.covariance;
-    return m;
-  }
+    /// The global descriptor of an image, which must have the first keyframe's size.
+    std::vector<float> describe(const cv::Mat &image, const char *what)
+    {
+        if (image.empty())
+            fail(std::string(what) + " is empty (is the image member set?)");
+        if (image_size_ && image.size() != *image_size_)
+            fail(std::string(what) + " is " + std::to_string(image.cols) + "x" +
+                 std::to_string(image.rows) + ", the first keyframe's was " +
+                 std::to_string(image_size_->width) + "x" + std::to_string(image_size_->height));
+        return describer_.describe(topoloc::image_view(image));
+    }
 
-  const std::string kind_;
-  const std::string model_;
-  const uint32_t dim_;
-  const topoloc::LoopOptions options_;
+    /// Records an added keyframe (topoloc has it), and the hints it confirmed.
+    const Entry &commit(KeyFrame *kf, uint64_t id, double timestamp, cv::Size size,
+                        const topoloc::LoopHint &hint)
+    {
+        try {
+            Entry &entry = by_id_[id];
+            entry.kf = kf;
+            entry.timestamp = timestamp;
+            entry.hint = hint;
+            by_ptr_[kf] = id;
+            take_confirmed_hints();
+        } catch (...) { // out of memory: undo, so that topoloc and the index agree
+            forget(id, kf);
+            throw;
+        }
+        last_id_ = id;
+        last_timestamp_ = timestamp;
+        if (!image_size_)
+            image_size_ = size;
+        return by_id_.at(id);
+    }
 
-  mutable std::mutex mutex_;  // guards everything below
-  topoloc::Describer describer_;
-  topoloc::LoopDetector detector_;
-  Settings settings_;
-  std::map<uint64_t, Entry> by_id_;
-  std::unordered_map<const KeyFrame *, uint64_t> by_ptr_;
-  std::set<Identity> retired_;  // held at the last clear()
-  std::vector<Match> confirmed_;
-  std::optional<uint64_t> last_id_;
-  double last_timestamp_ = 0.0;
-  std::optional<cv::Size> image_size_;
-  std::unordered_map<std::thread::id, std::string> status_;
-  std::size_t errors_ = 0;
+    /// Moves the detector's confirmed hints into the entries and the `TakeConfirmed` queue.
+    void take_confirmed_hints()
+    {
+        for (const topoloc::LoopHint &hint : detector_.confirmed()) {
+            const auto it = by_id_.find(hint.query_id);
+            if (it == by_id_.end())
+                continue;
+            it->second.hint = hint;
+            confirmed_.push_back(to_match(hint, it->second.kf));
+        }
+    }
+
+    void forget(uint64_t id, KeyFrame *kf) noexcept
+    {
+        try {
+            detector_.erase(id);
+        } catch (...) {
+        }
+        by_id_.erase(id);
+        by_ptr_.erase(kf);
+    }
+
+    // --- keyframes out --------------------------------------------------------------------------
+
+    void erase_if_held(KeyFrame *kf)
+    {
+        if (kf == nullptr)
+            fail("null keyframe");
+        const auto it = by_ptr_.find(kf);
+        if (it != by_ptr_.end())
+            return erase_held(it->second);
+        const auto retired =
+            retired_.lower_bound(Identity(kf, 0, -std::numeric_limits<double>::infinity()));
+        if (retired == retired_.end() || std::get<0>(*retired) != kf)
+            return; // never added
+        const uint64_t id = Access::id(*kf);
+        if (retired_.count(Identity(kf, id, Access::timestamp(*kf))) != 0)
+            fail(retired_message(id));
+    }
+
+    uint64_t held_id(KeyFrame *kf) const
+    {
+        const auto it = by_ptr_.find(kf);
+        if (it == by_ptr_.end())
+            fail(kf == nullptr ? std::string("null keyframe")
+                               : "keyframe is not in the database (never added, erased, or added "
+                                 "before clear())");
+        return it->second;
+    }
+
+    /// Erases held keyframe `id` from topoloc and the index, and drops hints naming it.
+    void erase_held(uint64_t id)
+    {
+        detector_.erase(id); // throws (and changes nothing) if topoloc does not hold it
+        KeyFrame *kf = by_id_.at(id).kf;
+        by_id_.erase(id);
+        by_ptr_.erase(kf);
+        std::vector<Match> kept;
+        for (Match &m : confirmed_)
+            if (m.query != kf && m.matched != kf)
+                kept.push_back(m);
+        confirmed_.swap(kept);
+    }
+
+    std::vector<uint64_t> ids_in_map(const void *map) const
+    {
+        std::vector<uint64_t> ids;
+        for (const auto &[id, entry] : by_id_)
+            if (Access::map_of(*entry.kf) == map)
+                ids.push_back(id);
+        return ids;
+    }
+
+    void reset()
+    {
+        topoloc::LoopDetector fresh = new_detector(); // may throw: nothing changed yet
+        std::set<Identity> retired;
+        for (const auto &[id, entry] : by_id_)
+            retired.insert(Identity(entry.kf, id, entry.timestamp));
+        detector_ = std::move(fresh);
+        retired_.swap(retired);
+        by_id_.clear();
+        by_ptr_.clear();
+        confirmed_.clear();
+        last_id_.reset();
+        last_timestamp_ = 0.0;
+        image_size_.reset();
+    }
+
+    /// The held, good keyframe with id `id`, or null.
+    KeyFrame *usable(uint64_t id) const
+    {
+        const auto it = by_id_.find(id);
+        if (it == by_id_.end() || Access::is_bad(*it->second.kf))
+            return nullptr;
+        return it->second.kf;
+    }
+
+    /// The matched keyframe of an accepted hint, if still usable (null for no entry).
+    KeyFrame *accepted_match(const Entry *entry) const
+    {
+        return entry != nullptr && entry->hint.accepted ? usable(entry->hint.matched_id) : nullptr;
+    }
+
+    static void append(std::vector<KeyFrame *> &to, KeyFrame *kf) noexcept
+    {
+        try {
+            to.push_back(kf);
+        } catch (...) {
+        }
+    }
+
+    std::vector<KeyFrame *> relocalize(Frame *F, const void *map, bool by_map) noexcept
+    {
+        std::vector<KeyFrame *> found;
+        const bool ok = run("DetectRelocalizationCandidates", [&] {
+            if (F == nullptr)
+                fail("null frame");
+            const std::vector<float> d = describe(Access::frame_image(*F), "frame image");
+            if (by_id_.empty())
+                return;
+            for (const topoloc::LoopCandidate &c : detector_.query(d, by_id_.size())) {
+                if (found.size() >= settings_.relocalization_candidates)
+                    break;
+                KeyFrame *kf = usable(c.keyframe_id);
+                if (kf != nullptr && (!by_map || Access::map_of(*kf) == map))
+                    found.push_back(kf);
+            }
+        });
+        if (!ok)
+            found.clear();
+        return found;
+    }
+
+    Match to_match(const topoloc::LoopHint &hint, KeyFrame *query) const
+    {
+        Match m;
+        m.query = query;
+        m.matched = hint.has_match ? usable(hint.matched_id) : nullptr;
+        m.accepted = hint.accepted;
+        m.gate = hint.gate;
+        m.inliers = hint.inliers;
+        m.confidence = hint.confidence;
+        m.has_pose = hint.has_pose;
+        m.scale_known = hint.scale_known;
+        m.matched_T_query = hint.matched_T_query;
+        m.query_T_matched = inverse_rigid(hint.matched_T_query);
+        m.covariance = hint.covariance;
+        return m;
+    }
+
+    const std::string kind_;
+    const std::string model_;
+    const uint32_t dim_;
+    const topoloc::LoopOptions options_;
+
+    mutable std::mutex mutex_; // guards everything below
+    topoloc::Describer describer_;
+    topoloc::LoopDetector detector_;
+    Settings settings_;
+    std::map<uint64_t, Entry> by_id_;
+    std::unordered_map<const KeyFrame *, uint64_t> by_ptr_;
+    std::set<Identity> retired_; // held at the last clear()
+    std::vector<Match> confirmed_;
+    std::optional<uint64_t> last_id_;
+    double last_timestamp_ = 0.0;
+    std::optional<cv::Size> image_size_;
+    std::unordered_map<std::thread::id, std::string> status_;
+    std::size_t errors_ = 0;
 };
 
-}  // namespace topoloc_orbslam
+} // namespace topoloc_orbslam
 
-#endif  // TOPOLOC_ORBSLAM_HPP
+#endif // TOPOLOC_ORBSLAM_HPP

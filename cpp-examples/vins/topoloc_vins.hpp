@@ -38,84 +38,90 @@ using Descriptor = std::array<uint8_t, 32>;
 
 /// One keyframe as loop_fusion has it. Borrowed by `LoopDetector::detectLoop` for the call.
 struct KeyFrame {
-  /// VINS's keyframe index; must increase from one keyframe to the next.
-  int index = -1;
-  /// Seconds; must not decrease.
-  double time_stamp = 0.0;
-  /// The keyframe image (CV_8UC1 grey or CV_8UC3 BGR), undistorted; every keyframe the size
-  /// of the first.
-  cv::Mat image;
-  /// VIO pose of the body (IMU) in the VIO world: `vio_T_w_i`, `vio_R_w_i`.
-  Eigen::Vector3d vio_T_w_i = Eigen::Vector3d::Zero();
-  Eigen::Matrix3d vio_R_w_i = Eigen::Matrix3d::Identity();
-  /// Optional: the tracked points of the sliding window, with their VIO world positions
-  /// (`point_3d`), undistorted pixels (`point_2d_uv`) and descriptors (VINS:
-  /// `window_brief_descriptors`); all three the same length.
-  std::vector<cv::Point3f> point_3d;
-  std::vector<cv::Point2f> point_2d_uv;
-  std::vector<Descriptor> window_descriptors;
-  /// Optional: further keypoints without 3D (VINS: `keypoints` and `brief_descriptors`, its
-  /// extra FAST corners), undistorted pixels; the same length.
-  std::vector<cv::Point2f> keypoints;
-  std::vector<Descriptor> descriptors;
+    /// VINS's keyframe index; must increase from one keyframe to the next.
+    int index = -1;
+    /// Seconds; must not decrease.
+    double time_stamp = 0.0;
+    /// The keyframe image (CV_8UC1 grey or CV_8UC3 BGR), undistorted; every keyframe the size
+    /// of the first.
+    cv::Mat image;
+    /// VIO pose of the body (IMU) in the VIO world: `vio_T_w_i`, `vio_R_w_i`.
+    Eigen::Vector3d vio_T_w_i = Eigen::Vector3d::Zero();
+    Eigen::Matrix3d vio_R_w_i = Eigen::Matrix3d::Identity();
+    /// Optional: the tracked points of the sliding window, with their VIO world positions
+    /// (`point_3d`), undistorted pixels (`point_2d_uv`) and descriptors (VINS:
+    /// `window_brief_descriptors`); all three the same length.
+    std::vector<cv::Point3f> point_3d;
+    std::vector<cv::Point2f> point_2d_uv;
+    std::vector<Descriptor> window_descriptors;
+    /// Optional: further keypoints without 3D (VINS: `keypoints` and `brief_descriptors`, its
+    /// extra FAST corners), undistorted pixels; the same length.
+    std::vector<cv::Point2f> keypoints;
+    std::vector<Descriptor> descriptors;
 };
 
 /// What VINS's findConnection computes for a loop: the new keyframe `cur_index`'s body in the
 /// old keyframe `old_index`'s body frame, and the yaw between them.
 struct LoopInfo {
-  int cur_index = -1;
-  int old_index = -1;
-  /// `R_old^T (t_cur - t_old)`, metres (VINS `relative_t`).
-  Eigen::Vector3d relative_t = Eigen::Vector3d::Zero();
-  /// `R_old^T R_cur` (VINS `relative_q`).
-  Eigen::Quaterniond relative_q = Eigen::Quaterniond::Identity();
-  /// yaw(R_cur) - yaw(R_old) in degrees, (-180, 180], as VINS computes it from the VIO
-  /// rotation of the new keyframe and the loop's rotation of the old one.
-  double relative_yaw = 0.0;
-  /// Covariance of the relative pose (body frames, right perturbation), GTSAM Pose3 order:
-  /// rotation (rad) x y z, then translation (m) x y z.
-  Eigen::Matrix<double, 6, 6> covariance = Eigen::Matrix<double, 6, 6>::Zero();
-  /// Fundamental-matrix inliers of the pair.
-  uint32_t inliers = 0;
+    int cur_index = -1;
+    int old_index = -1;
+    /// `R_old^T (t_cur - t_old)`, metres (VINS `relative_t`).
+    Eigen::Vector3d relative_t = Eigen::Vector3d::Zero();
+    /// `R_old^T R_cur` (VINS `relative_q`).
+    Eigen::Quaterniond relative_q = Eigen::Quaterniond::Identity();
+    /// yaw(R_cur) - yaw(R_old) in degrees, (-180, 180], as VINS computes it from the VIO
+    /// rotation of the new keyframe and the loop's rotation of the old one.
+    double relative_yaw = 0.0;
+    /// Covariance of the relative pose (body frames, right perturbation), GTSAM Pose3 order:
+    /// rotation (rad) x y z, then translation (m) x y z.
+    Eigen::Matrix<double, 6, 6> covariance = Eigen::Matrix<double, 6, 6>::Zero();
+    /// Fundamental-matrix inliers of the pair.
+    uint32_t inliers = 0;
 
-  /// VINS's `loop_info`: [tx ty tz qw qx qy qz yaw_deg].
-  Eigen::Matrix<double, 8, 1> loop_info() const {
-    Eigen::Matrix<double, 8, 1> v;
-    v << relative_t, relative_q.w(), relative_q.x(), relative_q.y(), relative_q.z(), relative_yaw;
-    return v;
-  }
+    /// VINS's `loop_info`: [tx ty tz qw qx qy qz yaw_deg].
+    Eigen::Matrix<double, 8, 1> loop_info() const
+    {
+        Eigen::Matrix<double, 8, 1> v;
+        v << relative_t, relative_q.w(), relative_q.x(), relative_q.y(), relative_q.z(),
+            relative_yaw;
+        return v;
+    }
 };
 
 /// Configuration: the camera and its extrinsics, the exclusion window and VINS's own gates.
 struct Config {
-  /// Pinhole intrinsics of the undistorted keyframe images, pixels.
-  double fx = 0, fy = 0, cx = 0, cy = 0;
-  /// The camera in the body frame (VINS `tic`, `qic`): optical axes z forward, x right, y down.
-  Eigen::Vector3d tic = Eigen::Vector3d::Zero();
-  Eigen::Matrix3d qic = Eigen::Matrix3d::Identity();
-  /// Keyframes whose index is within this many of the new one's are never candidates (VINS
-  /// queries DBoW2 with `max_id = index - 50`).
-  uint64_t exclude_recent = 50;
-  /// VINS's findConnection gates: |relative yaw| below this, degrees, and |relative_t| below
-  /// `max_translation_m`.
-  double max_yaw_deg = 30.0;
-  double max_translation_m = 20.0;
-  /// ORB keypoints extracted from the image when a keyframe brings no points of its own.
-  int orb_features = 1000;
-  /// topoloc's loop options; the fields above override `fx`..`cy` and `exclude_recent_ids`.
-  topoloc::LoopOptions options = topoloc::default_loop_options();
+    /// Pinhole intrinsics of the undistorted keyframe images, pixels.
+    double fx = 0, fy = 0, cx = 0, cy = 0;
+    /// The camera in the body frame (VINS `tic`, `qic`): optical axes z forward, x right, y down.
+    Eigen::Vector3d tic = Eigen::Vector3d::Zero();
+    Eigen::Matrix3d qic = Eigen::Matrix3d::Identity();
+    /// Keyframes whose index is within this many of the new one's are never candidates (VINS
+    /// queries DBoW2 with `max_id = index - 50`).
+    uint64_t exclude_recent = 50;
+    /// VINS's findConnection gates: |relative yaw| below this, degrees, and |relative_t| below
+    /// `max_translation_m`.
+    double max_yaw_deg = 30.0;
+    double max_translation_m = 20.0;
+    /// ORB keypoints extracted from the image when a keyframe brings no points of its own.
+    int orb_features = 1000;
+    /// topoloc's loop options; the fields above override `fx`..`cy` and `exclude_recent_ids`.
+    topoloc::LoopOptions options = topoloc::default_loop_options();
 };
 
 /// Yaw (rotation about z) of `R`, degrees, as VINS's `Utility::R2ypr` gives it.
-inline double yaw_deg(const Eigen::Matrix3d &R) {
-  return std::atan2(R(1, 0), R(0, 0)) * 180.0 / M_PI;
+inline double yaw_deg(const Eigen::Matrix3d &R)
+{
+    return std::atan2(R(1, 0), R(0, 0)) * 180.0 / M_PI;
 }
 
 /// `angle` in (-180, 180] degrees.
-inline double normalize_deg(double angle) {
-  while (angle > 180.0) angle -= 360.0;
-  while (angle <= -180.0) angle += 360.0;
-  return angle;
+inline double normalize_deg(double angle)
+{
+    while (angle > 180.0)
+        angle -= 360.0;
+    while (angle <= -180.0)
+        angle += 360.0;
+    return angle;
 }
 
 /// The loop detector of a VINS pose graph. Owns a topoloc describer (of the given map) and
@@ -129,280 +135,310 @@ inline double normalize_deg(double angle) {
 /// Thread safety: one thread at a time (VINS calls it from its pose-graph thread).
 class LoopDetector {
 public:
-  /// A detector whose keyframe images are described by `describer_map`'s describer (a map
-  /// built from images of another run or place: its PCA is never fitted on the run itself).
-  LoopDetector(const topoloc::Map &describer_map, const Config &config)
-      : config_(config),
-        describer_(describer_map),
-        kind_(describer_map.descriptor_kind()),
-        model_(describer_map.descriptor_model()),
-        dim_(describer_map.dim()),
-        orb_(cv::ORB::create(config.orb_features)) {
-    config_.options.fx = config.fx;
-    config_.options.fy = config.fy;
-    config_.options.cx = config.cx;
-    config_.options.cy = config.cy;
-    config_.options.exclude_recent_ids = config.exclude_recent;
-    body_T_camera_.setIdentity();
-    body_T_camera_.linear() = config.qic;
-    body_T_camera_.translation() = config.tic;
-    clear();
-  }
-
-  /// Sets the function that receives every error message and every refused loop (e.g.
-  /// ROS_WARN or spdlog).
-  void set_logger(std::function<void(const std::string &)> logger) { logger_ = std::move(logger); }
-
-  /// The last error message ("" when the last call succeeded).
-  const std::string &last_error() const noexcept { return last_error_; }
-
-  /// Keyframes added since construction or the last `clear`.
-  std::size_t size() const noexcept { return poses_.size(); }
-
-  /// Forgets every keyframe: a new run starts (new indices may start anywhere).
-  void clear() {
-    detector_ = topoloc::LoopDetector::create(kind_, model_, dim_, config_.options);
-    poses_.clear();
-    loops_.clear();
-    confirmed_.clear();
-    image_size_ = cv::Size();
-    last_index_.reset();
-    last_error_.clear();
-  }
-
-  /// VINS's `detectLoop(keyframe, frame_index)`: adds `keyframe` (whose `index` must equal
-  /// `frame_index`) and returns the index of the old keyframe of its accepted loop, or -1 (no
-  /// loop, a loop refused by VINS's gates, or an error: see `last_error()`). The accepted loop's
-  /// `LoopInfo` is then available from `findConnection`.
-  int detectLoop(const KeyFrame &keyframe, int frame_index) {
-    last_error_.clear();
-    confirmed_.clear();
-    if (keyframe.index != frame_index) {
-      return fail("keyframe.index " + std::to_string(keyframe.index) + " is not frame_index " +
-                  std::to_string(frame_index));
+    /// A detector whose keyframe images are described by `describer_map`'s describer (a map
+    /// built from images of another run or place: its PCA is never fitted on the run itself).
+    LoopDetector(const topoloc::Map &describer_map, const Config &config)
+        : config_(config), describer_(describer_map), kind_(describer_map.descriptor_kind()),
+          model_(describer_map.descriptor_model()), dim_(describer_map.dim()),
+          orb_(cv::ORB::create(config.orb_features))
+    {
+        config_.options.fx = config.fx;
+        config_.options.fy = config.fy;
+        config_.options.cx = config.cx;
+        config_.options.cy = config.cy;
+        config_.options.exclude_recent_ids = config.exclude_recent;
+        body_T_camera_.setIdentity();
+        body_T_camera_.linear() = config.qic;
+        body_T_camera_.translation() = config.tic;
+        clear();
     }
-    std::string why = validate(keyframe);
-    if (!why.empty()) return fail(why);
-    topoloc::LoopHint hint;
-    try {
-      hint = add(keyframe);
-    } catch (const std::exception &e) {  // topoloc::Error, cv::Exception: nothing was added
-      return fail(std::string("keyframe ") + std::to_string(keyframe.index) + ": " + e.what());
-    }
-    poses_[keyframe.index] = body_pose(keyframe);
-    last_index_ = keyframe.index;
-    for (const topoloc::LoopHint &earlier : detector_.confirmed()) {
-      if (std::optional<LoopInfo> info = accept(earlier)) confirmed_.push_back(*info);
-    }
-    const std::optional<LoopInfo> info = hint.accepted ? accept(hint) : std::nullopt;
-    return info ? info->old_index : -1;
-  }
 
-  /// VINS's `findConnection`: the loop of keyframe `cur_index` with `old_index` as detected,
-  /// written to `info`; false when there is none (never for a keyframe `detectLoop` refused).
-  bool findConnection(int cur_index, int old_index, LoopInfo &info) const {
-    const auto found = loops_.find(cur_index);
-    if (found == loops_.end() || found->second.old_index != old_index) return false;
-    info = found->second;
-    return true;
-  }
+    /// Sets the function that receives every error message and every refused loop (e.g.
+    /// ROS_WARN or spdlog).
+    void set_logger(std::function<void(const std::string &)> logger)
+    {
+        logger_ = std::move(logger);
+    }
 
-  /// Loops of earlier keyframes that the last `detectLoop` confirmed (topoloc accepts the first
-  /// keyframes of a revisit once a later one completes the consistency streak): the host adds
-  /// them to its pose graph as it does the current one's. Replaced by the next `detectLoop`.
-  const std::vector<LoopInfo> &confirmed() const noexcept { return confirmed_; }
+    /// The last error message ("" when the last call succeeded).
+    const std::string &last_error() const noexcept { return last_error_; }
+
+    /// Keyframes added since construction or the last `clear`.
+    std::size_t size() const noexcept { return poses_.size(); }
+
+    /// Forgets every keyframe: a new run starts (new indices may start anywhere).
+    void clear()
+    {
+        detector_ = topoloc::LoopDetector::create(kind_, model_, dim_, config_.options);
+        poses_.clear();
+        loops_.clear();
+        confirmed_.clear();
+        image_size_ = cv::Size();
+        last_index_.reset();
+        last_error_.clear();
+    }
+
+    /// VINS's `detectLoop(keyframe, frame_index)`: adds `keyframe` (whose `index` must equal
+    /// `frame_index`) and returns the index of the old keyframe of its accepted loop, or -1 (no
+    /// loop, a loop refused by VINS's gates, or an error: see `last_error()`). The accepted loop's
+    /// `LoopInfo` is then available from `findConnection`.
+    int detectLoop(const KeyFrame &keyframe, int frame_index)
+    {
+        last_error_.clear();
+        confirmed_.clear();
+        if (keyframe.index != frame_index) {
+            return fail("keyframe.index " + std::to_string(keyframe.index) +
+                        " is not frame_index " + std::to_string(frame_index));
+        }
+        std::string why = validate(keyframe);
+        if (!why.empty())
+            return fail(why);
+        topoloc::LoopHint hint;
+        try {
+            hint = add(keyframe);
+        } catch (const std::exception &e) { // topoloc::Error, cv::Exception: nothing was added
+            return fail(std::string("keyframe ") + std::to_string(keyframe.index) + ": " +
+                        e.what());
+        }
+        poses_[keyframe.index] = body_pose(keyframe);
+        last_index_ = keyframe.index;
+        for (const topoloc::LoopHint &earlier : detector_.confirmed()) {
+            if (std::optional<LoopInfo> info = accept(earlier))
+                confirmed_.push_back(*info);
+        }
+        const std::optional<LoopInfo> info = hint.accepted ? accept(hint) : std::nullopt;
+        return info ? info->old_index : -1;
+    }
+
+    /// VINS's `findConnection`: the loop of keyframe `cur_index` with `old_index` as detected,
+    /// written to `info`; false when there is none (never for a keyframe `detectLoop` refused).
+    bool findConnection(int cur_index, int old_index, LoopInfo &info) const
+    {
+        const auto found = loops_.find(cur_index);
+        if (found == loops_.end() || found->second.old_index != old_index)
+            return false;
+        info = found->second;
+        return true;
+    }
+
+    /// Loops of earlier keyframes that the last `detectLoop` confirmed (topoloc accepts the first
+    /// keyframes of a revisit once a later one completes the consistency streak): the host adds
+    /// them to its pose graph as it does the current one's. Replaced by the next `detectLoop`.
+    const std::vector<LoopInfo> &confirmed() const noexcept { return confirmed_; }
 
 private:
-  using Isometry = Eigen::Isometry3d;
+    using Isometry = Eigen::Isometry3d;
 
-  /// Records and logs an error of the current call; returns detectLoop's "no loop".
-  int fail(const std::string &message) {
-    last_error_ = "topoloc_vins: " + message;
-    if (logger_) logger_(last_error_);
-    return -1;
-  }
+    /// Records and logs an error of the current call; returns detectLoop's "no loop".
+    int fail(const std::string &message)
+    {
+        last_error_ = "topoloc_vins: " + message;
+        if (logger_)
+            logger_(last_error_);
+        return -1;
+    }
 
-  /// Logs a refused loop (not an error of the call).
-  void note(const std::string &message) const {
-    if (logger_) logger_("topoloc_vins: " + message);
-  }
+    /// Logs a refused loop (not an error of the call).
+    void note(const std::string &message) const
+    {
+        if (logger_)
+            logger_("topoloc_vins: " + message);
+    }
 
-  static bool finite(const Eigen::MatrixXd &m) { return m.allFinite(); }
+    static bool finite(const Eigen::MatrixXd &m) { return m.allFinite(); }
 
-  /// Why `keyframe` cannot be used, or "".
-  std::string validate(const KeyFrame &keyframe) const {
-    const std::string name = "keyframe " + std::to_string(keyframe.index);
-    if (last_index_ && keyframe.index <= *last_index_) {
-      return name + " does not follow keyframe " + std::to_string(*last_index_) +
-             (keyframe.index == *last_index_ ? " (duplicate index)" : " (out of order)");
+    /// Why `keyframe` cannot be used, or "".
+    std::string validate(const KeyFrame &keyframe) const
+    {
+        const std::string name = "keyframe " + std::to_string(keyframe.index);
+        if (last_index_ && keyframe.index <= *last_index_) {
+            return name + " does not follow keyframe " + std::to_string(*last_index_) +
+                   (keyframe.index == *last_index_ ? " (duplicate index)" : " (out of order)");
+        }
+        if (!finite(keyframe.vio_T_w_i) || !finite(keyframe.vio_R_w_i) ||
+            !std::isfinite(keyframe.time_stamp)) {
+            return name + " has a non-finite pose or timestamp";
+        }
+        const double orthogonality =
+            (keyframe.vio_R_w_i.transpose() * keyframe.vio_R_w_i - Eigen::Matrix3d::Identity())
+                .norm();
+        if (orthogonality > 1e-6 || keyframe.vio_R_w_i.determinant() < 0) {
+            return name + " has a vio_R_w_i that is not a rotation";
+        }
+        if (keyframe.image.empty() || keyframe.image.depth() != CV_8U ||
+            (keyframe.image.channels() != 1 && keyframe.image.channels() != 3)) {
+            return name + " needs an 8-bit grey or BGR image";
+        }
+        if (!image_size_.empty() && keyframe.image.size() != image_size_) {
+            return name + " has a " + std::to_string(keyframe.image.cols) + "x" +
+                   std::to_string(keyframe.image.rows) + " image, the first keyframe's was " +
+                   std::to_string(image_size_.width) + "x" + std::to_string(image_size_.height);
+        }
+        if (keyframe.point_3d.size() != keyframe.point_2d_uv.size() ||
+            keyframe.point_3d.size() != keyframe.window_descriptors.size()) {
+            return name + ": point_3d, point_2d_uv and window_descriptors differ in length";
+        }
+        if (keyframe.keypoints.size() != keyframe.descriptors.size()) {
+            return name + ": keypoints and descriptors differ in length";
+        }
+        return "";
     }
-    if (!finite(keyframe.vio_T_w_i) || !finite(keyframe.vio_R_w_i) || !std::isfinite(keyframe.time_stamp)) {
-      return name + " has a non-finite pose or timestamp";
-    }
-    const double orthogonality = (keyframe.vio_R_w_i.transpose() * keyframe.vio_R_w_i -
-                                  Eigen::Matrix3d::Identity()).norm();
-    if (orthogonality > 1e-6 || keyframe.vio_R_w_i.determinant() < 0) {
-      return name + " has a vio_R_w_i that is not a rotation";
-    }
-    if (keyframe.image.empty() || keyframe.image.depth() != CV_8U ||
-        (keyframe.image.channels() != 1 && keyframe.image.channels() != 3)) {
-      return name + " needs an 8-bit grey or BGR image";
-    }
-    if (!image_size_.empty() && keyframe.image.size() != image_size_) {
-      return name + " has a " + std::to_string(keyframe.image.cols) + "x" +
-             std::to_string(keyframe.image.rows) + " image, the first keyframe's was " +
-             std::to_string(image_size_.width) + "x" + std::to_string(image_size_.height);
-    }
-    if (keyframe.point_3d.size() != keyframe.point_2d_uv.size() ||
-        keyframe.point_3d.size() != keyframe.window_descriptors.size()) {
-      return name + ": point_3d, point_2d_uv and window_descriptors differ in length";
-    }
-    if (keyframe.keypoints.size() != keyframe.descriptors.size()) {
-      return name + ": keypoints and descriptors differ in length";
-    }
-    return "";
-  }
 
-  /// The body pose of a keyframe.
-  static Isometry body_pose(const KeyFrame &keyframe) {
-    Isometry pose = Isometry::Identity();
-    pose.linear() = keyframe.vio_R_w_i;
-    pose.translation() = keyframe.vio_T_w_i;
-    return pose;
-  }
-
-  static topoloc::Pose row_major(const Isometry &pose) {
-    topoloc::Pose out{};
-    const Eigen::Matrix4d m = pose.matrix();
-    for (int r = 0; r < 4; ++r)
-      for (int c = 0; c < 4; ++c) out[4 * r + c] = m(r, c);
-    return out;
-  }
-
-  /// Describes and adds `keyframe` to topoloc; returns its hint.
-  topoloc::LoopHint add(const KeyFrame &keyframe) {
-    cv::Mat grey = keyframe.image;
-    if (grey.channels() == 3) cv::cvtColor(keyframe.image, grey, cv::COLOR_BGR2GRAY);
-    if (!grey.isContinuous()) grey = grey.clone();
-    topoloc::LoopKeyframe kf;
-    kf.id = static_cast<uint64_t>(keyframe.index);
-    kf.timestamp = keyframe.time_stamp;
-    kf.descriptor = describer_.describe(
-        topoloc::image_view(grey.data, uint32_t(grey.cols), uint32_t(grey.rows), TOPOLOC_PIXEL_GRAY8));
-    const Isometry world_T_body = body_pose(keyframe);
-    kf.world_T_body = row_major(world_T_body);
-    kf.body_T_camera = row_major(body_T_camera_);
-    if (keyframe.point_3d.empty() && keyframe.keypoints.empty()) {
-      add_orb(grey, kf);
-    } else {
-      add_points(keyframe, (world_T_body * body_T_camera_).inverse(), kf);
+    /// The body pose of a keyframe.
+    static Isometry body_pose(const KeyFrame &keyframe)
+    {
+        Isometry pose = Isometry::Identity();
+        pose.linear() = keyframe.vio_R_w_i;
+        pose.translation() = keyframe.vio_T_w_i;
+        return pose;
     }
-    topoloc::LoopHint hint = detector_.add(kf);
-    if (image_size_.empty()) image_size_ = keyframe.image.size();
-    return hint;
-  }
 
-  /// The host's points: tracked ones with their 3D positions (moved into the camera frame),
-  /// then the extra keypoints without.
-  static void add_points(const KeyFrame &keyframe, const Isometry &camera_T_world, topoloc::LoopKeyframe &kf) {
-    const float nan = std::numeric_limits<float>::quiet_NaN();
-    auto push = [&kf](const cv::Point2f &uv, const Descriptor &d, const Eigen::Vector3f &p) {
-      kf.keypoints.insert(kf.keypoints.end(), {uv.x, uv.y});
-      kf.keypoint_descriptors.insert(kf.keypoint_descriptors.end(), d.begin(), d.end());
-      kf.camera_points.insert(kf.camera_points.end(), {p.x(), p.y(), p.z()});
-    };
-    for (std::size_t i = 0; i < keyframe.point_3d.size(); ++i) {
-      const cv::Point3f &w = keyframe.point_3d[i];
-      const Eigen::Vector3d c = camera_T_world * Eigen::Vector3d(w.x, w.y, w.z);
-      push(keyframe.point_2d_uv[i], keyframe.window_descriptors[i], c.cast<float>());
+    static topoloc::Pose row_major(const Isometry &pose)
+    {
+        topoloc::Pose out{};
+        const Eigen::Matrix4d m = pose.matrix();
+        for (int r = 0; r < 4; ++r)
+            for (int c = 0; c < 4; ++c)
+                out[4 * r + c] = m(r, c);
+        return out;
     }
-    for (std::size_t i = 0; i < keyframe.keypoints.size(); ++i) {
-      push(keyframe.keypoints[i], keyframe.descriptors[i], Eigen::Vector3f(nan, nan, nan));
-    }
-  }
 
-  /// ORB keypoints of the image, without 3D points (hints matched to this keyframe then carry
-  /// a translation direction only, which `accept` refuses: VINS needs metric loops).
-  void add_orb(const cv::Mat &grey, topoloc::LoopKeyframe &kf) {
-    std::vector<cv::KeyPoint> keypoints;
-    cv::Mat descriptors;
-    orb_->detectAndCompute(grey, cv::noArray(), keypoints, descriptors);
-    for (std::size_t i = 0; i < keypoints.size(); ++i) {
-      kf.keypoints.insert(kf.keypoints.end(), {keypoints[i].pt.x, keypoints[i].pt.y});
-      const uint8_t *row = descriptors.ptr<uint8_t>(int(i));
-      kf.keypoint_descriptors.insert(kf.keypoint_descriptors.end(), row, row + 32);
+    /// Describes and adds `keyframe` to topoloc; returns its hint.
+    topoloc::LoopHint add(const KeyFrame &keyframe)
+    {
+        cv::Mat grey = keyframe.image;
+        if (grey.channels() == 3)
+            cv::cvtColor(keyframe.image, grey, cv::COLOR_BGR2GRAY);
+        if (!grey.isContinuous())
+            grey = grey.clone();
+        topoloc::LoopKeyframe kf;
+        kf.id = static_cast<uint64_t>(keyframe.index);
+        kf.timestamp = keyframe.time_stamp;
+        kf.descriptor = describer_.describe(topoloc::image_view(
+            grey.data, uint32_t(grey.cols), uint32_t(grey.rows), TOPOLOC_PIXEL_GRAY8));
+        const Isometry world_T_body = body_pose(keyframe);
+        kf.world_T_body = row_major(world_T_body);
+        kf.body_T_camera = row_major(body_T_camera_);
+        if (keyframe.point_3d.empty() && keyframe.keypoints.empty()) {
+            add_orb(grey, kf);
+        } else {
+            add_points(keyframe, (world_T_body * body_T_camera_).inverse(), kf);
+        }
+        topoloc::LoopHint hint = detector_.add(kf);
+        if (image_size_.empty())
+            image_size_ = keyframe.image.size();
+        return hint;
     }
-  }
 
-  /// The `LoopInfo` of an accepted hint when it passes VINS's gates (metric, yaw, translation);
-  /// recorded for `findConnection`. Refusals are logged.
-  std::optional<LoopInfo> accept(const topoloc::LoopHint &hint) {
-    const int cur = int(hint.query_id), old = int(hint.matched_id);
-    if (!hint.has_pose || !hint.scale_known) {
-      note("loop " + std::to_string(cur) + " -> " + std::to_string(old) +
-           " has no metric pose (the old keyframe had no 3D points); not a VINS loop");
-      return std::nullopt;
+    /// The host's points: tracked ones with their 3D positions (moved into the camera frame),
+    /// then the extra keypoints without.
+    static void add_points(const KeyFrame &keyframe, const Isometry &camera_T_world,
+                           topoloc::LoopKeyframe &kf)
+    {
+        const float nan = std::numeric_limits<float>::quiet_NaN();
+        auto push = [&kf](const cv::Point2f &uv, const Descriptor &d, const Eigen::Vector3f &p) {
+            kf.keypoints.insert(kf.keypoints.end(), {uv.x, uv.y});
+            kf.keypoint_descriptors.insert(kf.keypoint_descriptors.end(), d.begin(), d.end());
+            kf.camera_points.insert(kf.camera_points.end(), {p.x(), p.y(), p.z()});
+        };
+        for (std::size_t i = 0; i < keyframe.point_3d.size(); ++i) {
+            const cv::Point3f &w = keyframe.point_3d[i];
+            const Eigen::Vector3d c = camera_T_world * Eigen::Vector3d(w.x, w.y, w.z);
+            push(keyframe.point_2d_uv[i], keyframe.window_descriptors[i], c.cast<float>());
+        }
+        for (std::size_t i = 0; i < keyframe.keypoints.size(); ++i) {
+            push(keyframe.keypoints[i], keyframe.descriptors[i], Eigen::Vector3f(nan, nan, nan));
+        }
     }
-    Eigen::Matrix4d m;
-    for (int r = 0; r < 4; ++r)
-      for (int c = 0; c < 4; ++c) m(r, c) = hint.matched_T_query[4 * r + c];
-    const Isometry camera_old_T_cur(m);
-    const Isometry relative = body_T_camera_ * camera_old_T_cur * body_T_camera_.inverse();
-    LoopInfo info;
-    info.cur_index = cur;
-    info.old_index = old;
-    info.relative_t = relative.translation();
-    info.relative_q = Eigen::Quaterniond(relative.linear()).normalized();
-    const Eigen::Matrix3d R_cur = poses_.at(cur).linear();
-    info.relative_yaw = normalize_deg(yaw_deg(R_cur) - yaw_deg(R_cur * relative.linear().transpose()));
-    info.inliers = hint.inliers;
-    info.covariance = body_covariance(hint);
-    if (std::abs(info.relative_yaw) >= config_.max_yaw_deg ||
-        info.relative_t.norm() >= config_.max_translation_m) {
-      note("loop " + std::to_string(cur) + " -> " + std::to_string(old) +
-           " refused by VINS's gates (yaw " + std::to_string(info.relative_yaw) + " deg, |t| " +
-           std::to_string(info.relative_t.norm()) + " m)");
-      return std::nullopt;
+
+    /// ORB keypoints of the image, without 3D points (hints matched to this keyframe then carry
+    /// a translation direction only, which `accept` refuses: VINS needs metric loops).
+    void add_orb(const cv::Mat &grey, topoloc::LoopKeyframe &kf)
+    {
+        std::vector<cv::KeyPoint> keypoints;
+        cv::Mat descriptors;
+        orb_->detectAndCompute(grey, cv::noArray(), keypoints, descriptors);
+        for (std::size_t i = 0; i < keypoints.size(); ++i) {
+            kf.keypoints.insert(kf.keypoints.end(), {keypoints[i].pt.x, keypoints[i].pt.y});
+            const uint8_t *row = descriptors.ptr<uint8_t>(int(i));
+            kf.keypoint_descriptors.insert(kf.keypoint_descriptors.end(), row, row + 32);
+        }
     }
-    loops_[cur] = info;
-    return info;
-  }
 
-  /// The hint's covariance (camera frames, right perturbation) in the body frames: the
-  /// adjoint of `camera_T_body` maps a camera-frame tangent to the body frame's.
-  Eigen::Matrix<double, 6, 6> body_covariance(const topoloc::LoopHint &hint) const {
-    Eigen::Matrix<double, 6, 6> camera;
-    for (int r = 0; r < 6; ++r)
-      for (int c = 0; c < 6; ++c) camera(r, c) = hint.covariance[6 * r + c];
-    // A right perturbation exp(xi) of camera_old_T_cur is one of body_old_T_cur by
-    // Ad(body_T_camera) xi; rotation first: [R 0; [t]x R R].
-    const Eigen::Matrix3d R = body_T_camera_.linear();
-    const Eigen::Vector3d t = body_T_camera_.translation();
-    Eigen::Matrix3d tx;
-    tx << 0, -t.z(), t.y(), t.z(), 0, -t.x(), -t.y(), t.x(), 0;
-    Eigen::Matrix<double, 6, 6> adjoint = Eigen::Matrix<double, 6, 6>::Zero();
-    adjoint.topLeftCorner<3, 3>() = R;
-    adjoint.bottomLeftCorner<3, 3>() = tx * R;
-    adjoint.bottomRightCorner<3, 3>() = R;
-    return adjoint * camera * adjoint.transpose();
-  }
+    /// The `LoopInfo` of an accepted hint when it passes VINS's gates (metric, yaw, translation);
+    /// recorded for `findConnection`. Refusals are logged.
+    std::optional<LoopInfo> accept(const topoloc::LoopHint &hint)
+    {
+        const int cur = int(hint.query_id), old = int(hint.matched_id);
+        if (!hint.has_pose || !hint.scale_known) {
+            note("loop " + std::to_string(cur) + " -> " + std::to_string(old) +
+                 " has no metric pose (the old keyframe had no 3D points); not a VINS loop");
+            return std::nullopt;
+        }
+        Eigen::Matrix4d m;
+        for (int r = 0; r < 4; ++r)
+            for (int c = 0; c < 4; ++c)
+                m(r, c) = hint.matched_T_query[4 * r + c];
+        const Isometry camera_old_T_cur(m);
+        const Isometry relative = body_T_camera_ * camera_old_T_cur * body_T_camera_.inverse();
+        LoopInfo info;
+        info.cur_index = cur;
+        info.old_index = old;
+        info.relative_t = relative.translation();
+        info.relative_q = Eigen::Quaterniond(relative.linear()).normalized();
+        const Eigen::Matrix3d R_cur = poses_.at(cur).linear();
+        info.relative_yaw =
+            normalize_deg(yaw_deg(R_cur) - yaw_deg(R_cur * relative.linear().transpose()));
+        info.inliers = hint.inliers;
+        info.covariance = body_covariance(hint);
+        if (std::abs(info.relative_yaw) >= config_.max_yaw_deg ||
+            info.relative_t.norm() >= config_.max_translation_m) {
+            note("loop " + std::to_string(cur) + " -> " + std::to_string(old) +
+                 " refused by VINS's gates (yaw " + std::to_string(info.relative_yaw) +
+                 " deg, |t| " + std::to_string(info.relative_t.norm()) + " m)");
+            return std::nullopt;
+        }
+        loops_[cur] = info;
+        return info;
+    }
 
-  Config config_;
-  topoloc::Describer describer_;
-  std::string kind_, model_;
-  uint32_t dim_;
-  cv::Ptr<cv::ORB> orb_;
-  Isometry body_T_camera_;
-  topoloc::LoopDetector detector_;
-  std::map<int, Isometry> poses_;
-  std::map<int, LoopInfo> loops_;
-  std::vector<LoopInfo> confirmed_;
-  cv::Size image_size_;
-  std::optional<int> last_index_;
-  std::string last_error_;
-  std::function<void(const std::string &)> logger_;
+    /// The hint's covariance (camera frames, right perturbation) in the body frames: the
+    /// adjoint of `camera_T_body` maps a camera-frame tangent to the body frame's.
+    Eigen::Matrix<double, 6, 6> body_covariance(const topoloc::LoopHint &hint) const
+    {
+        Eigen::Matrix<double, 6, 6> camera;
+        for (int r = 0; r < 6; ++r)
+            for (int c = 0; c < 6; ++c)
+                camera(r, c) = hint.covariance[6 * r + c];
+        // A right perturbation exp(xi) of camera_old_T_cur is one of body_old_T_cur by
+        // Ad(body_T_camera) xi; rotation first: [R 0; [t]x R R].
+        const Eigen::Matrix3d R = body_T_camera_.linear();
+        const Eigen::Vector3d t = body_T_camera_.translation();
+        Eigen::Matrix3d tx;
+        tx << 0, -t.z(), t.y(), t.z(), 0, -t.x(), -t.y(), t.x(), 0;
+        Eigen::Matrix<double, 6, 6> adjoint = Eigen::Matrix<double, 6, 6>::Zero();
+        adjoint.topLeftCorner<3, 3>() = R;
+        adjoint.bottomLeftCorner<3, 3>() = tx * R;
+        adjoint.bottomRightCorner<3, 3>() = R;
+        return adjoint * camera * adjoint.transpose();
+    }
+
+    Config config_;
+    topoloc::Describer describer_;
+    std::string kind_, model_;
+    uint32_t dim_;
+    cv::Ptr<cv::ORB> orb_;
+    Isometry body_T_camera_;
+    topoloc::LoopDetector detector_;
+    std::map<int, Isometry> poses_;
+    std::map<int, LoopInfo> loops_;
+    std::vector<LoopInfo> confirmed_;
+    cv::Size image_size_;
+    std::optional<int> last_index_;
+    std::string last_error_;
+    std::function<void(const std::string &)> logger_;
 };
 
-}  // namespace topoloc_vins
+} // namespace topoloc_vins
 
-#endif  // TOPOLOC_VINS_HPP
+#endif // TOPOLOC_VINS_HPP

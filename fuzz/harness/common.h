@@ -18,7 +18,8 @@ void topoloc_fuzz_free(uint8_t *ptr, size_t len);
 
 /* A status the C ABI must never return to these inputs: TOPOLOC_ERR_PANIC means a Rust panic
  * was caught at the boundary, i.e. a bug (overflow, index out of range, failed assertion). */
-static inline topoloc_status fuzz_check(topoloc_status status, const char *call) {
+static inline topoloc_status fuzz_check(topoloc_status status, const char *call)
+{
     if (status == TOPOLOC_ERR_PANIC) {
         char msg[1024];
         topoloc_last_error_message(msg, sizeof msg, NULL);
@@ -39,7 +40,8 @@ static inline topoloc_status fuzz_check(topoloc_status status, const char *call)
     } while (0)
 
 /* Reads a whole file (a seed map named by fuzz/run.sh through the environment). */
-static inline uint8_t *fuzz_read_file(const char *env, size_t *len) {
+static inline uint8_t *fuzz_read_file(const char *env, size_t *len)
+{
     const char *path = getenv(env);
     if (!path) {
         fprintf(stderr, "set %s to a map file (fuzz/run.sh does)\n", env);
@@ -64,7 +66,8 @@ static inline uint8_t *fuzz_read_file(const char *env, size_t *len) {
 }
 
 /* Loads a map that must load (a seed named by the environment). */
-static inline topoloc_map *fuzz_load_seed(const char *env) {
+static inline topoloc_map *fuzz_load_seed(const char *env)
+{
     size_t len = 0;
     uint8_t *bytes = fuzz_read_file(env, &len);
     topoloc_map *map = NULL;
@@ -84,26 +87,36 @@ typedef struct {
     size_t n;
 } fuzz_reader;
 
-static inline uint8_t fuzz_u8(fuzz_reader *r) {
-    if (r->n == 0) return 0;
+static inline uint8_t fuzz_u8(fuzz_reader *r)
+{
+    if (r->n == 0)
+        return 0;
     r->n--;
     return *r->p++;
 }
-static inline uint32_t fuzz_u16(fuzz_reader *r) {
+static inline uint32_t fuzz_u16(fuzz_reader *r)
+{
     uint32_t lo = fuzz_u8(r);
     return lo | ((uint32_t)fuzz_u8(r) << 8);
 }
 /* A float that is mostly ordinary (a byte scaled to [-4, 4)), sometimes NaN, infinite, huge or
  * subnormal: the values a broken host or a corrupt file would pass. */
-static inline float fuzz_f32(fuzz_reader *r) {
+static inline float fuzz_f32(fuzz_reader *r)
+{
     uint8_t b = fuzz_u8(r);
     switch (b) {
-    case 0xF8: return __builtin_nanf("");
-    case 0xF9: return __builtin_inff();
-    case 0xFA: return -__builtin_inff();
-    case 0xFB: return 3.0e38f;
-    case 0xFC: return 1.0e-40f;
-    default: return ((float)b - 128.0f) / 32.0f;
+    case 0xF8:
+        return __builtin_nanf("");
+    case 0xF9:
+        return __builtin_inff();
+    case 0xFA:
+        return -__builtin_inff();
+    case 0xFB:
+        return 3.0e38f;
+    case 0xFC:
+        return 1.0e-40f;
+    default:
+        return ((float)b - 128.0f) / 32.0f;
     }
 }
 

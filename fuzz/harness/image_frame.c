@@ -9,7 +9,8 @@ static topoloc_describer *describer = NULL;
 static size_t dim = 0;
 static double timestamp = 0;
 
-int LLVMFuzzerInitialize(int *argc, char ***argv) {
+int LLVMFuzzerInitialize(int *argc, char ***argv)
+{
     (void)argc;
     (void)argv;
     map = fuzz_load_seed("TOPOLOC_FUZZ_IMAGE_MAP");
@@ -22,7 +23,8 @@ int LLVMFuzzerInitialize(int *argc, char ***argv) {
     return 0;
 }
 
-int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size) {
+int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
+{
     fuzz_reader r = {data, size};
     uint32_t width = fuzz_u16(&r) % 600, height = fuzz_u16(&r) % 600;
     uint32_t pad = fuzz_u8(&r);
@@ -33,12 +35,18 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size) {
     /* The pixels: the rest of the input, repeated to fill the declared length, less a
      * shortfall that tests the length check. */
     size_t need = height ? stride * (height - 1) + (size_t)width * channels : 0;
-    if (need > 4u << 20) need = 4u << 20;
+    if (need > 4u << 20)
+        need = 4u << 20;
     size_t claimed = need > shortfall ? need - (shortfall & 1 ? shortfall : 0) : need;
     uint8_t *pixels = malloc(claimed ? claimed : 1);
-    for (size_t i = 0; i < claimed; i++) pixels[i] = r.n ? r.p[i % r.n] : (uint8_t)i;
-    topoloc_image image = {.data = pixels, .data_len = claimed, .width = width, .height = height,
-                           .stride = stride, .format = format};
+    for (size_t i = 0; i < claimed; i++)
+        pixels[i] = r.n ? r.p[i % r.n] : (uint8_t)i;
+    topoloc_image image = {.data = pixels,
+                           .data_len = claimed,
+                           .width = width,
+                           .height = height,
+                           .stride = stride,
+                           .format = format};
 
     topoloc_frame frame;
     topoloc_frame_default(&frame);

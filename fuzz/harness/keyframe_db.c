@@ -7,17 +7,20 @@
 #define DIM 16
 #define MAX_KEYPOINTS 96
 
-static void read_pose(fuzz_reader *r, double pose[16]) {
+static void read_pose(fuzz_reader *r, double pose[16])
+{
     /* A rotation about z by a fuzzed angle and a fuzzed translation, sometimes raw floats
      * (not a rigid transform, non-finite). */
     uint8_t kind = fuzz_u8(r);
     double a = fuzz_f32(r), tx = fuzz_f32(r), ty = fuzz_f32(r), tz = fuzz_f32(r);
     double c = __builtin_cos(a), s = __builtin_sin(a);
     double rigid[16] = {c, -s, 0, tx, s, c, 0, ty, 0, 0, 1, tz, 0, 0, 0, 1};
-    for (int i = 0; i < 16; i++) pose[i] = (kind & 7) == 0 ? fuzz_f32(r) : rigid[i];
+    for (int i = 0; i < 16; i++)
+        pose[i] = (kind & 7) == 0 ? fuzz_f32(r) : rigid[i];
 }
 
-int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size) {
+int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
+{
     fuzz_reader r = {data, size};
     topoloc_loop_options options;
     topoloc_loop_options_default(&options);
@@ -31,7 +34,8 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size) {
     topoloc_loop_detector *det = NULL;
     topoloc_status s = CHECK(topoloc_loop_detector_new("fuzz", "fuzz", DIM, &options, &det));
     EXPECT_NULL_ON_ERROR(s, det);
-    if (s != TOPOLOC_OK) return 0;
+    if (s != TOPOLOC_OK)
+        return 0;
 
     uint64_t id = 0;
     double t = 0;
@@ -47,10 +51,11 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size) {
             topoloc_loop_keyframe kf;
             topoloc_loop_keyframe_default(&kf);
             id += (code & 0x80) ? 0 : 1 + (fuzz_u8(&r) & 3); /* sometimes a repeated id */
-            t += (code & 0x40) ? -1.0 : 0.5;                /* sometimes time going back */
+            t += (code & 0x40) ? -1.0 : 0.5;                 /* sometimes time going back */
             kf.id = id;
             kf.timestamp = t;
-            for (int i = 0; i < DIM; i++) descriptor[i] = fuzz_f32(&r);
+            for (int i = 0; i < DIM; i++)
+                descriptor[i] = fuzz_f32(&r);
             kf.descriptor = descriptor;
             kf.descriptor_len = (code & 0x20) ? DIM - 1 : DIM;
             if (code & 0x10) {
@@ -65,8 +70,10 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size) {
             for (size_t i = 0; i < n; i++) {
                 keypoints[2 * i] = 160 + 40 * fuzz_f32(&r);
                 keypoints[2 * i + 1] = 120 + 30 * fuzz_f32(&r);
-                for (int b = 0; b < 32; b++) binary[32 * i + b] = (uint8_t)(fuzz_u8(&r) * (b + 1));
-                for (int k = 0; k < 3; k++) points[3 * i + k] = k == 2 ? 2 + fuzz_f32(&r) : fuzz_f32(&r);
+                for (int b = 0; b < 32; b++)
+                    binary[32 * i + b] = (uint8_t)(fuzz_u8(&r) * (b + 1));
+                for (int k = 0; k < 3; k++)
+                    points[3 * i + k] = k == 2 ? 2 + fuzz_f32(&r) : fuzz_f32(&r);
             }
             kf.keypoint_count = (code & 0x04) ? 5001 : n; /* sometimes above the bound */
             kf.keypoints = keypoints;
@@ -83,8 +90,10 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size) {
         case 3: {
             topoloc_loop_candidate cands[8];
             size_t count = 0;
-            for (int i = 0; i < DIM; i++) descriptor[i] = fuzz_f32(&r);
-            CHECK(topoloc_loop_detector_query(det, descriptor, DIM, cands, fuzz_u8(&r) % 9, &count));
+            for (int i = 0; i < DIM; i++)
+                descriptor[i] = fuzz_f32(&r);
+            CHECK(
+                topoloc_loop_detector_query(det, descriptor, DIM, cands, fuzz_u8(&r) % 9, &count));
             break;
         }
         default: {

@@ -5,7 +5,8 @@
 
 #define MAX_ITEMS 64
 
-static void exercise(const topoloc_map *map) {
+static void exercise(const topoloc_map *map)
+{
     size_t places = 0, views = 0, edges = 0, needed = 0, keypoints = 0;
     uint32_t dim = 0;
     char text[256];
@@ -41,7 +42,8 @@ static void exercise(const topoloc_map *map) {
         CHECK(topoloc_map_view_keypoints(map, v, xy, 64, &count));
     }
     /* Out-of-range ids are typed errors. */
-    CHECK(topoloc_map_view_info(map, (uint32_t)views, &(topoloc_view_info){.struct_size = sizeof(topoloc_view_info)}));
+    CHECK(topoloc_map_view_info(map, (uint32_t)views,
+                                &(topoloc_view_info){.struct_size = sizeof(topoloc_view_info)}));
     CHECK(topoloc_map_neighbours(map, (uint32_t)places, ids, MAX_ITEMS, &count));
 
     /* A localizer follows view 0's descriptor for a few frames, then a loop detector is made
@@ -74,7 +76,8 @@ static void exercise(const topoloc_map *map) {
     free(descriptor);
 }
 
-int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size) {
+int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
+{
     topoloc_map *map = NULL;
     topoloc_status s = CHECK(topoloc_map_load_from_memory(data, size, NULL, &map));
     EXPECT_NULL_ON_ERROR(s, map);
@@ -85,6 +88,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size) {
     return 0;
 }
 
-size_t LLVMFuzzerCustomMutator(uint8_t *data, size_t size, size_t max_size, unsigned int seed) {
+size_t LLVMFuzzerCustomMutator(uint8_t *data, size_t size, size_t max_size, unsigned int seed)
+{
     return topoloc_fuzz_mutate_map(data, size, max_size, seed);
 }

@@ -1,7 +1,7 @@
 // include/topoloc.h compiled on its own as C++17 with strict warnings (see tests/c/run.sh), and
 // included twice to exercise the include guard. Linked and run against the library.
 #include "topoloc.h"
-#include "topoloc.h"  // twice: the include guard must make this a no-op
+#include "topoloc.h" // twice: the include guard must make this a no-op
 
 #include <cstddef>
 #include <cstdint>
@@ -23,28 +23,30 @@ static_assert(std::is_trivially_copyable<topoloc_frame>::value, "C layout");
 
 namespace {
 
-bool fill_defaults() {
-  topoloc_view_attributes attributes;
-  topoloc_keyframe_options keyframe_options;
-  topoloc_localizer_options localizer_options;
-  topoloc_frame frame;
-  topoloc_result result;
-  topoloc_map_load_options load_options;
-  topoloc_view_info info;
-  return topoloc_view_attributes_default(&attributes) == TOPOLOC_OK &&
-         topoloc_keyframe_options_default(&keyframe_options) == TOPOLOC_OK &&
-         topoloc_localizer_options_default(&localizer_options) == TOPOLOC_OK &&
-         topoloc_frame_default(&frame) == TOPOLOC_OK &&
-         topoloc_result_default(&result) == TOPOLOC_OK &&
-         topoloc_map_load_options_default(&load_options) == TOPOLOC_OK &&
-         topoloc_view_info_default(&info) == TOPOLOC_OK;
+bool fill_defaults()
+{
+    topoloc_view_attributes attributes;
+    topoloc_keyframe_options keyframe_options;
+    topoloc_localizer_options localizer_options;
+    topoloc_frame frame;
+    topoloc_result result;
+    topoloc_map_load_options load_options;
+    topoloc_view_info info;
+    return topoloc_view_attributes_default(&attributes) == TOPOLOC_OK &&
+           topoloc_keyframe_options_default(&keyframe_options) == TOPOLOC_OK &&
+           topoloc_localizer_options_default(&localizer_options) == TOPOLOC_OK &&
+           topoloc_frame_default(&frame) == TOPOLOC_OK &&
+           topoloc_result_default(&result) == TOPOLOC_OK &&
+           topoloc_map_load_options_default(&load_options) == TOPOLOC_OK &&
+           topoloc_view_info_default(&info) == TOPOLOC_OK;
 }
 
-}  // namespace
+} // namespace
 
-int main() {
-  if (topoloc_abi_version() != TOPOLOC_ABI_VERSION) {
-    return 1;
-  }
-  return fill_defaults() ? 0 : 1;
+int main()
+{
+    if (topoloc_abi_version() != TOPOLOC_ABI_VERSION) {
+        return 1;
+    }
+    return fill_defaults() ? 0 : 1;
 }

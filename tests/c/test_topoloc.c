@@ -80,7 +80,8 @@ static void check_status_impl(topoloc_status got, uint32_t want, const char *exp
 
 #define CHECK(cond) check_impl((cond) ? true : false, #cond, __FILE__, __LINE__)
 #define CHECK_OK(expr) check_status_impl((expr), TOPOLOC_OK, #expr, __FILE__, __LINE__)
-#define CHECK_STATUS(expr, want) check_status_impl((expr), (uint32_t)(want), #expr, __FILE__, __LINE__)
+#define CHECK_STATUS(expr, want)                                                                   \
+    check_status_impl((expr), (uint32_t)(want), #expr, __FILE__, __LINE__)
 #define CHECK_NEAR(a, b, tol) CHECK(((a) - (b)) <= (tol) && ((b) - (a)) <= (tol))
 
 /* Sets the last error to a known message, so that a following call can be shown to set its own. */
@@ -135,7 +136,7 @@ static bool contains_text(const char *haystack, const char *needle)
     do {                                                                                           \
         const char *check_msg_ = last_error();                                                     \
         if (!contains_text(check_msg_, (text))) {                                                  \
-            fprintf(stderr, "    message \"%s\" does not contain \"%s\"\n", check_msg_, (text));    \
+            fprintf(stderr, "    message \"%s\" does not contain \"%s\"\n", check_msg_, (text));   \
         }                                                                                          \
         CHECK(contains_text(check_msg_, (text)));                                                  \
     } while (0)
@@ -176,9 +177,9 @@ static void section(const char *name)
 /* The last view is added without attributes, to exercise "absent" answers. */
 #define BARE_VIEW (VIEWS - 1u)
 
-static float g_view_desc[VIEWS][DIM];  /* as given to the builder (not unit norm) */
+static float g_view_desc[VIEWS][DIM]; /* as given to the builder (not unit norm) */
 static double g_place_pos[PLACES][3];
-static double g_view_pose[VIEWS][16];  /* world_T_camera, row-major */
+static double g_view_pose[VIEWS][16]; /* world_T_camera, row-major */
 static char g_view_image[VIEWS][64];
 /* Edges sorted by (a, b), as topoloc_map_edge reports them. */
 static const uint32_t g_edges[EDGES][2] = {{0, 1}, {0, 5}, {1, 2}, {2, 3}, {3, 4}, {4, 5}};
@@ -323,7 +324,8 @@ static topoloc_map *build_world(bool bare_view)
             attributes.world_T_camera = g_view_pose[v];
             attributes.image = g_view_image[v];
             CHECK_OK(topoloc_map_builder_add_view(
-                b, p, g_view_desc[v], DIM, (bare_view && v == BARE_VIEW) ? NULL : &attributes, &id));
+                b, p, g_view_desc[v], DIM, (bare_view && v == BARE_VIEW) ? NULL : &attributes,
+                &id));
             CHECK(id == v);
         }
     }
@@ -338,10 +340,7 @@ static topoloc_map *build_world(bool bare_view)
 }
 
 /* The test world as the accessor checks expect it: its last view has no attributes. */
-static topoloc_map *build_world_map(void)
-{
-    return build_world(true);
-}
+static topoloc_map *build_world_map(void) { return build_world(true); }
 
 /* ------------------------------------------------------------------------------------------ */
 /* Temporary files                                                                             */
@@ -437,7 +436,7 @@ static void test_status_str(void)
         TOPOLOC_ERR_CONCURRENT_USE,
         TOPOLOC_ERR_PANIC,
     };
-    static const uint32_t unknown[] = {7u,   99u,  110u, 199u, 205u,   299u,
+    static const uint32_t unknown[] = {7u,   99u,  110u, 199u,   205u,       299u,
                                        306u, 899u, 901u, 65536u, 0xFFFFFFFFu};
     const size_t n_known = sizeof known / sizeof known[0];
     size_t i, j;
@@ -868,7 +867,8 @@ static void test_from_keyframes(void)
     CHECK(options.place_spacing_m == 2.0);
     CHECK(options.max_views_per_place == 4);
     options.neighbour_radius_m = 2.5; /* below the 3 m spot spacing: only consecutive edges */
-    CHECK_OK(topoloc_map_from_keyframes("kf-desc", NULL, DIM, keyframes, KEYFRAMES, &options, &map));
+    CHECK_OK(
+        topoloc_map_from_keyframes("kf-desc", NULL, DIM, keyframes, KEYFRAMES, &options, &map));
     if (map != NULL) {
         CHECK_COUNTS(map, SPOTS, KEYFRAMES, SPOTS - 1);
         CHECK_OK(topoloc_map_descriptor_kind(map, kind, sizeof kind, NULL));
@@ -1008,10 +1008,12 @@ static void test_builder_errors(void)
     CHECK_STATUS(topoloc_map_builder_add_view(b, 0, desc, DIM + 1, NULL, &view),
                  TOPOLOC_ERR_DIMENSION_MISMATCH);
     desc[5] = (float)nan_position[1];
-    CHECK_STATUS(topoloc_map_builder_add_view(b, 0, desc, DIM, NULL, &view), TOPOLOC_ERR_NON_FINITE);
+    CHECK_STATUS(topoloc_map_builder_add_view(b, 0, desc, DIM, NULL, &view),
+                 TOPOLOC_ERR_NON_FINITE);
     CHECK_HAS_MESSAGE();
     desc[5] = make_inf();
-    CHECK_STATUS(topoloc_map_builder_add_view(b, 0, desc, DIM, NULL, &view), TOPOLOC_ERR_NON_FINITE);
+    CHECK_STATUS(topoloc_map_builder_add_view(b, 0, desc, DIM, NULL, &view),
+                 TOPOLOC_ERR_NON_FINITE);
     for (d = 0; d < DIM; d++) {
         desc[d] = 0.0f;
     }
@@ -1455,17 +1457,29 @@ static void test_bad_frames(const topoloc_map *map)
             bad.descriptor = bad_desc;
             memcpy(bad_odometry, odometry, sizeof odometry);
             switch (kind) {
-            case 0: bad.descriptor_len = DIM - 1; break;
-            case 1: bad.descriptor_len = DIM + 1; break;
-            case 2: bad_desc[DIM / 2] = (float)nan; break;
-            case 3: bad_desc[0] = -make_inf(); break;
+            case 0:
+                bad.descriptor_len = DIM - 1;
+                break;
+            case 1:
+                bad.descriptor_len = DIM + 1;
+                break;
+            case 2:
+                bad_desc[DIM / 2] = (float)nan;
+                break;
+            case 3:
+                bad_desc[0] = -make_inf();
+                break;
             case 4:
                 for (d = 0; d < DIM; d++) {
                     bad_desc[d] = 0.0f;
                 }
                 break;
-            case 5: bad.timestamp = good.timestamp - 1.5; break; /* before the previous frame */
-            case 6: bad.timestamp = nan; break;
+            case 5:
+                bad.timestamp = good.timestamp - 1.5;
+                break; /* before the previous frame */
+            case 6:
+                bad.timestamp = nan;
+                break;
             case 7:
                 bad_odometry[0] = 1.1; /* scaled, not a rotation */
                 bad.odometry = bad_odometry;
@@ -1474,13 +1488,16 @@ static void test_bad_frames(const topoloc_map *map)
                 bad_odometry[7] = nan;
                 bad.odometry = bad_odometry;
                 break;
-            case 9: bad.struct_size = 0; break;
+            case 9:
+                bad.struct_size = 0;
+                break;
             case 10:
                 zero_size = ra;
                 zero_size.struct_size = 0;
                 target = &zero_size;
                 break;
-            default: break;
+            default:
+                break;
             }
             if (kind == 5 && i == 0) {
                 continue; /* the first frame has no predecessor */
@@ -1618,9 +1635,9 @@ static void test_files(void)
     CHECK(write_file(other, (const unsigned char *)not_a_map, sizeof not_a_map - 1));
     CHECK_STATUS(topoloc_map_load(other, NULL, &m), TOPOLOC_ERR_NOT_A_MAP);
     CHECK_HAS_MESSAGE();
-    CHECK_STATUS(topoloc_map_load_from_memory((const uint8_t *)not_a_map, sizeof not_a_map - 1,
-                                              NULL, &m),
-                 TOPOLOC_ERR_NOT_A_MAP);
+    CHECK_STATUS(
+        topoloc_map_load_from_memory((const uint8_t *)not_a_map, sizeof not_a_map - 1, NULL, &m),
+        TOPOLOC_ERR_NOT_A_MAP);
     CHECK(write_file(other, (const unsigned char *)"", 0));
     CHECK_STATUS(topoloc_map_load(other, NULL, &m), TOPOLOC_ERR_NOT_A_MAP);
     CHECK_STATUS(topoloc_map_load_from_memory((const uint8_t *)not_a_map, 0, NULL, &m),
@@ -1655,8 +1672,8 @@ static void test_files(void)
     tmp_path(other, sizeof other, "truncated.topoloc");
     for (off = 0; off < len; off++) {
         topoloc_status st = topoloc_map_load_from_memory(bytes, off, NULL, &m);
-        bool ok = st == TOPOLOC_ERR_TRUNCATED || st == TOPOLOC_ERR_NOT_A_MAP ||
-                  st == TOPOLOC_ERR_CORRUPT;
+        bool ok =
+            st == TOPOLOC_ERR_TRUNCATED || st == TOPOLOC_ERR_NOT_A_MAP || st == TOPOLOC_ERR_CORRUPT;
         if (!ok) {
             fprintf(stderr, "    truncated at %zu of %zu: status %u\n", off, len, (unsigned)st);
         }
@@ -1946,7 +1963,8 @@ static void *thread_main(void *arg)
         job_fail(job, "localizer_new");
         return NULL;
     }
-    if (topoloc_frame_default(&frame) != TOPOLOC_OK || topoloc_result_default(&result) != TOPOLOC_OK) {
+    if (topoloc_frame_default(&frame) != TOPOLOC_OK ||
+        topoloc_result_default(&result) != TOPOLOC_OK) {
         job_fail(job, "_default");
     }
     result.candidates = candidates;
@@ -2308,11 +2326,10 @@ static void vlad_options(topoloc_image_map_options *options, uint32_t images)
     options->vlad_clusters = IMG_CLUSTERS;
 }
 
-
 /* Progress callback log. */
 struct progress_log {
     pthread_t caller;
-    int cancel_stage;  /* stage at which to return false; -1 = never */
+    int cancel_stage; /* stage at which to return false; -1 = never */
     size_t expected_total;
     unsigned calls;
     unsigned calls_after_cancel;
@@ -2320,9 +2337,9 @@ struct progress_log {
     bool first_is_describing;
     bool saw_describing_all; /* DESCRIBING with done == total == expected_total */
     bool saw_fitting;
-    bool saw_fitting_done;   /* FITTING 1 of 1 */
+    bool saw_fitting_done; /* FITTING 1 of 1 */
     bool last_is_fitting_done;
-    bool bad_values;         /* unknown stage, done > total, wrong total, or going back */
+    bool bad_values; /* unknown stage, done > total, wrong total, or going back */
     bool other_thread;
     uint32_t last_stage;
     size_t last_done;
@@ -2460,9 +2477,9 @@ static topoloc_map *test_image_map_build(void)
     /* Cancelled while describing: no map. */
     progress_log_init(&log, TOPOLOC_STAGE_DESCRIBING, IMG_PLACES);
     out = untouched_map();
-    CHECK_STATUS(topoloc_map_build_from_images(images, IMG_PLACES, &options, record_progress, &log,
-                                               &out),
-                 TOPOLOC_ERR_CANCELLED);
+    CHECK_STATUS(
+        topoloc_map_build_from_images(images, IMG_PLACES, &options, record_progress, &log, &out),
+        TOPOLOC_ERR_CANCELLED);
     CHECK_HAS_MESSAGE();
     CHECK(out == untouched_map());
     CHECK(log.cancelled && log.calls >= 1 && !log.other_thread);
@@ -2470,16 +2487,16 @@ static topoloc_map *test_image_map_build(void)
 
     /* Cancelled when fitting starts (every image described): no map either. */
     progress_log_init(&log, TOPOLOC_STAGE_FITTING, IMG_PLACES);
-    CHECK_STATUS(topoloc_map_build_from_images(images, IMG_PLACES, &options, record_progress, &log,
-                                               &out),
-                 TOPOLOC_ERR_CANCELLED);
+    CHECK_STATUS(
+        topoloc_map_build_from_images(images, IMG_PLACES, &options, record_progress, &log, &out),
+        TOPOLOC_ERR_CANCELLED);
     CHECK(out == untouched_map());
     CHECK(log.cancelled && log.saw_describing_all && log.saw_fitting && !log.saw_fitting_done);
 
     /* The real build, with progress. */
     progress_log_init(&log, -1, IMG_PLACES);
-    CHECK_OK(topoloc_map_build_from_images(images, IMG_PLACES, &options, record_progress, &log,
-                                           &built));
+    CHECK_OK(
+        topoloc_map_build_from_images(images, IMG_PLACES, &options, record_progress, &log, &built));
     if (built == NULL) {
         return NULL;
     }
@@ -2571,8 +2588,8 @@ static topoloc_status localize_image(topoloc_localizer *loc, const topoloc_image
 
 /* A localizer made with `options` localizes one image of `place` there (one check per step). */
 static void check_new_localizer_finds(const topoloc_map *map,
-                                      const topoloc_localizer_options *options,
-                                      const uint8_t *px, uint32_t place)
+                                      const topoloc_localizer_options *options, const uint8_t *px,
+                                      uint32_t place)
 {
     topoloc_localizer *loc = NULL;
     topoloc_image image = gray_image(px);
@@ -2626,8 +2643,8 @@ static void test_image_localize(const topoloc_map *map, const topoloc_map *world
         CHECK_OK(localize_image(filter, &image, (double)p, &r));
         correct_filter += r.place == p;
     }
-    printf("   revisits localized: %u/%u single-frame, %u/%u filter\n", correct_single,
-           IMG_PLACES, correct_filter, IMG_PLACES);
+    printf("   revisits localized: %u/%u single-frame, %u/%u filter\n", correct_single, IMG_PLACES,
+           correct_filter, IMG_PLACES);
     CHECK(correct_single >= IMG_PLACES - 1);
     CHECK(correct_filter >= IMG_PLACES - 1);
 
@@ -2750,19 +2767,19 @@ static void test_bad_images(const topoloc_map *map)
     static uint8_t black_rgb[IMG_PIXELS * 3];
     static const uint8_t one_pixel[1] = {128};
     static const uint32_t expected[BAD] = {
-        TOPOLOC_ERR_INVALID_IMAGE,        /* 0: width 0 */
-        TOPOLOC_ERR_INVALID_IMAGE,        /* 1: height 0 */
-        TOPOLOC_ERR_INVALID_IMAGE,        /* 2: 10000 x 10000 */
-        TOPOLOC_ERR_INVALID_IMAGE,        /* 3: stride smaller than a row */
-        TOPOLOC_ERR_INVALID_IMAGE,        /* 4: data_len one byte short */
-        TOPOLOC_ERR_INVALID_IMAGE,        /* 5: format 99 */
-        TOPOLOC_ERR_INVALID_IMAGE,        /* 6: data_len 0 */
-        TOPOLOC_ERR_NULL_ARGUMENT,        /* 7: data NULL */
-        TOPOLOC_ERR_UNINFORMATIVE_IMAGE,  /* 8: constant grey */
-        TOPOLOC_ERR_UNINFORMATIVE_IMAGE,  /* 9: 1 x 1 */
-        TOPOLOC_ERR_UNINFORMATIVE_IMAGE,  /* 10: all-black RGB */
-        TOPOLOC_ERR_INVALID_IMAGE,        /* 11: RGB8 format over a grey buffer (too short) */
-        TOPOLOC_ERR_INVALID_IMAGE,        /* 12: stride * (height - 1) overflows size_t */
+        TOPOLOC_ERR_INVALID_IMAGE,       /* 0: width 0 */
+        TOPOLOC_ERR_INVALID_IMAGE,       /* 1: height 0 */
+        TOPOLOC_ERR_INVALID_IMAGE,       /* 2: 10000 x 10000 */
+        TOPOLOC_ERR_INVALID_IMAGE,       /* 3: stride smaller than a row */
+        TOPOLOC_ERR_INVALID_IMAGE,       /* 4: data_len one byte short */
+        TOPOLOC_ERR_INVALID_IMAGE,       /* 5: format 99 */
+        TOPOLOC_ERR_INVALID_IMAGE,       /* 6: data_len 0 */
+        TOPOLOC_ERR_NULL_ARGUMENT,       /* 7: data NULL */
+        TOPOLOC_ERR_UNINFORMATIVE_IMAGE, /* 8: constant grey */
+        TOPOLOC_ERR_UNINFORMATIVE_IMAGE, /* 9: 1 x 1 */
+        TOPOLOC_ERR_UNINFORMATIVE_IMAGE, /* 10: all-black RGB */
+        TOPOLOC_ERR_INVALID_IMAGE,       /* 11: RGB8 format over a grey buffer (too short) */
+        TOPOLOC_ERR_INVALID_IMAGE,       /* 12: stride * (height - 1) overflows size_t */
     };
     topoloc_localizer *a = NULL, *b = NULL;
     topoloc_result ra, rb, snapshot;
@@ -2790,19 +2807,35 @@ static void test_bad_images(const topoloc_map *map)
         topoloc_status st;
         image = gray_image(g_place_px[1]);
         switch (k) {
-        case 0: image.width = 0; break;
-        case 1: image.height = 0; break;
+        case 0:
+            image.width = 0;
+            break;
+        case 1:
+            image.height = 0;
+            break;
         case 2:
             image.width = 10000;
             image.height = 10000;
             image.stride = 10000;
             break;
-        case 3: image.stride = IMG_W - 1; break;
-        case 4: image.data_len = IMG_PIXELS - 1; break;
-        case 5: image.format = 99; break;
-        case 6: image.data_len = 0; break;
-        case 7: image.data = NULL; break;
-        case 8: image = gray_image(constant); break;
+        case 3:
+            image.stride = IMG_W - 1;
+            break;
+        case 4:
+            image.data_len = IMG_PIXELS - 1;
+            break;
+        case 5:
+            image.format = 99;
+            break;
+        case 6:
+            image.data_len = 0;
+            break;
+        case 7:
+            image.data = NULL;
+            break;
+        case 8:
+            image = gray_image(constant);
+            break;
         case 9:
             image.data = one_pixel;
             image.data_len = 1;
@@ -2815,7 +2848,9 @@ static void test_bad_images(const topoloc_map *map)
             image.stride = IMG_W * 3;
             image.format = TOPOLOC_PIXEL_RGB8;
             break;
-        case 11: image.format = TOPOLOC_PIXEL_RGB8; break;
+        case 11:
+            image.format = TOPOLOC_PIXEL_RGB8;
+            break;
         case 12:
             /* 2^63 * 2 wraps to 0: the needed length must be computed with overflow checks, or
              * rows 2^63 bytes apart would be read (SIGSEGV). */
@@ -2823,7 +2858,8 @@ static void test_bad_images(const topoloc_map *map)
             image.stride = (SIZE_MAX >> 1) + 1;
             image.data_len = IMG_W;
             break;
-        default: break;
+        default:
+            break;
         }
         snapshot = ra;
         /* A later timestamp than the good frame that follows: it must not be remembered. */
@@ -2942,8 +2978,8 @@ static void test_image_files(void)
     CHECK(written);
     vlad_options(&options, IMG_FILES);
     progress_log_init(&log, -1, IMG_FILES);
-    CHECK_OK(topoloc_map_build_from_image_files(list, IMG_FILES, &options, record_progress, &log,
-                                                &map));
+    CHECK_OK(
+        topoloc_map_build_from_image_files(list, IMG_FILES, &options, record_progress, &log, &map));
     CHECK(log.saw_describing_all && log.saw_fitting_done && !log.bad_values);
     if (map != NULL) {
         CHECK_OK(topoloc_map_place_count(map, &n));
@@ -3279,10 +3315,7 @@ static void test_verification(const topoloc_map *map, const topoloc_map *world)
  * the content 2 px left, so the fixed pose reprojects the view's scene points 2 px left of their
  * keypoints. Bad lengths, bad intrinsics and a camera without scene points are refused. */
 #define PF_FOCAL 400.0
-static double pf_depth(float u)
-{
-    return (double)u < (IMG_W - 1) / 2.0 ? 1.0 : 4.0;
-}
+static double pf_depth(float u) { return (double)u < (IMG_W - 1) / 2.0 ? 1.0 : 4.0; }
 
 static int compare_double(const void *a, const void *b)
 {
@@ -3334,7 +3367,7 @@ static void test_pose_fix(const topoloc_map *map)
     CHECK_STATUS(topoloc_map_with_keypoint_points(map, xyz, 3 * total, &posed),
                  TOPOLOC_ERR_INVALID_ARGUMENT);
     xyz[1] = (float)((xy[1] - cy) / PF_FOCAL); /* overwritten below anyway */
-    xyz[0] = xyz[1] = xyz[2] = NAN;             /* unknown: allowed */
+    xyz[0] = xyz[1] = xyz[2] = NAN;            /* unknown: allowed */
     CHECK_OK(topoloc_map_with_keypoint_points(map, xyz, 3 * total, &posed));
     if (posed == NULL) {
         return;
@@ -3364,9 +3397,10 @@ static void test_pose_fix(const topoloc_map *map)
         CHECK_OK(topoloc_result_default(&r));
         CHECK(!r.has_pose_fix && T[0] == 1.0 && T[5] == 1.0 && T[3] == 0.0);
         CHECK_OK(localize_image(loc, &image, 0.0, &r));
-        printf("   revisit of place 4: pose fix %d against view %u, %u inliers, t = %.3f %.3f %.3f\n",
-               (int)r.has_pose_fix, (unsigned)r.pose_fix_view, (unsigned)r.pose_fix_inliers, T[3],
-               T[7], T[11]);
+        printf(
+            "   revisit of place 4: pose fix %d against view %u, %u inliers, t = %.3f %.3f %.3f\n",
+            (int)r.has_pose_fix, (unsigned)r.pose_fix_view, (unsigned)r.pose_fix_inliers, T[3],
+            T[7], T[11]);
         CHECK(r.place == 4 && r.has_pose_fix && r.pose_fix_inliers >= 12u);
         CHECK_OK(topoloc_map_view_keypoints(posed, r.pose_fix_view, xy, sizeof xy / sizeof xy[0],
                                             &count));
@@ -3389,7 +3423,8 @@ static void test_pose_fix(const topoloc_map *map)
         CHECK(n > 0);
         if (n > 0) {
             qsort(error, n, sizeof error[0], compare_double);
-            printf("   median squared reprojection against the 2 px shift: %.2f px^2 over %zu points\n",
+            printf("   median squared reprojection against the 2 px shift: %.2f px^2 over %zu "
+                   "points\n",
                    error[n / 2], n);
             CHECK(error[n / 2] < 1.5 * 1.5);
         }
@@ -3491,8 +3526,7 @@ static void test_describer(const topoloc_map *map, const topoloc_map *world)
     options.backend = TOPOLOC_BACKEND_NONE;
     CHECK_STATUS(topoloc_describer_new(map, &options, &untouched), TOPOLOC_ERR_INVALID_OPTION);
     options.backend = TOPOLOC_BACKEND_ONNX; /* the map is VLAD-ORB */
-    CHECK_STATUS(topoloc_describer_new(map, &options, &untouched),
-                 TOPOLOC_ERR_DESCRIPTOR_MISMATCH);
+    CHECK_STATUS(topoloc_describer_new(map, &options, &untouched), TOPOLOC_ERR_DESCRIPTOR_MISMATCH);
     options.backend = TOPOLOC_BACKEND_AUTO;
     options.threads = 0;
     CHECK_STATUS(topoloc_describer_new(map, &options, &untouched), TOPOLOC_ERR_INVALID_OPTION);
@@ -3584,7 +3618,8 @@ static void sk_carve(uint8_t *cells, const unsigned (*rects)[4], size_t count)
         for (y = 0; y < SK_NY; y++) {
             for (x = 0; x < SK_NX; x++) {
                 for (r = 0; r < count; r++) {
-                    if (x >= rects[r][0] && x < rects[r][2] && y >= rects[r][1] && y < rects[r][3]) {
+                    if (x >= rects[r][0] && x < rects[r][2] && y >= rects[r][1] &&
+                        y < rects[r][3]) {
                         cells[x + SK_NX * (y + SK_NY * z)] = 0;
                     }
                 }
@@ -3596,7 +3631,8 @@ static void sk_carve(uint8_t *cells, const unsigned (*rects)[4], size_t count)
 /* A T junction: a 7 m corridor along x and a 5 m stem along y, 1.2 m wide. */
 static const unsigned g_sk_t[2][4] = {{5, 5, 40, 11}, {19, 5, 25, 30}};
 /* A ring corridor 7 m x 5 m around a solid block. */
-static const unsigned g_sk_ring[4][4] = {{5, 5, 40, 11}, {5, 24, 40, 30}, {5, 5, 11, 30}, {34, 5, 40, 30}};
+static const unsigned g_sk_ring[4][4] = {
+    {5, 5, 40, 11}, {5, 24, 40, 30}, {5, 5, 11, 30}, {34, 5, 40, 30}};
 
 static const size_t g_sk_dims[3] = {SK_NX, SK_NY, SK_NZ};
 static const double g_sk_origin[3] = {0.0, 0.0, 0.0};
@@ -3652,8 +3688,8 @@ static void test_skeleton_graphs(void)
 
     /* T junction: one branch, three ends, a tree; the branch has three neighbours. */
     sk_carve(cells, g_sk_t, 2);
-    CHECK_OK(topoloc_graph_from_occupancy(g_sk_dims, SK_VOXEL, g_sk_origin, cells, SK_CELLS, &opts,
-                                          &g));
+    CHECK_OK(
+        topoloc_graph_from_occupancy(g_sk_dims, SK_VOXEL, g_sk_origin, cells, SK_CELLS, &opts, &g));
     if (g == NULL) {
         return;
     }
@@ -3675,7 +3711,8 @@ static void test_skeleton_graphs(void)
         CHECK_OK(topoloc_graph_place(g, a, xyz, &kind));
         CHECK_OK(topoloc_graph_place(g, b, xyz2, &kind));
         CHECK_NEAR(length * length,
-                   (xyz[0] - xyz2[0]) * (xyz[0] - xyz2[0]) + (xyz[1] - xyz2[1]) * (xyz[1] - xyz2[1]) +
+                   (xyz[0] - xyz2[0]) * (xyz[0] - xyz2[0]) +
+                       (xyz[1] - xyz2[1]) * (xyz[1] - xyz2[1]) +
                        (xyz[2] - xyz2[2]) * (xyz[2] - xyz2[2]),
                    1e-9);
         CHECK(length > 0.0 && length <= opts.max_edge_m);
@@ -3687,7 +3724,8 @@ static void test_skeleton_graphs(void)
     voxels = malloc(count * sizeof *voxels);
     CHECK(voxels != NULL);
     if (voxels != NULL) {
-        CHECK_STATUS(topoloc_graph_skeleton(g, voxels, count - 1, &n), TOPOLOC_ERR_BUFFER_TOO_SMALL);
+        CHECK_STATUS(topoloc_graph_skeleton(g, voxels, count - 1, &n),
+                     TOPOLOC_ERR_BUFFER_TOO_SMALL);
         CHECK(n == count);
         CHECK_OK(topoloc_graph_skeleton(g, voxels, count, &n));
         for (i = 0; i + 2 < count; i += 3) {
@@ -3744,8 +3782,8 @@ static void test_skeleton_graphs(void)
     opts.z_min_m = 0.5;
     opts.z_max_m = 0.9;
     g = NULL;
-    CHECK_OK(topoloc_graph_from_occupancy(g_sk_dims, SK_VOXEL, g_sk_origin, cells, SK_CELLS, &opts,
-                                          &g));
+    CHECK_OK(
+        topoloc_graph_from_occupancy(g_sk_dims, SK_VOXEL, g_sk_origin, cells, SK_CELLS, &opts, &g));
     if (g != NULL) {
         CHECK_OK(topoloc_graph_place_count(g, &places));
         for (i = 0; i < places; i++) {
@@ -3759,8 +3797,8 @@ static void test_skeleton_graphs(void)
     /* A ring: a cycle (every place has two neighbours) with four corners. */
     sk_carve(cells, g_sk_ring, 4);
     g = NULL;
-    CHECK_OK(topoloc_graph_from_occupancy(g_sk_dims, SK_VOXEL, g_sk_origin, cells, SK_CELLS, &opts,
-                                          &g));
+    CHECK_OK(
+        topoloc_graph_from_occupancy(g_sk_dims, SK_VOXEL, g_sk_origin, cells, SK_CELLS, &opts, &g));
     if (g != NULL) {
         bool two = true;
         CHECK(sk_summary(g, kinds, degree, &places, &edges));
@@ -3776,53 +3814,54 @@ static void test_skeleton_graphs(void)
 
     /* Errors: NULLs, sizes, a full grid and options out of range, each named; out untouched. */
     g = sentinel;
-    CHECK_NULL(topoloc_graph_from_occupancy(NULL, SK_VOXEL, g_sk_origin, cells, SK_CELLS, &opts, &g),
-               "dims");
+    CHECK_NULL(
+        topoloc_graph_from_occupancy(NULL, SK_VOXEL, g_sk_origin, cells, SK_CELLS, &opts, &g),
+        "dims");
     CHECK_NULL(topoloc_graph_from_occupancy(g_sk_dims, SK_VOXEL, NULL, cells, SK_CELLS, &opts, &g),
                "origin");
-    CHECK_NULL(topoloc_graph_from_occupancy(g_sk_dims, SK_VOXEL, g_sk_origin, NULL, SK_CELLS, &opts,
-                                            &g),
-               "cells");
-    CHECK_NULL(topoloc_graph_from_occupancy(g_sk_dims, SK_VOXEL, g_sk_origin, cells, SK_CELLS, &opts,
-                                            NULL),
+    CHECK_NULL(
+        topoloc_graph_from_occupancy(g_sk_dims, SK_VOXEL, g_sk_origin, NULL, SK_CELLS, &opts, &g),
+        "cells");
+    CHECK_NULL(topoloc_graph_from_occupancy(g_sk_dims, SK_VOXEL, g_sk_origin, cells, SK_CELLS,
+                                            &opts, NULL),
                "out");
     CHECK_STATUS(topoloc_graph_from_occupancy(g_sk_dims, SK_VOXEL, g_sk_origin, cells, SK_CELLS - 1,
                                               &opts, &g),
                  TOPOLOC_ERR_INVALID_ARGUMENT);
     CHECK(strstr(last_error(), "cells_len") != NULL);
-    CHECK_STATUS(topoloc_graph_from_occupancy(g_sk_dims, 0.0, g_sk_origin, cells, SK_CELLS, &opts,
-                                              &g),
-                 TOPOLOC_ERR_INVALID_ARGUMENT);
+    CHECK_STATUS(
+        topoloc_graph_from_occupancy(g_sk_dims, 0.0, g_sk_origin, cells, SK_CELLS, &opts, &g),
+        TOPOLOC_ERR_INVALID_ARGUMENT);
     CHECK(strstr(last_error(), "voxel_size") != NULL);
     opts.merge_radius_m = -1.0;
-    CHECK_STATUS(topoloc_graph_from_occupancy(g_sk_dims, SK_VOXEL, g_sk_origin, cells, SK_CELLS,
-                                              &opts, &g),
-                 TOPOLOC_ERR_INVALID_ARGUMENT);
+    CHECK_STATUS(
+        topoloc_graph_from_occupancy(g_sk_dims, SK_VOXEL, g_sk_origin, cells, SK_CELLS, &opts, &g),
+        TOPOLOC_ERR_INVALID_ARGUMENT);
     CHECK(strstr(last_error(), "merge_radius_m") != NULL);
     CHECK_OK(topoloc_skeleton_options_default(&opts));
     opts.max_edge_m = 0.3; /* under two voxels */
-    CHECK_STATUS(topoloc_graph_from_occupancy(g_sk_dims, SK_VOXEL, g_sk_origin, cells, SK_CELLS,
-                                              &opts, &g),
-                 TOPOLOC_ERR_INVALID_ARGUMENT);
+    CHECK_STATUS(
+        topoloc_graph_from_occupancy(g_sk_dims, SK_VOXEL, g_sk_origin, cells, SK_CELLS, &opts, &g),
+        TOPOLOC_ERR_INVALID_ARGUMENT);
     CHECK(strstr(last_error(), "max_edge_m") != NULL);
     CHECK_OK(topoloc_skeleton_options_default(&opts));
     opts.use_z_band = true;
     opts.z_min_m = 5.0;
     opts.z_max_m = 6.0;
-    CHECK_STATUS(topoloc_graph_from_occupancy(g_sk_dims, SK_VOXEL, g_sk_origin, cells, SK_CELLS,
-                                              &opts, &g),
-                 TOPOLOC_ERR_INVALID_ARGUMENT);
+    CHECK_STATUS(
+        topoloc_graph_from_occupancy(g_sk_dims, SK_VOXEL, g_sk_origin, cells, SK_CELLS, &opts, &g),
+        TOPOLOC_ERR_INVALID_ARGUMENT);
     CHECK(strstr(last_error(), "z_band") != NULL);
     CHECK_OK(topoloc_skeleton_options_default(&opts));
     opts.struct_size = 3;
-    CHECK_STATUS(topoloc_graph_from_occupancy(g_sk_dims, SK_VOXEL, g_sk_origin, cells, SK_CELLS,
-                                              &opts, &g),
-                 TOPOLOC_ERR_STRUCT_SIZE);
+    CHECK_STATUS(
+        topoloc_graph_from_occupancy(g_sk_dims, SK_VOXEL, g_sk_origin, cells, SK_CELLS, &opts, &g),
+        TOPOLOC_ERR_STRUCT_SIZE);
     CHECK_OK(topoloc_skeleton_options_default(&opts));
     memset(cells, 1, SK_CELLS);
-    CHECK_STATUS(topoloc_graph_from_occupancy(g_sk_dims, SK_VOXEL, g_sk_origin, cells, SK_CELLS,
-                                              &opts, &g),
-                 TOPOLOC_ERR_INVALID_ARGUMENT);
+    CHECK_STATUS(
+        topoloc_graph_from_occupancy(g_sk_dims, SK_VOXEL, g_sk_origin, cells, SK_CELLS, &opts, &g),
+        TOPOLOC_ERR_INVALID_ARGUMENT);
     CHECK(strstr(last_error(), "cells") != NULL);
     CHECK(g == sentinel);
 }
@@ -3840,7 +3879,6 @@ static bool make_tmpdir(void)
     }
     return true;
 }
-
 
 /* Loop closure (ABI 1.5): keyframes in, gated hints out. Two keyframes see the same 60
  * keypoints (same binary descriptors), so the second's candidate verifies with all of them;
@@ -3870,8 +3908,8 @@ static void loop_keypoints(float *first, float *second, uint8_t *descriptors)
         v1 = 300.0 * y / z + 120.0;
         u2 = 300.0 * qx / qz + 160.0;
         v2 = 300.0 * y / qz + 120.0;
-        if (qz < 0.5 || u1 < 0 || u1 > 319 || v1 < 0 || v1 > 239 || u2 < 0 || u2 > 319 ||
-            v2 < 0 || v2 > 239)
+        if (qz < 0.5 || u1 < 0 || u1 > 319 || v1 < 0 || v1 > 239 || u2 < 0 || u2 > 319 || v2 < 0 ||
+            v2 > 239)
             continue;
         first[2 * i] = (float)u1;
         first[2 * i + 1] = (float)v1;
@@ -4139,48 +4177,48 @@ static void test_trajectory_metrics(void)
     CHECK(options.alignment == TOPOLOC_ALIGN_SIM3 && options.max_diff_s == 0.01 &&
           options.offset_s == 0.0 && options.rpe_delta == 1);
     CHECK_STATUS(topoloc_trajectory_report_default(&report), TOPOLOC_OK);
-    CHECK_STATUS(topoloc_trajectory_evaluate(ref_t, ref_p, TRAJ_N, est_t, est_p, TRAJ_N, &options,
-                                             &report),
-                 TOPOLOC_OK);
+    CHECK_STATUS(
+        topoloc_trajectory_evaluate(ref_t, ref_p, TRAJ_N, est_t, est_p, TRAJ_N, &options, &report),
+        TOPOLOC_OK);
     CHECK(report.pairs == TRAJ_N && report.ate_m.rmse < 1e-9 && report.are_deg.max < 1e-6);
     CHECK(fabs(report.scale - 2.0) < 1e-9 && fabs(report.length_ratio - 1.0) < 1e-9);
     CHECK(fabs(report.alignment[15] - 1.0) < 1e-12);
     options.alignment = TOPOLOC_ALIGN_SE3;
-    CHECK_STATUS(topoloc_trajectory_evaluate(ref_t, ref_p, TRAJ_N, est_t, est_p, TRAJ_N, &options,
-                                             &report),
-                 TOPOLOC_OK);
+    CHECK_STATUS(
+        topoloc_trajectory_evaluate(ref_t, ref_p, TRAJ_N, est_t, est_p, TRAJ_N, &options, &report),
+        TOPOLOC_OK);
     CHECK(report.scale == 1.0 && report.ate_m.rmse > 0.5);
 
     /* Bad input: a status, and the report as it was. */
     options.alignment = 7;
-    CHECK_STATUS(topoloc_trajectory_evaluate(ref_t, ref_p, TRAJ_N, est_t, est_p, TRAJ_N, &options,
-                                             &report),
-                 TOPOLOC_ERR_INVALID_OPTION);
+    CHECK_STATUS(
+        topoloc_trajectory_evaluate(ref_t, ref_p, TRAJ_N, est_t, est_p, TRAJ_N, &options, &report),
+        TOPOLOC_ERR_INVALID_OPTION);
     options.alignment = TOPOLOC_ALIGN_SIM3;
     est_p[7 * 5 + 1] = make_nan();
-    CHECK_STATUS(topoloc_trajectory_evaluate(ref_t, ref_p, TRAJ_N, est_t, est_p, TRAJ_N, &options,
-                                             &report),
-                 TOPOLOC_ERR_NON_FINITE);
+    CHECK_STATUS(
+        topoloc_trajectory_evaluate(ref_t, ref_p, TRAJ_N, est_t, est_p, TRAJ_N, &options, &report),
+        TOPOLOC_ERR_NON_FINITE);
     est_p[7 * 5 + 1] = 0.0;
     est_t[3] = -1.0; /* earlier than the one before */
-    CHECK_STATUS(topoloc_trajectory_evaluate(ref_t, ref_p, TRAJ_N, est_t, est_p, TRAJ_N, &options,
-                                             &report),
-                 TOPOLOC_ERR_INVALID_ARGUMENT);
+    CHECK_STATUS(
+        topoloc_trajectory_evaluate(ref_t, ref_p, TRAJ_N, est_t, est_p, TRAJ_N, &options, &report),
+        TOPOLOC_ERR_INVALID_ARGUMENT);
     CHECK_HAS_MESSAGE();
     est_t[3] = 0.3;
-    CHECK_STATUS(topoloc_trajectory_evaluate(ref_t, ref_p, TRAJ_N, est_t, est_p, 2, &options,
-                                             &report),
-                 TOPOLOC_ERR_INVALID_ARGUMENT); /* too few pairs to align */
-    CHECK_NULL(topoloc_trajectory_evaluate(ref_t, NULL, TRAJ_N, est_t, est_p, TRAJ_N, &options,
-                                           &report),
-               "reference_poses");
-    CHECK_NULL(topoloc_trajectory_evaluate(ref_t, ref_p, TRAJ_N, est_t, est_p, TRAJ_N, &options,
-                                           NULL),
-               "report");
+    CHECK_STATUS(
+        topoloc_trajectory_evaluate(ref_t, ref_p, TRAJ_N, est_t, est_p, 2, &options, &report),
+        TOPOLOC_ERR_INVALID_ARGUMENT); /* too few pairs to align */
+    CHECK_NULL(
+        topoloc_trajectory_evaluate(ref_t, NULL, TRAJ_N, est_t, est_p, TRAJ_N, &options, &report),
+        "reference_poses");
+    CHECK_NULL(
+        topoloc_trajectory_evaluate(ref_t, ref_p, TRAJ_N, est_t, est_p, TRAJ_N, &options, NULL),
+        "report");
     report.struct_size = 3;
-    CHECK_STATUS(topoloc_trajectory_evaluate(ref_t, ref_p, TRAJ_N, est_t, est_p, TRAJ_N, NULL,
-                                             &report),
-                 TOPOLOC_ERR_STRUCT_SIZE);
+    CHECK_STATUS(
+        topoloc_trajectory_evaluate(ref_t, ref_p, TRAJ_N, est_t, est_p, TRAJ_N, NULL, &report),
+        TOPOLOC_ERR_STRUCT_SIZE);
     report.struct_size = sizeof report;
     CHECK(report.scale == 1.0 && report.pairs == TRAJ_N); /* the SE3 run's, untouched */
 
@@ -4207,15 +4245,15 @@ static void test_trajectory_metrics(void)
                                                    NULL, &report),
                  TOPOLOC_OK);
     CHECK(report.pairs == TRAJ_N && report.ate_m.rmse < 1e-9);
-    CHECK_STATUS(topoloc_trajectory_evaluate_files(ref_path, est_path, TOPOLOC_TRAJECTORY_TUM,
-                                                   NULL, &report),
+    CHECK_STATUS(topoloc_trajectory_evaluate_files(ref_path, est_path, TOPOLOC_TRAJECTORY_TUM, NULL,
+                                                   &report),
                  TOPOLOC_ERR_INVALID_ARGUMENT); /* line 2 is malformed */
     CHECK_HAS_MESSAGE();
     CHECK_STATUS(topoloc_trajectory_evaluate_files(ref_path, ref_path, 9, NULL, &report),
                  TOPOLOC_ERR_INVALID_ARGUMENT);
     CHECK(remove(est_path) == 0);
-    CHECK_STATUS(topoloc_trajectory_evaluate_files(ref_path, est_path, TOPOLOC_TRAJECTORY_TUM,
-                                                   NULL, &report),
+    CHECK_STATUS(topoloc_trajectory_evaluate_files(ref_path, est_path, TOPOLOC_TRAJECTORY_TUM, NULL,
+                                                   &report),
                  TOPOLOC_ERR_IO);
     CHECK(remove(ref_path) == 0);
 }
