@@ -10,7 +10,7 @@ mod common;
 use common::images::{gray, place_image, revisit};
 use std::sync::Arc;
 use topoloc::build::{build_from_images, BuildStage, ImageLayout, ImageMapOptions, ImageSource};
-use topoloc::describe::onnx::{cache_dir, DEFAULT_MODEL_FILE};
+use topoloc::describe::onnx::DEFAULT_MODEL_FILE;
 use topoloc::describe::{BackendConfig, Describer, DescriberOptions, FitOptions};
 use topoloc::verify::{
     cells_from_map, check_pair, FeatureKind, PairOptions, VerificationOptions, CELL_TAP,
@@ -24,10 +24,7 @@ const PLACES: u64 = 6;
 
 /// A map of `PLACES` synthetic place images with dense cells, or `None` before set-up.
 fn cells_map() -> Option<Arc<Map>> {
-    if !cache_dir().join(DEFAULT_MODEL_FILE).is_file() {
-        eprintln!("skipped: no ONNX model in {}", cache_dir().display());
-        return None;
-    }
+    common::models::cached(DEFAULT_MODEL_FILE)?;
     let images: Vec<Vec<u8>> = (0..PLACES).map(place_image).collect();
     let sources: Vec<ImageSource> = images
         .iter()

@@ -12,7 +12,7 @@ use topoloc::build::{
     build_from_images, BuildStage, ImageLayout, ImageMapError, ImageMapOptions, ImageSource,
     PlaceLayout,
 };
-use topoloc::describe::onnx::{cache_dir, OnnxOptions, DEFAULT_MODEL_FILE};
+use topoloc::describe::onnx::{OnnxOptions, DEFAULT_MODEL_FILE};
 use topoloc::describe::vlad::VladOptions;
 use topoloc::describe::{BackendConfig, BackendKind, BackendSpec, Describer, DescriberOptions};
 use topoloc::errors::VisionError;
@@ -50,11 +50,7 @@ fn image_frame(data: &[u8], t: f64) -> Frame<'_> {
 }
 
 fn onnx_available() -> bool {
-    let ok = cache_dir().join(DEFAULT_MODEL_FILE).is_file();
-    if !ok {
-        eprintln!("skipped: no ONNX model in {}", cache_dir().display());
-    }
-    ok
+    common::models::cached(DEFAULT_MODEL_FILE).is_some()
 }
 
 /// Builds a map from `places` images, saves and reloads it, and localizes revisits of every

@@ -1,254 +1,294 @@
-//! Holds the library's layer order (documented in `src/lib.rs`) against its source: a module may
-//! name another module of the crate (`use crate::x`, or a `crate::x::` path in code) only when
-//! that module sits in a lower layer. `eval` reads the core and is read by no module but the C
-//! ABI, which exposes its trajectory metrics.
+//! Holds the library's module structure against its source:
+//! - a module may name another module of the crate (`use crate::x`, or a `crate::x::` path in
+//!   code) only when that module sits in a lower layer of the table in `src/lib.rs` (the one
+//!   place that table lives; this test reads it from there);
+//! - `eval` reads the core and is read by no module but the C ABI, which exposes its trajectory
+//!   metrics;
+//! - inside every module, the submodules import each other without cycles.
 
+mod module_graph;
+
+use module_graph::ModuleGraph;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
-
-/// Layer of every top-level module of `src/`; a module may import only from lower numbers.
-const LAYERS: &[(&str, u32)] = &[
-    ("errors", 1),
-    ("image", 2),
-    ("descriptor", 2),
-    ("onnx_runtime", 2),
-    ("describe", 3),
-    ("verify", 3),
-    ("map", 4),
-    ("build", 5),
-    ("skeleton", 5),
-    ("eval", 5),
-    ("localize", 6),
-    ("loops", 7),
-    ("ffi", 8),
-];
 
 /// Modules that no other module of the library may import, but the ones listed with them.
 const NEVER_IMPORTED: &[(&str, &[&str])] = &[("eval", &["ffi"])];
 
-/// One import that breaks the order: the file, its line, and the two modules.
-#[derive(Debug, PartialEq)]
-struct Violation {
-    file: String,
-    line: usize,
-    from: String,
-    to: String,
+fn src() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("src")
 }
 
-fn layer_of(module: &str) -> Option<u32> {
-    LAYERS.iter().find(|(m, _)| *m == module).map(|&(_, l)| l)
-}
-
-/// The crate module names that `code` (one file's text, comments removed) refers to through
-/// `crate::`, with the line each is on. `use crate::{a::X, b::Y}` groups count every member.
-fn crate_references(code: &str) -> Vec<(usize, String)> {
-    let mut found = Vec::new();
-    let bytes = code.as_bytes();
-    let mut at = 0;
-    while let Some(pos) = code[at..].find("crate::") {
-        let start = at + pos;
-        at = start + "crate::".len();
-        // `topoloc_crate::` or `$crate::` are not this crate's paths.
-        if start > 0 && (bytes[start - 1].is_ascii_alphanumeric() || bytes[start - 1] == b'_') {
+/// The layer of every module, from the `# Layers` table of a crate root's doc comment: rows
+/// `//! | N | [`a`], `b` | what |`.
+fn layers_from_doc(lib_rs: &str) -> BTreeMap<String, u32> {
+    let mut layers = BTreeMap::new();
+    for line in lib_rs.lines() {
+        let Some(row) = line.strip_prefix("//! |") else {
             continue;
-        }
-        let line = code[..start].matches('\n').count() + 1;
-        let rest = &code[at..];
-        if let Some(group) = rest.strip_prefix('{') {
-            let end = matching_brace(group);
-            for member in split_top_level(&group[..end]) {
-                let name: String = member
-                    .trim()
-                    .chars()
-                    .take_while(|c| c.is_alphanumeric() || *c == '_')
-                    .collect();
-                if !name.is_empty() {
-                    found.push((line, name));
-                }
+        };
+        let cells: Vec<&str> = row.split('|').collect();
+        let Some(Ok(layer)) = cells.first().map(|c| c.trim().parse::<u32>()) else {
+            continue;
+        };
+        let names = cells.get(1).copied().unwrap_or("");
+        for name in names.split(',') {
+            let name = name
+                .trim()
+                .trim_matches(|c| c == '[' || c == ']' || c == '`');
+            if !name.is_empty() {
+                layers.insert(name.to_string(), layer);
             }
-        } else {
-            let name: String = rest
-                .chars()
-                .take_while(|c| c.is_alphanumeric() || *c == '_')
-                .collect();
-            found.push((line, name));
+        }
+    }
+    layers
+}
+
+/// What breaks the layer order in `graph`: `(from, to, where)` for each import of a module in
+/// the same or a higher layer, of a module that may not be imported, of a module missing from
+/// the table, or of a crate-root item (it hides which layer it comes from).
+fn violations(graph: &ModuleGraph, layers: &BTreeMap<String, u32>) -> Vec<String> {
+    let mut found = Vec::new();
+    for (from, targets) in &graph.edges {
+        let Some(&own) = layers.get(from) else {
+            found.push(format!(
+                "{from}: module missing from the table in src/lib.rs"
+            ));
+            continue;
+        };
+        for (to, site) in targets {
+            let allowed = layers.get(to).is_some_and(|&layer| layer < own)
+                && NEVER_IMPORTED
+                    .iter()
+                    .all(|(module, readers)| module != to || readers.contains(&from.as_str()));
+            if !allowed {
+                found.push(format!("{from} -> {to} (src/{}:{})", site.file, site.line));
+            }
+        }
+    }
+    for (from, name, site) in &graph.root_items {
+        if name != "VERSION" {
+            found.push(format!(
+                "{from} -> crate::{name}, a crate-root item (src/{}:{})",
+                site.file, site.line
+            ));
         }
     }
     found
 }
 
-fn matching_brace(s: &str) -> usize {
-    let mut depth = 0;
-    for (i, c) in s.char_indices() {
-        match c {
-            '{' => depth += 1,
-            '}' if depth == 0 => return i,
-            '}' => depth -= 1,
-            _ => {}
-        }
-    }
-    s.len()
+#[test]
+fn every_module_imports_only_from_lower_layers() {
+    let layers = layers_from_doc(&std::fs::read_to_string(src().join("lib.rs")).unwrap());
+    assert!(
+        layers.len() >= 10,
+        "too few modules in the table: {layers:?}"
+    );
+    assert_eq!(layers.get("ffi"), Some(&8), "{layers:?}");
+    assert_eq!(layers.get("errors"), Some(&1), "{layers:?}");
+    let graph = ModuleGraph::from_src(&src());
+    let modules: Vec<&String> = graph.edges.keys().collect();
+    let listed: Vec<&String> = layers.keys().collect();
+    assert_eq!(
+        modules, listed,
+        "src/ and the table in src/lib.rs name other modules"
+    );
+    let found = violations(&graph, &layers);
+    assert!(
+        found.is_empty(),
+        "imports against the layer order (src/lib.rs): {found:#?}"
+    );
 }
 
-fn split_top_level(s: &str) -> Vec<&str> {
-    let (mut parts, mut depth, mut from) = (Vec::new(), 0, 0);
-    for (i, c) in s.char_indices() {
-        match c {
-            '{' => depth += 1,
-            '}' => depth -= 1,
-            ',' if depth == 0 => {
-                parts.push(&s[from..i]);
-                from = i + 1;
-            }
-            _ => {}
-        }
-    }
-    parts.push(&s[from..]);
-    parts
-}
-
-/// Removes `//` comments (doc comments included: their links are not imports) and string
-/// literals' contents, keeping line breaks so that line numbers stay right.
-fn strip_comments(text: &str) -> String {
-    let mut out = String::with_capacity(text.len());
-    for line in text.lines() {
-        let mut in_str = false;
-        let mut prev = '\0';
-        let mut kept = String::new();
-        let chars: Vec<char> = line.chars().collect();
-        let mut i = 0;
-        while i < chars.len() {
-            let c = chars[i];
-            if !in_str && c == '/' && chars.get(i + 1) == Some(&'/') {
-                break;
-            }
-            if c == '"' && prev != '\\' {
-                in_str = !in_str;
-            }
-            if !in_str || c == '"' {
-                kept.push(c);
-            }
-            prev = c;
-            i += 1;
-        }
-        out.push_str(&kept);
-        out.push('\n');
-    }
-    out
-}
-
-/// Checks one file of module `from` and returns what breaks the order.
-fn check_file(file: &str, from: &str, text: &str) -> Vec<Violation> {
-    let Some(own) = layer_of(from) else {
-        return vec![Violation {
-            file: file.into(),
-            line: 0,
-            from: from.into(),
-            to: "(module missing from LAYERS)".into(),
-        }];
-    };
-    let mut violations = Vec::new();
-    for (line, to) in crate_references(&strip_comments(text)) {
-        if to == from || to == "VERSION" {
-            continue;
-        }
-        let allowed = match layer_of(&to) {
-            Some(layer) => {
-                layer < own
-                    && NEVER_IMPORTED
-                        .iter()
-                        .all(|(module, readers)| *module != to || readers.contains(&from))
-            }
-            // A crate-root item (re-exports in lib.rs) hides which layer it comes from.
-            None => false,
-        };
-        if !allowed {
-            violations.push(Violation {
-                file: file.into(),
-                line,
-                from: from.into(),
-                to,
-            });
-        }
-    }
-    violations
-}
-
-fn rust_files(dir: &Path, out: &mut Vec<PathBuf>) {
-    for entry in std::fs::read_dir(dir).expect("readable src/") {
-        let path = entry.expect("directory entry").path();
+/// Every module folder (a folder with a `mod.rs`) under `dir`, as a path relative to `src`.
+fn module_folders(src: &Path, dir: &Path, out: &mut Vec<String>) {
+    for entry in std::fs::read_dir(dir).unwrap() {
+        let path = entry.unwrap().path();
         if path.is_dir() {
-            rust_files(&path, out);
-        } else if path.extension().is_some_and(|e| e == "rs") {
-            out.push(path);
+            if path.join("mod.rs").is_file() {
+                let relative = path.strip_prefix(src).unwrap();
+                out.push(relative.to_string_lossy().replace('\\', "/"));
+            }
+            module_folders(src, &path, out);
         }
     }
 }
 
 #[test]
-fn every_module_imports_only_from_lower_layers() {
-    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
-    let mut files = Vec::new();
-    rust_files(&src, &mut files);
-    files.sort();
-    let mut violations = Vec::new();
-    let mut modules = BTreeMap::new();
-    for path in &files {
-        let relative = path.strip_prefix(&src).unwrap();
-        let first = relative.components().next().unwrap().as_os_str();
-        let module = first.to_string_lossy().trim_end_matches(".rs").to_string();
-        if module == "lib" {
-            continue;
+fn the_submodules_of_every_module_import_each_other_without_cycles() {
+    let mut folders = Vec::new();
+    module_folders(&src(), &src(), &mut folders);
+    assert!(folders.len() >= 8, "only {folders:?} read");
+    for module in &folders {
+        let graph = ModuleGraph::from_module(&src(), module);
+        if let Some(cycle) = graph.find_cycle() {
+            panic!("import cycle inside {module}: {}", graph.describe(&cycle));
         }
-        *modules.entry(module.clone()).or_insert(0) += 1;
-        let text = std::fs::read_to_string(path).unwrap();
-        violations.extend(check_file(&relative.display().to_string(), &module, &text));
     }
-    assert!(
-        modules.len() >= 10,
-        "the walk found too few modules: {modules:?}"
-    );
-    assert!(
-        violations.is_empty(),
-        "imports against the layer order (src/lib.rs): {violations:#?}"
+    // Not vacuous: imports known to exist are found.
+    let localize = ModuleGraph::from_module(&src(), "localize");
+    let edges = localize.edge_list();
+    for edge in [("localizer", "verification"), ("localizer", "options")] {
+        assert!(edges.contains(&edge), "{edge:?} not in {edges:?}");
+    }
+}
+
+#[test]
+fn the_layer_table_is_read_from_the_doc_rows() {
+    let doc = "//! # Layers\n//! | layer | modules | what |\n//! |---|---|---|\n\
+               //! | 3 | [`describe`], [`verify`] | backends |\n//! | 1 | `errors` | kinds |\n";
+    let layers = layers_from_doc(doc);
+    assert_eq!(
+        layers.into_iter().collect::<Vec<_>>(),
+        [
+            ("describe".into(), 3),
+            ("errors".into(), 1),
+            ("verify".into(), 3)
+        ]
     );
 }
+
+/// The layer check over a crate of `files` with the table `layers`.
+fn check(files: &[(&str, &str)], layers: &[(&str, u32)]) -> Vec<String> {
+    let layers = layers.iter().map(|(m, l)| (m.to_string(), *l)).collect();
+    violations(&ModuleGraph::from_files(files), &layers)
+}
+
+const TWO_LAYERS: &[(&str, u32)] = &[("eval", 2), ("ffi", 3), ("image", 1), ("map", 2)];
 
 #[test]
 fn the_check_catches_a_back_import_in_every_form() {
-    let back = "use crate::map::DescriptorIdentity;\n";
-    let found = check_file("describe/x.rs", "describe", back);
-    assert_eq!(
-        found,
-        vec![Violation {
-            file: "describe/x.rs".into(),
-            line: 1,
-            from: "describe".into(),
-            to: "map".into(),
-        }]
+    let lib = (
+        "lib.rs",
+        "pub mod eval;\npub mod ffi;\npub mod image;\npub mod map;\n",
     );
-    let grouped = "use crate::{\n    image::ImageView,\n    localize::Frame,\n};\n";
-    let found = check_file("map/x.rs", "map", grouped);
-    assert_eq!(found.len(), 1, "{found:?}");
-    assert_eq!((found[0].line, found[0].to.as_str()), (1, "localize"));
-    let inline = "fn f() {\n    let x = crate::ffi::something();\n}\n";
-    assert_eq!(check_file("verify/x.rs", "verify", inline).len(), 1);
-    let same_layer = "use crate::verify::Keypoints;\n";
-    assert_eq!(check_file("describe/x.rs", "describe", same_layer).len(), 1);
-    let eval = "use crate::eval::GraphMetrics;\n";
-    assert_eq!(check_file("loops/x.rs", "loops", eval).len(), 1);
+    let back = [lib, ("image.rs", "use crate::map::Map;\n"), ("map.rs", "")];
+    assert_eq!(check(&back, TWO_LAYERS), ["image -> map (src/image.rs:1)"]);
+    let grouped = [
+        lib,
+        ("image/x.rs", "use crate::{\n    map::Map,\n};\n"),
+        ("map.rs", ""),
+    ];
+    assert_eq!(
+        check(&grouped, TWO_LAYERS),
+        ["image -> map (src/image/x.rs:1)"]
+    );
+    let inline = [
+        lib,
+        ("image.rs", "fn f() {\n    crate::ffi::g();\n}\n"),
+        ("ffi.rs", ""),
+    ];
+    assert_eq!(
+        check(&inline, TWO_LAYERS),
+        ["image -> ffi (src/image.rs:2)"]
+    );
+    let same_layer = [lib, ("map.rs", "use crate::eval::X;\n"), ("eval.rs", "")];
+    assert_eq!(check(&same_layer, TWO_LAYERS).len(), 1);
+    let eval_read = [lib, ("ffi.rs", "use crate::eval::X;\n"), ("eval.rs", "")];
     assert!(
-        check_file("ffi/x.rs", "ffi", eval).is_empty(),
+        check(&eval_read, TWO_LAYERS).is_empty(),
         "the C ABI may read eval"
     );
-    let root = "use crate::Map;\n";
-    assert_eq!(check_file("localize/x.rs", "localize", root).len(), 1);
+    let root = [lib, ("map.rs", "use crate::Map;\nuse crate::VERSION;\n")];
+    assert_eq!(
+        check(&root, TWO_LAYERS),
+        ["map -> crate::Map, a crate-root item (src/map.rs:1)"]
+    );
+    let unknown = [lib, ("newthing.rs", "")];
+    assert_eq!(
+        check(&unknown, TWO_LAYERS).len(),
+        1,
+        "a module missing from the table fails"
+    );
 }
 
 #[test]
 fn comments_strings_and_downward_imports_pass() {
-    let fine = "//! See [`crate::ffi`].\n/// [`crate::localize::Localizer`]\nuse crate::image::ImageView;\nlet s = \"crate::ffi\";\nuse super::x; // crate::ffi\n";
-    assert_eq!(check_file("verify/x.rs", "verify", fine), vec![]);
-    let unknown = check_file("newthing.rs", "newthing", "");
-    assert_eq!(unknown.len(), 1, "a module missing from LAYERS must fail");
+    let fine = "//! See [`crate::ffi`].\n/// [`crate::map::Map`]\nuse crate::image::ImageView;\n\
+                let s = \"crate::ffi\";\nlet r = r#\"crate::ffi \"quoted\"\"#;\nlet q = '\"';\n\
+                use super::x; // crate::ffi\nlet t = \"after crate::ffi\";\n";
+    let files = [("lib.rs", ""), ("map.rs", fine), ("image.rs", "")];
+    assert_eq!(check(&files, TWO_LAYERS), Vec::<String>::new());
+}
+
+#[test]
+fn a_submodule_cycle_is_found_through_super_and_the_module_path() {
+    let dir = tempfile::tempdir().unwrap();
+    let module = dir.path().join("m");
+    std::fs::create_dir_all(module.join("c")).unwrap();
+    for (file, text) in [
+        ("mod.rs", "mod a;\nmod b;\nmod c;\n"),
+        ("a.rs", "use super::b::X;\nuse crate::b::Unrelated;\n"),
+        ("b.rs", "fn f() {\n    crate::m::c::g();\n}\n"),
+        ("c.rs", "mod inner;\n"),
+        ("c/inner.rs", "use super::super::a::Y;\n"),
+    ] {
+        std::fs::write(module.join(file), text).unwrap();
+    }
+    let graph = ModuleGraph::from_module(dir.path(), "m");
+    let cycle = graph.find_cycle().expect("a -> b -> c -> a");
+    assert_eq!(cycle, ["a", "b", "c", "a"]);
+    assert_eq!(
+        graph.describe(&cycle),
+        "a -> b (src/m/a.rs:1), b -> c (src/m/b.rs:2), c -> a (src/m/c/inner.rs:1)"
+    );
+}
+#[test]
+fn checker_finds_a_cycle_through_groups_paths_and_super() {
+    let files = [
+        ("lib.rs", "pub mod a;\npub mod b;\npub mod c;\npub mod d;\n"),
+        ("a.rs", "use crate::b::X;\n"),
+        // A group, and `d` (no cycle through it).
+        ("b.rs", "use crate::{d, c::{Y, Z}};\n"),
+        ("c.rs", "mod inner;\n"),
+        // Back to `a` from a submodule of `c`, climbing to the root with `super::super::`.
+        ("c/inner.rs", "fn f() {\n    super::super::a::g();\n}\n"),
+        ("d.rs", "pub struct D;\n"),
+    ];
+    let graph = ModuleGraph::from_files(&files);
+    let cycle = graph.find_cycle().expect("a -> b -> c -> a is a cycle");
+    assert_eq!(cycle, ["a", "b", "c", "a"]);
+    assert_eq!(
+        graph.describe(&cycle),
+        "a -> b (src/a.rs:1), b -> c (src/b.rs:1), c -> a (src/c/inner.rs:2)"
+    );
+}
+
+#[test]
+fn checker_finds_a_two_module_cycle_in_expression_paths() {
+    let files = [
+        ("main.rs", "mod x;\nmod y;\n"),
+        ("x.rs", "fn f() -> u32 {\n    crate::y::g()\n}\n"),
+        (
+            "y.rs",
+            "pub fn g() -> u32 {\n    1\n}\nfn h() {\n    crate::x::f();\n}\n",
+        ),
+    ];
+    let cycle = ModuleGraph::from_files(&files).find_cycle();
+    assert_eq!(cycle.expect("x <-> y"), ["x", "y", "x"]);
+}
+
+#[test]
+fn checker_passes_a_dag_and_ignores_comments_and_local_paths() {
+    let files = [
+        ("lib.rs", "pub mod a;\npub mod b;\npub mod c;\n"),
+        // Doc links and comments are not imports.
+        (
+            "a.rs",
+            "//! See [`crate::c`].\nuse crate::b::X;\n/* crate::c::Y */\n",
+        ),
+        (
+            "b.rs",
+            "use crate::c::Y;\n#[cfg(test)]\nmod tests {\n    use super::*;\n}\n",
+        ),
+        // `super::` from a submodule stays inside `c`; `$crate::` is not this crate's path.
+        (
+            "c.rs",
+            "mod sub;\nmacro_rules! m { () => { $crate::a::f() } }\n",
+        ),
+        ("c/sub.rs", "use super::Y;\n/// [`crate::a`]\nfn f() {}\n"),
+    ];
+    let graph = ModuleGraph::from_files(&files);
+    assert_eq!(graph.edge_list(), [("a", "b"), ("b", "c")]);
+    assert_eq!(graph.find_cycle(), None);
 }

@@ -1,7 +1,9 @@
 //! The ONNX backend: typed errors naming what is missing, and, when scripts/setup-models.sh has
 //! put the model and runtime in the cache (CI does), real descriptors from the default model.
 
-use topoloc::describe::onnx::{cache_dir, OnnxMlf, OnnxOptions, DEFAULT_MODEL_FILE};
+mod common;
+
+use topoloc::describe::onnx::{OnnxMlf, OnnxOptions, DEFAULT_MODEL_FILE};
 use topoloc::errors::VisionError;
 use topoloc::image::{ImageView, PixelFormat};
 
@@ -27,16 +29,7 @@ fn a_missing_model_names_the_path_tried() {
 
 /// The default model from the cache, or `None` (and a note) when set-up has not run.
 fn cached_model() -> Option<std::path::PathBuf> {
-    let path = cache_dir().join(DEFAULT_MODEL_FILE);
-    if path.is_file() {
-        Some(path)
-    } else {
-        eprintln!(
-            "skipped: no model in {} (run scripts/setup-models.sh)",
-            cache_dir().display()
-        );
-        None
-    }
+    common::models::cached(DEFAULT_MODEL_FILE)
 }
 
 fn expect_runtime_unavailable(options: OnnxOptions, path: &str, hint_has: &str) {

@@ -7,9 +7,11 @@
 //! Skipped (with a message) only when the cache lacks the model or the weights
 //! (scripts/setup-models.sh) or /usr/bin/python3 cannot import torch and torchvision.
 
+mod common;
+
 use std::path::Path;
 use std::process::Command;
-use topoloc::describe::onnx::{cache_dir, OnnxMlf, OnnxOptions, DEFAULT_MODEL_FILE};
+use topoloc::describe::onnx::{OnnxMlf, OnnxOptions, DEFAULT_MODEL_FILE};
 use topoloc::describe::pca::Pca;
 use topoloc::image::{ImageView, PixelFormat};
 
@@ -52,23 +54,16 @@ fn pattern() -> Vec<u8> {
 
 /// The reference vector, or None (after printing why) when the test must be skipped.
 fn reference(image: &[u8], taps: &[&str], grid: (usize, usize)) -> Option<Vec<f32>> {
-    let model = cache_dir().join(DEFAULT_MODEL_FILE);
-    let weights = cache_dir().join(WEIGHTS_FILE);
-    for file in [&model, &weights] {
-        if !file.is_file() {
-            eprintln!(
-                "skipped: no {} (run scripts/setup-models.sh)",
-                file.display()
-            );
-            return None;
-        }
-    }
+    let model = common::models::cached(DEFAULT_MODEL_FILE)?;
+    let weights = common::models::cached(WEIGHTS_FILE)?;
     let has_torch = Command::new(PYTHON)
         .args(["-c", "import torch, torchvision"])
         .output()
         .is_ok_and(|o| o.status.success());
     if !has_torch {
-        eprintln!("skipped: {PYTHON} cannot import torch and torchvision (python3-torch)");
+        common::models::unavailable(&format!(
+            "{PYTHON} cannot import torch and torchvision (python3-torch)"
+        ));
         return None;
     }
     let dir = tempfile::tempdir().unwrap();
@@ -188,11 +183,7 @@ fn other_taps_and_global_pooling_match_the_pytorch_reference() {
 
 #[test]
 fn pca_of_the_mlf_vector_matches_a_direct_computation() {
-    if !cache_dir().join(DEFAULT_MODEL_FILE).is_file() {
-        eprintln!(
-            "skipped: no model in {} (run scripts/setup-models.sh)",
-            cache_dir().display()
-        );
+    if common::models::cached(DEFAULT_MODEL_FILE).is_none() {
         return;
     }
     let image = pattern();

@@ -8,7 +8,6 @@ mod common;
 
 use common::chain_map;
 use common::images::{gray, place_image, revisit};
-use topoloc::describe::onnx::cache_dir;
 use topoloc::errors::VisionError;
 use topoloc::image::{ImageView, PixelFormat};
 use topoloc::verify::xfeat::DEFAULT_XFEAT_MODEL_FILE;
@@ -20,13 +19,7 @@ use topoloc::{LoadOptions, Map};
 
 /// A detector on the cache's model, or `None` (and a note) before set-up.
 fn detector(max_keypoints: usize) -> Option<XFeatDetector> {
-    if !cache_dir().join(DEFAULT_XFEAT_MODEL_FILE).is_file() {
-        eprintln!(
-            "skipped: no XFeat model in {} (run scripts/setup-models.sh)",
-            cache_dir().display()
-        );
-        return None;
-    }
+    common::models::cached(DEFAULT_XFEAT_MODEL_FILE)?;
     Some(XFeatDetector::new(&XFeatOptions::default(), max_keypoints).unwrap())
 }
 

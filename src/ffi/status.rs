@@ -1,7 +1,7 @@
-//! Status codes of the C ABI: one enum (what cbindgen writes into the header) and one table of
-//! names and descriptions beside it, matched exhaustively so that a new code cannot lack
-//! either. `topoloc_status_str` and `topoloc_status_name` read the table; the C++ and Python
-//! layers are tested against it.
+//! Status codes of the C ABI: one enum (what cbindgen writes into the header, with its codes
+//! and docs) and one table of descriptions beside it, whose completeness the compiler checks.
+//! `topoloc_status_str` and `topoloc_status_name` read them; the C++ and Python layers build
+//! their own tables from those two functions.
 
 use std::ffi::CStr;
 
@@ -80,100 +80,89 @@ pub enum topoloc_status {
     TOPOLOC_ERR_PANIC = 900,
 }
 
-use topoloc_status::*;
+/// The description table: each status (in numeric order) with the short English description
+/// that `topoloc_status_str` returns. Its C name comes from the variant itself, and a match
+/// generated from the list fails to compile when the enum gains a variant the list lacks.
+macro_rules! status_table {
+    ($($status:ident => $text:literal,)*) => {
+        impl topoloc_status {
+            /// Every status, in numeric order, with its C name and its description.
+            const TABLE: &'static [(topoloc_status, &'static CStr, &'static CStr)] = &[
+                $((
+                    topoloc_status::$status,
+                    c_str(concat!(stringify!($status), "\0")),
+                    c_str(concat!($text, "\0")),
+                ),)*
+            ];
+        }
+
+        /// Compiles only while the table names every status.
+        #[allow(dead_code)]
+        fn every_status_is_in_the_table(status: topoloc_status) {
+            match status {
+                $(topoloc_status::$status => {})*
+            }
+        }
+    };
+}
+
+/// A C string from a literal ending in NUL (checked at compile time).
+const fn c_str(text: &'static str) -> &'static CStr {
+    match CStr::from_bytes_with_nul(text.as_bytes()) {
+        Ok(c) => c,
+        Err(_) => panic!("a status table string holds a NUL"),
+    }
+}
+
+status_table! {
+    TOPOLOC_OK => "ok",
+    TOPOLOC_ERR_NULL_ARGUMENT => "a required pointer argument is NULL",
+    TOPOLOC_ERR_INVALID_ARGUMENT => "invalid argument",
+    TOPOLOC_ERR_BUFFER_TOO_SMALL => "buffer too small",
+    TOPOLOC_ERR_STRUCT_SIZE => "unknown struct_size",
+    TOPOLOC_ERR_INVALID_UTF8 => "string is not valid UTF-8",
+    TOPOLOC_ERR_CONCURRENT_USE => "handle in use by another call",
+    TOPOLOC_ERR_IO => "I/O error",
+    TOPOLOC_ERR_NOT_A_MAP => "not a topoloc map",
+    TOPOLOC_ERR_TRUNCATED => "truncated map file",
+    TOPOLOC_ERR_CORRUPT => "corrupt map file",
+    TOPOLOC_ERR_UNSUPPORTED_VERSION => "unsupported map format version",
+    TOPOLOC_ERR_DESCRIPTOR_MISMATCH => "descriptor mismatch",
+    TOPOLOC_ERR_EMPTY_MAP => "empty map",
+    TOPOLOC_ERR_INVALID_MAP => "invalid map",
+    TOPOLOC_ERR_UNKNOWN_PLACE => "unknown place",
+    TOPOLOC_ERR_UNKNOWN_VIEW => "unknown view",
+    TOPOLOC_ERR_DIMENSION_MISMATCH => "descriptor dimension mismatch",
+    TOPOLOC_ERR_NON_FINITE => "NaN or infinite value",
+    TOPOLOC_ERR_ZERO_DESCRIPTOR => "all-zero descriptor",
+    TOPOLOC_ERR_TIMESTAMP => "timestamp goes backwards",
+    TOPOLOC_ERR_INVALID_OPTION => "invalid localizer option",
+    TOPOLOC_ERR_INVALID_IMAGE => "invalid image",
+    TOPOLOC_ERR_UNINFORMATIVE_IMAGE => "uninformative image",
+    TOPOLOC_ERR_BACKEND_UNAVAILABLE => "descriptor backend unavailable",
+    TOPOLOC_ERR_MODEL => "model error",
+    TOPOLOC_ERR_NO_DESCRIBER => "no describer for images",
+    TOPOLOC_ERR_CANCELLED => "cancelled",
+    TOPOLOC_ERR_PANIC => "internal error (panic caught)",
+}
 
 impl topoloc_status {
     /// Every status, in numeric order.
-    pub(crate) const ALL: &'static [topoloc_status] = &[
-        TOPOLOC_OK,
-        TOPOLOC_ERR_NULL_ARGUMENT,
-        TOPOLOC_ERR_INVALID_ARGUMENT,
-        TOPOLOC_ERR_BUFFER_TOO_SMALL,
-        TOPOLOC_ERR_STRUCT_SIZE,
-        TOPOLOC_ERR_INVALID_UTF8,
-        TOPOLOC_ERR_CONCURRENT_USE,
-        TOPOLOC_ERR_IO,
-        TOPOLOC_ERR_NOT_A_MAP,
-        TOPOLOC_ERR_TRUNCATED,
-        TOPOLOC_ERR_CORRUPT,
-        TOPOLOC_ERR_UNSUPPORTED_VERSION,
-        TOPOLOC_ERR_DESCRIPTOR_MISMATCH,
-        TOPOLOC_ERR_EMPTY_MAP,
-        TOPOLOC_ERR_INVALID_MAP,
-        TOPOLOC_ERR_UNKNOWN_PLACE,
-        TOPOLOC_ERR_UNKNOWN_VIEW,
-        TOPOLOC_ERR_DIMENSION_MISMATCH,
-        TOPOLOC_ERR_NON_FINITE,
-        TOPOLOC_ERR_ZERO_DESCRIPTOR,
-        TOPOLOC_ERR_TIMESTAMP,
-        TOPOLOC_ERR_INVALID_OPTION,
-        TOPOLOC_ERR_INVALID_IMAGE,
-        TOPOLOC_ERR_UNINFORMATIVE_IMAGE,
-        TOPOLOC_ERR_BACKEND_UNAVAILABLE,
-        TOPOLOC_ERR_MODEL,
-        TOPOLOC_ERR_NO_DESCRIBER,
-        TOPOLOC_ERR_CANCELLED,
-        TOPOLOC_ERR_PANIC,
-    ];
+    pub(crate) fn all() -> impl Iterator<Item = topoloc_status> {
+        Self::TABLE.iter().map(|&(status, _, _)| status)
+    }
 
     /// The status with this numeric value, if there is one.
     pub(crate) fn from_code(code: u32) -> Option<Self> {
-        Self::ALL.iter().copied().find(|&s| s as u32 == code)
+        Self::all().find(|&s| s as u32 == code)
     }
 
     /// The status' C name (`"TOPOLOC_ERR_IO"`) and its short English description.
     pub(crate) fn entry(self) -> (&'static CStr, &'static CStr) {
-        match self {
-            TOPOLOC_OK => (c"TOPOLOC_OK", c"ok"),
-            TOPOLOC_ERR_NULL_ARGUMENT => (
-                c"TOPOLOC_ERR_NULL_ARGUMENT",
-                c"a required pointer argument is NULL",
-            ),
-            TOPOLOC_ERR_INVALID_ARGUMENT => (c"TOPOLOC_ERR_INVALID_ARGUMENT", c"invalid argument"),
-            TOPOLOC_ERR_BUFFER_TOO_SMALL => (c"TOPOLOC_ERR_BUFFER_TOO_SMALL", c"buffer too small"),
-            TOPOLOC_ERR_STRUCT_SIZE => (c"TOPOLOC_ERR_STRUCT_SIZE", c"unknown struct_size"),
-            TOPOLOC_ERR_INVALID_UTF8 => (c"TOPOLOC_ERR_INVALID_UTF8", c"string is not valid UTF-8"),
-            TOPOLOC_ERR_CONCURRENT_USE => (
-                c"TOPOLOC_ERR_CONCURRENT_USE",
-                c"handle in use by another call",
-            ),
-            TOPOLOC_ERR_IO => (c"TOPOLOC_ERR_IO", c"I/O error"),
-            TOPOLOC_ERR_NOT_A_MAP => (c"TOPOLOC_ERR_NOT_A_MAP", c"not a topoloc map"),
-            TOPOLOC_ERR_TRUNCATED => (c"TOPOLOC_ERR_TRUNCATED", c"truncated map file"),
-            TOPOLOC_ERR_CORRUPT => (c"TOPOLOC_ERR_CORRUPT", c"corrupt map file"),
-            TOPOLOC_ERR_UNSUPPORTED_VERSION => (
-                c"TOPOLOC_ERR_UNSUPPORTED_VERSION",
-                c"unsupported map format version",
-            ),
-            TOPOLOC_ERR_DESCRIPTOR_MISMATCH => {
-                (c"TOPOLOC_ERR_DESCRIPTOR_MISMATCH", c"descriptor mismatch")
-            }
-            TOPOLOC_ERR_EMPTY_MAP => (c"TOPOLOC_ERR_EMPTY_MAP", c"empty map"),
-            TOPOLOC_ERR_INVALID_MAP => (c"TOPOLOC_ERR_INVALID_MAP", c"invalid map"),
-            TOPOLOC_ERR_UNKNOWN_PLACE => (c"TOPOLOC_ERR_UNKNOWN_PLACE", c"unknown place"),
-            TOPOLOC_ERR_UNKNOWN_VIEW => (c"TOPOLOC_ERR_UNKNOWN_VIEW", c"unknown view"),
-            TOPOLOC_ERR_DIMENSION_MISMATCH => (
-                c"TOPOLOC_ERR_DIMENSION_MISMATCH",
-                c"descriptor dimension mismatch",
-            ),
-            TOPOLOC_ERR_NON_FINITE => (c"TOPOLOC_ERR_NON_FINITE", c"NaN or infinite value"),
-            TOPOLOC_ERR_ZERO_DESCRIPTOR => (c"TOPOLOC_ERR_ZERO_DESCRIPTOR", c"all-zero descriptor"),
-            TOPOLOC_ERR_TIMESTAMP => (c"TOPOLOC_ERR_TIMESTAMP", c"timestamp goes backwards"),
-            TOPOLOC_ERR_INVALID_OPTION => {
-                (c"TOPOLOC_ERR_INVALID_OPTION", c"invalid localizer option")
-            }
-            TOPOLOC_ERR_INVALID_IMAGE => (c"TOPOLOC_ERR_INVALID_IMAGE", c"invalid image"),
-            TOPOLOC_ERR_UNINFORMATIVE_IMAGE => {
-                (c"TOPOLOC_ERR_UNINFORMATIVE_IMAGE", c"uninformative image")
-            }
-            TOPOLOC_ERR_BACKEND_UNAVAILABLE => (
-                c"TOPOLOC_ERR_BACKEND_UNAVAILABLE",
-                c"descriptor backend unavailable",
-            ),
-            TOPOLOC_ERR_MODEL => (c"TOPOLOC_ERR_MODEL", c"model error"),
-            TOPOLOC_ERR_NO_DESCRIBER => (c"TOPOLOC_ERR_NO_DESCRIBER", c"no describer for images"),
-            TOPOLOC_ERR_CANCELLED => (c"TOPOLOC_ERR_CANCELLED", c"cancelled"),
-            TOPOLOC_ERR_PANIC => (c"TOPOLOC_ERR_PANIC", c"internal error (panic caught)"),
-        }
+        let &(_, name, text) = Self::TABLE
+            .iter()
+            .find(|&&(status, _, _)| status == self)
+            .expect("every status is in the table (checked at compile time)");
+        (name, text)
     }
 }

@@ -422,9 +422,8 @@ fn the_status_table_matches_the_header_and_names_every_code() {
             }
         }
     }
-    let table: Vec<(String, u32)> = topoloc_status::ALL
-        .iter()
-        .map(|&s| {
+    let table: Vec<(String, u32)> = topoloc_status::all()
+        .map(|s| {
             let name = unsafe { CStr::from_ptr(topoloc_status_name(s as u32)) };
             (name.to_str().unwrap().to_string(), s as u32)
         })
@@ -434,7 +433,7 @@ fn the_status_table_matches_the_header_and_names_every_code() {
         table.windows(2).all(|w| w[0].1 < w[1].1),
         "codes unique, ascending"
     );
-    for &status in topoloc_status::ALL {
+    for status in topoloc_status::all() {
         let (name, text) = status.entry();
         assert!(
             !text.is_empty() && text != c"unknown status code",

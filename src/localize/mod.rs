@@ -17,6 +17,7 @@ mod motion;
 mod options;
 mod particles;
 mod result;
+mod scratch;
 mod similarity;
 mod verification;
 

@@ -4,8 +4,8 @@
 
 use super::estimator::Estimator;
 use super::filter::FilterParams;
-use super::localizer::{select_most_probable, Scratch};
 use super::result::PoseFix;
+use super::scratch::{select_most_probable, Scratch};
 use super::LocalizeError;
 use crate::describe::onnx::DenseTap;
 use crate::errors::VisionError;

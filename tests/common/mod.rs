@@ -4,6 +4,7 @@
 
 pub mod correspondences;
 pub mod images;
+pub mod models;
 
 use nalgebra::{Isometry3, Point3, Vector3};
 use topoloc::map::ViewAttributes;

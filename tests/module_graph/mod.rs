@@ -1,9 +1,10 @@
-//! The import graph between the top-level modules of a crate, read from its source files, and a
-//! cycle finder. Shared by `tools/sim/tests/module_cycles.rs` and
-//! `tools/cli/tests/module_cycles.rs` (the latter includes this file by path).
+//! The import graph between the modules of a crate (or between the submodules of one of its
+//! modules), read from its source files, and a cycle finder. Shared by `tests/layers.rs` and
+//! the `module_cycles` tests of `tools/sim` and `tools/cli`, which include this file by path.
 //!
 //! A module is a file `src/NAME.rs` together with everything under `src/NAME/`; the crate root
-//! (`lib.rs` or `main.rs`) is not a node. A module imports another when its code (comments
+//! (`lib.rs` or `main.rs`) is not a node. [`ModuleGraph::from_module`] reads one module's folder
+//! the same way, its `mod.rs` being the root and `crate::MODULE::` its path. A module imports another when its code (comments
 //! removed, so doc links do not count) names `crate::OTHER` (in a `use` line, a
 //! `use crate::{a, b::C}` group, or a path in an expression) or reaches `OTHER` through enough
 //! `super::` to climb to the crate root (`super::super::OTHER` from `src/a/b.rs`). Names that
@@ -26,51 +27,77 @@ pub struct Site {
 #[derive(Debug, Default)]
 pub struct ModuleGraph {
     pub edges: BTreeMap<String, BTreeMap<String, Site>>,
+    /// Names of the root that are not modules (items the root defines or re-exports), as
+    /// `(from module, name, where)`.
+    pub root_items: Vec<(String, String, Site)>,
 }
 
 impl ModuleGraph {
     /// Reads every `.rs` file under `src` (the crate's source folder).
     pub fn from_src(src: &Path) -> ModuleGraph {
-        let mut files = Vec::new();
-        collect(src, src, &mut files);
-        files.sort();
-        let borrowed: Vec<(&str, &str)> = files
-            .iter()
-            .map(|(p, t)| (p.as_str(), t.as_str()))
-            .collect();
-        ModuleGraph::from_files(&borrowed)
+        ModuleGraph::from_files(&read_tree(src))
+    }
+
+    /// Reads the submodules of `module` (a folder `src/MODULE/` with a `mod.rs`; `a/b` for a
+    /// nested one): the nodes are its files and folders, and an import is a path through
+    /// `crate::MODULE::` (`crate::a::b::`) or enough `super::` to climb to `MODULE`.
+    pub fn from_module(src: &Path, module: &str) -> ModuleGraph {
+        let files = read_tree(&src.join(module));
+        let root = format!("crate::{}::", module.replace('/', "::"));
+        let mut graph = ModuleGraph::read(&files, &root, "mod");
+        let sites = graph.edges.values_mut().flat_map(|to| to.values_mut());
+        for site in sites.chain(graph.root_items.iter_mut().map(|(_, _, site)| site)) {
+            site.file = format!("{module}/{}", site.file);
+        }
+        graph
     }
 
     /// Builds the graph from `(path relative to src, text)` pairs, paths with `/` separators:
     /// `lib.rs` or `main.rs` is the root, `a.rs` and `a/b.rs` belong to module `a`.
-    pub fn from_files(files: &[(&str, &str)]) -> ModuleGraph {
+    pub fn from_files<P: AsRef<str>, T: AsRef<str>>(files: &[(P, T)]) -> ModuleGraph {
+        ModuleGraph::read(files, "crate::", "lib")
+    }
+
+    /// The graph of `files`, whose root file is `{root_file}.rs` (or `main.rs`) and whose root
+    /// path is `root_path` (`crate::` or `crate::MODULE::`).
+    fn read<P: AsRef<str>, T: AsRef<str>>(
+        files: &[(P, T)],
+        root_path: &str,
+        root_file: &str,
+    ) -> ModuleGraph {
         let module_of = |path: &str| -> Option<String> {
             let first = path.split('/').next().unwrap_or(path);
             let name = first.strip_suffix(".rs").unwrap_or(first);
-            let is_root = !path.contains('/') && (name == "lib" || name == "main");
+            let is_root = !path.contains('/')
+                && (name == root_file || (root_file == "lib" && name == "main"));
             (!is_root).then(|| name.to_string())
         };
         let mut graph = ModuleGraph::default();
         for (path, _) in files {
-            if let Some(m) = module_of(path) {
+            if let Some(m) = module_of(path.as_ref()) {
                 graph.edges.entry(m).or_default();
             }
         }
         let modules: BTreeSet<String> = graph.edges.keys().cloned().collect();
         for (path, text) in files {
+            let (path, text) = (path.as_ref(), text.as_ref());
             let Some(from) = module_of(path) else {
                 continue;
             };
             // `src/a.rs` is one level below the root, `src/a/b.rs` two.
             let depth = path.split('/').count();
-            for (line, to) in references(&strip_comments(text), depth) {
-                if to != from && modules.contains(&to) {
-                    let site = Site {
-                        file: path.to_string(),
-                        line,
-                    };
-                    let targets = graph.edges.get_mut(&from).expect("every module is a node");
-                    targets.entry(to).or_insert(site);
+            for (line, to, named_from_root) in references(&strip_comments(text), depth, root_path) {
+                let site = Site {
+                    file: path.to_string(),
+                    line,
+                };
+                if modules.contains(&to) {
+                    if to != from {
+                        let targets = graph.edges.get_mut(&from).expect("every module is a node");
+                        targets.entry(to).or_insert(site);
+                    }
+                } else if named_from_root && !to.is_empty() {
+                    graph.root_items.push((from.clone(), to, site));
                 }
             }
         }
@@ -134,6 +161,24 @@ impl ModuleGraph {
         None
     }
 
+    /// Panics unless the graph is acyclic and holds `modules` and `edges` (which show that the
+    /// reading was not vacuous).
+    pub fn assert_acyclic(&self, modules: &[&str], edges: &[(&str, &str)]) {
+        for module in modules {
+            assert!(self.edges.contains_key(*module), "module {module} not read");
+        }
+        let found = self.edge_list();
+        for edge in edges {
+            assert!(
+                found.contains(edge),
+                "import {edge:?} not found in {found:?}"
+            );
+        }
+        if let Some(cycle) = self.find_cycle() {
+            panic!("import cycle: {}", self.describe(&cycle));
+        }
+    }
+
     /// A cycle spelled out with where each import is, for a failure message.
     pub fn describe(&self, cycle: &[String]) -> String {
         let steps: Vec<String> = cycle
@@ -145,6 +190,14 @@ impl ModuleGraph {
             .collect();
         steps.join(", ")
     }
+}
+
+/// `(path relative to src with / separators, text)` of every `.rs` file under `src`, sorted.
+fn read_tree(src: &Path) -> Vec<(String, String)> {
+    let mut files = Vec::new();
+    collect(src, src, &mut files);
+    files.sort();
+    files
 }
 
 fn collect(src: &Path, dir: &Path, out: &mut Vec<(String, String)>) {
@@ -165,18 +218,47 @@ fn collect(src: &Path, dir: &Path, out: &mut Vec<(String, String)>) {
     }
 }
 
-/// Removes `//` comments (doc comments too) and `/* */` comments, keeping line breaks.
+/// Removes `//` comments (doc comments too), `/* */` comments and the contents of string
+/// literals (raw ones too), keeping line breaks so that line numbers stay right.
 fn strip_comments(text: &str) -> String {
     let mut out = String::with_capacity(text.len());
     let mut rest = text;
+    let keep_lines = |skipped: &str, out: &mut String| {
+        out.extend(skipped.chars().filter(|&c| c == '\n'));
+    };
     while !rest.is_empty() {
         if let Some(after) = rest.strip_prefix("//") {
             let end = after.find('\n').unwrap_or(after.len());
             rest = &after[end..];
         } else if let Some(after) = rest.strip_prefix("/*") {
             let end = after.find("*/").map_or(after.len(), |e| e + 2);
-            out.extend(after[..end].chars().filter(|&c| c == '\n'));
+            keep_lines(&after[..end], &mut out);
             rest = &after[end..];
+        } else if let Some((open, close)) = raw_string_quotes(rest) {
+            let after = &rest[open..];
+            let end = after.find(&close).map_or(after.len(), |e| e + close.len());
+            out.push_str("\"\"");
+            keep_lines(&after[..end], &mut out);
+            rest = &after[end..];
+        } else if let Some(after) = rest.strip_prefix('"') {
+            let mut end = after.len();
+            let mut escaped = false;
+            for (i, c) in after.char_indices() {
+                match c {
+                    '\\' if !escaped => escaped = true,
+                    '"' if !escaped => {
+                        end = i + 1;
+                        break;
+                    }
+                    _ => escaped = false,
+                }
+            }
+            out.push_str("\"\"");
+            keep_lines(&after[..end], &mut out);
+            rest = &after[end..];
+        } else if let Some(len) = char_literal_len(rest) {
+            out.push_str("' '");
+            rest = &rest[len..];
         } else {
             let c = rest.chars().next().expect("not empty");
             out.push(c);
@@ -186,10 +268,36 @@ fn strip_comments(text: &str) -> String {
     out
 }
 
-/// The names following each `crate::` and each run of `super::` that climbs to the crate root
-/// from a file `depth` levels below it, with their line numbers; `{a, b::c}` groups give each
-/// member's first name.
-fn references(code: &str, depth: usize) -> Vec<(usize, String)> {
+/// For text starting with a raw string (`r"`, `r#"`, `br##"`...): the length of its opening and
+/// its closing quote.
+fn raw_string_quotes(text: &str) -> Option<(usize, String)> {
+    let after_b = text.strip_prefix('b').unwrap_or(text);
+    let after_r = after_b.strip_prefix('r')?;
+    let hashes = after_r.chars().take_while(|&c| c == '#').count();
+    after_r[hashes..].starts_with('"').then(|| {
+        let open = text.len() - after_r.len() + hashes + 1;
+        (open, format!("\"{}", "#".repeat(hashes)))
+    })
+}
+
+/// For text starting with a character literal (`'x'`, `'\n'`, `'\''`, `'\u{..}'`): its length.
+/// Lifetimes (`'a`) are not literals.
+fn char_literal_len(text: &str) -> Option<usize> {
+    let body = text.strip_prefix('\'')?;
+    let len = if let Some(escape) = body.strip_prefix('\\') {
+        let escaped = escape.chars().next()?.len_utf8();
+        1 + escaped + escape[escaped..].find('\'')?
+    } else {
+        body.chars().next()?.len_utf8()
+    };
+    body[len..].starts_with('\'').then_some(len + 2)
+}
+
+/// The names following each `root` path (`crate::` or `crate::MODULE::`) and each run of
+/// `super::` that climbs to the root from a file `depth` levels below it, with their line
+/// numbers and whether the name was reached through `root` (rather than `super::`);
+/// `{a, b::c}` groups give each member's first name.
+fn references(code: &str, depth: usize, root: &str) -> Vec<(usize, String, bool)> {
     let mut found = Vec::new();
     let is_ident = |c: char| c.is_alphanumeric() || c == '_';
     let mut at = 0;
@@ -198,8 +306,8 @@ fn references(code: &str, depth: usize) -> Vec<(usize, String)> {
         let Some(c) = rest.chars().next() else { break };
         let before_ok = at == 0 || !code[..at].ends_with(|p: char| is_ident(p) || p == '$');
         let mut path = None;
-        if before_ok && rest.starts_with("crate::") {
-            path = Some("crate::".len());
+        if before_ok && rest.starts_with(root) {
+            path = Some(root.len());
         } else if before_ok && rest.starts_with("super::") {
             let mut len = 0;
             let mut supers = 0;
@@ -218,17 +326,19 @@ fn references(code: &str, depth: usize) -> Vec<(usize, String)> {
             at += c.len_utf8();
             continue;
         };
+        let from_root = rest.starts_with(root);
         let line = code[..at].matches('\n').count() + 1;
         let tail = &code[at + len..];
         if let Some(group) = tail.strip_prefix('{') {
             for member in top_level_members(group) {
                 let name: String = member.trim().chars().take_while(|&c| is_ident(c)).collect();
                 if !name.is_empty() {
-                    found.push((line, name));
+                    found.push((line, name, from_root));
                 }
             }
         } else {
-            found.push((line, tail.chars().take_while(|&c| is_ident(c)).collect()));
+            let name = tail.chars().take_while(|&c| is_ident(c)).collect();
+            found.push((line, name, from_root));
         }
         at += len;
     }

@@ -1,0 +1,334 @@
+//! Verified loop-closure hints: for each new keyframe, the database's loop candidates (recent
+//! keyframes excluded, at most one per stretch of `candidate_id_gap` consecutive ids, so that
+//! one look-alike stretch cannot fill every slot), with host odometry also the keyframes
+//! nearest its odometry pose that the odometry gate could pass, are checked geometrically
+//! against the keyframe's local features, and a candidate becomes a hint only when it passes
+//! every gate:
+//!
+//! 1. a candidate exists outside the exclusion window ([`Gate::NoCandidate`]);
+//! 2. the candidate with the most fundamental-matrix inliers, refined within its group (the
+//!    keyframes of its place and the linked places, and of its stretch: neighbouring
+//!    keyframes look alike, geometry picks the nearest), has at least `min_inliers`
+//!    ([`Gate::TooFewInliers`]);
+//! 3. with camera intrinsics and point-accurate features, a relative pose is found
+//!    ([`Gate::NoPose`]; dense cells verify but give no pose);
+//! 4. with odometry poses on both keyframes, the pose agrees with the odometry's relative
+//!    pose (VINS-Fusion's loop check: |delta yaw| and |delta t| bounds; an unscaled pose's
+//!    direction is scaled by the odometry's baseline, [`Gate::Odometry`]);
+//!
+//!    a candidate refused by gate 3 or 4 gives way to the next with enough inliers (most
+//!    first, each refined), so a look-alike with more inliers than the true match does not
+//!    hide it when geometry or odometry can tell them apart; with odometry, every candidate
+//!    with enough inliers is tried and the passing one the odometry agrees with most is kept
+//!    (a look-alike stretch a few metres on can pass the drift bound beside the true one);
+//! 5. the candidates that passed 2-4 for the last `consistent_keyframes` keyframes agree: each
+//!    one's group (its place and the linked places) shares a place with the previous one's
+//!    ([`Gate::Inconsistent`], ORB-SLAM's consistency groups on the place graph).
+//!
+//! At most one hint per keyframe. A refused candidate is reported with the gate that refused
+//! it, so the host can log why no loop was closed. The keyframes that began a streak were
+//! refused as inconsistent only because the streak was not long enough yet: when a later
+//! keyframe completes it, their hints are delivered with that keyframe as confirmed
+//! ([`Processed::confirmed`]), so a revisit yields hints from its first keyframe on. Errors (bad features, keyframes out of
+//! order, duplicate ids) leave the detector exactly as it was.
+
+mod gates;
+mod options;
+mod streak;
+
+use super::database::{Added, DatabaseOptions, KeyframeDatabase, KeyframeEntry};
+use super::error::LoopsError;
+use crate::map::{Map, PlaceId};
+use crate::verify::{FeatureKind, Keypoints, RelativePose};
+use nalgebra::Point3;
+use std::collections::HashMap;
+
+pub use gates::Gate;
+use gates::{Checks, Gated};
+pub use options::{HintOptions, OdometryGate};
+use streak::Streak;
+
+/// A keyframe's local features: its keypoints and, when the host has them, the scene point of
+/// each in the keyframe's camera frame (metres; NaN in all three coordinates when unknown).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct KeyframeFeatures {
+    /// Keypoints with their descriptors (ORB from the host, XFeat, or dense cells).
+    pub keypoints: Keypoints,
+    /// Scene points, one per keypoint, in the camera frame.
+    pub camera_points: Option<Vec<[f32; 3]>>,
+}
+
+/// The best verified candidate of a keyframe, accepted or not.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LoopHint {
+    /// The query keyframe's id.
+    pub query_id: u64,
+    /// The place the query keyframe joined.
+    pub query_place: PlaceId,
+    /// The matched keyframe's id.
+    pub matched_id: u64,
+    /// The matched keyframe's place.
+    pub place: PlaceId,
+    /// Fundamental-matrix inliers.
+    pub inliers: u32,
+    /// The candidate's share of the inliers of every verified candidate (0..=1): near 1 when
+    /// no other candidate agrees with the query, near 1/n among n look-alikes.
+    pub confidence: f32,
+    /// The relative pose, when intrinsics were given and it was fitted.
+    pub pose: Option<RelativePose>,
+    /// Which gate refused it, or [`Gate::Accepted`].
+    pub gate: Gate,
+}
+
+impl LoopHint {
+    /// True when every gate passed.
+    pub fn accepted(&self) -> bool {
+        self.gate == Gate::Accepted
+    }
+}
+
+/// What processing a keyframe did.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Processed {
+    /// Where the keyframe went in the place graph.
+    pub added: Added,
+    /// The best verified candidate; `None` when there was none ([`Gate::NoCandidate`]).
+    pub hint: Option<LoopHint>,
+    /// Hints of earlier keyframes that this one confirmed: the keyframes of the streak it
+    /// completed, whose candidates passed every other gate but were refused as
+    /// [`Gate::Inconsistent`] while the streak was short, and whose pose, with odometry,
+    /// agrees with this keyframe's along the route. Now [`Gate::Accepted`], oldest first,
+    /// each with its own `query_id`; empty unless this keyframe's hint was accepted.
+    /// Every keyframe gets at most one accepted hint, as its own or as a confirmed one.
+    pub confirmed: Vec<LoopHint>,
+    /// The geometric work it took, for hosts that budget or log the cost.
+    pub work: Work,
+}
+
+/// Geometric work done for one keyframe: what its time is made of besides describing.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Work {
+    /// Pair checks (matching and a fundamental-matrix fit), candidates and refinements.
+    pub pair_checks: u32,
+    /// Relative-pose fits.
+    pub pose_fits: u32,
+}
+
+impl Processed {
+    /// The gate that decided: the hint's, or [`Gate::NoCandidate`].
+    pub fn gate(&self) -> Gate {
+        self.hint.map_or(Gate::NoCandidate, |h| h.gate)
+    }
+
+    /// The accepted hint, if any.
+    pub fn accepted(&self) -> Option<&LoopHint> {
+        self.hint.as_ref().filter(|h| h.accepted())
+    }
+}
+
+/// A keyframe database with each keyframe's local features, producing gated hints.
+pub struct LoopDetector {
+    database: KeyframeDatabase,
+    options: HintOptions,
+    features: HashMap<u64, KeyframeFeatures>,
+    kind: Option<FeatureKind>,
+    /// The place the last keyframes' best candidates agreed on, and how many in a row.
+    streak: Streak,
+    /// The hints of the current streak's keyframes, refused as inconsistent: confirmed when
+    /// a later keyframe completes the streak, dropped when it breaks.
+    pending: Vec<LoopHint>,
+    /// What the last successful [`LoopDetector::process`] confirmed.
+    confirmed: Vec<LoopHint>,
+    /// The largest id of a previous session's keyframes ([`LoopDetector::from_map`]): they are
+    /// never inside the exclusion window, whatever this session's ids.
+    reloaded_max_id: Option<u64>,
+}
+
+impl LoopDetector {
+    /// A detector over `database` (empty, or reloaded from a map: its keyframes have no
+    /// features, so they are never verified candidates). Options are validated.
+    pub fn new(database: KeyframeDatabase, options: HintOptions) -> Result<Self, LoopsError> {
+        options.validate()?;
+        Ok(Self {
+            database,
+            options,
+            features: HashMap::new(),
+            kind: None,
+            streak: None,
+            pending: Vec::new(),
+            confirmed: Vec::new(),
+            reloaded_max_id: None,
+        })
+    }
+
+    /// A detector over a map's views as keyframes ([`KeyframeDatabase::from_map`]) with the
+    /// keypoints the map stores as their features, and, where the map has both a view's pose
+    /// and its keypoints' scene points, those points in the view's camera frame: a second
+    /// session closes loops against the first.
+    pub fn from_map(
+        map: &Map,
+        database: DatabaseOptions,
+        options: HintOptions,
+    ) -> Result<Self, LoopsError> {
+        let mut detector = Self::new(KeyframeDatabase::from_map(map, database)?, options)?;
+        detector.reloaded_max_id = map.views().iter().filter_map(|v| v.keyframe_id).max();
+        let Some(stored) = map.keypoints() else {
+            return Ok(detector);
+        };
+        for (v, view) in map.views().iter().enumerate() {
+            let (Some(id), Some(keypoints)) = (view.keyframe_id, stored.view(v)) else {
+                continue;
+            };
+            let camera_points = match (view.world_t_camera, stored.view_world_points(v)) {
+                (Some(world_t_camera), Some(world)) => Some(
+                    world
+                        .iter()
+                        .map(|p| {
+                            let c = world_t_camera.inverse_transform_point(&Point3::new(
+                                f64::from(p[0]),
+                                f64::from(p[1]),
+                                f64::from(p[2]),
+                            ));
+                            [c.x as f32, c.y as f32, c.z as f32]
+                        })
+                        .collect(),
+                ),
+                _ => None,
+            };
+            let features = KeyframeFeatures {
+                keypoints: keypoints.to_keypoints(),
+                camera_points,
+            };
+            detector.check_features(&features)?;
+            detector.kind = Some(stored.kind());
+            detector.features.insert(id, features);
+        }
+        Ok(detector)
+    }
+
+    /// The keyframe database.
+    pub fn database(&self) -> &KeyframeDatabase {
+        &self.database
+    }
+
+    /// The options.
+    pub fn options(&self) -> &HintOptions {
+        &self.options
+    }
+
+    /// Queries, verifies and gates the keyframe's loop candidates, then adds the keyframe.
+    /// Errors (inconsistent features, features of another kind than earlier keyframes', and
+    /// every error of [`KeyframeDatabase::add`]) change nothing.
+    pub fn process(
+        &mut self,
+        entry: &KeyframeEntry<'_>,
+        features: KeyframeFeatures,
+    ) -> Result<Processed, LoopsError> {
+        self.check_features(&features)?;
+        let mut checks = Checks::default();
+        let verified = self.verified_candidates(entry, &features, &mut checks)?;
+        let decided = self.decide(entry, &features, &verified, &mut checks)?;
+        let added = self.database.add(entry)?;
+        let (hint, streak) = match decided {
+            None => (None, None),
+            Some((best, Gated { gate, pose, streak })) => {
+                let hint = LoopHint {
+                    query_id: entry.id,
+                    query_place: added.place,
+                    matched_id: best.id,
+                    place: best.place,
+                    inliers: best.inliers,
+                    confidence: best.confidence,
+                    pose,
+                    gate,
+                };
+                (Some(hint), streak)
+            }
+        };
+        self.kind
+            .get_or_insert(features.keypoints.descriptors.kind());
+        self.features.insert(entry.id, features);
+        self.streak = streak;
+        self.confirmed = self.follow_streak(hint.as_ref())?;
+        match &hint {
+            Some(h) => log::debug!(
+                "keyframe {}: candidate keyframe {} (place {}), {} inliers, gate {:?}; {} confirmed",
+                entry.id,
+                h.matched_id,
+                h.place,
+                h.inliers,
+                h.gate,
+                self.confirmed.len()
+            ),
+            None => log::trace!("keyframe {}: no candidate verified", entry.id),
+        }
+        Ok(Processed {
+            added,
+            hint,
+            confirmed: self.confirmed.clone(),
+            work: checks.work,
+        })
+    }
+
+    /// The hints the last successful [`LoopDetector::process`] confirmed
+    /// ([`Processed::confirmed`]); replaced by the next one, kept by errors and erasures.
+    pub fn confirmed(&self) -> &[LoopHint] {
+        &self.confirmed
+    }
+
+    /// Removes a keyframe and its features (ORB-SLAM culls keyframes); a pending hint from or
+    /// to it is dropped, so none is ever confirmed against an erased keyframe.
+    pub fn erase(&mut self, id: u64) -> Result<(), LoopsError> {
+        self.database.erase(id)?;
+        self.features.remove(&id);
+        self.pending
+            .retain(|h| h.query_id != id && h.matched_id != id);
+        Ok(())
+    }
+
+    /// Features must be consistent and of the kind the earlier keyframes have.
+    fn check_features(&self, features: &KeyframeFeatures) -> Result<(), LoopsError> {
+        let k = &features.keypoints;
+        let bad = |m: String| Err(LoopsError::InvalidKeyframe(m));
+        if k.points.len() != k.descriptors.len() {
+            return bad(format!(
+                "{} keypoints but {} descriptors",
+                k.points.len(),
+                k.descriptors.len()
+            ));
+        }
+        if let Some(i) = k
+            .points
+            .iter()
+            .position(|p| !p.iter().all(|v| v.is_finite()))
+        {
+            return bad(format!("keypoint {i} is at {:?}", k.points[i]));
+        }
+        let kind = k.descriptors.kind();
+        if let Some(expected) = self.kind.filter(|&e| e != kind && !k.is_empty()) {
+            return bad(format!(
+                "keypoints are {} but earlier keyframes' are {}",
+                kind.name(),
+                expected.name()
+            ));
+        }
+        if let Some(points) = &features.camera_points {
+            if points.len() != k.points.len() {
+                return bad(format!(
+                    "{} camera points for {} keypoints",
+                    points.len(),
+                    k.points.len()
+                ));
+            }
+            let valid =
+                |p: &[f32; 3]| p.iter().all(|v| v.is_finite()) || p.iter().all(|v| v.is_nan());
+            if let Some(i) = points.iter().position(|p| !valid(p)) {
+                return bad(format!(
+                    "camera point {i} is {:?}: finite, or NaN in all three coordinates",
+                    points[i]
+                ));
+            }
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,94 @@
+//! The consistency streak: the place consecutive keyframes' best candidates agreed on, the
+//! hints held while the streak grows, and the route check that confirms them when a later
+//! keyframe completes it.
+
+use super::super::error::LoopsError;
+use super::{Gate, LoopDetector, LoopHint};
+use crate::map::PlaceId;
+
+/// The place consecutive keyframes' best candidates agreed on, and how many in a row.
+pub(super) type Streak = Option<(PlaceId, usize)>;
+
+impl LoopDetector {
+    /// Keeps the streak's pending hints in step with the new keyframe's: an inconsistent hint
+    /// joins them (a new streak starts them afresh), an accepted one confirms and returns
+    /// those that agree with it along the route ([`LoopDetector::route_agrees`]), any other
+    /// outcome drops them (the streak broke).
+    pub(super) fn follow_streak(
+        &mut self,
+        hint: Option<&LoopHint>,
+    ) -> Result<Vec<LoopHint>, LoopsError> {
+        match hint.map(|h| (h, h.gate)) {
+            Some((h, Gate::Inconsistent { agreeing })) => {
+                if agreeing == 1 {
+                    self.pending.clear();
+                }
+                self.pending.push(*h);
+                Ok(Vec::new())
+            }
+            Some((accepted, Gate::Accepted)) => {
+                let mut confirmed = Vec::new();
+                for earlier in std::mem::take(&mut self.pending) {
+                    if self.route_agrees(&earlier, accepted)? {
+                        confirmed.push(LoopHint {
+                            gate: Gate::Accepted,
+                            ..earlier
+                        });
+                    }
+                }
+                Ok(confirmed)
+            }
+            _ => {
+                self.pending.clear();
+                Ok(Vec::new())
+            }
+        }
+    }
+
+    /// Whether a streak's earlier hint (keyframe a matched to b) and its accepted one (c to
+    /// d) agree along the route: going from a to b by the earlier hint, from b to d by the
+    /// odometry of their session, and from d to c by the accepted hint must bring a where the
+    /// odometry takes it to c, within the odometry gate's bounds (the translation bound
+    /// growing with the path travelled from a to c and from b to d). A look-alike that began
+    /// the streak, beside the true place, fits a pose metres off and fails. The rotation is
+    /// compared whenever both hints have a pose, the translation when both are metric; without
+    /// poses, the odometry gate, or a shared session for b and d, nothing is compared (true).
+    fn route_agrees(&self, earlier: &LoopHint, accepted: &LoopHint) -> Result<bool, LoopsError> {
+        let (Some(gate), Some(pose_ab), Some(pose_dc)) =
+            (self.options.odometry, &earlier.pose, &accepted.pose)
+        else {
+            return Ok(true);
+        };
+        let reloaded = |id: u64| self.reloaded_max_id.is_some_and(|max| id <= max);
+        if reloaded(earlier.matched_id) != reloaded(accepted.matched_id) {
+            return Ok(true);
+        }
+        let camera = |id: u64| self.database.world_t_camera(id);
+        let (Some(a), Some(b), Some(c), Some(d)) = (
+            camera(earlier.query_id)?,
+            camera(earlier.matched_id)?,
+            camera(accepted.query_id)?,
+            camera(accepted.matched_id)?,
+        ) else {
+            return Ok(true);
+        };
+        // a_T_c: by the odometry, and through the matched keyframes.
+        let odometry = a.inverse() * c;
+        let through =
+            pose_ab.matched_t_query.inverse() * (b.inverse() * d) * pose_dc.matched_t_query;
+        if odometry.rotation.angle_to(&through.rotation).to_degrees() > gate.max_rotation_deg {
+            return Ok(false);
+        }
+        if !(pose_ab.scale_known && pose_dc.scale_known) {
+            return Ok(true);
+        }
+        let travelled = |x: u64, y: u64| -> Result<f64, LoopsError> {
+            let (x, y) = (self.database.travelled_m(x)?, self.database.travelled_m(y)?);
+            Ok(x.zip(y).map_or(0.0, |(x, y)| (y - x).abs()))
+        };
+        let path = travelled(earlier.query_id, accepted.query_id)?
+            + travelled(earlier.matched_id, accepted.matched_id)?;
+        let bound = gate.max_translation_m + gate.max_translation_per_m * path;
+        Ok((odometry.translation.vector - through.translation.vector).norm() <= bound)
+    }
+}
