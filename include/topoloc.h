@@ -412,7 +412,8 @@ typedef struct topoloc_localizer_options {
   const char *onnx_runtime_path;
   /**
    * Most probable places verified geometrically per frame against the frame's image, 0..=64
-   * (ORB matches + RANSAC; the result's `verified` / `inliers`). 0 = off (default). Needs a
+   * (matches of the local features the map stores, ORB, XFeat or dense cells, and a RANSAC
+   * geometric model; the result's `verified` / `inliers`). 0 = off (default). Needs a
    * map storing keypoints (maps built from images do; else `_INVALID_OPTION`) and frames
    * with images (else `_INVALID_IMAGE`). Costs a pair check per view checked (BENCHMARKS.md).
    */

@@ -8,7 +8,8 @@ set -euo pipefail
 # OpenCV 4.6 (image work) needs clang + libclang for the opencv crate's binding generator.
 # fonts-dejavu-core: the TrueType font the CLI's evaluation plots (tools/cli/src/plot.rs) draw text with.
 # libclang-rt-14-dev: libFuzzer and the sanitizer runtimes of clang 14 (fuzz/run.sh).
-packages=(build-essential cmake pkg-config valgrind libopencv-dev clang libclang-dev libclang-rt-14-dev fonts-dejavu-core libceres-dev libeigen3-dev)
+# clang-format, shellcheck: the C/C++ and shell lints (scripts/lint.sh).
+packages=(build-essential cmake pkg-config valgrind libopencv-dev clang libclang-dev libclang-rt-14-dev fonts-dejavu-core libceres-dev libeigen3-dev clang-format shellcheck)
 missing=()
 for p in "${packages[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
@@ -26,7 +27,7 @@ if ! command -v cargo >/dev/null 2>&1; then
 fi
 
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
-if ! python3 -c "import numpy, pytest" >/dev/null 2>&1; then
+if ! python3 -c "import numpy, pytest, ruff, mypy" >/dev/null 2>&1; then
   echo "install-deps: pip install -r python/requirements-dev.txt"
   python3 -m pip install -q -r "$root/python/requirements-dev.txt"
 fi

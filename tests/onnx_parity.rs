@@ -54,7 +54,7 @@ fn pattern() -> Vec<u8> {
 
 /// The reference vector, or None (after printing why) when the test must be skipped.
 fn reference(image: &[u8], taps: &[&str], grid: (usize, usize)) -> Option<Vec<f32>> {
-    let model = common::models::cached(DEFAULT_MODEL_FILE)?;
+    let _model = common::models::cached(DEFAULT_MODEL_FILE)?;
     let weights = common::models::cached(WEIGHTS_FILE)?;
     let has_torch = Command::new(PYTHON)
         .args(["-c", "import torch, torchvision"])

@@ -37,7 +37,7 @@ pub struct ImageMapOptions {
     /// Place spacing and merging when poses are given.
     pub keyframes: KeyframeOptions,
     /// Worker threads describing images; 0 means one per core, at most
-    /// [`MAX_BUILD_THREADS`]. They are joined before the build returns.
+    /// `MAX_BUILD_THREADS`. They are joined before the build returns.
     pub threads: usize,
     /// Keypoints stored per view for geometric verification (`crate::verify`), at most
     /// [`MAX_KEYPOINTS`]; 0 stores none. Default [`DEFAULT_KEYPOINTS`] (about 20 KB per view

@@ -252,7 +252,7 @@ impl DescriberModel {
             }
             (BackendSpec::Onnx { taps, grid, .. }, None) => {
                 let cells = grid[0] * grid[1]; // both bounded by MAX_POOL_GRID above
-                if pca.input_dim % cells != 0 || pca.input_dim / cells < taps.len() {
+                if !pca.input_dim.is_multiple_of(cells) || pca.input_dim / cells < taps.len() {
                     return bad(format!(
                         "PCA input {} is not a whole number of {}x{} grids, at least one per tap ({})",
                         pca.input_dim,
@@ -564,7 +564,7 @@ fn train_codebook(
     let mut index = 0usize;
     for l in locals {
         for row in l.values.chunks_exact(dim) {
-            if index % step == 0 {
+            if index.is_multiple_of(step) {
                 samples.extend_from_slice(row);
             }
             index += 1;

@@ -2,7 +2,7 @@
 //! samples, faer), then used to project every descriptor to D dimensions.
 //!
 //! The projection rows are stored either as `f32` or, four times smaller, as `i8` with one
-//! scale per row ([`Pca::quantized`]): with D = 512 rows of the MobileNetV2 multi-level vector
+//! scale per row ([`PcaPrecision::I8`], [`Pca::with_precision`]): with D = 512 rows of the MobileNetV2 multi-level vector
 //! (F = 27,648) that is 14 MB instead of 57 MB, the largest part of a map built from images.
 
 use crate::errors::VisionError;
@@ -116,7 +116,7 @@ impl Pca {
         dim: usize,
         whiten: bool,
     ) -> Result<Self, VisionError> {
-        if input_dim == 0 || samples.len() % input_dim != 0 {
+        if input_dim == 0 || !samples.len().is_multiple_of(input_dim) {
             return Err(VisionError::InvalidArgument(format!(
                 "{} values are not rows of {input_dim}",
                 samples.len()

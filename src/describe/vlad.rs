@@ -319,7 +319,7 @@ impl Codebook {
                 "codebook needs positive dimensions, got {clusters} clusters of {dim} values"
             ));
         }
-        if samples.len() % dim != 0 {
+        if !samples.len().is_multiple_of(dim) {
             return bad(format!(
                 "{} sample values are not a whole number of {dim}-value descriptors",
                 samples.len()

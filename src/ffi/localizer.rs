@@ -91,7 +91,8 @@ pub struct topoloc_localizer_options {
     pub onnx_runtime_path: *const c_char,
     // ABI 1.2 (topoloc 0.1): geometric verification.
     /// Most probable places verified geometrically per frame against the frame's image, 0..=64
-    /// (ORB matches + RANSAC; the result's `verified` / `inliers`). 0 = off (default). Needs a
+    /// (matches of the local features the map stores, ORB, XFeat or dense cells, and a RANSAC
+    /// geometric model; the result's `verified` / `inliers`). 0 = off (default). Needs a
     /// map storing keypoints (maps built from images do; else `_INVALID_OPTION`) and frames
     /// with images (else `_INVALID_IMAGE`). Costs a pair check per view checked (BENCHMARKS.md).
     pub verify_candidates: u32,

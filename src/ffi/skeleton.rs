@@ -399,7 +399,7 @@ mod tests {
             topoloc_graph_skeleton(graph, null_mut(), 0, &mut count),
             TOPOLOC_ERR_BUFFER_TOO_SMALL
         );
-        assert!(count > 0 && count % 3 == 0);
+        assert!(count > 0 && count.is_multiple_of(3));
         let mut xyz = vec![0u32; count];
         assert_eq!(
             topoloc_graph_skeleton(graph, xyz.as_mut_ptr(), count, &mut count),

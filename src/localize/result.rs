@@ -14,7 +14,7 @@ pub struct Frame<'a> {
     /// described with the map's own backend; when given, it is used and `image` is not described.
     pub descriptor: &'a [f32],
     /// The camera image, described when `descriptor` is empty (needs a localizer made with
-    /// [`Localizer::with_describer`]).
+    /// [`Localizer::with_describer`](crate::Localizer::with_describer)).
     pub image: Option<ImageView<'a>>,
     /// Motion since the previous frame, `previous_T_current`, from the host's odometry.
     pub odometry: Option<Isometry3<f64>>,
@@ -72,7 +72,7 @@ pub struct Localization {
     /// Top-k places by posterior, best first; `candidates[0]` is `place`.
     pub candidates: Vec<Candidate>,
     /// The camera's metric pose against the best-verified view, when verification has a camera
-    /// ([`VerificationOptions::camera`]), the map stores keypoint scene points and enough
+    /// ([`VerificationOptions::camera`](crate::verify::VerificationOptions::camera)), the map stores keypoint scene points and enough
     /// keypoints agree on one pose.
     pub pose_fix: Option<PoseFix>,
 }

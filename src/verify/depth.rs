@@ -28,7 +28,7 @@ pub const DEPTH_EDGE_RATIO: f64 = 0.05;
 /// z forward), back-projected through `camera` at the depth interpolated bilinearly between
 /// the four pixel centres around it (OpenCV's convention: pixel `(c, r)` is centred on
 /// `(c, r)`). Keypoints outside the image, next to a pixel without measurement, or on a depth
-/// edge ([`DEPTH_EDGE_RATIO`]) get NaN in all three coordinates. Fails, naming the field, on a
+/// edge (`DEPTH_EDGE_RATIO`) get NaN in all three coordinates. Fails, naming the field, on a
 /// buffer of the wrong length, a non-positive scale or invalid intrinsics.
 pub fn camera_points_from_depth(
     points: &[[f32; 2]],

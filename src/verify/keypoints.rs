@@ -307,7 +307,7 @@ impl KeypointDetector {
 
     /// Validates the image, converts it to grey at its own size, detects and describes.
     /// A featureless image gives no keypoints, not an error.
-    /// Images narrower or lower than [`MIN_ORB_SIDE`] are refused with
+    /// Images narrower or lower than `MIN_ORB_SIDE` are refused with
     /// [`VisionError::InvalidImage`] before OpenCV sees them.
     pub fn detect(&mut self, image: &ImageView<'_>) -> Result<Keypoints, VisionError> {
         image.validate()?;

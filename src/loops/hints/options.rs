@@ -41,7 +41,7 @@ pub struct HintOptions {
     /// Loop candidates verified per keyframe, most similar first. Default 5.
     pub candidates: usize,
     /// Candidates come from different stretches of the route: one whose id is less than this
-    /// from a more similar candidate's is skipped ([`LoopQuery::min_id_gap`]); 0 = off.
+    /// from a more similar candidate's is skipped ([`LoopQuery::min_id_gap`](crate::loops::LoopQuery::min_id_gap)); 0 = off.
     /// Default 10.
     pub candidate_id_gap: u64,
     /// Keyframes with an id within this many of the query's are never candidates (DBoW2's

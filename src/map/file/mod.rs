@@ -169,7 +169,7 @@ impl Map {
         let parsed = parse(&shared, &|data| shared.slice_ref(data), options)?;
         release_pages(&mmap);
         let descriptors = shared.slice(parsed.descriptor_bytes.clone());
-        let aligned = descriptors.as_ptr() as usize % std::mem::align_of::<f32>() == 0;
+        let aligned = (descriptors.as_ptr() as usize).is_multiple_of(std::mem::align_of::<f32>());
         let store = if aligned && cfg!(target_endian = "little") {
             DescriptorStore::Mapped(descriptors)
         } else {

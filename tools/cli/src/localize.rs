@@ -222,7 +222,7 @@ pub fn run(args: &LocalizeArgs) -> Result<()> {
         let Some(frame) = source.next_frame()? else {
             break;
         };
-        if frame.index as u64 % args.stride != 0 {
+        if !(frame.index as u64).is_multiple_of(args.stride) {
             continue;
         }
         let line = stream.line(&frame);

@@ -575,7 +575,7 @@ impl Canvas {
             let offset = (hash_unit(this.seed, row as i64, 0, 1) * 128.0) as usize;
             let ss = (s + offset) % this.n;
             let plank = ss / 128;
-            if t % 16 == 0 || ss % 128 == 0 {
+            if t % 16 == 0 || ss.is_multiple_of(128) {
                 return scale(this.base, 0.3);
             }
             let phase = hash_unit(this.seed, row as i64, plank as i64, 2) as f32;
