@@ -26,36 +26,23 @@ TEST(abi_and_version)
     CHECK(std::string(topoloc::status_string(TOPOLOC_ERR_IO)) == "I/O error");
 }
 
+// An owner class of the layer: move-only (copies deleted, moves noexcept), an explicit `operator
+// bool`, and derived from the one owner template over its C handle, not a hand-written owner.
+template <typename T, typename Handle, void (*Free)(Handle *)>
+constexpr bool is_owner_v =
+    !std::is_copy_constructible_v<T> && !std::is_copy_assignable_v<T> &&
+    std::is_nothrow_move_constructible_v<T> && std::is_nothrow_move_assignable_v<T> &&
+    !std::is_convertible_v<T, bool> && std::is_base_of_v<topoloc::detail::Owner<Handle, Free>, T>;
+
 TEST(owners_are_move_only)
 {
-    static_assert(!std::is_copy_constructible_v<topoloc::Map>);
-    static_assert(!std::is_copy_assignable_v<topoloc::Map>);
-    static_assert(std::is_nothrow_move_constructible_v<topoloc::Map>);
-    static_assert(std::is_nothrow_move_assignable_v<topoloc::Map>);
-    static_assert(!std::is_copy_constructible_v<topoloc::MapBuilder>);
-    static_assert(!std::is_copy_assignable_v<topoloc::MapBuilder>);
-    static_assert(std::is_nothrow_move_constructible_v<topoloc::MapBuilder>);
-    static_assert(std::is_nothrow_move_assignable_v<topoloc::MapBuilder>);
-    static_assert(!std::is_copy_constructible_v<topoloc::Localizer>);
-    static_assert(!std::is_copy_assignable_v<topoloc::Localizer>);
-    static_assert(std::is_nothrow_move_constructible_v<topoloc::Localizer>);
-    static_assert(std::is_nothrow_move_assignable_v<topoloc::Localizer>);
-    static_assert(!std::is_copy_constructible_v<topoloc::Graph>);
-    static_assert(!std::is_copy_assignable_v<topoloc::Graph>);
-    static_assert(std::is_nothrow_move_constructible_v<topoloc::Graph>);
-    static_assert(std::is_nothrow_move_assignable_v<topoloc::Graph>);
-    static_assert(!std::is_convertible_v<topoloc::Map, bool>, "operator bool must be explicit");
-    // One owner template for every handle, not one hand-written owner per class.
+    static_assert(is_owner_v<topoloc::Map, topoloc_map, &topoloc_map_free>);
+    static_assert(is_owner_v<topoloc::MapBuilder, topoloc_map_builder, &topoloc_map_builder_free>);
+    static_assert(is_owner_v<topoloc::Localizer, topoloc_localizer, &topoloc_localizer_free>);
+    static_assert(is_owner_v<topoloc::Graph, topoloc_graph, &topoloc_graph_free>);
+    static_assert(is_owner_v<topoloc::Describer, topoloc_describer, &topoloc_describer_free>);
     static_assert(
-        std::is_base_of_v<topoloc::detail::Owner<topoloc_map, &topoloc_map_free>, topoloc::Map>);
-    static_assert(
-        std::is_base_of_v<topoloc::detail::Owner<topoloc_map_builder, &topoloc_map_builder_free>,
-                          topoloc::MapBuilder>);
-    static_assert(
-        std::is_base_of_v<topoloc::detail::Owner<topoloc_localizer, &topoloc_localizer_free>,
-                          topoloc::Localizer>);
-    static_assert(std::is_base_of_v<topoloc::detail::Owner<topoloc_graph, &topoloc_graph_free>,
-                                    topoloc::Graph>);
+        is_owner_v<topoloc::LoopDetector, topoloc_loop_detector, &topoloc_loop_detector_free>);
     // get() is capi().
     topoloc::Map map = chain_map();
     CHECK(map.get() == map.capi() && map.get() != nullptr);
