@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 import topoloc
-from topoloc import _core, _lib
+from topoloc import _convert, _lib
 
 W, H = 320, 240
 PLACES = 12
@@ -419,21 +419,21 @@ def test_errors_of_image_frames_keep_the_filter_contract(vlad_map, images):
 def test_arrays_with_contiguous_rows_are_read_in_place():
     big = place_image(77, w=400, h=300)
     crop = big[30:270, 40:360]
-    c_image, keep = _core._image(crop, None, "image")
+    c_image, keep = _convert._image(crop, None, "image")
     assert np.shares_memory(keep, big)  # no copy
     assert c_image.stride == 400 and (c_image.width, c_image.height) == (320, 240)
     assert c_image.data_len == 400 * 239 + 320
     rgb = np.zeros((300, 400, 4), np.uint8)[10:20, 5:9, :3]  # crop of the colour channels of RGBA
-    c_image, keep = _core._image(rgb, "bgr", "image")
+    c_image, keep = _convert._image(rgb, "bgr", "image")
     assert not np.shares_memory(keep, rgb)  # pixels are 4 bytes apart: copied
-    c_image, keep = _core._image(np.zeros((300, 400, 3), np.uint8)[10:20, 5:9], "bgr", "image")
+    c_image, keep = _convert._image(np.zeros((300, 400, 3), np.uint8)[10:20, 5:9], "bgr", "image")
     assert c_image.stride == 1200 and c_image.format == topoloc._lib.PIXEL_BGR8
     for strided in (big[:, ::2], big[::-1], np.asfortranarray(big), big.T):
-        c_image, keep = _core._image(strided, None, "image")
+        c_image, keep = _convert._image(strided, None, "image")
         assert keep.flags.c_contiguous and not np.shares_memory(keep, big)
         assert c_image.stride == strided.shape[1]
     one_row = big[5:6, :]
-    c_image, _ = _core._image(one_row, None, "image")
+    c_image, _ = _convert._image(one_row, None, "image")
     assert c_image.stride == 400 and c_image.data_len == 400
 
 

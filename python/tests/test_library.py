@@ -95,7 +95,7 @@ def test_constant_groups_match_header(group):
 
 def test_node_kinds_are_exported_in_code_order():
     assert [topoloc.NODE_END, topoloc.NODE_CORNER, topoloc.NODE_BRANCH, topoloc.NODE_INTERMEDIATE] == [0, 1, 2, 3]
-    assert [getattr(topoloc, f"NODE_{k.upper()}") for k in topoloc._core.NODE_KINDS] == [0, 1, 2, 3]
+    assert [getattr(topoloc, f"NODE_{k.upper()}") for k in topoloc._skeleton.NODE_KINDS] == [0, 1, 2, 3]
 
 
 def test_zero_constants_are_the_defaults():

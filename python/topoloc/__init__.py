@@ -106,36 +106,13 @@ from ._lib import (
     library_path,
 )
 from ._logging import TRACE, log_level, set_log_level
-from ._core import (
-    Candidate,
-    Describer,
-    ErrorStats,
-    Gate,
-    Graph,
-    Localizer,
-    LoopCandidate,
-    LoopDetector,
-    LoopHint,
-    Map,
-    MapBuilder,
-    PoseFix,
-    Result,
-    TrajectoryReport,
-    ViewInfo,
-    abi_version,
-    abi_version_minor,
-    keyframe_options_default,
-    localizer_options_default,
-    loop_options_default,
-    evaluate_trajectory,
-    evaluate_trajectory_files,
-    map_from_keyframes,
-    skeleton_graph,
-    skeleton_options_default,
-    status_name,
-    status_str,
-    version,
-)
+from ._describer import Describer
+from ._localizer import Candidate, Localizer, PoseFix, Result, localizer_options_default
+from ._loops import Gate, LoopCandidate, LoopDetector, LoopHint, loop_options_default
+from ._map import Map, MapBuilder, ViewInfo, keyframe_options_default, map_from_keyframes
+from ._skeleton import Graph, skeleton_graph, skeleton_options_default
+from ._trajectory import ErrorStats, TrajectoryReport, evaluate_trajectory, evaluate_trajectory_files
+from ._version import abi_version, abi_version_minor, status_name, status_str, version
 
 #: Version of the loaded shared library (a wheel's own version: both are Cargo.toml's).
 __version__: str = version()

@@ -1,0 +1,443 @@
+"""Loop closure (ABI 1.5; mirrors ``src/ffi/loops.rs``): :class:`LoopDetector`, its options,
+:class:`LoopHint`, :class:`LoopCandidate` and :class:`Gate`.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import enum
+from ctypes import POINTER, byref, c_size_t, c_uint8
+from dataclasses import dataclass
+from typing import Any, Dict, List, Optional, Union
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from . import _lib
+from ._errors import (
+    InvalidArgumentError,
+    InvalidOptionError,
+)
+from ._lib import check, lib
+from ._convert import PathLike, _U32_MAX, _U64_MAX, _descriptor, _f32_ptr, _f64_ptr, _int_in_range, _keypoint_array, _matrix, _path, _pose, _text, _u32
+from ._handles import _SingleThreaded
+from ._map import Map
+
+__all__ = ['Gate', 'LoopHint', 'LoopCandidate', 'loop_options_default', 'LoopDetector']
+
+
+class Gate(enum.IntEnum):
+    """Which gate decided a :class:`LoopHint` (``TOPOLOC_GATE_*``): why a candidate was
+    refused, for logs."""
+
+    #: Every gate passed: the hint is a loop closure.
+    ACCEPTED = _lib.GATE_ACCEPTED
+    #: No keyframe outside the exclusion window had features to verify.
+    NO_CANDIDATE = _lib.GATE_NO_CANDIDATE
+    #: The best candidate had fewer inliers than ``min_inliers``.
+    TOO_FEW_INLIERS = _lib.GATE_TOO_FEW_INLIERS
+    #: Too few consecutive keyframes agreed on the place (``consistent_keyframes``).
+    INCONSISTENT = _lib.GATE_INCONSISTENT
+    #: Intrinsics were given but no relative pose could be fitted (too few matches, no
+    #: consensus, or a pure rotation).
+    NO_POSE = _lib.GATE_NO_POSE
+    #: The pose disagrees with the host's odometry beyond the bounds.
+    ODOMETRY = _lib.GATE_ODOMETRY
+
+
+@dataclass(frozen=True, eq=False)
+class LoopHint:
+    """The answer of :meth:`LoopDetector.add` for one keyframe: its best verified loop
+    candidate and the gate that decided (``topoloc_loop_hint``).
+
+    Attributes:
+        query_id: the query keyframe's id (the added one; a confirmed hint's earlier one).
+        query_place: the place the query keyframe joined.
+        has_match: whether a candidate was verified (the fields below describe it).
+        accepted: whether every gate passed: a loop closure for the pose graph.
+        gate: the :class:`Gate` that decided.
+        matched_id: the matched keyframe's id.
+        place: the matched keyframe's place.
+        inliers: fundamental-matrix inliers between the two keyframes.
+        confidence: the candidate's share of the inliers of all verified candidates (0..1).
+        has_pose: whether ``matched_T_query`` and ``covariance`` are set (intrinsics given,
+            pose fitted).
+        scale_known: whether the translation is metric (the matched keyframe had scene
+            points); otherwise it has unit length (a direction).
+        matched_T_query: (4, 4) float64, the query camera in the matched camera's optical
+            frame (z forward, x right, y down); the identity without a pose.
+        covariance: (6, 6) float64 covariance of ``matched_T_query`` for a right
+            perturbation, in GTSAM Pose3 tangent order: rotation (rad) x y z, then
+            translation (m) x y z; zeros without a pose.
+    """
+
+    query_id: int
+    query_place: int
+    has_match: bool
+    accepted: bool
+    gate: Union[Gate, int]
+    matched_id: int
+    place: int
+    inliers: int
+    confidence: float
+    has_pose: bool
+    scale_known: bool
+    matched_T_query: np.ndarray
+    covariance: np.ndarray
+
+
+@dataclass(frozen=True)
+class LoopCandidate:
+    """One relocalization candidate of :meth:`LoopDetector.query`: keyframe ``keyframe_id``,
+    its ``place``, and the cosine ``similarity`` of the query to it."""
+
+    keyframe_id: int
+    place: int
+    similarity: float
+
+
+#: Options of :class:`LoopDetector` (the ``topoloc_loop_options`` fields) -> converter kind.
+_LOOP_OPTION_KINDS = {
+    "candidates": "u32",
+    "exclude_recent_ids": "u64",
+    "exclude_recent_s": "float",
+    "min_inliers": "u32",
+    "consistent_keyframes": "u32",
+    "odometry_gate": "bool",
+    "odometry_max_rotation_deg": "float",
+    "odometry_max_translation_m": "float",
+    "fx": "float",
+    "fy": "float",
+    "cx": "float",
+    "cy": "float",
+    "novelty_similarity": "float",
+    "place_spacing_m": "float",
+    "neighbour_radius_m": "float",
+    "candidate_id_gap": "u64",
+    "odometry_max_translation_per_m": "float",
+    "pose_reprojection_px": "float",
+    "odometry_search_m": "float",
+    "odometry_candidates": "u32",
+}
+
+
+def loop_options_default() -> Dict[str, Any]:
+    """The library's default :class:`LoopDetector` options (``topoloc_loop_options_init``) as
+    a dict keyed by the C field names (``fx == 0``: no intrinsics, hints carry no pose)."""
+    o = _lib.defaults(_lib.topoloc_loop_options, lib.topoloc_loop_options_init)
+    return _loop_options_dict(o)
+
+
+def _loop_options_dict(o: _lib.topoloc_loop_options) -> Dict[str, Any]:
+    out: Dict[str, Any] = {}
+    for name, kind in _LOOP_OPTION_KINDS.items():
+        value = getattr(o, name)
+        out[name] = float(value) if kind == "float" else bool(value) if kind == "bool" else int(value)
+    return out
+
+
+def _loop_options(given: Dict[str, Any]) -> _lib.topoloc_loop_options:
+    """The library defaults with the options in ``given`` (``None`` values: the default)."""
+    unknown = sorted(set(given) - set(_LOOP_OPTION_KINDS))
+    if unknown:
+        raise TypeError(
+            f"unexpected loop detector option(s) {', '.join(repr(n) for n in unknown)}; "
+            f"the options are {', '.join(_LOOP_OPTION_KINDS)}"
+        )
+    options = _lib.defaults(_lib.topoloc_loop_options, lib.topoloc_loop_options_init)
+    for name, value in given.items():
+        if value is None:
+            continue
+        kind = _LOOP_OPTION_KINDS[name]
+        if kind == "u32":
+            value = _u32(value, name, InvalidOptionError)
+        elif kind == "u64":
+            value = _int_in_range(value, name, _U64_MAX, InvalidOptionError)
+        elif kind == "bool":
+            value = bool(value)
+        else:
+            value = float(value)
+        setattr(options, name, value)
+    return options
+
+
+def _binary_descriptors(values: Any, count: int) -> np.ndarray:
+    """The keypoints' 32-byte descriptors as a C-contiguous uint8 (N, 32) array."""
+    if isinstance(values, (bytes, bytearray, memoryview)):
+        flat = np.frombuffer(values, dtype=np.uint8)
+        if flat.size % 32:
+            raise InvalidArgumentError(f"keypoint_descriptors has {flat.size} bytes, not a multiple of 32")
+        arr = flat.reshape(-1, 32)
+    else:
+        arr = np.asarray(values)
+        if arr.size and arr.dtype.kind not in "biu":
+            raise TypeError(f"keypoint_descriptors must be uint8 bytes, got dtype {arr.dtype}")
+        if arr.size and arr.dtype != np.uint8 and (arr.min() < 0 or arr.max() > 255):
+            raise InvalidArgumentError("keypoint_descriptors values must be bytes in [0, 255]")
+        if arr.ndim != 2 or arr.shape[1] != 32:
+            raise InvalidArgumentError(
+                f"keypoint_descriptors must be an (N, 32) array of bytes, got shape {arr.shape}"
+            )
+    if arr.shape[0] != count:
+        raise InvalidArgumentError(
+            f"keypoint_descriptors has {arr.shape[0]} rows but keypoints has {count}: one per keypoint"
+        )
+    return np.ascontiguousarray(arr, dtype=np.uint8)
+
+
+class LoopDetector(_SingleThreaded):
+    """Loop-closure hints for a SLAM run: keyframes in, at most one gated hint per keyframe out.
+
+    ``LoopDetector(kind, model, dim, **options)`` starts an empty detector for global
+    descriptors of ``kind`` / ``model`` (non-empty strings) and dimension ``dim``;
+    :meth:`from_map` starts one whose first session is a saved map (a second session closes
+    loops against it). Each :meth:`add` verifies the keyframe's loop candidates (keyframes
+    outside the exclusion window) against its keypoints and gates the best one; the keyframe
+    then joins the detector's place graph.
+
+    Options (keyword arguments named as the ``topoloc_loop_options`` fields; left out or
+    ``None``: the library default, :func:`loop_options_default`): ``candidates`` (verified per
+    keyframe, 1..64), ``exclude_recent_ids`` and ``exclude_recent_s`` (the exclusion window),
+    ``min_inliers`` (8..10000), ``consistent_keyframes`` (1..100), ``odometry_gate``,
+    ``odometry_max_rotation_deg``, ``odometry_max_translation_m`` and
+    ``odometry_max_translation_per_m`` (the bound grows with the distance travelled between
+    the two keyframes: the odometry's drift rate), the pinhole intrinsics
+    ``fx``, ``fy``, ``cx``, ``cy`` (pixels; ``fx == 0``: none, hints carry no pose), and the
+    place graph's ``novelty_similarity``, ``place_spacing_m``, ``neighbour_radius_m``, and
+    ``candidate_id_gap`` (candidates from different stretches of ids; 0: off), and
+    ``pose_reprojection_px`` (the metric pose fit's inlier threshold, pixels), and
+    ``odometry_candidates`` and ``odometry_search_m`` (keyframes the odometry puts near the new
+    one, checked besides appearance's candidates; 0: none). Invalid
+    options raise :class:`InvalidOptionError`, unknown names ``TypeError``.
+
+    Ownership: owns a C ``topoloc_loop_detector`` handle, released by :meth:`close`, the
+    ``with`` statement or garbage collection. A map given to :meth:`from_map` is not kept.
+
+    Thread safety: single-threaded state; use from one thread at a time (concurrent calls raise
+    ``RuntimeError``).
+    """
+
+    def __init__(self, kind: str, model: str, dim: int, **options: Any) -> None:
+        self._init_guard()
+        self._free = lib.topoloc_loop_detector_free
+        opts = _loop_options(options)
+        out = _lib.LoopDetectorPtr()
+        check(
+            lib.topoloc_loop_detector_new(
+                _text(kind, "kind"), _text(model, "model"), _u32(dim, "dim"), byref(opts), byref(out)
+            )
+        )
+        self._finish_init(out, opts, int(dim))
+
+    @classmethod
+    def from_map(cls, map: Map, **options: Any) -> "LoopDetector":
+        """A detector whose first session is ``map``'s views (with their stored keypoints and,
+        where known, scene points; e.g. a map written by :meth:`save` and read with
+        :meth:`Map.load`): new keyframes, with ids above the map's, close loops against it.
+        Options as for the constructor. Raises :class:`InvalidOptionError` (also a view
+        without keyframe id), :class:`InvalidArgumentError` (keyframe ids not increasing)."""
+        if not isinstance(map, Map):
+            raise TypeError(f"map must be a topoloc.Map, got {type(map).__name__}")
+        self = cls.__new__(cls)
+        self._init_guard()
+        self._free = lib.topoloc_loop_detector_free
+        opts = _loop_options(options)
+        out = _lib.LoopDetectorPtr()
+        check(lib.topoloc_loop_detector_from_map(map._h, byref(opts), byref(out)))
+        self._finish_init(out, opts, map.dim)
+        return self
+
+    def _finish_init(self, ptr, options: _lib.topoloc_loop_options, dim: int) -> None:
+        self._ptr = ptr
+        self._options = _loop_options_dict(options)
+        self._dim = dim
+        # Reused per keyframe.
+        self._keyframe = _lib.defaults(_lib.topoloc_loop_keyframe, lib.topoloc_loop_keyframe_init)
+        self._hint = _lib.defaults(_lib.topoloc_loop_hint, lib.topoloc_loop_hint_init)
+
+    @property
+    def options(self) -> Dict[str, Any]:
+        """The options this detector was created with (as the library stores them)."""
+        return dict(self._options)
+
+    @property
+    def dim(self) -> int:
+        """Global descriptor dimension D."""
+        return self._dim
+
+    def __len__(self) -> int:
+        """Number of keyframes held."""
+        out = c_size_t(0)
+        h = self._enter("__len__")
+        try:
+            check(lib.topoloc_loop_detector_len(h, byref(out)))
+        finally:
+            self._leave()
+        return int(out.value)
+
+    def __repr__(self) -> str:
+        if self.closed:
+            return "<topoloc.LoopDetector (closed)>"
+        return f"<topoloc.LoopDetector dim={self._dim} keyframes={len(self)}>"
+
+    def add(
+        self,
+        id: int,
+        timestamp: float,
+        descriptor: ArrayLike,
+        keypoints: Optional[ArrayLike] = None,
+        keypoint_descriptors: Optional[ArrayLike] = None,
+        camera_points: Optional[ArrayLike] = None,
+        world_T_body: Optional[ArrayLike] = None,
+        body_T_camera: Optional[ArrayLike] = None,
+    ) -> LoopHint:
+        """Adds keyframe ``id`` and returns its :class:`LoopHint` (``has_match`` False when no
+        candidate was verified; ``accepted`` True for a loop closure).
+
+        ``id``: the host's keyframe id, increasing from one keyframe to the next.
+        ``timestamp``: seconds, not decreasing. ``descriptor``: the global descriptor, D floats.
+        ``keypoints``: (N, 2) pixel positions (x right, y down; N <= 5000) with
+        ``keypoint_descriptors``, their (N, 32) uint8 binary descriptors (ORB, BRIEF; ``bytes``
+        of 32 * N also work); both or neither. ``camera_points``: optional (N, 3) scene point
+        of each keypoint in this camera's frame (metres, NaN rows when unknown): with
+        intrinsics, a later hint matched to this keyframe is metric. ``world_T_body``: the
+        odometry pose, a 4x4 rigid transform (every keyframe has one or none has);
+        ``body_T_camera``: the camera in the body frame (``None``: identity).
+
+        The whole keyframe is validated first: on any error the detector is unchanged. Arrays
+        of inconsistent lengths raise :class:`InvalidArgumentError` before the library is
+        called. Raises :class:`DimensionMismatchError`, :class:`NonFiniteError`,
+        :class:`ZeroDescriptorError`, :class:`InvalidArgumentError` (duplicate or decreasing
+        id, earlier timestamp, poses on some keyframes only, bad keypoints, non-rigid poses).
+        """
+        kid = _int_in_range(id, "id", _U64_MAX, InvalidArgumentError)
+        ts = float(timestamp)
+        q = _descriptor(descriptor)
+        if (keypoints is None) != (keypoint_descriptors is None):
+            raise InvalidArgumentError("give keypoints and keypoint_descriptors together (or neither)")
+        points = descriptors = scene = None
+        n = 0
+        if keypoints is not None:
+            points = _keypoint_array(keypoints, "keypoints", 2, None)
+            n = int(points.shape[0])
+            descriptors = _binary_descriptors(keypoint_descriptors, n)
+        if camera_points is not None:
+            if points is None:
+                raise InvalidArgumentError("camera_points needs keypoints (one scene point per keypoint)")
+            scene = _keypoint_array(camera_points, "camera_points", 3, n)
+        body = None if world_T_body is None else _pose(world_T_body, "world_T_body")
+        camera = None if body_T_camera is None else _pose(body_T_camera, "body_T_camera")
+
+        h = self._enter("add")
+        try:
+            kf, hint = self._keyframe, self._hint
+            kf.struct_size = ctypes.sizeof(_lib.topoloc_loop_keyframe)
+            kf.id = kid
+            kf.timestamp = ts
+            kf.descriptor = _f32_ptr(q)
+            kf.descriptor_len = q.size
+            kf.world_T_body = None if body is None else _f64_ptr(body)
+            kf.body_T_camera = None if camera is None else _f64_ptr(camera)
+            kf.keypoint_count = n
+            kf.keypoints = None if points is None else _f32_ptr(points)
+            kf.keypoint_descriptors = None if descriptors is None else descriptors.ctypes.data_as(POINTER(c_uint8))
+            kf.camera_points = None if scene is None else _f32_ptr(scene)
+            hint.struct_size = ctypes.sizeof(_lib.topoloc_loop_hint)
+            try:
+                check(lib.topoloc_loop_detector_add(h, byref(kf), byref(hint)))
+            finally:
+                kf.descriptor = None
+                kf.descriptor_len = 0
+                kf.world_T_body = kf.body_T_camera = None
+                kf.keypoint_count = 0
+                kf.keypoints = kf.keypoint_descriptors = kf.camera_points = None
+            return _loop_hint(hint)
+        finally:
+            self._leave()
+            del q, points, descriptors, scene, body, camera
+
+    def confirmed(self) -> List[LoopHint]:
+        """The hints of earlier keyframes that the last :meth:`add` confirmed (ABI 1.10),
+        oldest first: when an added keyframe's hint is accepted because it completes a
+        consistency streak, the streak's earlier keyframes, refused as
+        :attr:`Gate.INCONSISTENT` while it was short, are accepted too (each with its own
+        ``query_id``; at most one accepted hint per keyframe in all). Empty after an
+        :meth:`add` whose hint was not accepted; replaced by the next :meth:`add`, kept by a
+        failed one and by :meth:`erase`."""
+        h = self._enter("confirmed")
+        try:
+            count = c_size_t(0)
+            check(lib.topoloc_loop_detector_confirmed_count(h, byref(count)))
+            hints = []
+            for i in range(int(count.value)):
+                raw = _lib.defaults(_lib.topoloc_loop_hint, lib.topoloc_loop_hint_init)
+                check(lib.topoloc_loop_detector_confirmed(h, i, byref(raw)))
+                hints.append(_loop_hint(raw))
+            return hints
+        finally:
+            self._leave()
+
+    def query(self, descriptor: ArrayLike, max_results: int) -> List[LoopCandidate]:
+        """Relocalization: the (at most ``max_results``) keyframes most similar to
+        ``descriptor`` (D floats; not added, and every keyframe may match), most similar
+        first. Raises :class:`DimensionMismatchError`, :class:`NonFiniteError`,
+        :class:`ZeroDescriptorError`."""
+        q = _descriptor(descriptor)
+        capacity = _int_in_range(max_results, "max_results", _U32_MAX, InvalidArgumentError)
+        found = (_lib.topoloc_loop_candidate * max(capacity, 1))()
+        count = c_size_t(0)
+        h = self._enter("query")
+        try:
+            check(lib.topoloc_loop_detector_query(h, _f32_ptr(q), q.size, found, capacity, byref(count)))
+        finally:
+            self._leave()
+        n = min(int(count.value), capacity)
+        return [LoopCandidate(int(c.keyframe_id), int(c.place), float(c.similarity)) for c in found[:n]]
+
+    def erase(self, id: int) -> None:
+        """Removes keyframe ``id`` and its features (e.g. when SLAM culls it).
+        Raises :class:`InvalidArgumentError` (no keyframe with that id)."""
+        kid = _int_in_range(id, "id", _U64_MAX, InvalidArgumentError)
+        h = self._enter("erase")
+        try:
+            check(lib.topoloc_loop_detector_erase(h, kid))
+        finally:
+            self._leave()
+
+    def save(self, path: PathLike) -> None:
+        """Saves the keyframes and their place graph as a topoloc map file (a view per
+        keyframe, keyframe ids kept), atomically, for a later session: :meth:`Map.load`, then
+        :meth:`from_map`. Raises :class:`MapIOError`, :class:`EmptyMapError`."""
+        encoded = _path(path)
+        h = self._enter("save")
+        try:
+            check(lib.topoloc_loop_detector_save(h, encoded))
+        finally:
+            self._leave()
+
+
+def _loop_hint(hint: Any) -> LoopHint:
+    """The :class:`LoopHint` of a C ``topoloc_loop_hint``."""
+    return LoopHint(
+        query_id=int(hint.query_id),
+        query_place=int(hint.query_place),
+        has_match=bool(hint.has_match),
+        accepted=bool(hint.accepted),
+        gate=_gate(int(hint.gate)),
+        matched_id=int(hint.matched_id),
+        place=int(hint.place),
+        inliers=int(hint.inliers),
+        confidence=float(hint.confidence),
+        has_pose=bool(hint.has_pose),
+        scale_known=bool(hint.scale_known),
+        matched_T_query=_matrix(hint.matched_T_query, 4),
+        covariance=_matrix(hint.covariance, 6),
+    )
+
+
+def _gate(code: int) -> Union[Gate, int]:
+    """The :class:`Gate` of a code (a code from a newer library stays an int)."""
+    try:
+        return Gate(code)
+    except ValueError:
+        return code

@@ -1,0 +1,213 @@
+"""Skeleton graphs from occupancy grids (mirrors ``src/ffi/skeleton.rs``): :class:`Graph` and
+:func:`skeleton_graph`.
+"""
+
+from __future__ import annotations
+
+from ctypes import POINTER, byref, c_double, c_size_t, c_uint8, c_uint32
+from dataclasses import dataclass
+from typing import Any, Dict, List, Optional, Tuple
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from . import _lib
+from ._errors import (
+    InvalidArgumentError,
+    UnknownPlaceError,
+)
+from ._lib import check, lib
+from ._convert import _f64_ptr, _int_in_range, _read_u32s
+
+__all__ = ['Graph', 'skeleton_options_default', 'skeleton_graph']
+
+
+#: ``TOPOLOC_NODE_*`` codes by name, in code order.
+NODE_KINDS = ("end", "corner", "branch", "intermediate")
+
+
+@dataclass(frozen=True, eq=False)
+class Graph:
+    """A topological graph built from an occupancy grid by :func:`skeleton_graph`.
+
+    Plain numpy arrays (copied out of the library; nothing to close):
+
+    - ``positions``: (N, 3) float64, world position of each place in metres (the centre of its
+      skeleton voxel);
+    - ``kinds``: (N,) uint32 ``TOPOLOC_NODE_*`` codes, ``kind_names`` the same as strings
+      (``"end"``, ``"corner"``, ``"branch"``, ``"intermediate"``); places come in the order
+      branches, ends, corners, then intermediate places;
+    - ``edges``: (E, 2) uint32 place pairs ``a < b``, sorted; ``lengths``: (E,) float64, the
+      straight distance between them in metres;
+    - ``skeleton``: (S, 3) int64 voxel indices ``(x, y, z)`` of the skeleton the graph was built
+      on, in grid order (``occupied[tuple(graph.skeleton.T)]`` is all False).
+    """
+
+    positions: np.ndarray
+    kinds: np.ndarray
+    edges: np.ndarray
+    lengths: np.ndarray
+    skeleton: np.ndarray
+
+    @property
+    def place_count(self) -> int:
+        """Number of places N."""
+        return int(self.positions.shape[0])
+
+    @property
+    def edge_count(self) -> int:
+        """Number of undirected edges E."""
+        return int(self.edges.shape[0])
+
+    @property
+    def kind_names(self) -> List[str]:
+        """The kind of each place as a string: ``"end"``, ``"corner"``, ``"branch"`` or
+        ``"intermediate"``."""
+        return [NODE_KINDS[k] for k in self.kinds]
+
+    def kind_counts(self) -> Dict[str, int]:
+        """Number of places of each kind, e.g. ``{"end": 2, "corner": 0, ...}``."""
+        counts = np.bincount(self.kinds, minlength=len(NODE_KINDS))
+        return {name: int(counts[i]) for i, name in enumerate(NODE_KINDS)}
+
+    def neighbours(self, place: int) -> np.ndarray:
+        """Places joined to ``place``, increasing."""
+        p = _int_in_range(place, "place", self.place_count - 1, UnknownPlaceError)
+        a, b = self.edges[:, 0], self.edges[:, 1]
+        return np.sort(np.concatenate([b[a == p], a[b == p]]))
+
+    def __repr__(self) -> str:
+        return f"Graph(places={self.place_count}, edges={self.edge_count}, kinds={self.kind_counts()})"
+
+
+def skeleton_options_default() -> Dict[str, Any]:
+    """The library's defaults for :func:`skeleton_graph` options, as a dict (``z_band`` is
+    ``None``: the whole grid)."""
+    o = _lib.defaults(_lib.topoloc_skeleton_options, lib.topoloc_skeleton_options_init)
+    out: Dict[str, Any] = {"z_band": (o.z_min_m, o.z_max_m) if o.use_z_band else None}
+    for f in o._fields_:
+        if f[0] not in ("struct_size", "use_z_band", "z_min_m", "z_max_m"):
+            out[f[0]] = getattr(o, f[0])
+    return out
+
+
+def _occupancy_cells(occupied: Any) -> Tuple[np.ndarray, Tuple[int, int, int]]:
+    """The cells of an ``occupied[x, y, z]`` array as uint8, x fastest, and ``(nx, ny, nz)``."""
+    arr = np.asarray(occupied)
+    if arr.dtype != np.bool_ and arr.dtype.kind not in "iu":
+        raise TypeError(
+            f"occupied must be a bool or integer array (non-zero = occupied), got dtype {arr.dtype}; "
+            "threshold occupancy probabilities first, e.g. occupied = probability > 0.5"
+        )
+    if arr.ndim == 2:
+        arr = arr[:, :, np.newaxis]
+    if arr.ndim != 3:
+        raise InvalidArgumentError(
+            f"occupied must have shape (nx, ny, nz) (indexed occupied[x, y, z]) or (nx, ny) for a "
+            f"single layer; got shape {arr.shape}"
+        )
+    # (nx, ny, nz) indexed [x, y, z] -> C order of (nz, ny, nx): x fastest, as the C API wants.
+    cells = np.ascontiguousarray((arr != 0).transpose(2, 1, 0), dtype=np.uint8)
+    nx, ny, nz = (int(n) for n in arr.shape)
+    return cells, (nx, ny, nz)
+
+
+def skeleton_graph(
+    occupied: ArrayLike,
+    voxel_size: float,
+    origin: ArrayLike = (0.0, 0.0, 0.0),
+    *,
+    z_band: Optional[Tuple[float, float]] = None,
+    min_clearance_m: Optional[float] = None,
+    merge_radius_m: Optional[float] = None,
+    max_edge_m: Optional[float] = None,
+    corner_angle_deg: Optional[float] = None,
+    corner_scale_m: Optional[float] = None,
+    min_spur_m: Optional[float] = None,
+) -> Graph:
+    """Builds the topological graph of the free space of an occupancy voxel grid
+    (``topoloc_graph_from_occupancy``): the free space is thinned to a one-voxel-thin 3D
+    skeleton, whose ends, corners and junctions become places (merged when closer than
+    ``merge_radius_m`` along it), joined where the skeleton links them by an obstacle-free
+    straight segment; intermediate places are inserted where a segment would cross an obstacle
+    or be longer than ``max_edge_m``.
+
+    ``occupied``: bool or integer array of shape ``(nx, ny, nz)``, **indexed**
+    ``occupied[x, y, z]`` (non-zero = occupied; a 2-D ``(nx, ny)`` array is one layer). Voxel
+    ``(x, y, z)`` covers ``origin + voxel_size * [x, x+1) x [y, y+1) x [z, z+1)`` metres, z up.
+    Any memory layout is accepted (the cells are copied).
+
+    Options left as ``None`` take the library defaults (:func:`skeleton_options_default`):
+    ``z_band`` ``(z_min, z_max)`` metres, only voxels whose centre lies in it; ``min_clearance_m``
+    free voxels closer than this to an obstacle count as occupied; ``merge_radius_m``;
+    ``max_edge_m`` (at least two voxels); ``corner_angle_deg`` smallest bend that makes a corner;
+    ``corner_scale_m`` distance over which bends are measured; ``min_spur_m`` dead ends shorter
+    than this are removed.
+
+    Returns a :class:`Graph`. Raises :class:`InvalidArgumentError` naming the problem
+    (``occupied`` shape, ``voxel_size``, ``origin``, ``cells`` when every voxel is occupied,
+    ``z_band`` when the band holds no free voxel, ``min_clearance_m`` when nothing keeps the
+    clearance, or another option out of range), ``TypeError`` for a float ``occupied``.
+    """
+    cells, dims = _occupancy_cells(occupied)
+    org = np.ascontiguousarray(np.asarray(origin, dtype=np.float64))
+    if org.shape != (3,):
+        raise InvalidArgumentError(f"origin must have 3 values (x, y, z), got shape {org.shape}")
+    options = _lib.defaults(_lib.topoloc_skeleton_options, lib.topoloc_skeleton_options_init)
+    if z_band is not None:
+        band = tuple(float(v) for v in z_band)
+        if len(band) != 2:
+            raise InvalidArgumentError(f"z_band must be (z_min, z_max), got {z_band!r}")
+        options.use_z_band = True
+        options.z_min_m, options.z_max_m = band
+    for name, value in (
+        ("min_clearance_m", min_clearance_m),
+        ("merge_radius_m", merge_radius_m),
+        ("max_edge_m", max_edge_m),
+        ("corner_angle_deg", corner_angle_deg),
+        ("corner_scale_m", corner_scale_m),
+        ("min_spur_m", min_spur_m),
+    ):
+        if value is not None:
+            setattr(options, name, float(value))
+
+    out = _lib.GraphPtr()
+    check(
+        lib.topoloc_graph_from_occupancy(
+            (c_size_t * 3)(*dims),
+            float(voxel_size),
+            _f64_ptr(org),
+            cells.ctypes.data_as(POINTER(c_uint8)),
+            cells.size,
+            byref(options),
+            byref(out),
+        )
+    )
+    try:
+        return _read_graph(out)
+    finally:
+        lib.topoloc_graph_free(out)
+
+
+def _read_graph(h) -> Graph:
+    """Copies a ``topoloc_graph`` into a :class:`Graph`."""
+    places, edges = c_size_t(0), c_size_t(0)
+    check(lib.topoloc_graph_place_count(h, byref(places)))
+    check(lib.topoloc_graph_edge_count(h, byref(edges)))
+    positions = np.empty((places.value, 3), dtype=np.float64)
+    kinds = np.empty(places.value, dtype=np.uint32)
+    kind = c_uint32(0)
+    for p in range(places.value):
+        check(lib.topoloc_graph_place(h, p, _f64_ptr(positions[p]), byref(kind)))
+        kinds[p] = kind.value
+    pairs = np.empty((edges.value, 2), dtype=np.uint32)
+    lengths = np.empty(edges.value, dtype=np.float64)
+    a, b, length = c_uint32(0), c_uint32(0), c_double(0.0)
+    for e in range(edges.value):
+        check(lib.topoloc_graph_edge(h, e, byref(a), byref(b), byref(length)))
+        pairs[e] = (a.value, b.value)
+        lengths[e] = length.value
+    skeleton = _read_u32s(lib.topoloc_graph_skeleton, h).astype(np.int64).reshape(-1, 3)
+    for arr in (positions, kinds, pairs, lengths, skeleton):
+        arr.flags.writeable = False
+    return Graph(positions, kinds, pairs, lengths, skeleton)
