@@ -29,7 +29,7 @@ from pathlib import Path
 import pytest
 
 import topoloc
-from topoloc import _errors, _lib
+from topoloc import _errors, _lib, _options, _version
 
 from conftest import HEADER, PACKAGE_PARENT, REPO_ROOT
 
@@ -148,12 +148,12 @@ NO_DEFAULT_FUNCTION = {
 def test_struct_size_matches_library_default(struct_name):
     cls = _lib.STRUCTS[struct_name]
     fill = getattr(_lib.lib, DEFAULT_FUNCTIONS[struct_name])
-    assert _lib.library_struct_size(cls, fill) == ctypes.sizeof(cls)
+    assert _options.library_struct_size(cls, fill) == ctypes.sizeof(cls)
 
 
 def test_struct_size_written_by_view_info_and_process(corridor):
     # topoloc_view_info has no _default(): the library writes its sizeof when it fills one.
-    info, keep = _lib.scratch_struct(_lib.topoloc_view_info)
+    info, keep = _options.scratch_struct(_lib.topoloc_view_info)
     info.struct_size = ctypes.sizeof(_lib.topoloc_view_info)
     assert _lib.lib.topoloc_map_view_info(corridor.map._h, 0, ctypes.byref(info)) == 0
     assert ctypes.cast(keep, POINTER(c_size_t))[0] == ctypes.sizeof(_lib.topoloc_view_info)
@@ -169,11 +169,11 @@ def test_struct_size_below_minimum_is_refused(corridor):
     status = _lib.lib.topoloc_map_view_info(corridor.map._h, 0, ctypes.byref(info))
     assert status == topoloc.StructSizeError.STATUS
     with pytest.raises(topoloc.StructSizeError, match="struct_size"):
-        _lib.check(status)
+        _errors.check(status)
 
 
 def test_defaults_are_the_library_defaults():
-    raw = _lib.defaults(_lib.topoloc_localizer_options, _lib.lib.topoloc_localizer_options_init)
+    raw = _options.defaults(_lib.topoloc_localizer_options, _lib.lib.topoloc_localizer_options_init)
     d = topoloc.localizer_options_default()
     assert d["mode"] == "filter"
     for name in ("temperature", "stay_probability", "jump_probability", "off_map_probability",
@@ -193,7 +193,7 @@ def test_defaults_are_the_library_defaults():
     renamed = {"expected_descriptor_kind": "expected_kind", "expected_descriptor_model": "expected_model"}
     assert set(d) == {renamed.get(name, name) for name, _ in raw._fields_} - {"struct_size"}
     kf = topoloc.keyframe_options_default()
-    raw_kf = _lib.defaults(_lib.topoloc_keyframe_options, _lib.lib.topoloc_keyframe_options_init)
+    raw_kf = _options.defaults(_lib.topoloc_keyframe_options, _lib.lib.topoloc_keyframe_options_init)
     assert kf["place_spacing_m"] == raw_kf.place_spacing_m > 0
     assert kf["max_views_per_place"] == raw_kf.max_views_per_place >= 1
 
@@ -202,7 +202,7 @@ def _filled_by_init(cls, init):
     """A ``cls`` whose bytes are all 0xAB before the library's ``_init`` fills it."""
     out = cls()
     ctypes.memset(ctypes.byref(out), 0xAB, ctypes.sizeof(cls))
-    _lib.check(init(ctypes.byref(out), ctypes.sizeof(cls)))
+    _errors.check(init(ctypes.byref(out), ctypes.sizeof(cls)))
     return out
 
 
@@ -587,6 +587,29 @@ def test_status_names_match_the_librarys_table():
     assert topoloc.status_name(7) is None
 
 
+def test_every_library_status_has_a_class_and_every_class_a_status():
+    """Exception classes are matched to the library's statuses by C name (STATUS_NAME): every
+    status the loaded library names, TOPOLOC_OK aside, has its class, with the library's code
+    as STATUS; and every class names a status the library knows."""
+    library = {code: topoloc.status_name(code) for code in range(0, 1000)}
+    library = {code: name for code, name in library.items() if name is not None}
+    classes = [
+        cls
+        for cls in vars(_errors).values()
+        if isinstance(cls, type) and issubclass(cls, topoloc.TopolocError) and cls is not topoloc.TopolocError
+    ]
+    by_name = {cls.STATUS_NAME: cls for cls in classes}
+    assert len(by_name) == len(classes), "two classes name the same status"
+    assert set(by_name) == set(library.values()) - {"TOPOLOC_OK"}
+    for code, name in library.items():
+        if code == 0:
+            continue
+        cls = _errors.error_class_for_status(code)
+        assert (cls.STATUS_NAME, cls.STATUS) == (name, code)
+        assert cls is by_name[name]
+    assert _errors.error_class_for_status(0) is topoloc.TopolocError
+
+
 def test_abi_minor_version():
     assert topoloc.abi_version_minor() >= _lib.ABI_VERSION_MINOR == 14
 
@@ -682,8 +705,8 @@ def test_error_message_is_read_from_the_library(tmp_path):
     assert info.value.status == 100
     assert str(missing) in info.value.message
     # The message stays readable (thread-local, not cleared by reading it).
-    assert _lib.last_error_message() == info.value.message
-    assert _lib.last_error_message() == info.value.message
+    assert _version.last_error_message() == info.value.message
+    assert _version.last_error_message() == info.value.message
 
 
 def test_last_error_is_per_thread():
@@ -692,11 +715,11 @@ def test_last_error_is_per_thread():
     with pytest.raises(topoloc.MapIOError) as info:
         topoloc.Map.load("/nonexistent/in/main/thread")
     seen = []
-    t = threading.Thread(target=lambda: seen.append(_lib.last_error_message()))
+    t = threading.Thread(target=lambda: seen.append(_version.last_error_message()))
     t.start()
     t.join()
     assert seen == [""]
-    assert _lib.last_error_message() == info.value.message
+    assert _version.last_error_message() == info.value.message
 
 
 # ---------------------------------------------------------------------------------------------

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import topoloc
-from topoloc import _lib
+from topoloc import _lib, _options
 
 DIM = 8
 POINTS = 60
@@ -91,7 +91,7 @@ def test_generator_matches_the_c_test(views):
 
 def test_options_defaults():
     d = topoloc.loop_options_default()
-    raw = _lib.defaults(_lib.topoloc_loop_options, _lib.lib.topoloc_loop_options_init)
+    raw = _options.defaults(_lib.topoloc_loop_options, _lib.lib.topoloc_loop_options_init)
     assert raw.struct_size == ctypes.sizeof(_lib.topoloc_loop_options)
     assert set(d) == {name for name, _ in _lib.topoloc_loop_options._fields_} - {"struct_size"}
     for name, value in d.items():

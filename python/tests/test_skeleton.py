@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import topoloc
-from topoloc import _lib
+from topoloc import _lib, _options
 
 from conftest import PYTHON_DIR
 
@@ -199,7 +199,7 @@ def test_neighbours_of_an_unknown_place():
 
 
 def test_the_c_struct_defaults_match():
-    raw = _lib.defaults(_lib.topoloc_skeleton_options, _lib.lib.topoloc_skeleton_options_init)
+    raw = _options.defaults(_lib.topoloc_skeleton_options, _lib.lib.topoloc_skeleton_options_init)
     assert raw.struct_size == _lib.ctypes.sizeof(_lib.topoloc_skeleton_options)
     assert not raw.use_z_band
     assert (raw.merge_radius_m, raw.max_edge_m) == (1.0, 3.0)

@@ -22,7 +22,7 @@ from ._errors import (
     InvalidUTF8Error,
     TopolocError,
 )
-from ._lib import check
+from ._errors import check
 
 
 PathLike = Union[str, bytes, "os.PathLike[str]", "os.PathLike[bytes]"]

@@ -14,7 +14,9 @@ from . import _lib
 from ._errors import (
     InvalidOptionError,
 )
-from ._lib import check, lib
+from ._errors import check
+from ._lib import lib
+from ._options import defaults
 from ._convert import PathLike, _IMAGE_BACKENDS, _backend_code, _f32_ptr, _image, _path, _u32
 from ._handles import _SingleThreaded
 from ._map import Map
@@ -54,7 +56,7 @@ class Describer(_SingleThreaded):
         self._free = lib.topoloc_describer_free
         if not isinstance(map, Map):
             raise TypeError(f"map must be a topoloc.Map, got {type(map).__name__}")
-        options = _lib.defaults(_lib.topoloc_describer_options, lib.topoloc_describer_options_init)
+        options = defaults(_lib.topoloc_describer_options, lib.topoloc_describer_options_init)
         options.backend = _backend_code(backend, _IMAGE_BACKENDS, "backend", InvalidOptionError)
         if onnx_model_path is not None:
             options.onnx_model_path = _path(onnx_model_path, "onnx_model_path")

@@ -39,9 +39,7 @@ from ctypes import (
     c_void_p,
 )
 from pathlib import Path
-from typing import Callable, List, Mapping, Optional, Sequence, Tuple, Type, TypeVar
-
-from ._errors import error_from_status
+from typing import List, Mapping, Optional, Sequence, Tuple
 
 #: ABI version these bindings were written for (``TOPOLOC_ABI_VERSION`` of the header).
 ABI_VERSION = 1
@@ -795,59 +793,3 @@ def load_library(
 
 
 lib, library_path = load_library()
-
-# --------------------------------------------------------------------------------------------
-# Calling helpers
-# --------------------------------------------------------------------------------------------
-
-
-def last_error_message() -> str:
-    """The calling thread's last error message ("" if none): reads the size first, then the text."""
-    needed = c_size_t(0)
-    lib.topoloc_last_error_message(None, 0, ctypes.byref(needed))
-    size = max(int(needed.value), 1)
-    buf = ctypes.create_string_buffer(size)
-    status = lib.topoloc_last_error_message(buf, size, ctypes.byref(needed))
-    if status != TOPOLOC_OK:  # the message cannot change between the two calls on one thread
-        return ""
-    return buf.value.decode("utf-8", errors="replace")
-
-
-def check(status: int) -> None:
-    """Raises the exception registered for a non-zero status, with the last error message."""
-    if status != TOPOLOC_OK:
-        raise error_from_status(status, last_error_message())
-
-
-def status_str(status: int) -> str:
-    """Static English description of a status code (``topoloc_status_str``)."""
-    return lib.topoloc_status_str(int(status) & 0xFFFFFFFF).decode("utf-8", errors="replace")
-
-
-S = TypeVar("S", bound=Structure)
-
-# Room the library may fill when asked for its own struct size (see library_struct_size).
-_SCRATCH_BYTES = 4096
-
-
-def scratch_struct(cls: Type[S]) -> Tuple[S, ctypes.Array]:
-    """A zeroed ``cls`` at the start of an oversized buffer; keep the buffer alive with it."""
-    buf = (c_uint64 * (max(_SCRATCH_BYTES, ctypes.sizeof(cls)) // 8))()
-    return cls.from_buffer(buf), buf
-
-
-def defaults(cls: Type[S], init: Callable) -> S:
-    """A ``cls`` filled by the library's ``_init`` function with this struct's own size: the
-    library writes at most that many bytes and sets ``struct_size`` to it (what the C header's
-    ``*_default(p)`` macros do with ``sizeof *(p)``)."""
-    out = cls()
-    check(init(ctypes.byref(out), ctypes.sizeof(cls)))
-    return out
-
-
-def library_struct_size(cls: Type[S], init: Callable) -> int:
-    """The library's own ``sizeof`` of struct ``cls``: its ``_init`` function, offered an
-    oversized buffer, writes ``struct_size = min(offered, sizeof)``."""
-    tmp, buf = scratch_struct(cls)
-    check(init(ctypes.byref(tmp), ctypes.sizeof(buf)))
-    return int(ctypes.cast(buf, POINTER(c_size_t))[0])

@@ -17,7 +17,9 @@ from . import _lib
 from ._errors import (
     InvalidOptionError,
 )
-from ._lib import check, lib
+from ._errors import check
+from ._lib import lib
+from ._options import defaults
 from ._convert import PathLike, _IMAGE_BACKENDS, _backend_code, _backend_name, _descriptor, _f32_ptr, _f64_ptr, _image, _matrix, _path, _pose, _text, _u32
 from ._handles import _SingleThreaded
 from ._map import Map
@@ -129,7 +131,7 @@ def localizer_options_default() -> Dict[str, Any]:
     ``camera_fy``, ``camera_cx``, ``camera_cy`` (``camera_fx == 0``: no camera, no pose fixes)
     and ``pose_min_inliers`` (ABI 1.6), ``verify_off_map_inliers`` (negative: the map's feature
     kind's default) and ``verify_off_map_inlier_scale`` (ABI 1.9)."""
-    o = _lib.defaults(_lib.topoloc_localizer_options, lib.topoloc_localizer_options_init)
+    o = defaults(_lib.topoloc_localizer_options, lib.topoloc_localizer_options_init)
     return _options_dict(o)
 
 
@@ -246,7 +248,7 @@ class Localizer(_SingleThreaded):
         self._free = lib.topoloc_localizer_free
         if not isinstance(map, Map):
             raise TypeError(f"map must be a topoloc.Map, got {type(map).__name__}")
-        options = _lib.defaults(_lib.topoloc_localizer_options, lib.topoloc_localizer_options_init)
+        options = defaults(_lib.topoloc_localizer_options, lib.topoloc_localizer_options_init)
         if isinstance(mode, str):
             if mode not in _MODES:
                 raise InvalidOptionError(f"mode must be 'filter', 'single_frame' or 'metric', got {mode!r}")
@@ -307,8 +309,8 @@ class Localizer(_SingleThreaded):
         # Reused per frame: the candidate buffer, the frame and the result.
         capacity = max(1, min(int(options.top_k), map.place_count))
         self._candidates = (_lib.topoloc_candidate * capacity)()
-        self._result = _lib.defaults(_lib.topoloc_result, lib.topoloc_result_init)
-        self._frame = _lib.defaults(_lib.topoloc_frame, lib.topoloc_frame_init)
+        self._result = defaults(_lib.topoloc_result, lib.topoloc_result_init)
+        self._frame = defaults(_lib.topoloc_frame, lib.topoloc_frame_init)
 
     @property
     def options(self) -> Dict[str, Any]:

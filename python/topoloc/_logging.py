@@ -17,6 +17,7 @@ import threading
 from typing import Optional
 
 from . import _lib
+from ._errors import check
 
 __all__ = ["TRACE", "set_log_level", "log_level"]
 
@@ -66,9 +67,9 @@ def set_log_level(level: int) -> None:
     code = _library_level(level)
     with _lock:
         if code == 0:
-            _lib.check(_lib.lib.topoloc_set_log_callback(_lib.topoloc_log_fn(), 0, None))
+            check(_lib.lib.topoloc_set_log_callback(_lib.topoloc_log_fn(), 0, None))
         else:
-            _lib.check(_lib.lib.topoloc_set_log_callback(_CALLBACK, code, None))
+            check(_lib.lib.topoloc_set_log_callback(_CALLBACK, code, None))
         _level = level
 
 

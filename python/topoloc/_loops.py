@@ -18,7 +18,9 @@ from ._errors import (
     InvalidArgumentError,
     InvalidOptionError,
 )
-from ._lib import check, lib
+from ._errors import check
+from ._lib import lib
+from ._options import defaults
 from ._convert import PathLike, _U32_MAX, _U64_MAX, _descriptor, _f32_ptr, _f64_ptr, _int_in_range, _keypoint_array, _matrix, _path, _pose, _text, _u32
 from ._handles import _SingleThreaded
 from ._map import Map
@@ -124,7 +126,7 @@ _LOOP_OPTION_KINDS = {
 def loop_options_default() -> Dict[str, Any]:
     """The library's default :class:`LoopDetector` options (``topoloc_loop_options_init``) as
     a dict keyed by the C field names (``fx == 0``: no intrinsics, hints carry no pose)."""
-    o = _lib.defaults(_lib.topoloc_loop_options, lib.topoloc_loop_options_init)
+    o = defaults(_lib.topoloc_loop_options, lib.topoloc_loop_options_init)
     return _loop_options_dict(o)
 
 
@@ -144,7 +146,7 @@ def _loop_options(given: Dict[str, Any]) -> _lib.topoloc_loop_options:
             f"unexpected loop detector option(s) {', '.join(repr(n) for n in unknown)}; "
             f"the options are {', '.join(_LOOP_OPTION_KINDS)}"
         )
-    options = _lib.defaults(_lib.topoloc_loop_options, lib.topoloc_loop_options_init)
+    options = defaults(_lib.topoloc_loop_options, lib.topoloc_loop_options_init)
     for name, value in given.items():
         if value is None:
             continue
@@ -252,8 +254,8 @@ class LoopDetector(_SingleThreaded):
         self._options = _loop_options_dict(options)
         self._dim = dim
         # Reused per keyframe.
-        self._keyframe = _lib.defaults(_lib.topoloc_loop_keyframe, lib.topoloc_loop_keyframe_init)
-        self._hint = _lib.defaults(_lib.topoloc_loop_hint, lib.topoloc_loop_hint_init)
+        self._keyframe = defaults(_lib.topoloc_loop_keyframe, lib.topoloc_loop_keyframe_init)
+        self._hint = defaults(_lib.topoloc_loop_hint, lib.topoloc_loop_hint_init)
 
     @property
     def options(self) -> Dict[str, Any]:
@@ -370,7 +372,7 @@ class LoopDetector(_SingleThreaded):
             check(lib.topoloc_loop_detector_confirmed_count(h, byref(count)))
             hints = []
             for i in range(int(count.value)):
-                raw = _lib.defaults(_lib.topoloc_loop_hint, lib.topoloc_loop_hint_init)
+                raw = defaults(_lib.topoloc_loop_hint, lib.topoloc_loop_hint_init)
                 check(lib.topoloc_loop_detector_confirmed(h, i, byref(raw)))
                 hints.append(_loop_hint(raw))
             return hints

@@ -22,7 +22,9 @@ from ._errors import (
     UnknownPlaceError,
     UnknownViewError,
 )
-from ._lib import check, lib
+from ._errors import check
+from ._lib import lib
+from ._options import defaults
 from ._convert import PathLike, _U64_MAX, _backend_code, _descriptor, _f32_ptr, _f64_ptr, _image, _int_in_range, _keypoint_array, _matrix, _path, _pose, _read_array, _read_string, _read_u32s, _text, _u32
 from ._handles import _Handle, _SingleThreaded
 
@@ -48,7 +50,7 @@ class ViewInfo:
 
 
 def _load_options(expected_kind, expected_model, expected_dim) -> _lib.topoloc_map_load_options:
-    options = _lib.defaults(_lib.topoloc_map_load_options, lib.topoloc_map_load_options_init)
+    options = defaults(_lib.topoloc_map_load_options, lib.topoloc_map_load_options_init)
     # c_char_p fields keep a reference to the bytes object in the struct (ctypes' _objects).
     options.expected_descriptor_kind = _text(expected_kind, "expected_kind")
     options.expected_descriptor_model = _text(expected_model, "expected_model")
@@ -134,7 +136,7 @@ def _image_map_options(
     vlad_dense: Optional[bool] = None,
     pca_precision: Optional[str] = None,
 ) -> _lib.topoloc_image_map_options:
-    o = _lib.defaults(_lib.topoloc_image_map_options, lib.topoloc_image_map_options_init)
+    o = defaults(_lib.topoloc_image_map_options, lib.topoloc_image_map_options_init)
     o.backend = _backend_code(backend, _BUILD_BACKENDS, "backend", InvalidArgumentError)
     o.dim = _u32(dim, "dim")
     o.views_per_place = _u32(views_per_place, "views_per_place")
@@ -487,7 +489,7 @@ class Map(_Handle):
     def view_info(self, view: int) -> ViewInfo:
         """Place, keyframe id and pose of ``view``. Raises :class:`UnknownViewError`."""
         view = _u32(view, "view", UnknownViewError)
-        info = _lib.defaults(_lib.topoloc_view_info, lib.topoloc_view_info_init)
+        info = defaults(_lib.topoloc_view_info, lib.topoloc_view_info_init)
         check(lib.topoloc_map_view_info(self._h, view, byref(info)))
         pose = _matrix(info.world_T_camera, 4) if info.has_pose else None
         result = ViewInfo(
@@ -620,7 +622,7 @@ class MapBuilder(_SingleThreaded):
         attrs = None
         pose = None
         if keyframe_id is not None or world_T_camera is not None or image is not None:
-            attrs = _lib.defaults(_lib.topoloc_view_attributes, lib.topoloc_view_attributes_init)
+            attrs = defaults(_lib.topoloc_view_attributes, lib.topoloc_view_attributes_init)
             if keyframe_id is not None:
                 attrs.has_keyframe_id = True
                 attrs.keyframe_id = _int_in_range(keyframe_id, "keyframe_id", _U64_MAX, InvalidArgumentError)
@@ -668,7 +670,7 @@ class MapBuilder(_SingleThreaded):
 
 def keyframe_options_default() -> Dict[str, Any]:
     """The library's defaults for :func:`map_from_keyframes` options, as a dict."""
-    o = _lib.defaults(_lib.topoloc_keyframe_options, lib.topoloc_keyframe_options_init)
+    o = defaults(_lib.topoloc_keyframe_options, lib.topoloc_keyframe_options_init)
     return {f[0]: getattr(o, f[0]) for f in o._fields_ if f[0] != "struct_size"}
 
 
@@ -725,7 +727,7 @@ def map_from_keyframes(
             raise InvalidArgumentError(f"poses must have shape ({k}, 4, 4), got {pose_arr.shape}")
         pose_arr = np.ascontiguousarray(pose_arr)
 
-    options = _lib.defaults(_lib.topoloc_keyframe_options, lib.topoloc_keyframe_options_init)
+    options = defaults(_lib.topoloc_keyframe_options, lib.topoloc_keyframe_options_init)
     if place_spacing_m is not None:
         options.place_spacing_m = float(place_spacing_m)
     if novelty_similarity is not None:

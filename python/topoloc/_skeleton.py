@@ -16,7 +16,9 @@ from ._errors import (
     InvalidArgumentError,
     UnknownPlaceError,
 )
-from ._lib import check, lib
+from ._errors import check
+from ._lib import lib
+from ._options import defaults
 from ._convert import _f64_ptr, _int_in_range, _read_u32s
 
 __all__ = ['Graph', 'skeleton_options_default', 'skeleton_graph']
@@ -83,7 +85,7 @@ class Graph:
 def skeleton_options_default() -> Dict[str, Any]:
     """The library's defaults for :func:`skeleton_graph` options, as a dict (``z_band`` is
     ``None``: the whole grid)."""
-    o = _lib.defaults(_lib.topoloc_skeleton_options, lib.topoloc_skeleton_options_init)
+    o = defaults(_lib.topoloc_skeleton_options, lib.topoloc_skeleton_options_init)
     out: Dict[str, Any] = {"z_band": (o.z_min_m, o.z_max_m) if o.use_z_band else None}
     for f in o._fields_:
         if f[0] not in ("struct_size", "use_z_band", "z_min_m", "z_max_m"):
@@ -153,7 +155,7 @@ def skeleton_graph(
     org = np.ascontiguousarray(np.asarray(origin, dtype=np.float64))
     if org.shape != (3,):
         raise InvalidArgumentError(f"origin must have 3 values (x, y, z), got shape {org.shape}")
-    options = _lib.defaults(_lib.topoloc_skeleton_options, lib.topoloc_skeleton_options_init)
+    options = defaults(_lib.topoloc_skeleton_options, lib.topoloc_skeleton_options_init)
     if z_band is not None:
         band = tuple(float(v) for v in z_band)
         if len(band) != 2:

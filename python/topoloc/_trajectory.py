@@ -16,7 +16,9 @@ from ._errors import (
     InvalidArgumentError,
     InvalidOptionError,
 )
-from ._lib import check, lib
+from ._errors import check
+from ._lib import lib
+from ._options import defaults
 from ._convert import PathLike, _f64_ptr, _matrix, _path, _u32
 
 __all__ = ['ErrorStats', 'TrajectoryReport', 'evaluate_trajectory', 'evaluate_trajectory_files']
@@ -77,7 +79,7 @@ class TrajectoryReport:
 def _trajectory_options(alignment: str, max_diff_s: float, offset_s: float, rpe_delta: int):
     if alignment not in _ALIGNMENTS:
         raise InvalidOptionError(f"alignment must be one of {sorted(_ALIGNMENTS)}, not {alignment!r}")
-    o = _lib.defaults(_lib.topoloc_trajectory_options, lib.topoloc_trajectory_options_init)
+    o = defaults(_lib.topoloc_trajectory_options, lib.topoloc_trajectory_options_init)
     o.alignment = _ALIGNMENTS[alignment]
     o.max_diff_s = float(max_diff_s)
     o.offset_s = float(offset_s)
@@ -131,7 +133,7 @@ def evaluate_trajectory(
     o = _trajectory_options(alignment, max_diff_s, offset_s, rpe_delta)
     ref_t, ref_p = np.ascontiguousarray(ref[:, 0]), np.ascontiguousarray(ref[:, 1:])
     est_t, est_p = np.ascontiguousarray(est[:, 0]), np.ascontiguousarray(est[:, 1:])
-    report = _lib.defaults(_lib.topoloc_trajectory_report, lib.topoloc_trajectory_report_init)
+    report = defaults(_lib.topoloc_trajectory_report, lib.topoloc_trajectory_report_init)
     check(
         lib.topoloc_trajectory_evaluate(
             _f64_ptr(ref_t), _f64_ptr(ref_p), ref.shape[0],
@@ -159,7 +161,7 @@ def evaluate_trajectory_files(
     if format not in _TRAJECTORY_FORMATS:
         raise InvalidArgumentError(f"format must be one of tum, kitti, euroc or None, not {format!r}")
     o = _trajectory_options(alignment, max_diff_s, offset_s, rpe_delta)
-    report = _lib.defaults(_lib.topoloc_trajectory_report, lib.topoloc_trajectory_report_init)
+    report = defaults(_lib.topoloc_trajectory_report, lib.topoloc_trajectory_report_init)
     check(
         lib.topoloc_trajectory_evaluate_files(
             _path(reference_path, "reference_path"), _path(estimate_path, "estimate_path"),
