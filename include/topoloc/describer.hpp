@@ -53,7 +53,7 @@ public:
         topoloc_describer *raw = nullptr;
         check(topoloc_describer_new(map.capi(), &options, &raw));
         adopt(raw);
-        check(topoloc_describer_dim(get(), &dim_));
+        dim_ = read_value(&topoloc_describer_dim);
     }
 
     /// The descriptor dimension D (the map's).

@@ -75,6 +75,15 @@ protected:
         Free(old);
     }
 
+    /// The value a C getter `call(handle, &value)` writes (a count, a dimension).
+    template <typename T>
+    [[nodiscard]] T read_value(topoloc_status (*call)(const Handle *, T *)) const
+    {
+        T value{};
+        check(call(handle_, &value));
+        return value;
+    }
+
 private:
     Handle *handle_ = nullptr;
 };
@@ -135,6 +144,16 @@ template <typename T, typename Call> std::vector<T> read_array(Call call, std::s
     check(call(values.data(), values.size(), &count));
     values.resize(count * per_item);
     return values;
+}
+
+/// Items 0 .. `count` - 1 of a by-index getter `get(i)`, in order (all edges, all places).
+template <typename T, typename Get> std::vector<T> read_all(std::size_t count, Get get)
+{
+    std::vector<T> all(count);
+    for (std::size_t i = 0; i < count; ++i) {
+        all[i] = get(i);
+    }
+    return all;
 }
 
 /// Reads an id array through a C function of the (buf, len, &count) contract.

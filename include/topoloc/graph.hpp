@@ -84,20 +84,10 @@ public:
     }
 
     /// Number of places.
-    [[nodiscard]] std::size_t place_count() const
-    {
-        std::size_t n = 0;
-        check(topoloc_graph_place_count(get(), &n));
-        return n;
-    }
+    [[nodiscard]] std::size_t place_count() const { return read_value(&topoloc_graph_place_count); }
 
     /// Number of undirected edges.
-    [[nodiscard]] std::size_t edge_count() const
-    {
-        std::size_t n = 0;
-        check(topoloc_graph_edge_count(get(), &n));
-        return n;
-    }
+    [[nodiscard]] std::size_t edge_count() const { return read_value(&topoloc_graph_edge_count); }
 
     /// Place `index` (branches first, then ends, corners, intermediate places). Throws `Error`
     /// (`TOPOLOC_ERR_UNKNOWN_PLACE`).
@@ -111,11 +101,8 @@ public:
     /// All places.
     [[nodiscard]] std::vector<GraphPlace> places() const
     {
-        std::vector<GraphPlace> all(place_count());
-        for (std::size_t i = 0; i < all.size(); ++i) {
-            all[i] = place(static_cast<uint32_t>(i));
-        }
-        return all;
+        return detail::read_all<GraphPlace>(
+            place_count(), [this](std::size_t i) { return place(static_cast<uint32_t>(i)); });
     }
 
     /// Edge number `index` (0..edge_count(), sorted by (a, b)). Throws `Error`
@@ -130,11 +117,7 @@ public:
     /// All edges, sorted by (a, b).
     [[nodiscard]] std::vector<GraphEdge> edges() const
     {
-        std::vector<GraphEdge> all(edge_count());
-        for (std::size_t i = 0; i < all.size(); ++i) {
-            all[i] = edge(i);
-        }
-        return all;
+        return detail::read_all<GraphEdge>(edge_count(), [this](std::size_t i) { return edge(i); });
     }
 
     /// The skeleton the graph was built on: voxel indices x0, y0, z0, x1, y1, z1, ... in grid

@@ -223,8 +223,7 @@ public:
     /// by a failed one and by `erase`. Throws `Error` (`TOPOLOC_ERR_NULL_ARGUMENT` when empty).
     [[nodiscard]] std::vector<LoopHint> confirmed() const
     {
-        std::size_t count = 0;
-        check(topoloc_loop_detector_confirmed_count(get(), &count));
+        const std::size_t count = read_value(&topoloc_loop_detector_confirmed_count);
         std::vector<LoopHint> hints;
         hints.reserve(count);
         for (std::size_t i = 0; i < count; ++i) {
@@ -293,12 +292,7 @@ public:
     }
 
     /// Number of keyframes held.
-    [[nodiscard]] std::size_t size() const
-    {
-        std::size_t n = 0;
-        check(topoloc_loop_detector_len(get(), &n));
-        return n;
-    }
+    [[nodiscard]] std::size_t size() const { return read_value(&topoloc_loop_detector_len); }
 };
 
 } // namespace topoloc

@@ -198,36 +198,16 @@ public:
     void save(const std::string &path) const { check(topoloc_map_save(get(), path.c_str())); }
 
     /// Number of places.
-    [[nodiscard]] std::size_t place_count() const
-    {
-        std::size_t n = 0;
-        check(topoloc_map_place_count(get(), &n));
-        return n;
-    }
+    [[nodiscard]] std::size_t place_count() const { return read_value(&topoloc_map_place_count); }
 
     /// Number of views.
-    [[nodiscard]] std::size_t view_count() const
-    {
-        std::size_t n = 0;
-        check(topoloc_map_view_count(get(), &n));
-        return n;
-    }
+    [[nodiscard]] std::size_t view_count() const { return read_value(&topoloc_map_view_count); }
 
     /// Number of undirected edges.
-    [[nodiscard]] std::size_t edge_count() const
-    {
-        std::size_t n = 0;
-        check(topoloc_map_edge_count(get(), &n));
-        return n;
-    }
+    [[nodiscard]] std::size_t edge_count() const { return read_value(&topoloc_map_edge_count); }
 
     /// Descriptor dimension D: every descriptor given to a localizer of this map has D floats.
-    [[nodiscard]] uint32_t dim() const
-    {
-        uint32_t d = 0;
-        check(topoloc_map_descriptor_dim(get(), &d));
-        return d;
-    }
+    [[nodiscard]] uint32_t dim() const { return read_value(&topoloc_map_descriptor_dim); }
 
     /// Descriptor kind the map was built with (e.g. the backend family).
     [[nodiscard]] std::string descriptor_kind() const
@@ -286,11 +266,7 @@ public:
     /// All edges, sorted by (a, b).
     [[nodiscard]] std::vector<Edge> edges() const
     {
-        std::vector<Edge> all(edge_count());
-        for (std::size_t i = 0; i < all.size(); ++i) {
-            all[i] = edge(i);
-        }
-        return all;
+        return detail::read_all<Edge>(edge_count(), [this](std::size_t i) { return edge(i); });
     }
 
     /// Attributes of `view`. Throws `Error` (`TOPOLOC_ERR_UNKNOWN_VIEW`).
@@ -333,9 +309,7 @@ public:
     /// images store them): `with_keypoint_points` takes 3 floats per keypoint.
     [[nodiscard]] std::size_t keypoint_total() const
     {
-        std::size_t n = 0;
-        check(topoloc_map_keypoint_total(get(), &n));
-        return n;
+        return read_value(&topoloc_map_keypoint_total);
     }
 
     /// Pixel positions of `view`'s keypoints: x, y (x right, y down; the centre of the top-left

@@ -40,7 +40,10 @@ ln -sfn "$library" "$libdir/libtopoloc.so"
 ln -sfn "$library" "$libdir/$soname"
 
 cxxflags=(-std=c++17 -Wall -Wextra -Werror -pedantic -g -I"$repo/include")
+# (The commas belong to the compiler flags.)
+# shellcheck disable=SC2054
 ldflags=(-L"$libdir" -ltopoloc -Wl,-rpath,"$libdir")
+# shellcheck disable=SC2054
 sanitize=(-fsanitize=address,undefined -fno-omit-frame-pointer -fno-sanitize-recover=all)
 
 step() { printf '\n== %s\n' "$*"; }
