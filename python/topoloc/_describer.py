@@ -8,20 +8,31 @@ from ctypes import byref, c_size_t
 from typing import Optional, Union
 
 import numpy as np
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 
 from . import _lib
-from ._errors import (
-    InvalidOptionError,
-)
-from ._errors import check
-from ._lib import lib
-from ._options import defaults
-from ._convert import PathLike, _IMAGE_BACKENDS, _backend_code, _f32_ptr, _image, _path, _u32
+from ._convert import _IMAGE_BACKENDS, PathLike, _f32_ptr, _image
+from ._errors import InvalidOptionError, check
 from ._handles import _SingleThreaded
+from ._lib import lib
 from ._map import Map
+from ._options import OptionTable, choice, file_path, unsigned
 
-__all__ = ['Describer']
+__all__ = ["Describer"]
+
+#: The :class:`Describer` options: the fields of ``topoloc_describer_options``.
+DESCRIBER_OPTIONS = OptionTable(
+    "describer",
+    _lib.topoloc_describer_options,
+    lib.topoloc_describer_options_init,
+    InvalidOptionError,
+    [
+        choice("backend", _IMAGE_BACKENDS),
+        file_path("onnx_model_path"),
+        file_path("onnx_runtime_path"),
+        unsigned("threads"),
+    ],
+)
 
 
 class Describer(_SingleThreaded):
@@ -30,11 +41,14 @@ class Describer(_SingleThreaded):
     :meth:`Localizer.process`.
 
     ``map``: a :class:`Map` built from images (it stores its describer; otherwise
-    :class:`NoDescriberError`). ``backend``: ``"auto"`` (default: the map's), or ``"onnx"``,
-    ``"vlad-orb"``, ``"vlad-sift"`` to require it (:class:`DescriptorMismatchError`
-    otherwise). ``onnx_model_path`` / ``onnx_runtime_path`` override where the ONNX model (the
-    very file the map was built with) and runtime are found; ``threads``: ONNX Runtime
-    intra-op threads (1..64). Loading fails with :class:`BackendUnavailableError` or
+    :class:`NoDescriberError`). Options are keyword-only, named as the fields of
+    ``topoloc_describer_options`` in ``topoloc.h``, which documents each one's default and
+    range; left out or ``None``: the library's default. ``backend``: ``"auto"`` (the map's),
+    or ``"onnx"``, ``"vlad-orb"``, ``"vlad-sift"`` to require it
+    (:class:`DescriptorMismatchError` otherwise). ``onnx_model_path`` / ``onnx_runtime_path``
+    override where the ONNX model (the very file the map was built with) and runtime are
+    found; ``threads``: ONNX Runtime's intra-op threads. A value out of range raises
+    :class:`InvalidOptionError`; loading fails with :class:`BackendUnavailableError` or
     :class:`ModelError`.
 
     Ownership: owns a C ``topoloc_describer`` handle, released by :meth:`close`, the ``with``
@@ -47,22 +61,18 @@ class Describer(_SingleThreaded):
     def __init__(
         self,
         map: Map,
-        backend: Union[str, int] = "auto",
+        *,
+        backend: Optional[Union[str, int]] = None,
         onnx_model_path: Optional[PathLike] = None,
         onnx_runtime_path: Optional[PathLike] = None,
-        threads: int = 1,
+        threads: Optional[int] = None,
     ) -> None:
+        given = DESCRIBER_OPTIONS.pick(locals())
         self._init_guard()
         self._free = lib.topoloc_describer_free
         if not isinstance(map, Map):
             raise TypeError(f"map must be a topoloc.Map, got {type(map).__name__}")
-        options = defaults(_lib.topoloc_describer_options, lib.topoloc_describer_options_init)
-        options.backend = _backend_code(backend, _IMAGE_BACKENDS, "backend", InvalidOptionError)
-        if onnx_model_path is not None:
-            options.onnx_model_path = _path(onnx_model_path, "onnx_model_path")
-        if onnx_runtime_path is not None:
-            options.onnx_runtime_path = _path(onnx_runtime_path, "onnx_runtime_path")
-        options.threads = _u32(threads, "threads", InvalidOptionError)
+        options = DESCRIBER_OPTIONS.fill(given)
         out = _lib.DescriberPtr()
         check(lib.topoloc_describer_new(map._h, byref(options), byref(out)))
         self._ptr = out
@@ -75,7 +85,7 @@ class Describer(_SingleThreaded):
         """Descriptor dimension D (the map's)."""
         return self._dim
 
-    def describe(self, image: ArrayLike, pixel_format: Optional[str] = None) -> np.ndarray:
+    def describe(self, image: ArrayLike, pixel_format: Optional[str] = None) -> NDArray[np.float32]:
         """The global descriptor of ``image`` (a uint8 array, (H, W) grey or (H, W, 3) /
         (H, W, 4) colour; ``pixel_format`` as for :meth:`Localizer.process`): D float32 values
         of unit norm. Raises ``TypeError`` (not uint8), :class:`InvalidImageError`,

@@ -5,26 +5,22 @@ result types :class:`Result`, :class:`Candidate` and :class:`PoseFix`.
 from __future__ import annotations
 
 import ctypes
-import os
 from ctypes import byref
 from dataclasses import dataclass, field
 from typing import Any, Dict, List, Optional, Union
 
 import numpy as np
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 
 from . import _lib
-from ._errors import (
-    InvalidOptionError,
-)
-from ._errors import check
-from ._lib import lib
-from ._options import defaults
-from ._convert import PathLike, _IMAGE_BACKENDS, _backend_code, _backend_name, _descriptor, _f32_ptr, _f64_ptr, _image, _matrix, _path, _pose, _text, _u32
+from ._convert import PathLike, _descriptor, _f32_ptr, _f64_ptr, _image, _IMAGE_BACKENDS, _matrix, _pose
+from ._errors import InvalidOptionError, check
 from ._handles import _SingleThreaded
+from ._lib import lib
 from ._map import Map
+from ._options import OptionTable, choice, defaults, file_path, real, text, unsigned, unsigned64
 
-__all__ = ['Candidate', 'PoseFix', 'Result', 'localizer_options_default', 'Localizer']
+__all__ = ["Candidate", "PoseFix", "Result", "localizer_options_default", "Localizer"]
 
 
 @dataclass(frozen=True)
@@ -104,106 +100,108 @@ class Result:
     pose_fix: Optional[PoseFix] = None
 
 
-_MODES = {"filter": _lib.MODE_FILTER, "single_frame": _lib.MODE_SINGLE_FRAME, "metric": _lib.MODE_METRIC}
+#: ``mode`` names -> ``TOPOLOC_MODE_*``.
+_MODES = {
+    "filter": _lib.MODE_FILTER,
+    "single_frame": _lib.MODE_SINGLE_FRAME,
+    "metric": _lib.MODE_METRIC,
+}
 
-
-_OPTION_FIELDS = (
-    "temperature",
-    "stay_probability",
-    "jump_probability",
-    "off_map_probability",
-    "off_map_similarity",
-    "off_map_margin",
+#: The :class:`Localizer` options: the fields of ``topoloc_localizer_options``.
+LOCALIZER_OPTIONS = OptionTable(
+    "localizer",
+    _lib.topoloc_localizer_options,
+    lib.topoloc_localizer_options_init,
+    InvalidOptionError,
+    [
+        choice("mode", _MODES),
+        real("temperature"),
+        real("stay_probability"),
+        real("jump_probability"),
+        real("off_map_probability"),
+        real("off_map_similarity"),
+        real("off_map_margin"),
+        unsigned("top_k"),
+        text("expected_descriptor_kind", name="expected_kind"),
+        text("expected_descriptor_model", name="expected_model"),
+        choice("image_backend", _IMAGE_BACKENDS),
+        file_path("onnx_model_path"),
+        file_path("onnx_runtime_path"),
+        unsigned("verify_candidates"),
+        unsigned("verify_views_per_candidate"),
+        real("verify_inlier_weight"),
+        unsigned("metric_particles"),
+        real("metric_temperature"),
+        unsigned64("metric_seed"),
+        real("camera_fx"),
+        real("camera_fy"),
+        real("camera_cx"),
+        real("camera_cy"),
+        unsigned("pose_min_inliers"),
+        real("verify_off_map_inliers"),
+        real("verify_off_map_inlier_scale"),
+    ],
 )
 
 
-#: Pinhole intrinsics of the localizer's camera (ABI 1.6), pixels; ``camera_fx == 0``: none.
-_CAMERA_FIELDS = ("camera_fx", "camera_fy", "camera_cx", "camera_cy")
-
-
 def localizer_options_default() -> Dict[str, Any]:
-    """The library's default localizer options (``topoloc_localizer_options_init``) as a dict
-    with keys ``mode`` ("filter"/"single_frame"/"metric"), the float options, ``top_k``,
-    ``expected_kind``, ``expected_model``, ``image_backend`` ("auto"), ``onnx_model_path`` and
-    ``onnx_runtime_path`` (``None``: the library's search), ``verify_candidates`` (0: off),
-    ``verify_views_per_candidate``, ``verify_inlier_weight``, ``metric_particles``,
-    ``metric_temperature``, ``metric_seed``, the camera intrinsics ``camera_fx``,
-    ``camera_fy``, ``camera_cx``, ``camera_cy`` (``camera_fx == 0``: no camera, no pose fixes)
-    and ``pose_min_inliers`` (ABI 1.6), ``verify_off_map_inliers`` (negative: the map's feature
-    kind's default) and ``verify_off_map_inlier_scale`` (ABI 1.9)."""
-    o = defaults(_lib.topoloc_localizer_options, lib.topoloc_localizer_options_init)
-    return _options_dict(o)
-
-
-def _options_dict(o: _lib.topoloc_localizer_options) -> Dict[str, Any]:
-    modes = {v: k for k, v in _MODES.items()}
-    out: Dict[str, Any] = {"mode": modes.get(o.mode, o.mode)}
-    out.update({name: float(getattr(o, name)) for name in _OPTION_FIELDS})
-    out["top_k"] = int(o.top_k)
-    out["expected_kind"] = (o.expected_descriptor_kind or b"").decode("utf-8") or None
-    out["expected_model"] = (o.expected_descriptor_model or b"").decode("utf-8") or None
-    out["image_backend"] = _backend_name(o.image_backend, _IMAGE_BACKENDS)
-    out["onnx_model_path"] = os.fsdecode(o.onnx_model_path) if o.onnx_model_path else None
-    out["onnx_runtime_path"] = os.fsdecode(o.onnx_runtime_path) if o.onnx_runtime_path else None
-    out["verify_candidates"] = int(o.verify_candidates)
-    out["verify_views_per_candidate"] = int(o.verify_views_per_candidate)
-    out["verify_inlier_weight"] = float(o.verify_inlier_weight)
-    out["metric_particles"] = int(o.metric_particles)
-    out["metric_temperature"] = float(o.metric_temperature)
-    out["metric_seed"] = int(o.metric_seed)
-    out.update({name: float(getattr(o, name)) for name in _CAMERA_FIELDS})
-    out["pose_min_inliers"] = int(o.pose_min_inliers)
-    out["verify_off_map_inliers"] = float(o.verify_off_map_inliers)
-    out["verify_off_map_inlier_scale"] = float(o.verify_off_map_inlier_scale)
-    return out
+    """The library's default :class:`Localizer` options (``topoloc_localizer_options_init``)
+    as a dict keyed by the option names: enum codes by their names (``mode``,
+    ``image_backend``), unset strings and paths as ``None``. ``topoloc.h`` documents each on
+    its ``topoloc_localizer_options`` field."""
+    return LOCALIZER_OPTIONS.default_values()
 
 
 class Localizer(_SingleThreaded):
     """Follows one camera through a :class:`Map`, one frame at a time.
 
-    ``mode``: ``"filter"`` (forward filter over the graph; timestamps must not decrease),
-    ``"single_frame"`` (every frame judged on its own) or ``"metric"`` (Monte Carlo
-    localization of the camera pose, moved by the frames' ``odometry`` and weighed by
-    appearance; needs a map with every place's position and every view's pose, else
-    :class:`InvalidOptionError`; ``metric_particles``, ``metric_temperature`` and
-    ``metric_seed`` tune it). Every other option left as ``None``
-    takes the library default (:func:`localizer_options_default`): ``temperature`` (> 0),
-    ``stay_probability`` (persistence of the off-map state), ``jump_probability``,
-    ``off_map_probability`` (0 disables off-map),
-    ``off_map_similarity``, ``off_map_margin``, ``top_k`` (candidates per frame, >= 1).
-    ``expected_kind`` / ``expected_model`` refuse maps built with another descriptor
-    (:class:`DescriptorMismatchError`). Invalid options raise :class:`InvalidOptionError`.
+    Options are keyword-only, named as the fields of ``topoloc_localizer_options`` in
+    ``topoloc.h`` (``expected_kind`` and ``expected_model`` for ``expected_descriptor_kind``
+    and ``expected_descriptor_model``), where each field documents its default and range. An
+    option left out or ``None`` keeps the library's default (:func:`localizer_options_default`).
+    A value out of range raises :class:`InvalidOptionError`, one of the wrong type
+    ``TypeError``.
 
-    Images: a map built from images (:meth:`Map.build_from_images`) stores its describer.
-    ``image_backend`` says how image frames are described: ``"auto"`` (default) loads the
-    map's describer when it has one (for ONNX maps: ONNX Runtime and the model, now); ``"none"``
-    never (descriptor frames only, nothing loaded; image frames raise
-    :class:`NoDescriberError`); ``"onnx"``, ``"vlad-orb"`` or ``"vlad-sift"`` require the map's
-    describer to be that backend (:class:`DescriptorMismatchError` otherwise,
-    :class:`NoDescriberError` for a map without describer). ``onnx_model_path`` /
-    ``onnx_runtime_path`` override where the ONNX model (which must be the very file the map
-    was built with) and runtime are found. Loading fails with
-    :class:`BackendUnavailableError` or :class:`ModelError`.
-
-    Geometric verification (off by default): ``verify_candidates`` (0..64) most probable places
-    are checked each frame against the frame's image (ORB matches and RANSAC on each place's
-    ``verify_views_per_candidate`` most similar views; the belief of a place with n inliers is
-    multiplied by ``exp(verify_inlier_weight * n)``); the result reports ``verified`` and
-    ``inliers``. It needs a map built from images (they store keypoints; otherwise
-    :class:`InvalidOptionError`) and image frames (:class:`InvalidImageError` for a descriptor
-    frame). With verification on, the off-map flag (ABI 1.9) reads the inliers instead of
-    appearance: a frame whose best checked place has ``verify_off_map_inliers`` inliers is as
-    likely off the map as on it, each ``verify_off_map_inlier_scale`` fewer (or more) multiply
-    the odds by e. ``verify_off_map_inliers`` negative (default): the map's feature kind's
-    threshold (XFeat and cells 26, ORB 0); 0: appearance decides.
-
-    Pose fixes (ABI 1.6, off by default): with verification on and the pinhole intrinsics of
-    the frames' camera, ``camera_fx``, ``camera_fy``, ``camera_cx``, ``camera_cy`` (pixels of
-    the images as passed, undistorted; ``camera_fx == 0``: none; focal lengths finite and > 0,
-    principal point finite), on a map whose keypoints carry scene points
-    (:meth:`Map.with_keypoint_points`; otherwise :class:`InvalidOptionError`), the
-    best-verified view places the camera metrically: the result's ``pose_fix`` (a
-    :class:`PoseFix`) when at least ``pose_min_inliers`` (6..10000) keypoints agree.
+    - ``mode``: ``"filter"`` (a forward filter over the graph; timestamps must not decrease),
+      ``"single_frame"`` (every frame judged on its own) or ``"metric"`` (Monte Carlo
+      localization of the camera pose, moved by the frames' ``odometry`` and weighed by
+      appearance, tuned by ``metric_particles``, ``metric_temperature`` and ``metric_seed``;
+      it needs a map with every place's position and every view's pose, else
+      :class:`InvalidOptionError`), or a ``TOPOLOC_MODE_*`` code. See
+      ``topoloc_localizer_options.mode``.
+    - The filter's ``temperature``, ``stay_probability``, ``jump_probability``,
+      ``off_map_probability``, ``off_map_similarity`` and ``off_map_margin``, and ``top_k``,
+      the candidates reported per frame: see the fields of the same names.
+    - ``expected_kind`` / ``expected_model`` refuse maps built with another descriptor
+      (:class:`DescriptorMismatchError`).
+    - Images: a map built from images (:meth:`Map.build_from_images`) stores its describer.
+      ``image_backend`` says how image frames are described: ``"auto"`` loads the map's
+      describer when it has one (for ONNX maps: ONNX Runtime and the model, now); ``"none"``
+      never (descriptor frames only, nothing loaded; image frames raise
+      :class:`NoDescriberError`); ``"onnx"``, ``"vlad-orb"`` or ``"vlad-sift"`` require the
+      map's describer to be that backend (:class:`DescriptorMismatchError` otherwise,
+      :class:`NoDescriberError` for a map without describer). ``onnx_model_path`` /
+      ``onnx_runtime_path`` override where the ONNX model (the very file the map was built
+      with) and runtime are found. Loading fails with :class:`BackendUnavailableError` or
+      :class:`ModelError`. See ``topoloc_localizer_options.image_backend``.
+    - Geometric verification: ``verify_candidates`` selects how many of the most probable
+      places are checked each frame against the frame's image: the local features the map
+      stores for the place's ``verify_views_per_candidate`` most similar views (ORB, XFeat or
+      dense cells, as the map was built) are matched to the frame's and a RANSAC geometric
+      model is fitted; the inliers weigh the place's belief (``verify_inlier_weight``) and are
+      reported (:attr:`Result.verified`, :attr:`Result.inliers`). It needs a map that stores
+      keypoints (maps built from images do; otherwise :class:`InvalidOptionError`) and image
+      frames (:class:`InvalidImageError` for a descriptor frame). With it, the off-map flag
+      reads the inliers instead of appearance (ABI 1.9: ``verify_off_map_inliers``,
+      ``verify_off_map_inlier_scale``). See ``topoloc_localizer_options.verify_candidates``
+      and the fields after it.
+    - Pose fixes (ABI 1.6): with verification on and the pinhole intrinsics of the frames'
+      camera, ``camera_fx``, ``camera_fy``, ``camera_cx``, ``camera_cy`` (pixels of the
+      images as passed, undistorted), on a map whose keypoints carry scene points
+      (:meth:`Map.with_keypoint_points`; otherwise :class:`InvalidOptionError`), the
+      best-verified view places the camera metrically: the result's ``pose_fix`` (a
+      :class:`PoseFix`) when at least ``pose_min_inliers`` keypoints agree. See
+      ``topoloc_localizer_options.camera_fx``.
 
     Ownership: owns a C ``topoloc_localizer`` handle, released by :meth:`close`, the ``with``
     statement or garbage collection. The localizer keeps its own reference to the map data, so
@@ -217,7 +215,8 @@ class Localizer(_SingleThreaded):
     def __init__(
         self,
         map: Map,
-        mode: Union[str, int] = "filter",
+        *,
+        mode: Optional[Union[str, int]] = None,
         temperature: Optional[float] = None,
         stay_probability: Optional[float] = None,
         jump_probability: Optional[float] = None,
@@ -227,7 +226,7 @@ class Localizer(_SingleThreaded):
         top_k: Optional[int] = None,
         expected_kind: Optional[str] = None,
         expected_model: Optional[str] = None,
-        image_backend: Union[str, int] = "auto",
+        image_backend: Optional[Union[str, int]] = None,
         onnx_model_path: Optional[PathLike] = None,
         onnx_runtime_path: Optional[PathLike] = None,
         verify_candidates: Optional[int] = None,
@@ -244,66 +243,16 @@ class Localizer(_SingleThreaded):
         verify_off_map_inliers: Optional[float] = None,
         verify_off_map_inlier_scale: Optional[float] = None,
     ) -> None:
+        given = LOCALIZER_OPTIONS.pick(locals())
         self._init_guard()
         self._free = lib.topoloc_localizer_free
         if not isinstance(map, Map):
             raise TypeError(f"map must be a topoloc.Map, got {type(map).__name__}")
-        options = defaults(_lib.topoloc_localizer_options, lib.topoloc_localizer_options_init)
-        if isinstance(mode, str):
-            if mode not in _MODES:
-                raise InvalidOptionError(f"mode must be 'filter', 'single_frame' or 'metric', got {mode!r}")
-            options.mode = _MODES[mode]
-        else:
-            options.mode = _u32(mode, "mode", InvalidOptionError)
-        given = {
-            "temperature": temperature,
-            "stay_probability": stay_probability,
-            "jump_probability": jump_probability,
-            "off_map_probability": off_map_probability,
-            "off_map_similarity": off_map_similarity,
-            "off_map_margin": off_map_margin,
-            "camera_fx": camera_fx,
-            "camera_fy": camera_fy,
-            "camera_cx": camera_cx,
-            "camera_cy": camera_cy,
-            "verify_off_map_inliers": verify_off_map_inliers,
-            "verify_off_map_inlier_scale": verify_off_map_inlier_scale,
-        }
-        for name, value in given.items():
-            if value is not None:
-                setattr(options, name, float(value))
-        if top_k is not None:
-            options.top_k = _u32(top_k, "top_k", InvalidOptionError)
-        options.expected_descriptor_kind = _text(expected_kind, "expected_kind")
-        options.expected_descriptor_model = _text(expected_model, "expected_model")
-        options.image_backend = _backend_code(image_backend, _IMAGE_BACKENDS, "image_backend", InvalidOptionError)
-        if onnx_model_path is not None:
-            options.onnx_model_path = _path(onnx_model_path, "onnx_model_path")
-        if onnx_runtime_path is not None:
-            options.onnx_runtime_path = _path(onnx_runtime_path, "onnx_runtime_path")
-        if verify_candidates is not None:
-            options.verify_candidates = _u32(verify_candidates, "verify_candidates", InvalidOptionError)
-        if verify_views_per_candidate is not None:
-            options.verify_views_per_candidate = _u32(
-                verify_views_per_candidate, "verify_views_per_candidate", InvalidOptionError
-            )
-        if verify_inlier_weight is not None:
-            options.verify_inlier_weight = float(verify_inlier_weight)
-        if metric_particles is not None:
-            options.metric_particles = _u32(metric_particles, "metric_particles", InvalidOptionError)
-        if metric_temperature is not None:
-            options.metric_temperature = float(metric_temperature)
-        if metric_seed is not None:
-            if not isinstance(metric_seed, int) or not 0 <= metric_seed < 2**64:
-                raise InvalidOptionError(f"metric_seed must be an integer in [0, 2**64), got {metric_seed!r}")
-            options.metric_seed = metric_seed
-        if pose_min_inliers is not None:
-            options.pose_min_inliers = _u32(pose_min_inliers, "pose_min_inliers", InvalidOptionError)
-
+        options = LOCALIZER_OPTIONS.fill(given)
         out = _lib.LocalizerPtr()
         check(lib.topoloc_localizer_new(map._h, byref(options), byref(out)))
         self._ptr = out
-        self._options = _options_dict(options)
+        self._options = LOCALIZER_OPTIONS.read(options)
         self._map = map
 
         # Reused per frame: the candidate buffer, the frame and the result.

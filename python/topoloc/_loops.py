@@ -6,26 +6,35 @@ from __future__ import annotations
 
 import ctypes
 import enum
-from ctypes import POINTER, byref, c_size_t, c_uint8
+from ctypes import byref, c_size_t
 from dataclasses import dataclass
 from typing import Any, Dict, List, Optional, Union
 
 import numpy as np
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 
 from . import _lib
-from ._errors import (
-    InvalidArgumentError,
-    InvalidOptionError,
+from ._convert import (
+    PathLike,
+    _descriptor,
+    _f32_ptr,
+    _f64_ptr,
+    _keypoint_array,
+    _matrix,
+    _path,
+    _pose,
+    _text,
+    _u8_ptr,
+    _u32,
+    _u64,
 )
-from ._errors import check
-from ._lib import lib
-from ._options import defaults
-from ._convert import PathLike, _U32_MAX, _U64_MAX, _descriptor, _f32_ptr, _f64_ptr, _int_in_range, _keypoint_array, _matrix, _path, _pose, _text, _u32
+from ._errors import InvalidArgumentError, InvalidOptionError, check
 from ._handles import _SingleThreaded
+from ._lib import lib
 from ._map import Map
+from ._options import OptionTable, defaults, flag, real, unsigned, unsigned64
 
-__all__ = ['Gate', 'LoopHint', 'LoopCandidate', 'loop_options_default', 'LoopDetector']
+__all__ = ["Gate", "LoopHint", "LoopCandidate", "loop_options_default", "LoopDetector"]
 
 
 class Gate(enum.IntEnum):
@@ -84,8 +93,8 @@ class LoopHint:
     confidence: float
     has_pose: bool
     scale_known: bool
-    matched_T_query: np.ndarray
-    covariance: np.ndarray
+    matched_T_query: NDArray[np.float64]
+    covariance: NDArray[np.float64]
 
 
 @dataclass(frozen=True)
@@ -98,72 +107,44 @@ class LoopCandidate:
     similarity: float
 
 
-#: Options of :class:`LoopDetector` (the ``topoloc_loop_options`` fields) -> converter kind.
-_LOOP_OPTION_KINDS = {
-    "candidates": "u32",
-    "exclude_recent_ids": "u64",
-    "exclude_recent_s": "float",
-    "min_inliers": "u32",
-    "consistent_keyframes": "u32",
-    "odometry_gate": "bool",
-    "odometry_max_rotation_deg": "float",
-    "odometry_max_translation_m": "float",
-    "fx": "float",
-    "fy": "float",
-    "cx": "float",
-    "cy": "float",
-    "novelty_similarity": "float",
-    "place_spacing_m": "float",
-    "neighbour_radius_m": "float",
-    "candidate_id_gap": "u64",
-    "odometry_max_translation_per_m": "float",
-    "pose_reprojection_px": "float",
-    "odometry_search_m": "float",
-    "odometry_candidates": "u32",
-}
+#: The :class:`LoopDetector` options: the fields of ``topoloc_loop_options``, by their names.
+LOOP_OPTIONS = OptionTable(
+    "loop detector",
+    _lib.topoloc_loop_options,
+    lib.topoloc_loop_options_init,
+    InvalidOptionError,
+    [
+        unsigned("candidates"),
+        unsigned64("exclude_recent_ids"),
+        real("exclude_recent_s"),
+        unsigned("min_inliers"),
+        unsigned("consistent_keyframes"),
+        flag("odometry_gate"),
+        real("odometry_max_rotation_deg"),
+        real("odometry_max_translation_m"),
+        real("fx"),
+        real("fy"),
+        real("cx"),
+        real("cy"),
+        real("novelty_similarity"),
+        real("place_spacing_m"),
+        real("neighbour_radius_m"),
+        unsigned64("candidate_id_gap"),
+        real("odometry_max_translation_per_m"),
+        real("pose_reprojection_px"),
+        real("odometry_search_m"),
+        unsigned("odometry_candidates"),
+    ],
+)
 
 
 def loop_options_default() -> Dict[str, Any]:
     """The library's default :class:`LoopDetector` options (``topoloc_loop_options_init``) as
-    a dict keyed by the C field names (``fx == 0``: no intrinsics, hints carry no pose)."""
-    o = defaults(_lib.topoloc_loop_options, lib.topoloc_loop_options_init)
-    return _loop_options_dict(o)
+    a dict keyed by the C field names, which ``topoloc.h`` documents."""
+    return LOOP_OPTIONS.default_values()
 
 
-def _loop_options_dict(o: _lib.topoloc_loop_options) -> Dict[str, Any]:
-    out: Dict[str, Any] = {}
-    for name, kind in _LOOP_OPTION_KINDS.items():
-        value = getattr(o, name)
-        out[name] = float(value) if kind == "float" else bool(value) if kind == "bool" else int(value)
-    return out
-
-
-def _loop_options(given: Dict[str, Any]) -> _lib.topoloc_loop_options:
-    """The library defaults with the options in ``given`` (``None`` values: the default)."""
-    unknown = sorted(set(given) - set(_LOOP_OPTION_KINDS))
-    if unknown:
-        raise TypeError(
-            f"unexpected loop detector option(s) {', '.join(repr(n) for n in unknown)}; "
-            f"the options are {', '.join(_LOOP_OPTION_KINDS)}"
-        )
-    options = defaults(_lib.topoloc_loop_options, lib.topoloc_loop_options_init)
-    for name, value in given.items():
-        if value is None:
-            continue
-        kind = _LOOP_OPTION_KINDS[name]
-        if kind == "u32":
-            value = _u32(value, name, InvalidOptionError)
-        elif kind == "u64":
-            value = _int_in_range(value, name, _U64_MAX, InvalidOptionError)
-        elif kind == "bool":
-            value = bool(value)
-        else:
-            value = float(value)
-        setattr(options, name, value)
-    return options
-
-
-def _binary_descriptors(values: Any, count: int) -> np.ndarray:
+def _binary_descriptors(values: Any, count: int) -> NDArray[np.uint8]:
     """The keypoints' 32-byte descriptors as a C-contiguous uint8 (N, 32) array."""
     if isinstance(values, (bytes, bytearray, memoryview)):
         flat = np.frombuffer(values, dtype=np.uint8)
@@ -197,20 +178,19 @@ class LoopDetector(_SingleThreaded):
     outside the exclusion window) against its keypoints and gates the best one; the keyframe
     then joins the detector's place graph.
 
-    Options (keyword arguments named as the ``topoloc_loop_options`` fields; left out or
-    ``None``: the library default, :func:`loop_options_default`): ``candidates`` (verified per
-    keyframe, 1..64), ``exclude_recent_ids`` and ``exclude_recent_s`` (the exclusion window),
-    ``min_inliers`` (8..10000), ``consistent_keyframes`` (1..100), ``odometry_gate``,
-    ``odometry_max_rotation_deg``, ``odometry_max_translation_m`` and
-    ``odometry_max_translation_per_m`` (the bound grows with the distance travelled between
-    the two keyframes: the odometry's drift rate), the pinhole intrinsics
-    ``fx``, ``fy``, ``cx``, ``cy`` (pixels; ``fx == 0``: none, hints carry no pose), and the
-    place graph's ``novelty_similarity``, ``place_spacing_m``, ``neighbour_radius_m``, and
-    ``candidate_id_gap`` (candidates from different stretches of ids; 0: off), and
-    ``pose_reprojection_px`` (the metric pose fit's inlier threshold, pixels), and
-    ``odometry_candidates`` and ``odometry_search_m`` (keyframes the odometry puts near the new
-    one, checked besides appearance's candidates; 0: none). Invalid
-    options raise :class:`InvalidOptionError`, unknown names ``TypeError``.
+    Options are keyword arguments named as the fields of ``topoloc_loop_options`` in
+    ``topoloc.h``, which documents each one's default and range; left out or ``None``: the
+    library's default (:func:`loop_options_default`). They select how many candidates are
+    verified per keyframe (``candidates``) outside the exclusion window (``exclude_recent_ids``,
+    ``exclude_recent_s``, ``candidate_id_gap``), the gates (``min_inliers``,
+    ``consistent_keyframes``, the odometry gate ``odometry_gate``,
+    ``odometry_max_rotation_deg``, ``odometry_max_translation_m``,
+    ``odometry_max_translation_per_m``), the camera's pinhole intrinsics for relative poses
+    (``fx``, ``fy``, ``cx``, ``cy``; without them hints carry no pose;
+    ``pose_reprojection_px``), the place graph (``novelty_similarity``, ``place_spacing_m``,
+    ``neighbour_radius_m``) and the candidates the odometry adds (``odometry_candidates``,
+    ``odometry_search_m``). A value out of range raises :class:`InvalidOptionError`, an
+    unknown name ``TypeError``.
 
     Ownership: owns a C ``topoloc_loop_detector`` handle, released by :meth:`close`, the
     ``with`` statement or garbage collection. A map given to :meth:`from_map` is not kept.
@@ -222,7 +202,7 @@ class LoopDetector(_SingleThreaded):
     def __init__(self, kind: str, model: str, dim: int, **options: Any) -> None:
         self._init_guard()
         self._free = lib.topoloc_loop_detector_free
-        opts = _loop_options(options)
+        opts = LOOP_OPTIONS.fill(options)
         out = _lib.LoopDetectorPtr()
         check(
             lib.topoloc_loop_detector_new(
@@ -232,7 +212,7 @@ class LoopDetector(_SingleThreaded):
         self._finish_init(out, opts, int(dim))
 
     @classmethod
-    def from_map(cls, map: Map, **options: Any) -> "LoopDetector":
+    def from_map(cls, map: Map, **options: Any) -> LoopDetector:
         """A detector whose first session is ``map``'s views (with their stored keypoints and,
         where known, scene points; e.g. a map written by :meth:`save` and read with
         :meth:`Map.load`): new keyframes, with ids above the map's, close loops against it.
@@ -243,15 +223,15 @@ class LoopDetector(_SingleThreaded):
         self = cls.__new__(cls)
         self._init_guard()
         self._free = lib.topoloc_loop_detector_free
-        opts = _loop_options(options)
+        opts = LOOP_OPTIONS.fill(options)
         out = _lib.LoopDetectorPtr()
         check(lib.topoloc_loop_detector_from_map(map._h, byref(opts), byref(out)))
         self._finish_init(out, opts, map.dim)
         return self
 
-    def _finish_init(self, ptr, options: _lib.topoloc_loop_options, dim: int) -> None:
+    def _finish_init(self, ptr: Any, options: _lib.topoloc_loop_options, dim: int) -> None:
         self._ptr = ptr
-        self._options = _loop_options_dict(options)
+        self._options = LOOP_OPTIONS.read(options)
         self._dim = dim
         # Reused per keyframe.
         self._keyframe = defaults(_lib.topoloc_loop_keyframe, lib.topoloc_loop_keyframe_init)
@@ -312,7 +292,7 @@ class LoopDetector(_SingleThreaded):
         :class:`ZeroDescriptorError`, :class:`InvalidArgumentError` (duplicate or decreasing
         id, earlier timestamp, poses on some keyframes only, bad keypoints, non-rigid poses).
         """
-        kid = _int_in_range(id, "id", _U64_MAX, InvalidArgumentError)
+        kid = _u64(id, "id")
         ts = float(timestamp)
         q = _descriptor(descriptor)
         if (keypoints is None) != (keypoint_descriptors is None):
@@ -342,7 +322,7 @@ class LoopDetector(_SingleThreaded):
             kf.body_T_camera = None if camera is None else _f64_ptr(camera)
             kf.keypoint_count = n
             kf.keypoints = None if points is None else _f32_ptr(points)
-            kf.keypoint_descriptors = None if descriptors is None else descriptors.ctypes.data_as(POINTER(c_uint8))
+            kf.keypoint_descriptors = None if descriptors is None else _u8_ptr(descriptors)
             kf.camera_points = None if scene is None else _f32_ptr(scene)
             hint.struct_size = ctypes.sizeof(_lib.topoloc_loop_hint)
             try:
@@ -385,7 +365,7 @@ class LoopDetector(_SingleThreaded):
         first. Raises :class:`DimensionMismatchError`, :class:`NonFiniteError`,
         :class:`ZeroDescriptorError`."""
         q = _descriptor(descriptor)
-        capacity = _int_in_range(max_results, "max_results", _U32_MAX, InvalidArgumentError)
+        capacity = _u32(max_results, "max_results")
         found = (_lib.topoloc_loop_candidate * max(capacity, 1))()
         count = c_size_t(0)
         h = self._enter("query")
@@ -399,7 +379,7 @@ class LoopDetector(_SingleThreaded):
     def erase(self, id: int) -> None:
         """Removes keyframe ``id`` and its features (e.g. when SLAM culls it).
         Raises :class:`InvalidArgumentError` (no keyframe with that id)."""
-        kid = _int_in_range(id, "id", _U64_MAX, InvalidArgumentError)
+        kid = _u64(id, "id")
         h = self._enter("erase")
         try:
             check(lib.topoloc_loop_detector_erase(h, kid))

@@ -7,28 +7,54 @@ from __future__ import annotations
 
 import ctypes
 import os
-from ctypes import POINTER, byref, c_bool, c_char_p, c_double, c_float, c_size_t, c_uint8, c_uint32
+from ctypes import POINTER, byref, c_bool, c_char_p, c_double, c_float, c_size_t, c_uint32
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple, Union
 
 import numpy as np
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 
 from . import _lib
+from ._convert import (
+    PathLike,
+    _descriptor,
+    _f32_ptr,
+    _f64_ptr,
+    _image,
+    _keypoint_array,
+    _matrix,
+    _path,
+    _pose,
+    _read_array,
+    _read_string,
+    _text,
+    _u8_ptr,
+    _u32,
+    _u64,
+)
 from ._errors import (
     DimensionMismatchError,
     InvalidArgumentError,
     UnknownPlaceError,
     UnknownViewError,
+    check,
 )
-from ._errors import check
-from ._lib import lib
-from ._options import defaults
-from ._convert import PathLike, _U64_MAX, _backend_code, _descriptor, _f32_ptr, _f64_ptr, _image, _int_in_range, _keypoint_array, _matrix, _path, _pose, _read_array, _read_string, _read_u32s, _text, _u32
 from ._handles import _Handle, _SingleThreaded
+from ._lib import lib
+from ._options import (
+    OptionTable,
+    choice,
+    defaults,
+    flag,
+    file_path,
+    real,
+    text,
+    text_list,
+    unsigned,
+)
 
-__all__ = ['ViewInfo', 'Map', 'MapBuilder', 'keyframe_options_default', 'map_from_keyframes']
+__all__ = ["ViewInfo", "Map", "MapBuilder", "keyframe_options_default", "map_from_keyframes"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -49,14 +75,19 @@ class ViewInfo:
     world_T_camera: Optional[np.ndarray]
 
 
-def _load_options(expected_kind, expected_model, expected_dim) -> _lib.topoloc_map_load_options:
-    options = defaults(_lib.topoloc_map_load_options, lib.topoloc_map_load_options_init)
-    # c_char_p fields keep a reference to the bytes object in the struct (ctypes' _objects).
-    options.expected_descriptor_kind = _text(expected_kind, "expected_kind")
-    options.expected_descriptor_model = _text(expected_model, "expected_model")
-    options.expected_descriptor_dim = _u32(expected_dim or 0, "expected_dim")
-    return options
-
+#: The options of :meth:`Map.load` and :meth:`Map.from_bytes`: the fields of
+#: ``topoloc_map_load_options``, by shorter names.
+LOAD_OPTIONS = OptionTable(
+    "map load",
+    _lib.topoloc_map_load_options,
+    lib.topoloc_map_load_options_init,
+    InvalidArgumentError,
+    [
+        text("expected_descriptor_kind", name="expected_kind"),
+        text("expected_descriptor_model", name="expected_model"),
+        unsigned("expected_descriptor_dim", name="expected_dim"),
+    ],
+)
 
 #: Backends a map can be built with -> ``TOPOLOC_BACKEND_*``.
 _BUILD_BACKENDS = {
@@ -64,16 +95,54 @@ _BUILD_BACKENDS = {
     "vlad-orb": _lib.BACKEND_VLAD_ORB,
     "vlad-sift": _lib.BACKEND_VLAD_SIFT,
 }
+#: ``pca_precision`` names -> ``TOPOLOC_PCA_*`` (ABI 1.14).
+_PCA_PRECISIONS = {"i8": _lib.PCA_I8, "f32": _lib.PCA_F32}
 
+#: The options of :meth:`Map.build_from_images` and :meth:`Map.build_from_image_files`: the
+#: fields of ``topoloc_image_map_options``.
+IMAGE_MAP_OPTIONS = OptionTable(
+    "image map",
+    _lib.topoloc_image_map_options,
+    lib.topoloc_image_map_options_init,
+    InvalidArgumentError,
+    [
+        choice("backend", _BUILD_BACKENDS),
+        unsigned("dim"),
+        unsigned("views_per_place"),
+        unsigned("threads"),
+        file_path("onnx_model_path"),
+        file_path("onnx_runtime_path"),
+        text_list("onnx_taps"),
+        unsigned("grid_rows"),
+        unsigned("grid_cols"),
+        unsigned("vlad_clusters"),
+        flag("vlad_dense"),
+        file_path("poses_tum_path"),
+        real("place_spacing_m"),
+        choice("pca_precision", _PCA_PRECISIONS),
+    ],
+)
+
+#: The options of :func:`map_from_keyframes`: the fields of ``topoloc_keyframe_options``.
+KEYFRAME_OPTIONS = OptionTable(
+    "keyframe",
+    _lib.topoloc_keyframe_options,
+    lib.topoloc_keyframe_options_init,
+    InvalidArgumentError,
+    [
+        real("place_spacing_m"),
+        real("novelty_similarity"),
+        real("neighbour_radius_m"),
+        unsigned("max_views_per_place"),
+    ],
+)
 
 #: Build stage codes -> names given to progress callbacks.
 _STAGES: Dict[int, str] = {_lib.STAGE_DESCRIBING: "describing", _lib.STAGE_FITTING: "fitting"}
-
-
 #: File name extensions listed by :meth:`Map.build_from_image_files` given a folder.
 IMAGE_EXTENSIONS = (".jpg", ".jpeg", ".png", ".bmp", ".pgm", ".ppm")
 
-
+#: ``progress(stage, done, total)`` of a build from images; ``False`` cancels.
 ProgressCallback = Callable[[str, int, int], Optional[bool]]
 
 
@@ -118,60 +187,6 @@ class _Progress:
             finally:
                 error = None
         check(status)
-
-
-def _image_map_options(
-    backend: Union[str, int],
-    dim: int,
-    views_per_place: int,
-    threads: int,
-    onnx_model_path: Optional[PathLike],
-    onnx_runtime_path: Optional[PathLike],
-    onnx_taps: Optional[Union[str, Sequence[str]]],
-    grid_rows: Optional[int],
-    grid_cols: Optional[int],
-    vlad_clusters: Optional[int],
-    poses_tum_path: Optional[PathLike],
-    place_spacing_m: Optional[float],
-    vlad_dense: Optional[bool] = None,
-    pca_precision: Optional[str] = None,
-) -> _lib.topoloc_image_map_options:
-    o = defaults(_lib.topoloc_image_map_options, lib.topoloc_image_map_options_init)
-    o.backend = _backend_code(backend, _BUILD_BACKENDS, "backend", InvalidArgumentError)
-    o.dim = _u32(dim, "dim")
-    o.views_per_place = _u32(views_per_place, "views_per_place")
-    o.threads = _u32(threads, "threads")
-    # c_char_p fields keep a reference to the bytes object in the struct (ctypes' _objects).
-    if onnx_model_path is not None:
-        o.onnx_model_path = _path(onnx_model_path, "onnx_model_path")
-    if onnx_runtime_path is not None:
-        o.onnx_runtime_path = _path(onnx_runtime_path, "onnx_runtime_path")
-    if onnx_taps is not None:
-        taps = onnx_taps if isinstance(onnx_taps, str) else ",".join(onnx_taps)
-        o.onnx_taps = _text(taps, "onnx_taps")
-    if grid_rows is not None:
-        o.grid_rows = _u32(grid_rows, "grid_rows")
-    if grid_cols is not None:
-        o.grid_cols = _u32(grid_cols, "grid_cols")
-    if vlad_clusters is not None:
-        o.vlad_clusters = _u32(vlad_clusters, "vlad_clusters")
-    if vlad_dense is not None:
-        o.vlad_dense = bool(vlad_dense)
-    if poses_tum_path is not None:
-        o.poses_tum_path = _path(poses_tum_path, "poses_tum_path")
-    if place_spacing_m is not None:
-        o.place_spacing_m = float(place_spacing_m)
-    if pca_precision is not None:
-        if pca_precision not in _PCA_PRECISIONS:
-            raise InvalidArgumentError(
-                f"pca_precision {pca_precision!r}: use one of {sorted(_PCA_PRECISIONS)}"
-            )
-        o.pca_precision = _PCA_PRECISIONS[pca_precision]
-    return o
-
-
-#: ``pca_precision`` names -> ``TOPOLOC_PCA_*`` (ABI 1.14).
-_PCA_PRECISIONS = {"i8": _lib.PCA_I8, "f32": _lib.PCA_F32}
 
 
 def _image_files(paths: Union[PathLike, Sequence[PathLike]]) -> List[bytes]:
@@ -220,7 +235,7 @@ class Map(_Handle):
         )
 
     @classmethod
-    def _adopt(cls, ptr) -> "Map":
+    def _adopt(cls, ptr: Any) -> Map:
         self = cls.__new__(cls)
         self._ptr = ptr
         self._free = lib.topoloc_map_free  # kept so that __del__ works during interpreter exit
@@ -232,22 +247,24 @@ class Map(_Handle):
     def load(
         cls,
         path: PathLike,
+        *,
         expected_kind: Optional[str] = None,
         expected_model: Optional[str] = None,
-        expected_dim: int = 0,
-    ) -> "Map":
+        expected_dim: Optional[int] = None,
+    ) -> Map:
         """Loads and validates a map file (memory-mapped: do not modify the file while the map
         is open; :meth:`save` replaces files atomically, which is safe).
 
-        ``expected_kind`` / ``expected_model`` / ``expected_dim`` (``None``/``""``/``0`` = any)
-        make the load fail with :class:`DescriptorMismatchError` when the map was built with
-        another descriptor.
+        ``expected_kind`` / ``expected_model`` / ``expected_dim`` (keyword-only; the fields
+        ``expected_descriptor_kind``, ``_model`` and ``_dim`` of ``topoloc_map_load_options``
+        in ``topoloc.h``; left out or ``None``: any) make the load fail with
+        :class:`DescriptorMismatchError` when the map was built with another descriptor.
 
         Raises :class:`MapIOError`, :class:`NotAMapError`, :class:`TruncatedMapError`,
         :class:`CorruptMapError`, :class:`UnsupportedVersionError`,
         :class:`DescriptorMismatchError`, :class:`InvalidUTF8Error`.
         """
-        options = _load_options(expected_kind, expected_model, expected_dim)
+        options = LOAD_OPTIONS.fill(LOAD_OPTIONS.pick(locals()))
         out = _lib.MapPtr()
         check(lib.topoloc_map_load(_path(path), byref(options), byref(out)))
         return cls._adopt(out)
@@ -256,33 +273,30 @@ class Map(_Handle):
     def from_bytes(
         cls,
         data: Union[bytes, bytearray, memoryview],
+        *,
         expected_kind: Optional[str] = None,
         expected_model: Optional[str] = None,
-        expected_dim: int = 0,
-    ) -> "Map":
+        expected_dim: Optional[int] = None,
+    ) -> Map:
         """Loads and validates a map from bytes in the map file format (the library copies them;
         ``data`` may be released afterwards). Same options and errors as :meth:`load`."""
+        options = LOAD_OPTIONS.fill(LOAD_OPTIONS.pick(locals()))
         buf = np.frombuffer(data, dtype=np.uint8)
-        options = _load_options(expected_kind, expected_model, expected_dim)
         out = _lib.MapPtr()
-        check(
-            lib.topoloc_map_load_from_memory(
-                buf.ctypes.data_as(POINTER(c_uint8)), buf.size, byref(options), byref(out)
-            )
-        )
+        check(lib.topoloc_map_load_from_memory(_u8_ptr(buf), buf.size, byref(options), byref(out)))
         return cls._adopt(out)
 
     @classmethod
     def build_from_images(
         cls,
         images: Sequence[ArrayLike],
-        backend: Union[str, int] = "onnx",
-        dim: int = 512,
-        views_per_place: int = 1,
-        threads: int = 0,
-        progress: Optional[ProgressCallback] = None,
         *,
         pixel_format: Optional[str] = None,
+        progress: Optional[ProgressCallback] = None,
+        backend: Optional[Union[str, int]] = None,
+        dim: Optional[int] = None,
+        views_per_place: Optional[int] = None,
+        threads: Optional[int] = None,
         onnx_model_path: Optional[PathLike] = None,
         onnx_runtime_path: Optional[PathLike] = None,
         onnx_taps: Optional[Union[str, Sequence[str]]] = None,
@@ -292,8 +306,8 @@ class Map(_Handle):
         vlad_dense: Optional[bool] = None,
         poses_tum_path: Optional[PathLike] = None,
         place_spacing_m: Optional[float] = None,
-        pca_precision: Optional[str] = None,
-    ) -> "Map":
+        pca_precision: Optional[Union[str, int]] = None,
+    ) -> Map:
         """Builds a map from camera images in memory (``topoloc_map_build_from_images``).
 
         ``images``: a sequence (or stacked array) of at least 2 uint8 arrays, each (H, W) grey,
@@ -302,21 +316,23 @@ class Map(_Handle):
         ``"rgb"`` for 3 channels and ``"rgba"`` for 4. Arrays with contiguous rows are read in
         place (crops included), others are copied. The pixels are only read during the call.
 
-        Every image is described with ``backend`` in parallel (``threads``, 0 = one per core,
-        at most 256; the threads end before the call returns):
-        ``"onnx"`` (a CNN run by ONNX Runtime; ``onnx_model_path`` / ``onnx_runtime_path``
-        default to the cache filled by ``scripts/setup-models.sh``, ``onnx_taps`` names the
-        outputs pooled on a ``grid_rows`` x ``grid_cols`` grid), ``"vlad-orb"`` or
-        ``"vlad-sift"`` (VLAD of OpenCV local features, ``vlad_clusters`` words, on a dense
-        keypoint grid unless ``vlad_dense=False``; no learned weights). A PCA to ``dim``
-        dimensions is fitted on all of them; with fewer than ``dim + 1`` images, ``dim`` becomes
-        the number of images minus one (``Map.dim`` tells). Without ``poses_tum_path``, every
-        ``views_per_place`` consecutive images form a place and places are chained in order; with a TUM trajectory
-        (one pose per image, same order), places are made by ``place_spacing_m`` and hold at
-        most ``views_per_place`` views. View ``v`` records its image index as keyframe id.
-        ``pca_precision`` stores the PCA rows as ``"i8"`` (the default: a quarter of the size,
-        map format 1.5) or ``"f32"`` (exact). Options left as ``None`` take the library
-        defaults.
+        Every image is described with the ``backend`` in parallel (``threads``; they end
+        before the call returns), then a PCA to ``dim`` dimensions is fitted on all of them
+        (with fewer than ``dim + 1`` images, ``dim`` becomes the number of images minus one:
+        :attr:`Map.dim` tells). ``backend``: ``"onnx"`` (a CNN run by ONNX Runtime:
+        ``onnx_model_path``, ``onnx_runtime_path``, and ``onnx_taps``, the outputs pooled, a
+        string or a sequence of names, on a ``grid_rows`` x ``grid_cols`` grid), ``"vlad-orb"``
+        or ``"vlad-sift"`` (VLAD of OpenCV local features: ``vlad_clusters`` words, keypoints on
+        a dense grid or detected, ``vlad_dense``; no learned weights). Without
+        ``poses_tum_path``, every ``views_per_place`` consecutive images form a place and
+        places are chained in order; with a TUM trajectory (one pose per image, same order),
+        places are made by ``place_spacing_m`` and hold at most ``views_per_place`` views. View
+        ``v`` records its image index as keyframe id. ``pca_precision``: ``"i8"`` or ``"f32"``,
+        how the map stores its PCA rows.
+
+        Options are keyword-only, named as the fields of ``topoloc_image_map_options`` in
+        ``topoloc.h``, which documents each one's default and range; left out or ``None``: the
+        library's default.
 
         ``progress(stage, done, total)``, if given, is called on this thread about ten times a
         second with ``stage`` ``"describing"`` (``done`` of ``total`` images) or ``"fitting"``
@@ -329,33 +345,24 @@ class Map(_Handle):
         (fewer than 2 images, bad options), :class:`BackendUnavailableError`,
         :class:`ModelError`, :class:`MapIOError` (poses file), :class:`CancelledError`.
         """
+        given = IMAGE_MAP_OPTIONS.pick(locals())
         prepared = [_image(img, pixel_format, f"images[{i}]") for i, img in enumerate(images)]
-        n = len(prepared)
-        array = (_lib.topoloc_image * max(n, 1))()
-        for i, (img, _) in enumerate(prepared):
-            array[i] = img
-        options = _image_map_options(
-            backend, dim, views_per_place, threads, onnx_model_path, onnx_runtime_path, onnx_taps,
-            grid_rows, grid_cols, vlad_clusters, poses_tum_path, place_spacing_m, vlad_dense,
-            pca_precision,
+        array = (_lib.topoloc_image * max(len(prepared), 1))(*(img for img, _ in prepared))
+        # The image array points into the prepared pixels until the call returns.
+        return cls._build(
+            lib.topoloc_map_build_from_images, array, len(prepared), given, progress
         )
-        reporter = _Progress(progress)
-        out = _lib.MapPtr()
-        status = lib.topoloc_map_build_from_images(array, n, byref(options), reporter.callback, None, byref(out))
-        del prepared  # the image array pointed into these until the call returned
-        reporter.finish(status, out)
-        return cls._adopt(out)
 
     @classmethod
     def build_from_image_files(
         cls,
         paths: Union[PathLike, Sequence[PathLike]],
-        backend: Union[str, int] = "onnx",
-        dim: int = 512,
-        views_per_place: int = 1,
-        threads: int = 0,
-        progress: Optional[ProgressCallback] = None,
         *,
+        progress: Optional[ProgressCallback] = None,
+        backend: Optional[Union[str, int]] = None,
+        dim: Optional[int] = None,
+        views_per_place: Optional[int] = None,
+        threads: Optional[int] = None,
         onnx_model_path: Optional[PathLike] = None,
         onnx_runtime_path: Optional[PathLike] = None,
         onnx_taps: Optional[Union[str, Sequence[str]]] = None,
@@ -365,29 +372,41 @@ class Map(_Handle):
         vlad_dense: Optional[bool] = None,
         poses_tum_path: Optional[PathLike] = None,
         place_spacing_m: Optional[float] = None,
-        pca_precision: Optional[str] = None,
-    ) -> "Map":
+        pca_precision: Optional[Union[str, int]] = None,
+    ) -> Map:
         """Builds a map from image files (``topoloc_map_build_from_image_files``): any format
         OpenCV decodes, read and described in parallel.
 
         ``paths``: a list of image files in sequence order, or a folder, whose ``.jpg``,
         ``.jpeg``, ``.png``, ``.bmp``, ``.pgm`` and ``.ppm`` files are taken sorted by name.
         View ``v`` records the index of its image as keyframe id and its path as image
-        reference (:meth:`view_image`). Other arguments, progress reports and errors as
+        reference (:meth:`view_image`). Options, progress reports and errors as
         :meth:`build_from_images`; an unreadable file raises :class:`InvalidImageError` naming
         it, and a folder without images :class:`InvalidArgumentError`.
         """
+        given = IMAGE_MAP_OPTIONS.pick(locals())
         encoded = _image_files(paths)
-        n = len(encoded)
-        array = (c_char_p * max(n, 1))(*encoded)
-        options = _image_map_options(
-            backend, dim, views_per_place, threads, onnx_model_path, onnx_runtime_path, onnx_taps,
-            grid_rows, grid_cols, vlad_clusters, poses_tum_path, place_spacing_m, vlad_dense,
-            pca_precision,
+        array = (c_char_p * max(len(encoded), 1))(*encoded)
+        return cls._build(
+            lib.topoloc_map_build_from_image_files, array, len(encoded), given, progress
         )
+
+    @classmethod
+    def _build(
+        cls,
+        build: Callable[..., int],
+        images: Any,
+        count: int,
+        options: Dict[str, Any],
+        progress: Optional[ProgressCallback],
+    ) -> Map:
+        """The body of :meth:`build_from_images` and :meth:`build_from_image_files`, which
+        differ only in how the images arrive: ``build(images, count, options, progress_fn,
+        user_data, out)``."""
+        filled = IMAGE_MAP_OPTIONS.fill(options)
         reporter = _Progress(progress)
         out = _lib.MapPtr()
-        status = lib.topoloc_map_build_from_image_files(array, n, byref(options), reporter.callback, None, byref(out))
+        status = build(images, count, byref(filled), reporter.callback, None, byref(out))
         reporter.finish(status, out)
         return cls._adopt(out)
 
@@ -455,12 +474,12 @@ class Map(_Handle):
         """Places joined to ``place`` by an edge, as a uint32 array.
         Raises :class:`UnknownPlaceError`."""
         place = _u32(place, "place", UnknownPlaceError)
-        return _read_u32s(lib.topoloc_map_neighbours, self._h, place)
+        return _read_array(lib.topoloc_map_neighbours, self._h, place)
 
     def place_views(self, place: int) -> np.ndarray:
         """View ids of ``place``, as a uint32 array. Raises :class:`UnknownPlaceError`."""
         place = _u32(place, "place", UnknownPlaceError)
-        return _read_u32s(lib.topoloc_map_place_views, self._h, place)
+        return _read_array(lib.topoloc_map_place_views, self._h, place)
 
     def place_position(self, place: int) -> Optional[np.ndarray]:
         """Position of ``place`` in metres as a float64 array of 3, or ``None`` when the map has
@@ -625,7 +644,7 @@ class MapBuilder(_SingleThreaded):
             attrs = defaults(_lib.topoloc_view_attributes, lib.topoloc_view_attributes_init)
             if keyframe_id is not None:
                 attrs.has_keyframe_id = True
-                attrs.keyframe_id = _int_in_range(keyframe_id, "keyframe_id", _U64_MAX, InvalidArgumentError)
+                attrs.keyframe_id = _u64(keyframe_id, "keyframe_id")
             if world_T_camera is not None:
                 pose = _pose(world_T_camera, "world_T_camera")
                 attrs.world_T_camera = _f64_ptr(pose)
@@ -669,9 +688,9 @@ class MapBuilder(_SingleThreaded):
 
 
 def keyframe_options_default() -> Dict[str, Any]:
-    """The library's defaults for :func:`map_from_keyframes` options, as a dict."""
-    o = defaults(_lib.topoloc_keyframe_options, lib.topoloc_keyframe_options_init)
-    return {f[0]: getattr(o, f[0]) for f in o._fields_ if f[0] != "struct_size"}
+    """The library's defaults for :func:`map_from_keyframes` options, as a dict keyed by the
+    fields of ``topoloc_keyframe_options``, which ``topoloc.h`` documents."""
+    return KEYFRAME_OPTIONS.default_values()
 
 
 def map_from_keyframes(
@@ -681,6 +700,7 @@ def map_from_keyframes(
     descriptors: ArrayLike,
     ids: Optional[ArrayLike] = None,
     poses: Optional[ArrayLike] = None,
+    *,
     place_spacing_m: Optional[float] = None,
     novelty_similarity: Optional[float] = None,
     neighbour_radius_m: Optional[float] = None,
@@ -689,19 +709,23 @@ def map_from_keyframes(
     """Builds a map from an ordered keyframe sequence (a SLAM run or image sequence).
 
     ``descriptors``: (K, D) array-like of global descriptors. ``ids``: K host keyframe ids
-    (default ``0..K-1``), stored with the views they become. ``poses``: ``None`` or a (K, 4, 4)
+    (``None``: ``0`` to ``K-1``), stored with the views they become. ``poses``: ``None`` or a (K, 4, 4)
     array of ``world_T_camera`` rigid transforms. With poses, a keyframe joins the nearest
     place within ``place_spacing_m`` and becomes a new view there only when its appearance is
     novel (best cosine similarity below ``novelty_similarity``, at most
     ``max_views_per_place`` views); places closer than ``neighbour_radius_m`` are joined.
     Without poses, a keyframe starts a new place when novel with respect to the current place
-    and is dropped otherwise. Consecutive keyframes' places are always joined. Options left as
-    ``None`` take the library defaults (:func:`keyframe_options_default`).
+    and is dropped otherwise. Consecutive keyframes' places are always joined.
+
+    Options are keyword-only, named as the fields of ``topoloc_keyframe_options`` in
+    ``topoloc.h``, which documents each one's default and range; left out or ``None``: the
+    library's default (:func:`keyframe_options_default`).
 
     Returns a new :class:`Map`. Raises :class:`EmptyMapError` (K = 0),
     :class:`InvalidArgumentError` (bad keyframe or option; the message names it),
     :class:`DimensionMismatchError` (``descriptors`` not 2-D).
     """
+    given = KEYFRAME_OPTIONS.pick(locals())
     desc = np.asarray(descriptors, dtype=np.float32)
     if desc.ndim != 2:
         raise DimensionMismatchError(f"descriptors must be a (K, D) array, got shape {desc.shape}")
@@ -727,15 +751,7 @@ def map_from_keyframes(
             raise InvalidArgumentError(f"poses must have shape ({k}, 4, 4), got {pose_arr.shape}")
         pose_arr = np.ascontiguousarray(pose_arr)
 
-    options = defaults(_lib.topoloc_keyframe_options, lib.topoloc_keyframe_options_init)
-    if place_spacing_m is not None:
-        options.place_spacing_m = float(place_spacing_m)
-    if novelty_similarity is not None:
-        options.novelty_similarity = float(novelty_similarity)
-    if neighbour_radius_m is not None:
-        options.neighbour_radius_m = float(neighbour_radius_m)
-    if max_views_per_place is not None:
-        options.max_views_per_place = _u32(max_views_per_place, "max_views_per_place")
+    options = KEYFRAME_OPTIONS.fill(given)
 
     keyframes = (_lib.topoloc_keyframe * k)()
     desc_base, row = desc.ctypes.data, d * desc.itemsize

@@ -4,25 +4,20 @@
 
 from __future__ import annotations
 
-from ctypes import POINTER, byref, c_double, c_size_t, c_uint8, c_uint32
+from ctypes import byref, c_double, c_size_t, c_uint32
 from dataclasses import dataclass
-from typing import Any, Dict, List, Optional, Tuple
+from typing import Any, Dict, List, Optional, Tuple, Type
 
 import numpy as np
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 
 from . import _lib
-from ._errors import (
-    InvalidArgumentError,
-    UnknownPlaceError,
-)
-from ._errors import check
+from ._convert import _f64_ptr, _int_in_range, _read_array, _real, _u8_ptr
+from ._errors import InvalidArgumentError, TopolocError, UnknownPlaceError, check
 from ._lib import lib
-from ._options import defaults
-from ._convert import _f64_ptr, _int_in_range, _read_u32s
+from ._options import Option, OptionTable, real
 
-__all__ = ['Graph', 'skeleton_options_default', 'skeleton_graph']
-
+__all__ = ["Graph", "skeleton_options_default", "skeleton_graph"]
 
 #: ``TOPOLOC_NODE_*`` codes by name, in code order.
 NODE_KINDS = ("end", "corner", "branch", "intermediate")
@@ -82,15 +77,43 @@ class Graph:
         return f"Graph(places={self.place_count}, edges={self.edge_count}, kinds={self.kind_counts()})"
 
 
+def _store_z_band(options: Any, value: Any, error: Type[TopolocError]) -> None:
+    try:
+        z_min, z_max = (_real(v, "z_band", error) for v in value)
+    except ValueError:
+        raise InvalidArgumentError(f"z_band must be (z_min, z_max), got {value!r}") from None
+    options.use_z_band = True
+    options.z_min_m, options.z_max_m = z_min, z_max
+
+
+def _load_z_band(options: Any) -> Optional[Tuple[float, float]]:
+    return (options.z_min_m, options.z_max_m) if options.use_z_band else None
+
+
+#: The :func:`skeleton_graph` options: the fields of ``topoloc_skeleton_options``, ``z_band``
+#: standing for ``use_z_band``, ``z_min_m`` and ``z_max_m``.
+SKELETON_OPTIONS = OptionTable(
+    "skeleton",
+    _lib.topoloc_skeleton_options,
+    lib.topoloc_skeleton_options_init,
+    InvalidArgumentError,
+    [
+        Option("z_band", ("use_z_band", "z_min_m", "z_max_m"), _store_z_band, _load_z_band),
+        real("min_clearance_m"),
+        real("merge_radius_m"),
+        real("max_edge_m"),
+        real("corner_angle_deg"),
+        real("corner_scale_m"),
+        real("min_spur_m"),
+    ],
+)
+
+
 def skeleton_options_default() -> Dict[str, Any]:
-    """The library's defaults for :func:`skeleton_graph` options, as a dict (``z_band`` is
-    ``None``: the whole grid)."""
-    o = defaults(_lib.topoloc_skeleton_options, lib.topoloc_skeleton_options_init)
-    out: Dict[str, Any] = {"z_band": (o.z_min_m, o.z_max_m) if o.use_z_band else None}
-    for f in o._fields_:
-        if f[0] not in ("struct_size", "use_z_band", "z_min_m", "z_max_m"):
-            out[f[0]] = getattr(o, f[0])
-    return out
+    """The library's defaults for :func:`skeleton_graph` options, as a dict (``z_band``
+    ``None``: the whole grid); ``topoloc.h`` documents each on its ``topoloc_skeleton_options``
+    field."""
+    return SKELETON_OPTIONS.default_values()
 
 
 def _occupancy_cells(occupied: Any) -> Tuple[np.ndarray, Tuple[int, int, int]]:
@@ -139,47 +162,33 @@ def skeleton_graph(
     ``(x, y, z)`` covers ``origin + voxel_size * [x, x+1) x [y, y+1) x [z, z+1)`` metres, z up.
     Any memory layout is accepted (the cells are copied).
 
-    Options left as ``None`` take the library defaults (:func:`skeleton_options_default`):
-    ``z_band`` ``(z_min, z_max)`` metres, only voxels whose centre lies in it; ``min_clearance_m``
-    free voxels closer than this to an obstacle count as occupied; ``merge_radius_m``;
-    ``max_edge_m`` (at least two voxels); ``corner_angle_deg`` smallest bend that makes a corner;
-    ``corner_scale_m`` distance over which bends are measured; ``min_spur_m`` dead ends shorter
-    than this are removed.
+    Options are keyword-only, named as the fields of ``topoloc_skeleton_options`` in
+    ``topoloc.h``, which documents each one's default and range (``z_band=(z_min, z_max)``
+    stands for ``use_z_band``, ``z_min_m`` and ``z_max_m``); left out or ``None``: the
+    library's default (:func:`skeleton_options_default`). ``z_band``: only voxels whose centre
+    lies in it (metres); ``min_clearance_m``: free voxels closer than this to an obstacle count
+    as occupied; ``merge_radius_m``; ``max_edge_m``; ``corner_angle_deg``: the smallest bend
+    that makes a corner; ``corner_scale_m``: the distance over which bends are measured;
+    ``min_spur_m``: dead ends shorter than this are removed.
 
     Returns a :class:`Graph`. Raises :class:`InvalidArgumentError` naming the problem
     (``occupied`` shape, ``voxel_size``, ``origin``, ``cells`` when every voxel is occupied,
     ``z_band`` when the band holds no free voxel, ``min_clearance_m`` when nothing keeps the
     clearance, or another option out of range), ``TypeError`` for a float ``occupied``.
     """
+    given = SKELETON_OPTIONS.pick(locals())
     cells, dims = _occupancy_cells(occupied)
     org = np.ascontiguousarray(np.asarray(origin, dtype=np.float64))
     if org.shape != (3,):
         raise InvalidArgumentError(f"origin must have 3 values (x, y, z), got shape {org.shape}")
-    options = defaults(_lib.topoloc_skeleton_options, lib.topoloc_skeleton_options_init)
-    if z_band is not None:
-        band = tuple(float(v) for v in z_band)
-        if len(band) != 2:
-            raise InvalidArgumentError(f"z_band must be (z_min, z_max), got {z_band!r}")
-        options.use_z_band = True
-        options.z_min_m, options.z_max_m = band
-    for name, value in (
-        ("min_clearance_m", min_clearance_m),
-        ("merge_radius_m", merge_radius_m),
-        ("max_edge_m", max_edge_m),
-        ("corner_angle_deg", corner_angle_deg),
-        ("corner_scale_m", corner_scale_m),
-        ("min_spur_m", min_spur_m),
-    ):
-        if value is not None:
-            setattr(options, name, float(value))
-
+    options = SKELETON_OPTIONS.fill(given)
     out = _lib.GraphPtr()
     check(
         lib.topoloc_graph_from_occupancy(
             (c_size_t * 3)(*dims),
             float(voxel_size),
             _f64_ptr(org),
-            cells.ctypes.data_as(POINTER(c_uint8)),
+            _u8_ptr(cells),
             cells.size,
             byref(options),
             byref(out),
@@ -191,7 +200,7 @@ def skeleton_graph(
         lib.topoloc_graph_free(out)
 
 
-def _read_graph(h) -> Graph:
+def _read_graph(h: Any) -> Graph:
     """Copies a ``topoloc_graph`` into a :class:`Graph`."""
     places, edges = c_size_t(0), c_size_t(0)
     check(lib.topoloc_graph_place_count(h, byref(places)))
@@ -209,7 +218,7 @@ def _read_graph(h) -> Graph:
         check(lib.topoloc_graph_edge(h, e, byref(a), byref(b), byref(length)))
         pairs[e] = (a.value, b.value)
         lengths[e] = length.value
-    skeleton = _read_u32s(lib.topoloc_graph_skeleton, h).astype(np.int64).reshape(-1, 3)
+    skeleton = _read_array(lib.topoloc_graph_skeleton, h).astype(np.int64).reshape(-1, 3)
     for arr in (positions, kinds, pairs, lengths, skeleton):
         arr.flags.writeable = False
     return Graph(positions, kinds, pairs, lengths, skeleton)
