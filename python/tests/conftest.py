@@ -8,7 +8,7 @@ import os
 import sys
 from dataclasses import dataclass
 from pathlib import Path
-from typing import List, Optional
+from typing import List, NoReturn, Optional, Union
 
 import numpy as np
 import pytest
@@ -29,6 +29,27 @@ if INSTALLED and PACKAGE_PARENT == PYTHON_DIR:
         f"TOPOLOC_TEST_INSTALLED is set but topoloc was imported from the source tree "
         f"({topoloc.__file__}): run the tests from a directory where {PYTHON_DIR} is not on sys.path"
     )
+
+
+#: Whether this is a CI run (``CI=true``, as ``.ci/run`` is run): there, a test that needs a
+#: model fails instead of skipping when the model is missing.
+IN_CI = os.environ.get("CI", "").strip().lower() == "true"
+
+
+def skip_or_fail(reason: str) -> NoReturn:
+    """Skips the test, or fails it under CI, where what it needs must be installed
+    (``scripts/setup-models.sh``)."""
+    if IN_CI:
+        pytest.fail(f"{reason} (CI=true: scripts/setup-models.sh must have installed it)", pytrace=False)
+    pytest.skip(reason)
+
+
+def require_models(*paths: Union[str, Path]) -> None:
+    """Returns when every model file in ``paths`` exists; else skips the test, or fails it
+    under CI."""
+    missing = [str(p) for p in paths if not Path(p).is_file()]
+    if missing:
+        skip_or_fail(f"model file(s) missing: {', '.join(missing)}")
 
 
 def find_repo_root() -> Optional[Path]:

@@ -3,7 +3,8 @@ save/load), localizers describe image frames with it, progress callbacks report,
 re-raise, bad images give typed errors before or inside the library and leave the localizer
 unchanged, strided arrays are read in place; image maps' keypoints, their scene points and the
 pose fixes they give (ABI 1.6). The VLAD backend needs nothing and always runs; the ONNX cases
-run when scripts/setup-models.sh has filled ~/.cache/topoloc (skipped otherwise)."""
+run when scripts/setup-models.sh has filled ~/.cache/topoloc (skipped otherwise; failed under
+CI=true, see conftest.require_models)."""
 
 from __future__ import annotations
 
@@ -18,13 +19,13 @@ import numpy as np
 import pytest
 
 import topoloc
+from conftest import require_models, skip_or_fail
 from topoloc import _convert, _lib
 
 W, H = 320, 240
 PLACES = 12
 ONNX_MODEL = Path.home() / ".cache" / "topoloc" / "models" / "mobilenetv2-mlf.onnx"
 
-needs_onnx = pytest.mark.skipif(not ONNX_MODEL.is_file(), reason=f"no ONNX model at {ONNX_MODEL}")
 
 
 def place_image(seed: int, w: int = W, h: int = H) -> np.ndarray:
@@ -769,17 +770,15 @@ def test_pose_fix_options(vlad_map, points_map, images):
 
 @pytest.fixture(scope="module")
 def onnx_map(images):
-    if not ONNX_MODEL.is_file():
-        pytest.skip(f"no ONNX model at {ONNX_MODEL}")
+    require_models(ONNX_MODEL)
     try:
         m = topoloc.Map.build_from_images(images[:6], backend="onnx", threads=2)
     except topoloc.BackendUnavailableError as e:
-        pytest.skip(f"ONNX Runtime unavailable: {e}")
+        skip_or_fail(f"ONNX Runtime unavailable: {e}")
     yield m
     m.close()
 
 
-@needs_onnx
 def test_onnx_map_localizes_revisits_and_survives_save(onnx_map, images, tmp_path):
     assert onnx_map.descriptor_kind == "onnx-mlf"
     assert onnx_map.place_count == 6 and onnx_map.dim == 5
@@ -794,7 +793,6 @@ def test_onnx_map_localizes_revisits_and_survives_save(onnx_map, images, tmp_pat
         assert [loc.process(image=q, timestamp=0.0) for q in queries] == before
 
 
-@needs_onnx
 def test_onnx_colour_frames(onnx_map, images):
     with topoloc.Localizer(onnx_map, mode="single_frame") as loc:
         rgb = np.repeat(images[2][:, :, None], 3, axis=2)
@@ -804,7 +802,6 @@ def test_onnx_colour_frames(onnx_map, images):
         assert answer(b) == answer(a)
 
 
-@needs_onnx
 def test_onnx_describer_mismatches_and_missing_files(onnx_map, tmp_path, images):
     with pytest.raises(topoloc.DescriptorMismatchError):
         topoloc.Localizer(onnx_map, image_backend="vlad-orb")
@@ -824,8 +821,8 @@ def test_onnx_describer_mismatches_and_missing_files(onnx_map, tmp_path, images)
         assert loc.process(onnx_map.view_descriptor(1), 0.0).place == 1
 
 
-@needs_onnx
 def test_onnx_build_from_files_with_progress(tmp_path, images):
+    require_models(ONNX_MODEL)
     for i, img in enumerate(images[:4]):
         write_ppm(tmp_path / f"{i}.ppm", colour(img, i))
     seen = []
