@@ -12,8 +12,12 @@
 #   CC, CXX                   compilers (default: cc, c++)
 #
 # Sections: exported symbols vs header, SONAME, header alone (C11 and C++17), the test program
-# against the shared library, again under ASan+UBSan, under valgrind (if installed), and linked
-# statically against libtopoloc.a.
+# against the shared library, again under ASan+UBSan, under ThreadSanitizer, under valgrind (if
+# installed), and linked statically against libtopoloc.a.
+#
+# The test program, test_topoloc, is one binary built from main.c (the entry point), harness.c
+# and harness.h (the CHECK macros, the generated worlds, shared helpers) and one test_<section>.c
+# per section of include/topoloc.h; every run prints "<N> passed, 0 failed".
 set -euo pipefail
 
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
@@ -37,6 +41,7 @@ CXX="${CXX:-c++}"
 PINNED_STATIC_LIBS="-ldl -lstdc++ -lopencv_calib3d -lopencv_features2d -lopencv_flann -lopencv_imgcodecs -lopencv_imgproc -lopencv_core -lgcc_s -lutil -lrt -lpthread -lm -ldl -lc"
 
 CFLAGS_STRICT=(-std=c11 -Wall -Wextra -Werror -pedantic)
+TEST_SOURCES=("$here/main.c" "$here/harness.c" "$here"/test_*.c)
 CXXFLAGS_STRICT=(-std=c++17 -Wall -Wextra -Werror -pedantic)
 
 section() { printf '\n==> %s\n' "$*"; }
@@ -104,13 +109,13 @@ section "header alone: C11 and C++17, included twice"
 echo "ok"
 
 section "test_topoloc: shared library"
-"$CC" "${CFLAGS_STRICT[@]}" -g -O1 -I"$repo/include" "$here/test_topoloc.c" \
+"$CC" "${CFLAGS_STRICT[@]}" -g -O1 -I"$repo/include" "${TEST_SOURCES[@]}" \
     -o "$build/test_topoloc" "${LINK_SHARED[@]}"
 run_test "$build/shared.log" "$build/test_topoloc"
 
 section "test_topoloc: AddressSanitizer + UndefinedBehaviorSanitizer"
 "$CC" "${CFLAGS_STRICT[@]}" -g -O1 -fsanitize=address,undefined -fno-omit-frame-pointer \
-    -I"$repo/include" "$here/test_topoloc.c" -o "$build/test_topoloc_asan" "${LINK_SHARED[@]}"
+    -I"$repo/include" "${TEST_SOURCES[@]}" -o "$build/test_topoloc_asan" "${LINK_SHARED[@]}"
 lsan_env=()
 if [[ -f "$here/lsan.supp" ]]; then
     lsan_env=(LSAN_OPTIONS="suppressions=$here/lsan.supp:print_suppressions=1")
@@ -124,7 +129,7 @@ section "test_topoloc: ThreadSanitizer (the C side: callers' threads, shared map
 # would report the library's intercepted memcpy/memset as races. tsan.supp ignores interceptor
 # calls made from libtopoloc.so; TSan then checks every access of the C side (results,
 # descriptors, callbacks' state, the threads' own data) against pthread's synchronisation.
-"$CC" "${CFLAGS_STRICT[@]}" -g -O1 -fsanitize=thread -I"$repo/include" "$here/test_topoloc.c" \
+"$CC" "${CFLAGS_STRICT[@]}" -g -O1 -fsanitize=thread -I"$repo/include" "${TEST_SOURCES[@]}" \
     -o "$build/test_topoloc_tsan" "${LINK_SHARED[@]}"
 run_test "$build/tsan.log" env TSAN_OPTIONS="halt_on_error=1:second_deadlock_stack=1:suppressions=$here/tsan.supp" \
     "$build/test_topoloc_tsan"
@@ -179,7 +184,7 @@ fi
 
 section "test_topoloc: linked statically against libtopoloc.a"
 # shellcheck disable=SC2086 # the pinned list is a word list on purpose
-"$CC" "${CFLAGS_STRICT[@]}" -g -O1 -I"$repo/include" "$here/test_topoloc.c" \
+"$CC" "${CFLAGS_STRICT[@]}" -g -O1 -I"$repo/include" "${TEST_SOURCES[@]}" \
     -o "$build/test_topoloc_static" "$target/libtopoloc.a" $PINNED_STATIC_LIBS -pthread
 if readelf -d "$build/test_topoloc_static" | grep -q 'libtopoloc'; then
     fail "the static test program depends on a shared libtopoloc"
