@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Installs topoloc with CMake into a temporary prefix and builds a separate consumer project
-# against it with find_package(Topoloc): C (shared and static), C++ (when topoloc.hpp is
-# installed) and C++ with OpenCV (when topoloc_opencv.hpp is installed and OpenCV is found);
+# against it with find_package(Topoloc): C (shared and static), C++ (when topoloc.hpp and the
+# topoloc/ headers it includes are installed) and C++ with OpenCV (when topoloc_opencv.hpp is
+# installed and OpenCV is found);
 # then cpp-examples (the SLAM adapters, their tests and demos), shared and static.
 # Also checks the installed layout, the SONAME, pkg-config, and that the installed tree still
 # works after being moved elsewhere.
@@ -75,6 +76,10 @@ for hpp in topoloc.hpp topoloc_opencv.hpp; do
         echo "note: include/$hpp does not exist in the source tree; not installed"
     fi
 done
+if [[ -d "$repo/include/topoloc" ]]; then
+    # The concept headers topoloc.hpp includes: each installed unchanged, and nothing else.
+    diff -r "$repo/include/topoloc" "$includedir/topoloc" || fail "include/topoloc/ not installed as it is"
+fi
 cmp -s "$repo/include/topoloc.h" "$includedir/topoloc.h" || fail "installed topoloc.h differs"
 # Relocatable: no absolute path of the prefix or the source/build trees in the package files.
 if grep -rlF -e "$prefix" -e "$repo" "$libdir/cmake/Topoloc" "$libdir/pkgconfig"; then
@@ -105,6 +110,15 @@ done
 cc -std=c11 -Wall -Wextra -Werror -pedantic $(pkg-config --cflags topoloc) "$here/main.c" \
     -o "$work/consumer_pkgconfig" $(pkg-config --libs topoloc) -Wl,-rpath,"$libdir"
 "$work/consumer_pkgconfig"
+# Each installed C++ header first in a translation unit, with nothing but pkg-config's flags:
+# topoloc.hpp and every header of topoloc/ alone (`#include <topoloc/map.hpp>`).
+for header in "$includedir/topoloc.hpp" "$includedir/topoloc/"*.hpp; do
+    [[ -f "$header" ]] || continue
+    printf '#include <%s>\nint main() { return 0; }\n' "${header#"$includedir/"}" >"$work/header_alone.cpp"
+    # shellcheck disable=SC2046
+    c++ -std=c++17 -Wall -Wextra -Werror -pedantic $(pkg-config --cflags topoloc) -fsyntax-only \
+        "$work/header_alone.cpp" || fail "${header#"$includedir/"} does not compile alone"
+done
 
 # Configures, builds and runs the consumer project against an installed prefix.
 build_consumer() {
