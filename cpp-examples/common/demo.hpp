@@ -38,8 +38,8 @@ struct Args {
     std::string out;       ///< `--out`: the PNG to write ("" = none).
     bool json = false;     ///< `--json`: one JSON line instead of the text report.
     std::size_t max_keyframes = 0; ///< `--max-keyframes`: the first N frames only (0 = all).
-    uint64_t exclude_recent =
-        30; ///< `--exclude-recent`: topoloc's default window (chosen on train worlds).
+    /// `--exclude-recent`: topoloc's default window (`topoloc_loop_options::exclude_recent_ids`).
+    uint64_t exclude_recent = topoloc::default_loop_options().exclude_recent_ids;
     int orb_features =
         500; ///< `--orb-features`: topoloc's own keypoint budget (verify::DEFAULT_KEYPOINTS).
     int fast_threshold = 20; ///< `--fast-threshold`: OpenCV's ORB default.

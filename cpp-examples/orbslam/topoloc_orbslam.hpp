@@ -29,13 +29,14 @@
 
 #include "topoloc_opencv.hpp"
 
+#include "../common/adapter_support.hpp"
+
 #include <opencv2/core.hpp>
 
 #include <array>
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
-#include <functional>
 #include <limits>
 #include <map>
 #include <mutex>
@@ -43,7 +44,6 @@
 #include <set>
 #include <stdexcept>
 #include <string>
-#include <thread>
 #include <tuple>
 #include <unordered_map>
 #include <utility>
@@ -70,7 +70,7 @@ struct Settings {
     /// Receives every error message (see the top of this header); empty = none. Called without
     /// the database's mutex held, possibly from the tracking and the loop closing thread at once:
     /// it must be thread-safe and must not throw (an exception it throws is swallowed).
-    std::function<void(const std::string &)> logger;
+    topoloc_adapter::Logger logger;
 };
 
 /// topoloc's verdict on one keyframe, with the keyframes resolved to the host's pointers.
@@ -256,6 +256,7 @@ public:
           options_(with_intrinsics(options, intrinsics)), describer_(map),
           detector_(new_detector()), settings_(std::move(settings))
     {
+        errors_.set_logger(std::move(settings_.logger));
     }
 
     KeyFrameDatabase(const KeyFrameDatabase &) = delete;
@@ -394,22 +395,21 @@ public:
     [[nodiscard]] std::string last_error() const
     {
         std::lock_guard<std::mutex> lock(mutex_);
-        const auto it = status_.find(std::this_thread::get_id());
-        return it == status_.end() ? std::string() : it->second;
+        return errors_.last_error();
     }
 
     /// How many calls failed since construction (all threads).
     [[nodiscard]] std::size_t error_count() const noexcept
     {
         std::lock_guard<std::mutex> lock(mutex_);
-        return errors_;
+        return errors_.error_count();
     }
 
     /// Replaces the logger of `Settings::logger` (empty = none).
-    void SetLogger(std::function<void(const std::string &)> logger) noexcept
+    void SetLogger(topoloc_adapter::Logger logger) noexcept
     {
         std::lock_guard<std::mutex> lock(mutex_);
-        settings_.logger.swap(logger);
+        errors_.set_logger(std::move(logger));
     }
 
 private:
@@ -445,18 +445,13 @@ private:
     template <typename Body> bool run(const char *call, Body &&body) noexcept
     {
         std::string error;
-        std::function<void(const std::string &)> logger;
+        topoloc_adapter::Logger logger;
         {
             std::lock_guard<std::mutex> lock(mutex_);
             error = attempt(call, body);
-            logger = record(error);
+            logger = errors_.record(error);
         }
-        if (!error.empty() && logger) {
-            try {
-                logger(error);
-            } catch (...) { // a logger must not throw; ignore it if it does
-            }
-        }
+        topoloc_adapter::log(logger, error);
         return error.empty();
     }
 
@@ -479,19 +474,6 @@ private:
             return std::string(call) + ": " + reason;
         } catch (...) {
             return std::string(); // out of memory: nothing better to report
-        }
-    }
-
-    /// Stores `error` as the calling thread's status; returns the logger to call (if any).
-    std::function<void(const std::string &)> record(const std::string &error) noexcept
-    {
-        try {
-            if (!error.empty())
-                ++errors_;
-            status_[std::this_thread::get_id()] = error;
-            return error.empty() ? nullptr : settings_.logger;
-        } catch (...) {
-            return nullptr;
         }
     }
 
@@ -634,10 +616,9 @@ private:
     {
         if (image.empty())
             fail(std::string(what) + " is empty (is the image member set?)");
-        if (image_size_ && image.size() != *image_size_)
-            fail(std::string(what) + " is " + std::to_string(image.cols) + "x" +
-                 std::to_string(image.rows) + ", the first keyframe's was " +
-                 std::to_string(image_size_->width) + "x" + std::to_string(image_size_->height));
+        const std::string size = image_size_.mismatch(image.size(), what);
+        if (!size.empty())
+            fail(size);
         return describer_.describe(topoloc::image_view(image));
     }
 
@@ -658,8 +639,7 @@ private:
         }
         last_id_ = id;
         last_timestamp_ = timestamp;
-        if (!image_size_)
-            image_size_ = size;
+        image_size_.remember(size);
         return by_id_.at(id);
     }
 
@@ -829,9 +809,8 @@ private:
     std::vector<Match> confirmed_;
     std::optional<uint64_t> last_id_;
     double last_timestamp_ = 0.0;
-    std::optional<cv::Size> image_size_;
-    std::unordered_map<std::thread::id, std::string> status_;
-    std::size_t errors_ = 0;
+    topoloc_adapter::ImageSize image_size_;
+    topoloc_adapter::ErrorReport errors_;
 };
 
 } // namespace topoloc_orbslam

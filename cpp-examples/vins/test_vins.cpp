@@ -2,7 +2,7 @@
 // loop_info VINS's findConnection would give (relative t, q, yaw in the body frames), VINS's
 // gates refuse what they would refuse, and bad keyframes (out of order, duplicate, NaN pose,
 // another image size, arrays of different lengths, use after clear) give a logged error, no
-// loop and an unchanged detector. Images: the textured places of tests/cpp/harness.hpp (their
+// loop and an unchanged detector, also when the logger throws. Images: the textured places of tests/cpp/harness.hpp (their
 // VLAD map is the describer); points: the two views of the same scene from harness.hpp.
 #include "topoloc_vins.hpp"
 
@@ -166,7 +166,7 @@ TEST(bad_keyframes_are_refused_and_change_nothing)
     refused(sheared, 4, "not a rotation");
     topoloc_vins::KeyFrame big = keyframe(4, 2, origin, true, false);
     cv::resize(place_image(2), big.image, cv::Size(2 * int(kImgW), 2 * int(kImgH)));
-    refused(big, 4, "image, the first keyframe's was");
+    refused(big, 4, "keyframe 4's image is 320x240, the first keyframe's was 160x120");
     topoloc_vins::KeyFrame lengths = keyframe(4, 2, origin, true, false);
     lengths.point_2d_uv.pop_back();
     refused(lengths, 4, "differ in length");
@@ -179,6 +179,12 @@ TEST(bad_keyframes_are_refused_and_change_nothing)
     topoloc_vins::KeyFrame empty = keyframe(4, 2, origin, false, false);
     empty.image = cv::Mat();
     refused(empty, 4, "8-bit grey or BGR");
+    // A logger that throws is contained: the call still returns its -1 and records its error.
+    detector.set_logger([](const std::string &) { throw std::runtime_error("logger"); });
+    CHECK_EQ(detector.detectLoop(keyframe(3, 2, origin, true, false), 3), -1);
+    CHECK(detector.last_error().find("duplicate") != std::string::npos);
+    CHECK_EQ(detector.size(), std::size_t{1});
+    detector.set_logger([&log](const std::string &m) { log.push_back(m); });
     // After all that, keyframe 4 is taken as if nothing had happened.
     CHECK_EQ(detector.detectLoop(keyframe(4, 2, origin, true, false), 4), -1);
     CHECK(detector.last_error().empty());

@@ -20,14 +20,16 @@
 
 #include "topoloc.hpp"
 
+#include "../common/adapter_support.hpp"
+
 #include <array>
 #include <cmath>
 #include <cstdint>
-#include <functional>
 #include <limits>
 #include <map>
 #include <optional>
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace topoloc_vins {
@@ -130,8 +132,9 @@ inline double normalize_deg(double angle)
 /// Errors: VINS does not expect exceptions from its loop detector. A keyframe that cannot be
 /// used (index not increasing, a duplicate, a NaN pose, an image of another size, points and
 /// descriptors of different lengths, an image without content) makes `detectLoop` return -1,
-/// adds nothing, records `last_error()` and calls the logger (if set); no hint is ever built
-/// from it. Construction throws `topoloc::Error` (missing model, map without describer).
+/// adds nothing, records `last_error()` and calls the logger (if set; an exception it throws is
+/// swallowed); no hint is ever built from it. Construction throws `topoloc::Error` (missing
+/// model, map without describer).
 /// Thread safety: one thread at a time (VINS calls it from its pose-graph thread).
 class LoopDetector {
 public:
@@ -155,13 +158,10 @@ public:
 
     /// Sets the function that receives every error message and every refused loop (e.g.
     /// ROS_WARN or spdlog).
-    void set_logger(std::function<void(const std::string &)> logger)
-    {
-        logger_ = std::move(logger);
-    }
+    void set_logger(topoloc_adapter::Logger logger) { errors_.set_logger(std::move(logger)); }
 
     /// The last error message ("" when the last call succeeded).
-    const std::string &last_error() const noexcept { return last_error_; }
+    std::string last_error() const { return errors_.last_error(); }
 
     /// Keyframes added since construction or the last `clear`.
     std::size_t size() const noexcept { return poses_.size(); }
@@ -173,9 +173,9 @@ public:
         poses_.clear();
         loops_.clear();
         confirmed_.clear();
-        image_size_ = cv::Size();
+        image_size_.reset();
         last_index_.reset();
-        last_error_.clear();
+        errors_.record("");
     }
 
     /// VINS's `detectLoop(keyframe, frame_index)`: adds `keyframe` (whose `index` must equal
@@ -184,7 +184,7 @@ public:
     /// `LoopInfo` is then available from `findConnection`.
     int detectLoop(const KeyFrame &keyframe, int frame_index)
     {
-        last_error_.clear();
+        errors_.record("");
         confirmed_.clear();
         if (keyframe.index != frame_index) {
             return fail("keyframe.index " + std::to_string(keyframe.index) +
@@ -232,17 +232,15 @@ private:
     /// Records and logs an error of the current call; returns detectLoop's "no loop".
     int fail(const std::string &message)
     {
-        last_error_ = "topoloc_vins: " + message;
-        if (logger_)
-            logger_(last_error_);
+        const std::string error = "topoloc_vins: " + message;
+        topoloc_adapter::log(errors_.record(error), error);
         return -1;
     }
 
     /// Logs a refused loop (not an error of the call).
     void note(const std::string &message) const
     {
-        if (logger_)
-            logger_("topoloc_vins: " + message);
+        topoloc_adapter::log(errors_.logger(), "topoloc_vins: " + message);
     }
 
     static bool finite(const Eigen::MatrixXd &m) { return m.allFinite(); }
@@ -269,10 +267,9 @@ private:
             (keyframe.image.channels() != 1 && keyframe.image.channels() != 3)) {
             return name + " needs an 8-bit grey or BGR image";
         }
-        if (!image_size_.empty() && keyframe.image.size() != image_size_) {
-            return name + " has a " + std::to_string(keyframe.image.cols) + "x" +
-                   std::to_string(keyframe.image.rows) + " image, the first keyframe's was " +
-                   std::to_string(image_size_.width) + "x" + std::to_string(image_size_.height);
+        const std::string size = image_size_.mismatch(keyframe.image.size(), name + "'s image");
+        if (!size.empty()) {
+            return size;
         }
         if (keyframe.point_3d.size() != keyframe.point_2d_uv.size() ||
             keyframe.point_3d.size() != keyframe.window_descriptors.size()) {
@@ -325,8 +322,7 @@ private:
             add_points(keyframe, (world_T_body * body_T_camera_).inverse(), kf);
         }
         topoloc::LoopHint hint = detector_.add(kf);
-        if (image_size_.empty())
-            image_size_ = keyframe.image.size();
+        image_size_.remember(keyframe.image.size());
         return hint;
     }
 
@@ -433,10 +429,9 @@ private:
     std::map<int, Isometry> poses_;
     std::map<int, LoopInfo> loops_;
     std::vector<LoopInfo> confirmed_;
-    cv::Size image_size_;
+    topoloc_adapter::ImageSize image_size_;
     std::optional<int> last_index_;
-    std::string last_error_;
-    std::function<void(const std::string &)> logger_;
+    topoloc_adapter::ErrorReport errors_;
 };
 
 } // namespace topoloc_vins
