@@ -81,7 +81,9 @@ def cargo_version(cargo_toml: Path = CARGO_TOML) -> str:
             line = re.search(r'^version\s*=\s*"([^"]+)"\s*$', table.group(1), re.M)
             version = line.group(1) if line else None
     if not version:
-        raise CargoManifestError(f"{cargo_toml} has no [package] version = \"...\" (a literal string)")
+        raise CargoManifestError(
+            f'{cargo_toml} has no [package] version = "..." (a literal string)'
+        )
     return version
 
 
@@ -115,7 +117,15 @@ def _run_cargo(cmd: List[str], env: Dict[str, str], capture: bool) -> subprocess
 
 def target_directory(cargo: str, env: Dict[str, str]) -> Path:
     """Cargo's target directory for the workspace (``cargo metadata``)."""
-    cmd = [cargo, "metadata", "--format-version", "1", "--no-deps", "--manifest-path", str(CARGO_TOML)]
+    cmd = [
+        cargo,
+        "metadata",
+        "--format-version",
+        "1",
+        "--no-deps",
+        "--manifest-path",
+        str(CARGO_TOML),
+    ]
     proc = _run_cargo(cmd, env, capture=True)
     if proc.returncode != 0:
         raise CargoBuildError(f"`{' '.join(cmd)}` failed (exit {proc.returncode}):\n{proc.stderr}")
@@ -132,7 +142,9 @@ def build_library(environ: Optional[Mapping[str, str]] = None) -> Path:
     print(f"topoloc: {' '.join(cmd)}", file=sys.stderr, flush=True)
     proc = _run_cargo(cmd, env, capture=False)
     if proc.returncode != 0:
-        raise CargoBuildError(f"`{' '.join(cmd)}` failed with exit code {proc.returncode} (its output is above)")
+        raise CargoBuildError(
+            f"`{' '.join(cmd)}` failed with exit code {proc.returncode} (its output is above)"
+        )
     built = target_directory(cargo, env) / "release" / library_file_name()
     if not built.is_file():
         raise CargoBuildError(f"`{' '.join(cmd)}` succeeded but {built} does not exist")
@@ -141,8 +153,8 @@ def build_library(environ: Optional[Mapping[str, str]] = None) -> Path:
 
 def _setup() -> None:
     from setuptools import setup
-    from setuptools.command.build_py import build_py
     from setuptools.command.bdist_wheel import bdist_wheel
+    from setuptools.command.build_py import build_py
     from setuptools.dist import Distribution
 
     class BuildPyWithLibrary(build_py):
@@ -163,7 +175,7 @@ def _setup() -> None:
 
         def get_outputs(self, include_bytecode: bool = True) -> List[str]:
             outputs = super().get_outputs(include_bytecode)
-            return outputs + [str(Path(self.build_lib) / "topoloc" / library_file_name())]
+            return [*outputs, str(Path(self.build_lib) / "topoloc" / library_file_name())]
 
     class PlatformWheel(bdist_wheel):
         """Tag ``py3-none-<platform>``: native content, no dependence on the CPython ABI."""

@@ -170,7 +170,9 @@ def read_tum(path: Path) -> np.ndarray:
         except ValueError:
             values = []
         if len(values) != 8 or not all(math.isfinite(v) for v in values):
-            raise DemoError(f"{path}:{number}: expected 8 numbers 't tx ty tz qx qy qz qw', got {line!r}")
+            raise DemoError(
+                f"{path}:{number}: expected 8 numbers 't tx ty tz qx qy qz qw', got {line!r}"
+            )
         if abs(np.linalg.norm(values[4:]) - 1.0) > 1e-3:
             raise DemoError(f"{path}:{number}: quaternion is not of unit norm")
         rows.append(values)
@@ -184,11 +186,17 @@ def read_intrinsics(path: Path) -> Intrinsics:
     try:
         data = json.loads(require_file(path).read_text())
         intrinsics = Intrinsics(
-            int(data["width"]), int(data["height"]),
-            float(data["fx"]), float(data["fy"]), float(data["cx"]), float(data["cy"]),
+            int(data["width"]),
+            int(data["height"]),
+            float(data["fx"]),
+            float(data["fy"]),
+            float(data["cx"]),
+            float(data["cy"]),
         )
     except (ValueError, KeyError, TypeError) as e:
-        raise DemoError(f"{path}: not an intrinsics file with width height fx fy cx cy ({e})") from e
+        raise DemoError(
+            f"{path}: not an intrinsics file with width height fx fy cx cy ({e})"
+        ) from e
     if min(intrinsics.fx, intrinsics.fy, intrinsics.width, intrinsics.height) <= 0:
         raise DemoError(f"{path}: focal lengths and image size must be positive")
     return intrinsics
@@ -220,8 +228,10 @@ def read_frame(sequence: Path, name: str, intrinsics: Intrinsics) -> Tuple[np.nd
     path = sequence / "images" / name
     image = read_image(path, cv2.IMREAD_COLOR, "colour")
     if image.shape[:2] != (intrinsics.height, intrinsics.width):
-        raise DemoError(f"{path}: {image.shape[1]}x{image.shape[0]}, but intrinsics.json says "
-                        f"{intrinsics.width}x{intrinsics.height}")
+        raise DemoError(
+            f"{path}: {image.shape[1]}x{image.shape[0]}, but intrinsics.json says "
+            f"{intrinsics.width}x{intrinsics.height}"
+        )
     return image, read_depth(sequence / "depth" / name, intrinsics)
 
 
@@ -230,7 +240,9 @@ def sequence_frames(sequence: Path, count: int) -> List[str]:
     depth image."""
     images = sorted(p.name for p in (sequence / "images").glob("*.png"))
     if len(images) < count:
-        raise DemoError(f"{sequence / 'images'}: {len(images)} PNG images for {count} odometry poses")
+        raise DemoError(
+            f"{sequence / 'images'}: {len(images)} PNG images for {count} odometry poses"
+        )
     for name in images[:count]:
         require_file(sequence / "depth" / name)
     return images[:count]
@@ -274,11 +286,11 @@ def relative_error(estimate: np.ndarray, reference: np.ndarray) -> Tuple[float, 
 
 
 def keyframe_features(
-    image: np.ndarray, depth: np.ndarray, intrinsics: Intrinsics, orb: "cv2.ORB"
+    image: np.ndarray, depth: np.ndarray, intrinsics: Intrinsics, orb: cv2.ORB
 ) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
     """ORB ``(keypoints (N, 2), descriptors (N, 32) uint8, camera points (N, 3))`` of a
-    BGR image (its grey levels equalised: ``CLAHE_*``), each keypoint's scene point back-projected from ``depth`` (NaN rows where the
-    depth image has none)."""
+    BGR image (its grey levels equalised: ``CLAHE_*``), each keypoint's scene point
+    back-projected from ``depth`` (NaN rows where the depth image has none)."""
     grey = cv2.createCLAHE(CLAHE_CLIP, CLAHE_TILES).apply(cv2.cvtColor(image, cv2.COLOR_BGR2GRAY))
     found, descriptors = orb.detectAndCompute(grey, None)
     if descriptors is None or not found:
@@ -288,7 +300,11 @@ def keyframe_features(
     rows = np.clip(np.rint(uv[:, 1]).astype(int), 0, intrinsics.height - 1)
     z = depth[rows, cols]
     points = np.column_stack(
-        [(uv[:, 0] - intrinsics.cx) * z / intrinsics.fx, (uv[:, 1] - intrinsics.cy) * z / intrinsics.fy, z]
+        [
+            (uv[:, 0] - intrinsics.cx) * z / intrinsics.fx,
+            (uv[:, 1] - intrinsics.cy) * z / intrinsics.fy,
+            z,
+        ]
     )
     return uv, descriptors, points
 
@@ -305,7 +321,9 @@ def loop_from_hint(hint: topoloc.LoopHint) -> Loop:
     return Loop(hint.matched_id, hint.query_id, old_T_cur, covariance, hint.inliers)
 
 
-def accepted_hints(detector: topoloc.LoopDetector, hint: topoloc.LoopHint) -> List[topoloc.LoopHint]:
+def accepted_hints(
+    detector: topoloc.LoopDetector, hint: topoloc.LoopHint
+) -> List[topoloc.LoopHint]:
     """The hints accepted by the last ``add``: its own and the earlier keyframes' it
     confirmed."""
     hints = [hint] if hint.accepted else []
@@ -322,19 +340,31 @@ def run_front_end(
     hints: Dict[int, topoloc.LoopHint] = {}
     detector_seconds = 0.0
     start = time.perf_counter()
-    with topoloc.Map.load(require_file(describer_map)) as m, topoloc.Describer(m) as describer, \
-            topoloc.LoopDetector(
-                m.descriptor_kind, m.descriptor_model, m.dim,
-                fx=intrinsics.fx, fy=intrinsics.fy, cx=intrinsics.cx, cy=intrinsics.cy,
-            ) as detector:
+    with topoloc.Map.load(require_file(describer_map)) as m:  # neither keeps the map
+        describer = topoloc.Describer(m)
+        detector = topoloc.LoopDetector(
+            m.descriptor_kind,
+            m.descriptor_model,
+            m.dim,
+            fx=intrinsics.fx,
+            fy=intrinsics.fy,
+            cx=intrinsics.cx,
+            cy=intrinsics.cy,
+        )
+    with describer, detector:
         for kid, (name, row) in enumerate(zip(frames, odometry)):
             image, depth = read_frame(sequence, name, intrinsics)
             keypoints, descriptors, points = keyframe_features(image, depth, intrinsics, orb)
             t0 = time.perf_counter()
             hint = detector.add(
-                kid, row[0], describer.describe(image, pixel_format="bgr"),
-                keypoints=keypoints, keypoint_descriptors=descriptors, camera_points=points,
-                world_T_body=tum_matrix(row), body_T_camera=BODY_T_CAMERA,
+                kid,
+                row[0],
+                describer.describe(image, pixel_format="bgr"),
+                keypoints=keypoints,
+                keypoint_descriptors=descriptors,
+                camera_points=points,
+                world_T_body=tum_matrix(row),
+                body_T_camera=BODY_T_CAMERA,
             )
             for h in accepted_hints(detector, hint):
                 hints[h.query_id] = h
@@ -372,7 +402,10 @@ def loop_gaussian(loop: Loop) -> gtsam.noiseModel.Gaussian:
         raise DemoError(f"loop {loop.old}-{loop.cur}: covariance is not finite")
     values, vectors = np.linalg.eigh(covariance)
     if values.min() <= 0.0:
-        raise DemoError(f"loop {loop.old}-{loop.cur}: covariance is not positive definite (eigenvalues {values})")
+        raise DemoError(
+            f"loop {loop.old}-{loop.cur}: covariance is not positive definite "
+            f"(eigenvalues {values})"
+        )
     floored = (vectors * np.maximum(values, MIN_LOOP_VARIANCE)) @ vectors.T
     return gtsam.noiseModel.Gaussian.Covariance(floored)
 
@@ -389,14 +422,22 @@ def loop_factor(loop: Loop, robust: bool) -> gtsam.BetweenFactorPose3:
     """The loop's factor, with a Cauchy kernel when ``robust``."""
     noise = loop_gaussian(loop)
     if robust:
-        noise = gtsam.noiseModel.Robust.Create(gtsam.noiseModel.mEstimator.Cauchy.Create(CAUCHY_K), noise)
+        noise = gtsam.noiseModel.Robust.Create(
+            gtsam.noiseModel.mEstimator.Cauchy.Create(CAUCHY_K), noise
+        )
     return gtsam.BetweenFactorPose3(loop.old, loop.cur, gtsam.Pose3(loop.old_T_cur), noise)
 
 
-def odometry_graph(timestamps: np.ndarray, odometry: Sequence[np.ndarray]) -> gtsam.NonlinearFactorGraph:
+def odometry_graph(
+    timestamps: np.ndarray, odometry: Sequence[np.ndarray]
+) -> gtsam.NonlinearFactorGraph:
     """The prior on keyframe 0 and the odometry factors between consecutive keyframes."""
     graph = gtsam.NonlinearFactorGraph()
-    graph.add(gtsam.PriorFactorPose3(0, gtsam.Pose3(odometry[0]), gtsam.noiseModel.Isotropic.Sigma(6, 1e-6)))
+    graph.add(
+        gtsam.PriorFactorPose3(
+            0, gtsam.Pose3(odometry[0]), gtsam.noiseModel.Isotropic.Sigma(6, 1e-6)
+        )
+    )
     for k in range(1, len(odometry)):
         step = np.linalg.inv(odometry[k - 1]) @ odometry[k]
         noise = odometry_noise(step, float(timestamps[k] - timestamps[k - 1]))
@@ -404,12 +445,16 @@ def odometry_graph(timestamps: np.ndarray, odometry: Sequence[np.ndarray]) -> gt
     return graph
 
 
-def optimise(base: gtsam.NonlinearFactorGraph, loops: Sequence[Loop], initial: gtsam.Values) -> gtsam.Values:
+def optimise(
+    base: gtsam.NonlinearFactorGraph, loops: Sequence[Loop], initial: gtsam.Values
+) -> gtsam.Values:
     """Levenberg-Marquardt on the odometry graph plus the robust loop factors."""
     graph = gtsam.NonlinearFactorGraph(base)
     for loop in loops:
         graph.add(loop_factor(loop, robust=True))
-    return gtsam.LevenbergMarquardtOptimizer(graph, initial, gtsam.LevenbergMarquardtParams()).optimize()
+    return gtsam.LevenbergMarquardtOptimizer(
+        graph, initial, gtsam.LevenbergMarquardtParams()
+    ).optimize()
 
 
 def mahalanobis_squared(loop: Loop, values: gtsam.Values) -> float:
@@ -417,7 +462,9 @@ def mahalanobis_squared(loop: Loop, values: gtsam.Values) -> float:
     return 2.0 * loop_factor(loop, robust=False).error(values)
 
 
-def solve(timestamps: np.ndarray, odometry: Sequence[np.ndarray], loops: Sequence[Loop]) -> Solution:
+def solve(
+    timestamps: np.ndarray, odometry: Sequence[np.ndarray], loops: Sequence[Loop]
+) -> Solution:
     """Optimises the pose graph with the precise loops (:func:`is_precise`), then drops the
     loops inconsistent with the solution (squared whitened error above ``CHI2_6DOF_999``) and
     re-optimises, until every kept loop is consistent."""
@@ -451,7 +498,9 @@ def solve(timestamps: np.ndarray, odometry: Sequence[np.ndarray], loops: Sequenc
 def is_false(loop: Loop, truth: Sequence[np.ndarray]) -> bool:
     """Whether the loop's relative pose is off the ground truth's by more than
     ``FALSE_LOOP_DEG`` or ``FALSE_LOOP_M``."""
-    degrees, metres = relative_error(loop.old_T_cur, np.linalg.inv(truth[loop.old]) @ truth[loop.cur])
+    degrees, metres = relative_error(
+        loop.old_T_cur, np.linalg.inv(truth[loop.old]) @ truth[loop.cur]
+    )
     return degrees > FALSE_LOOP_DEG or metres > FALSE_LOOP_M
 
 
@@ -466,8 +515,14 @@ def aligned_xy(report: topoloc.TrajectoryReport, rows: np.ndarray) -> np.ndarray
     return (report.scale * rows[:, 1:4] @ r.T + t)[:, :2]
 
 
-def plot(path: Path, truth: np.ndarray, raw: np.ndarray, corrected: np.ndarray,
-         reports: Tuple[topoloc.TrajectoryReport, topoloc.TrajectoryReport], solution: Solution) -> None:
+def plot(
+    path: Path,
+    truth: np.ndarray,
+    raw: np.ndarray,
+    corrected: np.ndarray,
+    reports: Tuple[topoloc.TrajectoryReport, topoloc.TrajectoryReport],
+    solution: Solution,
+) -> None:
     """Top view of ground truth, raw odometry and corrected trajectory (both Sim3-aligned to
     the ground truth), with the loops used (thin green), dropped (red) and left out (grey)."""
     import matplotlib
@@ -488,18 +543,26 @@ def plot(path: Path, truth: np.ndarray, raw: np.ndarray, corrected: np.ndarray,
     for loops, colour, label in loop_sets:
         for i, loop in enumerate(loops):
             ends = corrected_xy[[loop.old, loop.cur]]
-            ax.plot(ends[:, 0], ends[:, 1], "-", color=colour, lw=0.4, label=label if i == 0 else None)
+            ax.plot(
+                ends[:, 0], ends[:, 1], "-", color=colour, lw=0.4, label=label if i == 0 else None
+            )
     ax.set_aspect("equal")
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
-    ax.set_title(f"ATE RMSE: raw {reports[0].ate_m.rmse:.2f} m, corrected {reports[1].ate_m.rmse:.2f} m")
+    ax.set_title(
+        f"ATE RMSE: raw {reports[0].ate_m.rmse:.2f} m, corrected {reports[1].ate_m.rmse:.2f} m"
+    )
     ax.legend(loc="best")
     fig.savefig(path, dpi=120, bbox_inches="tight")
     plt.close(fig)
 
 
-def summary(front: FrontEnd, solution: Solution, truth: Sequence[np.ndarray],
-            reports: Tuple[topoloc.TrajectoryReport, topoloc.TrajectoryReport]) -> Dict[str, float]:
+def summary(
+    front: FrontEnd,
+    solution: Solution,
+    truth: Sequence[np.ndarray],
+    reports: Tuple[topoloc.TrajectoryReport, topoloc.TrajectoryReport],
+) -> Dict[str, float]:
     """The figures of the run (the keys of ``--json``)."""
     raw, corrected = reports[0].ate_m.rmse, reports[1].ate_m.rmse
     return {
@@ -548,8 +611,12 @@ def print_text(figures: Dict[str, float]) -> None:
 def parse_args(argv: Optional[Sequence[str]]) -> argparse.Namespace:
     """Command-line options."""
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--sequence", type=Path, required=True, help="a `topoloc simulate --depth` traj-00i folder")
-    p.add_argument("--describer", type=Path, required=True, help="a map built from images of another world")
+    p.add_argument(
+        "--sequence", type=Path, required=True, help="a `topoloc simulate --depth` traj-00i folder"
+    )
+    p.add_argument(
+        "--describer", type=Path, required=True, help="a map built from images of another world"
+    )
     p.add_argument("--out", type=Path, help="write a top-view PNG here")
     p.add_argument("--json", action="store_true", help="print one JSON object instead of text")
     p.add_argument("--max-keyframes", type=int, help="use only the first N frames")
@@ -564,7 +631,9 @@ def run(args: argparse.Namespace) -> Dict[str, float]:
         raise DemoError("--max-keyframes must be at least 2")
     odometry_rows = read_tum(args.sequence / "odometry.txt")[: args.max_keyframes]
     truth_rows = read_tum(args.sequence / "groundtruth.txt")
-    if len(truth_rows) < len(odometry_rows) or not np.allclose(truth_rows[: len(odometry_rows), 0], odometry_rows[:, 0]):
+    if len(truth_rows) < len(odometry_rows) or not np.allclose(
+        truth_rows[: len(odometry_rows), 0], odometry_rows[:, 0]
+    ):
         raise DemoError(f"{args.sequence}: groundtruth.txt and odometry.txt timestamps differ")
     truth_rows = truth_rows[: len(odometry_rows)]
     intrinsics = read_intrinsics(args.sequence / "intrinsics.json")

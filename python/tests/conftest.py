@@ -27,7 +27,8 @@ PACKAGE_PARENT = Path(topoloc.__file__).resolve().parents[1]
 if INSTALLED and PACKAGE_PARENT == PYTHON_DIR:
     raise ImportError(
         f"TOPOLOC_TEST_INSTALLED is set but topoloc was imported from the source tree "
-        f"({topoloc.__file__}): run the tests from a directory where {PYTHON_DIR} is not on sys.path"
+        f"({topoloc.__file__}): run the tests from a directory where {PYTHON_DIR} is not on "
+        "sys.path"
     )
 
 
@@ -40,7 +41,9 @@ def skip_or_fail(reason: str) -> NoReturn:
     """Skips the test, or fails it under CI, where what it needs must be installed
     (``scripts/setup-models.sh``)."""
     if IN_CI:
-        pytest.fail(f"{reason} (CI=true: scripts/setup-models.sh must have installed it)", pytrace=False)
+        pytest.fail(
+            f"{reason} (CI=true: scripts/setup-models.sh must have installed it)", pytrace=False
+        )
     pytest.skip(reason)
 
 
@@ -104,7 +107,9 @@ class Corridor:
         return view // self.views_per_place, view, float(sims[view])
 
 
-def build_corridor(places: int = 12, views_per_place: int = 2, dim: int = 64, seed: int = 7) -> Corridor:
+def build_corridor(
+    places: int = 12, views_per_place: int = 2, dim: int = 64, seed: int = 7
+) -> Corridor:
     rng = np.random.default_rng(seed)
     base = unit(rng.standard_normal((places, dim)))
     views = []

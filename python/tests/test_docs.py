@@ -5,7 +5,6 @@ from __future__ import annotations
 import inspect
 import re
 
-
 import topoloc
 
 from conftest import PYTHON_DIR
@@ -22,7 +21,11 @@ def test_every_public_name_has_a_docstring():
                 for member_name, member in vars(obj).items():
                     if member_name.startswith("_"):
                         continue
-                    target = member.__func__ if isinstance(member, (classmethod, staticmethod)) else member
+                    target = (
+                        member.__func__
+                        if isinstance(member, (classmethod, staticmethod))
+                        else member
+                    )
                     if callable(target) or isinstance(target, property):
                         if not (target.__doc__ or "").strip():
                             missing.append(f"{name}.{member_name}")

@@ -19,13 +19,13 @@ import numpy as np
 import pytest
 
 import topoloc
-from conftest import require_models, skip_or_fail
 from topoloc import _convert, _lib
+
+from conftest import require_models, skip_or_fail
 
 W, H = 320, 240
 PLACES = 12
 ONNX_MODEL = Path.home() / ".cache" / "topoloc" / "models" / "mobilenetv2-mlf.onnx"
-
 
 
 def place_image(seed: int, w: int = W, h: int = H) -> np.ndarray:
@@ -43,7 +43,9 @@ def place_image(seed: int, w: int = W, h: int = H) -> np.ndarray:
 def revisit(img: np.ndarray, seed: int) -> np.ndarray:
     """The same place seen again: shifted 3 pixels left, 10% brighter plus 10, with noise."""
     rng = np.random.default_rng(seed)
-    shifted = np.concatenate([img[:, 3:], np.repeat(img[:, -1:], 3, axis=1)], axis=1).astype(np.int32)
+    shifted = np.concatenate([img[:, 3:], np.repeat(img[:, -1:], 3, axis=1)], axis=1).astype(
+        np.int32
+    )
     noisy = shifted * 11 // 10 + 10 + rng.integers(-8, 8, size=img.shape)
     return np.clip(noisy, 0, 255).astype(np.uint8)
 
@@ -58,7 +60,9 @@ def write_pgm(path: Path, img: np.ndarray) -> None:
 
 
 def write_ppm(path: Path, rgb: np.ndarray) -> None:
-    path.write_bytes(b"P6\n%d %d\n255\n" % (rgb.shape[1], rgb.shape[0]) + np.ascontiguousarray(rgb).tobytes())
+    path.write_bytes(
+        b"P6\n%d %d\n255\n" % (rgb.shape[1], rgb.shape[0]) + np.ascontiguousarray(rgb).tobytes()
+    )
 
 
 @pytest.fixture(scope="module")
@@ -107,7 +111,10 @@ def test_revisits_are_localized_single_frame(vlad_map, images):
 
 def test_revisits_are_followed_in_filter_mode(vlad_map, images):
     with topoloc.Localizer(vlad_map) as loc:
-        results = [loc.process(image=revisit(img, 200 + p), timestamp=0.1 * p) for p, img in enumerate(images)]
+        results = [
+            loc.process(image=revisit(img, 200 + p), timestamp=0.1 * p)
+            for p, img in enumerate(images)
+        ]
     assert [r.place for r in results] == list(range(PLACES))
     assert [r.frame_index for r in results] == list(range(PLACES))
 
@@ -127,20 +134,33 @@ def test_colour_formats(vlad_map, images):
         # Equal channels: every colour layout describes like the grey image.
         rgb = np.repeat(grey[:, :, None], 3, axis=2)
         rgba = np.concatenate([rgb, np.full_like(grey[:, :, None], 255)], axis=2)
-        for img, fmt in [(grey[:, :, None], None), (rgb, None), (rgb, "rgb"), (rgb, "bgr"),
-                         (rgba, None), (rgba, "rgba"), (rgba, "bgra")]:
+        for img, fmt in [
+            (grey[:, :, None], None),
+            (rgb, None),
+            (rgb, "rgb"),
+            (rgb, "bgr"),
+            (rgba, None),
+            (rgba, "rgba"),
+            (rgba, "bgra"),
+        ]:
             r = loc.process(image=img, pixel_format=fmt, timestamp=0.0)
-            assert r.place == 5 and r.similarity == pytest.approx(expected.similarity, abs=1e-3), fmt
+            assert r.place == 5 and r.similarity == pytest.approx(expected.similarity, abs=1e-3), (
+                fmt
+            )
         # Distinct channels: the same pixels in RGB and in BGR order give the same answer.
         c = colour(images[3], 3)
         a = loc.process(image=c, timestamp=0.0)
-        assert answer(loc.process(image=c[:, :, ::-1], pixel_format="bgr", timestamp=0.0)) == answer(a)
+        assert answer(
+            loc.process(image=c[:, :, ::-1], pixel_format="bgr", timestamp=0.0)
+        ) == answer(a)
         bgra = np.concatenate([c[:, :, ::-1], np.zeros_like(c[:, :, :1])], axis=2)
         assert answer(loc.process(image=bgra, pixel_format="BGRA", timestamp=0.0)) == answer(a)
 
 
 def test_views_per_place_groups_consecutive_images(images):
-    m = topoloc.Map.build_from_images(images, backend="vlad-orb", views_per_place=2, dim=8, threads=2)
+    m = topoloc.Map.build_from_images(
+        images, backend="vlad-orb", views_per_place=2, dim=8, threads=2
+    )
     with m:
         assert (m.place_count, m.view_count, m.dim) == (PLACES // 2, PLACES, 8)
         assert list(m.place_views(2)) == [4, 5]
@@ -148,7 +168,9 @@ def test_views_per_place_groups_consecutive_images(images):
 
 def test_pca_rows_are_i8_by_default_and_f32_on_request(vlad_map, images, tmp_path):
     assert "/i8 fit=" in vlad_map.descriptor_model
-    with topoloc.Map.build_from_images(images, backend="vlad-orb", threads=2, pca_precision="f32") as m:
+    with topoloc.Map.build_from_images(
+        images, backend="vlad-orb", threads=2, pca_precision="f32"
+    ) as m:
         assert "/i8" not in m.descriptor_model
         exact, small = tmp_path / "f32.topoloc", tmp_path / "i8.topoloc"
         m.save(exact)
@@ -221,7 +243,9 @@ def test_exception_in_progress_cancels_and_is_reraised(images, exc_type, capfd):
         topoloc.Map.build_from_images(images[:6], backend="vlad-orb", progress=progress)
     assert e.value is raised
     assert len(calls) == 1  # the build stopped at the first report
-    assert "in progress" in "".join(traceback.format_tb(e.value.__traceback__))  # the callback's frame
+    assert "in progress" in "".join(
+        traceback.format_tb(e.value.__traceback__)
+    )  # the callback's frame
     assert "Exception ignored" not in capfd.readouterr().err  # nothing swallowed by ctypes
 
 
@@ -235,7 +259,9 @@ def test_exception_in_progress_of_a_file_build(tmp_path, images):
     with pytest.raises(ZeroDivisionError, match="from the callback"):
         topoloc.Map.build_from_image_files(tmp_path, backend="vlad-orb", progress=progress)
     # The next build is unaffected.
-    with topoloc.Map.build_from_image_files(tmp_path, backend="vlad-orb", progress=lambda *a: True) as m:
+    with topoloc.Map.build_from_image_files(
+        tmp_path, backend="vlad-orb", progress=lambda *a: True
+    ) as m:
         assert m.place_count == 3
 
 
@@ -255,7 +281,10 @@ def test_save_and_load_keep_the_describer(vlad_map, images, tmp_path):
     queries = [revisit(img, 300 + p) for p, img in enumerate(images)]
     with topoloc.Localizer(vlad_map, mode="single_frame") as loc:
         before = [loc.process(image=q, timestamp=0.0) for q in queries]
-    for loaded in (topoloc.Map.load(path, expected_kind="vlad-orb"), topoloc.Map.from_bytes(path.read_bytes())):
+    for loaded in (
+        topoloc.Map.load(path, expected_kind="vlad-orb"),
+        topoloc.Map.from_bytes(path.read_bytes()),
+    ):
         with loaded:
             assert loaded.descriptor_model == vlad_map.descriptor_model
             np.testing.assert_array_equal(loaded.view_descriptors(), vlad_map.view_descriptors())
@@ -296,8 +325,9 @@ def test_colour_files_and_mixed_sizes(tmp_path, images):
     write_ppm(tmp_path / "a.ppm", colour(images[0], 0))
     write_pgm(tmp_path / "b.pgm", place_image(5, w=200, h=150))
     write_ppm(tmp_path / "c.ppm", colour(images[2], 2))
-    with topoloc.Map.build_from_image_files(tmp_path, backend="vlad-orb") as m, \
-            topoloc.Localizer(m, mode="single_frame") as loc:
+    with topoloc.Map.build_from_image_files(tmp_path, backend="vlad-orb") as m, topoloc.Localizer(
+        m, mode="single_frame"
+    ) as loc:
         assert m.place_count == 3
         # A PPM is RGB: the same pixels from memory find their file's place.
         assert loc.process(image=colour(images[2], 2), timestamp=0.0).place == 2
@@ -305,10 +335,12 @@ def test_colour_files_and_mixed_sizes(tmp_path, images):
 
 def test_file_build_errors(tmp_path, images):
     write_pgm(tmp_path / "a.pgm", images[0])
-    with pytest.raises(topoloc.InvalidImageError, match="missing.png"):
-        topoloc.Map.build_from_image_files([tmp_path / "a.pgm", tmp_path / "missing.png"], backend="vlad-orb")
+    with pytest.raises(topoloc.InvalidImageError, match=r"missing\.png"):
+        topoloc.Map.build_from_image_files(
+            [tmp_path / "a.pgm", tmp_path / "missing.png"], backend="vlad-orb"
+        )
     (tmp_path / "broken.png").write_bytes(b"not a png")
-    with pytest.raises(topoloc.InvalidImageError, match="broken.png"):
+    with pytest.raises(topoloc.InvalidImageError, match=r"broken\.png"):
         topoloc.Map.build_from_image_files(tmp_path, backend="vlad-orb")
     empty = tmp_path / "empty"
     empty.mkdir()
@@ -333,9 +365,13 @@ def test_build_argument_errors(images):
     with pytest.raises(topoloc.InvalidImageError, match=r"images\[1\]"):
         topoloc.Map.build_from_images([images[0], images[1][:, :, None, None]], backend="vlad-orb")
     with pytest.raises(TypeError, match=r"images\[2\].*float32"):
-        topoloc.Map.build_from_images([images[0], images[1], images[2].astype(np.float32)], backend="vlad-orb")
+        topoloc.Map.build_from_images(
+            [images[0], images[1], images[2].astype(np.float32)], backend="vlad-orb"
+        )
     with pytest.raises(topoloc.InvalidImageError, match="8192"):  # checked by the library
-        topoloc.Map.build_from_images([images[0], np.zeros((9000, 10), np.uint8)], backend="vlad-orb")
+        topoloc.Map.build_from_images(
+            [images[0], np.zeros((9000, 10), np.uint8)], backend="vlad-orb"
+        )
     with pytest.raises(topoloc.InvalidImageError, match="pixel_format"):
         topoloc.Map.build_from_images(images[:3], backend="vlad-orb", pixel_format="rgb")
 
@@ -360,7 +396,12 @@ BAD_IMAGES = [
     ("format of other channels", lambda g: g, "rgb", topoloc.InvalidImageError),
     ("unknown format", lambda g: np.stack([g] * 3, -1), "yuv", topoloc.InvalidImageError),
     ("constant", lambda g: np.full_like(g, 90), None, topoloc.UninformativeImageError),
-    ("black RGB", lambda g: np.zeros(g.shape + (3,), np.uint8), None, topoloc.UninformativeImageError),
+    (
+        "black RGB",
+        lambda g: np.zeros((*g.shape, 3), np.uint8),
+        None,
+        topoloc.UninformativeImageError,
+    ),
     ("1x1", lambda g: g[:1, :1], None, topoloc.UninformativeImageError),
     ("10000x10000", lambda g: np.zeros((10000, 10000), np.uint8), None, topoloc.InvalidImageError),
     ("8193 wide", lambda g: np.tile(g[:2], (1, 26))[:, :8193], None, topoloc.InvalidImageError),
@@ -380,7 +421,7 @@ def test_bad_images_leave_the_localizer_unchanged(vlad_map, images):
     with topoloc.Localizer(vlad_map) as loc, topoloc.Localizer(vlad_map) as twin:
         first = loc.process(image=images[0], timestamp=0.0)
         assert twin.process(image=images[0], timestamp=0.0) == first
-        for t, (name, make, fmt, expected) in enumerate(BAD_IMAGES):
+        for t, (_name, make, fmt, expected) in enumerate(BAD_IMAGES):
             with pytest.raises(expected):
                 loc.process(image=make(images[0]), pixel_format=fmt, timestamp=1.0 + t)
         a = loc.process(image=images[1], timestamp=50.0)
@@ -473,8 +514,11 @@ def test_non_contiguous_arrays_give_the_answers_of_contiguous_copies(vlad_map, i
         p = np.zeros((H + 2, W + 7), np.uint8)
         p[1 : 1 + H, 4 : 4 + W] = img
         crops.append(p[1 : 1 + H, 4 : 4 + W])
-    with topoloc.Map.build_from_images(crops, backend="vlad-orb") as a, \
-            topoloc.Map.build_from_images([np.ascontiguousarray(x) for x in crops], backend="vlad-orb") as b:
+    with topoloc.Map.build_from_images(
+        crops, backend="vlad-orb"
+    ) as a, topoloc.Map.build_from_images(
+        [np.ascontiguousarray(x) for x in crops], backend="vlad-orb"
+    ) as b:
         np.testing.assert_array_equal(a.view_descriptors(), b.view_descriptors())
 
 
@@ -555,11 +599,17 @@ def test_image_backend_option_values(vlad_map):
     with topoloc.Localizer(vlad_map, image_backend=topoloc._lib.BACKEND_VLAD_ORB) as loc:
         assert loc.options["image_backend"] == "vlad-orb"
     # ONNX paths are recorded (and unused by a VLAD map).
-    with topoloc.Localizer(vlad_map, onnx_model_path=Path("/nonexistent/m.onnx"), onnx_runtime_path="/x/ort.so") as loc:
+    with topoloc.Localizer(
+        vlad_map, onnx_model_path=Path("/nonexistent/m.onnx"), onnx_runtime_path="/x/ort.so"
+    ) as loc:
         assert loc.options["onnx_model_path"] == "/nonexistent/m.onnx"
         assert loc.options["onnx_runtime_path"] == "/x/ort.so"
     d = topoloc.localizer_options_default()
-    assert (d["image_backend"], d["onnx_model_path"], d["onnx_runtime_path"]) == ("auto", None, None)
+    assert (d["image_backend"], d["onnx_model_path"], d["onnx_runtime_path"]) == (
+        "auto",
+        None,
+        None,
+    )
 
 
 def test_localizer_outlives_the_map_for_image_frames(images):
@@ -597,8 +647,12 @@ def shifted_left(img: np.ndarray, seed: int, px: int = SHIFT) -> np.ndarray:
     """``img`` with its content ``px`` pixels to the left (``query[:, x] = img[:, x + px]``,
     the last column repeated), 10% brighter, with noise of at most 3 grey levels."""
     rng = np.random.default_rng(seed)
-    shifted = np.concatenate([img[:, px:], np.repeat(img[:, -1:], px, axis=1)], axis=1).astype(np.int32)
-    return np.clip(shifted * 11 // 10 + rng.integers(-3, 4, size=img.shape), 0, 255).astype(np.uint8)
+    shifted = np.concatenate([img[:, px:], np.repeat(img[:, -1:], px, axis=1)], axis=1).astype(
+        np.int32
+    )
+    return np.clip(shifted * 11 // 10 + rng.integers(-3, 4, size=img.shape), 0, 255).astype(
+        np.uint8
+    )
 
 
 def project(world_T_camera: np.ndarray, xyz: np.ndarray) -> np.ndarray:
@@ -643,7 +697,14 @@ def test_view_keypoints_add_up_to_the_keypoint_total(vlad_map, corridor):
 
 def test_with_keypoint_points_makes_a_new_map(vlad_map, points_map, images):
     m = points_map
-    for name in ("place_count", "view_count", "edge_count", "dim", "descriptor_kind", "keypoint_total"):
+    for name in (
+        "place_count",
+        "view_count",
+        "edge_count",
+        "dim",
+        "descriptor_kind",
+        "keypoint_total",
+    ):
         assert getattr(m, name) == getattr(vlad_map, name), name
     np.testing.assert_array_equal(m.view_descriptors(), vlad_map.view_descriptors())
     for v in range(m.view_count):
@@ -677,7 +738,9 @@ def test_with_keypoint_points_checks_the_array(vlad_map, corridor, images, monke
     # Checked by the library: the number of rows, partly unknown or infinite points, a map
     # without keypoints.
     for rows in (xyz[:-1], np.concatenate([xyz, xyz[:1]]), xyz[:0]):
-        with pytest.raises(topoloc.InvalidArgumentError, match=f"keypoints need {3 * total}") as info:
+        with pytest.raises(
+            topoloc.InvalidArgumentError, match=f"keypoints need {3 * total}"
+        ) as info:
             vlad_map.with_keypoint_points(rows)
         assert info.value.status == 2
     partly = xyz.copy()
@@ -697,9 +760,9 @@ def test_with_keypoint_points_checks_the_array(vlad_map, corridor, images, monke
 
 
 def test_pose_fix_places_the_camera(points_map, images):
-    with topoloc.Localizer(points_map, mode="single_frame", verify_candidates=3, pose_min_inliers=12,
-                           **CAMERA) as loc, \
-            topoloc.Localizer(points_map, mode="single_frame", verify_candidates=3) as plain:
+    with topoloc.Localizer(
+        points_map, mode="single_frame", verify_candidates=3, pose_min_inliers=12, **CAMERA
+    ) as loc, topoloc.Localizer(points_map, mode="single_frame", verify_candidates=3) as plain:
         o = loc.options
         assert (o["camera_fx"], o["camera_fy"], o["camera_cx"], o["camera_cy"]) == (FX, FY, CX, CY)
         assert o["pose_min_inliers"] == 12 and o["verify_candidates"] == 3
@@ -720,10 +783,16 @@ def test_pose_fix_places_the_camera(points_map, images):
             expected = points_map.view_keypoints(fix.view) - [SHIFT, 0]
             error = np.linalg.norm(project(pose, scene[fix.view]) - expected, axis=1)
             assert np.median(error) < 1.5, (p, np.median(error), fix)
-            assert np.median(np.linalg.norm(project(np.eye(4), scene[fix.view]) - expected, axis=1)) > 1.5
-            # The same shift at 1 m and at 4 m is a pure turn, about the y axis, by atan(SHIFT / FX).
+            assert (
+                np.median(np.linalg.norm(project(np.eye(4), scene[fix.view]) - expected, axis=1))
+                > 1.5
+            )
+            # The same shift at 1 m and at 4 m is a pure turn, about the y axis, by
+            # atan(SHIFT / FX).
             assert np.linalg.norm(pose[:3, 3]) < 0.02, pose
-            assert np.arctan2(pose[0, 2], pose[2, 2]) == pytest.approx(np.arctan(SHIFT / FX), abs=5e-4)
+            assert np.arctan2(pose[0, 2], pose[2, 2]) == pytest.approx(
+                np.arctan(SHIFT / FX), abs=5e-4
+            )
             # The same frame again gives the same answer; without a camera, no pose fix.
             again = loc.process(image=query, timestamp=0.0)
             assert again.pose_fix == fix and answer(again) == answer(r)
@@ -757,8 +826,9 @@ def test_pose_fix_options(vlad_map, points_map, images):
         topoloc.Localizer(vlad_map, verify_candidates=3, **CAMERA)
     assert info.value.status == 204
     # Too few inliers for the threshold: verified, but no pose fix.
-    with topoloc.Localizer(points_map, mode="single_frame", verify_candidates=3, pose_min_inliers=10000,
-                           **CAMERA) as loc:
+    with topoloc.Localizer(
+        points_map, mode="single_frame", verify_candidates=3, pose_min_inliers=10000, **CAMERA
+    ) as loc:
         r = loc.process(image=shifted_left(images[4], 4), timestamp=0.0)
         assert r.place == 4 and r.verified and r.inliers >= 12 and r.pose_fix is None
 
@@ -788,8 +858,9 @@ def test_onnx_map_localizes_revisits_and_survives_save(onnx_map, images, tmp_pat
     assert sum(r.place == p for p, r in enumerate(before)) >= 5
     path = tmp_path / "onnx.topomap"
     onnx_map.save(path)
-    with topoloc.Map.load(path, expected_kind="onnx-mlf") as m, \
-            topoloc.Localizer(m, mode="single_frame", image_backend="onnx", onnx_model_path=ONNX_MODEL) as loc:
+    with topoloc.Map.load(path, expected_kind="onnx-mlf") as m, topoloc.Localizer(
+        m, mode="single_frame", image_backend="onnx", onnx_model_path=ONNX_MODEL
+    ) as loc:
         assert [loc.process(image=q, timestamp=0.0) for q in queries] == before
 
 
@@ -798,7 +869,9 @@ def test_onnx_colour_frames(onnx_map, images):
         rgb = np.repeat(images[2][:, :, None], 3, axis=2)
         a = loc.process(image=rgb, timestamp=0.0)
         assert a.place == 2
-        b = loc.process(image=np.ascontiguousarray(rgb[:, :, ::-1]), pixel_format="bgr", timestamp=0.0)
+        b = loc.process(
+            image=np.ascontiguousarray(rgb[:, :, ::-1]), pixel_format="bgr", timestamp=0.0
+        )
         assert answer(b) == answer(a)
 
 
@@ -806,18 +879,20 @@ def test_onnx_describer_mismatches_and_missing_files(onnx_map, tmp_path, images)
     with pytest.raises(topoloc.DescriptorMismatchError):
         topoloc.Localizer(onnx_map, image_backend="vlad-orb")
     missing = tmp_path / "missing.onnx"
-    with pytest.raises(topoloc.BackendUnavailableError, match="missing.onnx"):
+    with pytest.raises(topoloc.BackendUnavailableError, match=r"missing\.onnx"):
         topoloc.Map.build_from_images(images[:3], backend="onnx", onnx_model_path=missing)
     with pytest.raises((topoloc.BackendUnavailableError, topoloc.DescriptorMismatchError)):
         topoloc.Localizer(onnx_map, onnx_model_path=missing)
     corrupt = tmp_path / "corrupt.onnx"
     corrupt.write_bytes(b"this is not an ONNX model")
-    with pytest.raises(topoloc.ModelError, match="corrupt.onnx"):
+    with pytest.raises(topoloc.ModelError, match=r"corrupt\.onnx"):
         topoloc.Map.build_from_images(images[:3], backend="onnx", onnx_model_path=corrupt)
     with pytest.raises((topoloc.DescriptorMismatchError, topoloc.ModelError)):
         topoloc.Localizer(onnx_map, onnx_model_path=corrupt)
     # Descriptor-only use of an ONNX map never loads the runtime.
-    with topoloc.Localizer(onnx_map, image_backend="none", onnx_runtime_path=tmp_path / "none.so") as loc:
+    with topoloc.Localizer(
+        onnx_map, image_backend="none", onnx_runtime_path=tmp_path / "none.so"
+    ) as loc:
         assert loc.process(onnx_map.view_descriptor(1), 0.0).place == 1
 
 
@@ -826,8 +901,9 @@ def test_onnx_build_from_files_with_progress(tmp_path, images):
     for i, img in enumerate(images[:4]):
         write_ppm(tmp_path / f"{i}.ppm", colour(img, i))
     seen = []
-    with topoloc.Map.build_from_image_files(tmp_path, backend="onnx", dim=3,
-                                            progress=lambda *a: seen.append(a)) as m:
+    with topoloc.Map.build_from_image_files(
+        tmp_path, backend="onnx", dim=3, progress=lambda *a: seen.append(a)
+    ) as m:
         assert (m.place_count, m.dim) == (4, 3)
     assert ("describing", 4, 4) in seen and seen[-1] == ("fitting", 1, 1)
 
@@ -843,7 +919,9 @@ def test_the_off_map_flag_reads_verification_inliers_when_told(vlad_map, images)
     with topoloc.Localizer(vlad_map, verify_candidates=3, verify_off_map_inliers=30.0) as loc:
         assert loc.options["verify_off_map_inliers"] == 30.0
         stream = [home] * 10 + elsewhere + [home] * 10
-        flags = [loc.process(image=image, timestamp=0.1 * i).off_map for i, image in enumerate(stream)]
+        flags = [
+            loc.process(image=image, timestamp=0.1 * i).off_map for i, image in enumerate(stream)
+        ]
     assert not any(flags[:10]), flags
     assert all(flags[20:25]), flags
     assert not any(flags[28:]), flags
@@ -864,7 +942,9 @@ def test_describer_describes_as_the_map_and_feeds_a_loop_detector(vlad_map, imag
         q = describer.describe(revisit(images[3], 7))
         sims = [float(q @ vlad_map.view_descriptor(i)) for i in range(len(images))]
         assert int(np.argmax(sims)) == 3
-        with topoloc.LoopDetector(vlad_map.descriptor_kind, vlad_map.descriptor_model, vlad_map.dim) as det:
+        with topoloc.LoopDetector(
+            vlad_map.descriptor_kind, vlad_map.descriptor_model, vlad_map.dim
+        ) as det:
             hint = det.add(1, 0.0, q)
             assert not hint.has_match and len(det) == 1
         with pytest.raises(topoloc.UninformativeImageError):

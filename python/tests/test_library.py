@@ -33,7 +33,9 @@ from topoloc import _errors, _lib, _options, _version
 
 from conftest import HEADER, PACKAGE_PARENT, REPO_ROOT
 
-needs_header = pytest.mark.skipif(HEADER is None or not HEADER.is_file(), reason="not a source checkout")
+needs_header = pytest.mark.skipif(
+    HEADER is None or not HEADER.is_file(), reason="not a source checkout"
+)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -71,12 +73,31 @@ def test_abi_and_mode_constants_match_header():
 
 
 CONSTANT_GROUPS = {
-    "PIXEL": ["PIXEL_NONE", "PIXEL_GRAY8", "PIXEL_RGB8", "PIXEL_BGR8", "PIXEL_RGBA8", "PIXEL_BGRA8"],
-    "BACKEND": ["BACKEND_AUTO", "BACKEND_NONE", "BACKEND_ONNX", "BACKEND_VLAD_ORB", "BACKEND_VLAD_SIFT"],
+    "PIXEL": [
+        "PIXEL_NONE",
+        "PIXEL_GRAY8",
+        "PIXEL_RGB8",
+        "PIXEL_BGR8",
+        "PIXEL_RGBA8",
+        "PIXEL_BGRA8",
+    ],
+    "BACKEND": [
+        "BACKEND_AUTO",
+        "BACKEND_NONE",
+        "BACKEND_ONNX",
+        "BACKEND_VLAD_ORB",
+        "BACKEND_VLAD_SIFT",
+    ],
     "STAGE": ["STAGE_DESCRIBING", "STAGE_FITTING"],
     "NODE": ["NODE_END", "NODE_CORNER", "NODE_BRANCH", "NODE_INTERMEDIATE"],
-    "GATE": ["GATE_ACCEPTED", "GATE_NO_CANDIDATE", "GATE_TOO_FEW_INLIERS", "GATE_INCONSISTENT",
-             "GATE_NO_POSE", "GATE_ODOMETRY"],
+    "GATE": [
+        "GATE_ACCEPTED",
+        "GATE_NO_CANDIDATE",
+        "GATE_TOO_FEW_INLIERS",
+        "GATE_INCONSISTENT",
+        "GATE_NO_POSE",
+        "GATE_ODOMETRY",
+    ],
 }
 
 
@@ -86,7 +107,9 @@ def test_constant_groups_match_header(group):
     text = HEADER.read_text()
     defines = {n: int(v) for n, v in re.findall(rf"#define TOPOLOC_({group}_\w+) (\d+)\b", text)}
     shim = {n: v for n, v in vars(_lib).items() if n.startswith(group + "_")}
-    assert set(defines) == set(shim), f"TOPOLOC_{group}_* added to or removed from the header or the shim"
+    assert set(defines) == set(shim), (
+        f"TOPOLOC_{group}_* added to or removed from the header or the shim"
+    )
     assert set(defines) >= set(CONSTANT_GROUPS[group])
     for name, value in defines.items():
         assert type(shim[name]) is int and shim[name] == value, name
@@ -94,8 +117,18 @@ def test_constant_groups_match_header(group):
 
 
 def test_node_kinds_are_exported_in_code_order():
-    assert [topoloc.NODE_END, topoloc.NODE_CORNER, topoloc.NODE_BRANCH, topoloc.NODE_INTERMEDIATE] == [0, 1, 2, 3]
-    assert [getattr(topoloc, f"NODE_{k.upper()}") for k in topoloc._skeleton.NODE_KINDS] == [0, 1, 2, 3]
+    assert [
+        topoloc.NODE_END,
+        topoloc.NODE_CORNER,
+        topoloc.NODE_BRANCH,
+        topoloc.NODE_INTERMEDIATE,
+    ] == [0, 1, 2, 3]
+    assert [getattr(topoloc, f"NODE_{k.upper()}") for k in topoloc._skeleton.NODE_KINDS] == [
+        0,
+        1,
+        2,
+        3,
+    ]
 
 
 def test_zero_constants_are_the_defaults():
@@ -176,8 +209,14 @@ def test_defaults_are_the_library_defaults():
     raw = _options.defaults(_lib.topoloc_localizer_options, _lib.lib.topoloc_localizer_options_init)
     d = topoloc.localizer_options_default()
     assert d["mode"] == "filter"
-    for name in ("temperature", "stay_probability", "jump_probability", "off_map_probability",
-                 "off_map_similarity", "off_map_margin"):
+    for name in (
+        "temperature",
+        "stay_probability",
+        "jump_probability",
+        "off_map_probability",
+        "off_map_similarity",
+        "off_map_margin",
+    ):
         assert d[name] == pytest.approx(getattr(raw, name), abs=0, rel=0)
     assert d["top_k"] == raw.top_k >= 1
     assert 0 < d["temperature"] < 1
@@ -190,10 +229,15 @@ def test_defaults_are_the_library_defaults():
     assert d["verify_off_map_inliers"] == raw.verify_off_map_inliers == -1.0  # the kind's
     assert d["verify_off_map_inlier_scale"] == raw.verify_off_map_inlier_scale == 4.0
     # Every field of the struct is an option (the expected_descriptor_* ones by shorter names).
-    renamed = {"expected_descriptor_kind": "expected_kind", "expected_descriptor_model": "expected_model"}
+    renamed = {
+        "expected_descriptor_kind": "expected_kind",
+        "expected_descriptor_model": "expected_model",
+    }
     assert set(d) == {renamed.get(name, name) for name, _ in raw._fields_} - {"struct_size"}
     kf = topoloc.keyframe_options_default()
-    raw_kf = _options.defaults(_lib.topoloc_keyframe_options, _lib.lib.topoloc_keyframe_options_init)
+    raw_kf = _options.defaults(
+        _lib.topoloc_keyframe_options, _lib.lib.topoloc_keyframe_options_init
+    )
     assert kf["place_spacing_m"] == raw_kf.place_spacing_m > 0
     assert kf["max_views_per_place"] == raw_kf.max_views_per_place >= 1
 
@@ -210,7 +254,13 @@ def test_image_fields_of_the_library_defaults():
     frame = _filled_by_init(_lib.topoloc_frame, _lib.lib.topoloc_frame_init)
     assert frame.struct_size == ctypes.sizeof(_lib.topoloc_frame)
     img = frame.image
-    assert (img.format, img.width, img.height, img.stride, img.data_len) == (_lib.PIXEL_NONE, 0, 0, 0, 0)
+    assert (img.format, img.width, img.height, img.stride, img.data_len) == (
+        _lib.PIXEL_NONE,
+        0,
+        0,
+        0,
+        0,
+    )
     assert not img.data
     opts = _filled_by_init(_lib.topoloc_localizer_options, _lib.lib.topoloc_localizer_options_init)
     assert opts.image_backend == _lib.BACKEND_AUTO
@@ -233,10 +283,12 @@ def _header_integer_typedefs() -> dict:
     """``typedef uint32_t topoloc_mode;`` and its kind, read from the header: alias -> type."""
     if HEADER is None or not HEADER.is_file():
         return {}
-    return dict(
-        (alias, base)
-        for base, alias in re.findall(r"^typedef (u?int\d+_t) (topoloc_\w+);", HEADER.read_text(), re.M)
-    )
+    return {
+        alias: base
+        for base, alias in re.findall(
+            r"^typedef (u?int\d+_t) (topoloc_\w+);", HEADER.read_text(), re.M
+        )
+    }
 
 
 def _ctype_for(c_type: str):
@@ -330,7 +382,9 @@ def test_every_header_struct_is_mirrored_exactly():
         for (field, ty), (_, shim_ty) in zip(fields, shim):
             if isinstance(ty, type) and issubclass(ty, ctypes.Array):
                 assert issubclass(shim_ty, ctypes.Array)
-                assert shim_ty._type_ is ty._type_ and shim_ty._length_ == ty._length_, f"{name}.{field}"
+                assert shim_ty._type_ is ty._type_ and shim_ty._length_ == ty._length_, (
+                    f"{name}.{field}"
+                )
             else:
                 assert shim_ty is ty, f"{name}.{field}: header {ty}, shim {shim_ty}"
 
@@ -371,9 +425,17 @@ def test_c_type_mapping_of_the_checks(c_type, expected):
 #: Fields of the extended structs as first released (ABI 1): later versions only append.
 ABI1_FIELDS = {
     "topoloc_localizer_options": [
-        "struct_size", "mode", "temperature", "stay_probability", "jump_probability",
-        "off_map_probability", "off_map_similarity", "off_map_margin", "top_k",
-        "expected_descriptor_kind", "expected_descriptor_model",
+        "struct_size",
+        "mode",
+        "temperature",
+        "stay_probability",
+        "jump_probability",
+        "off_map_probability",
+        "off_map_similarity",
+        "off_map_margin",
+        "top_k",
+        "expected_descriptor_kind",
+        "expected_descriptor_model",
     ],
     "topoloc_frame": ["struct_size", "timestamp", "descriptor", "descriptor_len", "odometry"],
 }
@@ -381,7 +443,9 @@ ABI1_FIELDS = {
 #: Fields appended to them for images.
 IMAGE_FIELDS = {
     "topoloc_localizer_options": [
-        ("image_backend", c_uint32), ("onnx_model_path", c_char_p), ("onnx_runtime_path", c_char_p),
+        ("image_backend", c_uint32),
+        ("onnx_model_path", c_char_p),
+        ("onnx_runtime_path", c_char_p),
     ],
     "topoloc_frame": [("image", _lib.topoloc_image)],  # embedded by value, not a pointer
 }
@@ -389,7 +453,8 @@ IMAGE_FIELDS = {
 #: Fields appended after those for geometric verification (ABI 1.2).
 VERIFICATION_FIELDS = {
     "topoloc_localizer_options": [
-        ("verify_candidates", c_uint32), ("verify_views_per_candidate", c_uint32),
+        ("verify_candidates", c_uint32),
+        ("verify_views_per_candidate", c_uint32),
         ("verify_inlier_weight", c_float),
     ],
     "topoloc_frame": [],
@@ -398,7 +463,9 @@ VERIFICATION_FIELDS = {
 #: Fields appended after those for metric mode (ABI 1.3).
 METRIC_FIELDS = {
     "topoloc_localizer_options": [
-        ("metric_particles", c_uint32), ("metric_temperature", c_float), ("metric_seed", c_uint64),
+        ("metric_particles", c_uint32),
+        ("metric_temperature", c_float),
+        ("metric_seed", c_uint64),
     ],
     "topoloc_frame": [],
 }
@@ -406,7 +473,10 @@ METRIC_FIELDS = {
 #: Fields appended after those for pose fixes (ABI 1.6).
 POSE_FIX_FIELDS = {
     "topoloc_localizer_options": [
-        ("camera_fx", c_double), ("camera_fy", c_double), ("camera_cx", c_double), ("camera_cy", c_double),
+        ("camera_fx", c_double),
+        ("camera_fy", c_double),
+        ("camera_cx", c_double),
+        ("camera_cy", c_double),
         ("pose_min_inliers", c_uint32),
     ],
     "topoloc_frame": [],
@@ -415,7 +485,8 @@ POSE_FIX_FIELDS = {
 #: Fields appended after those for off-map evidence from verification (ABI 1.9).
 OFF_MAP_FIELDS = {
     "topoloc_localizer_options": [
-        ("verify_off_map_inliers", c_double), ("verify_off_map_inlier_scale", c_double),
+        ("verify_off_map_inliers", c_double),
+        ("verify_off_map_inlier_scale", c_double),
     ],
     "topoloc_frame": [],
 }
@@ -423,8 +494,12 @@ OFF_MAP_FIELDS = {
 #: Fields of topoloc_result from ``candidates_len`` on: verification (ABI 1.2), then pose fixes
 #: (ABI 1.6).
 RESULT_TAIL_FIELDS = [
-    ("candidates_len", c_size_t), ("verified", c_bool), ("inliers", c_uint32),
-    ("has_pose_fix", c_bool), ("pose_fix_view", c_uint32), ("pose_fix_inliers", c_uint32),
+    ("candidates_len", c_size_t),
+    ("verified", c_bool),
+    ("inliers", c_uint32),
+    ("has_pose_fix", c_bool),
+    ("pose_fix_view", c_uint32),
+    ("pose_fix_inliers", c_uint32),
     ("world_T_camera", c_double * 16),
 ]
 
@@ -443,23 +518,33 @@ def test_image_structs_are_in_the_layout_checks():
         fields = structs[name]
         assert [f for f, _ in fields[: len(old)]] == old, f"{name}: an ABI 1 field moved"
         images = len(old) + len(IMAGE_FIELDS[name])
-        assert fields[len(old):images] == IMAGE_FIELDS[name], f"{name}: image fields not appended as expected"
+        assert fields[len(old) : images] == IMAGE_FIELDS[name], (
+            f"{name}: image fields not appended as expected"
+        )
         verification = images + len(VERIFICATION_FIELDS[name])
-        assert fields[images:verification] == VERIFICATION_FIELDS[name], f"{name}: verification fields not appended"
+        assert fields[images:verification] == VERIFICATION_FIELDS[name], (
+            f"{name}: verification fields not appended"
+        )
         metric = verification + len(METRIC_FIELDS[name])
-        assert fields[verification:metric] == METRIC_FIELDS[name], f"{name}: metric fields not appended"
+        assert fields[verification:metric] == METRIC_FIELDS[name], (
+            f"{name}: metric fields not appended"
+        )
         pose = metric + len(POSE_FIX_FIELDS[name])
         assert fields[metric:pose] == POSE_FIX_FIELDS[name], f"{name}: pose fix fields not appended"
         assert fields[pose:] == OFF_MAP_FIELDS[name], f"{name}: off-map fields not appended"
     result = structs["topoloc_result"]
-    assert result[-len(RESULT_TAIL_FIELDS):] == RESULT_TAIL_FIELDS, "result: fields not appended"
-    assert _lib.topoloc_result._fields_[-len(RESULT_TAIL_FIELDS):] == RESULT_TAIL_FIELDS
+    assert result[-len(RESULT_TAIL_FIELDS) :] == RESULT_TAIL_FIELDS, "result: fields not appended"
+    assert _lib.topoloc_result._fields_[-len(RESULT_TAIL_FIELDS) :] == RESULT_TAIL_FIELDS
 
 
 @needs_header
 def test_every_default_macro_is_checked():
     text = HEADER.read_text()
-    macros = dict(re.findall(r"#define (topoloc_\w+)_default\(p\) (topoloc_\w+_init)\(\(p\), sizeof \*\(p\)\)", text))
+    macros = dict(
+        re.findall(
+            r"#define (topoloc_\w+)_default\(p\) (topoloc_\w+_init)\(\(p\), sizeof \*\(p\)\)", text
+        )
+    )
     assert "topoloc_image_map_options" in macros
     assert macros == DEFAULT_FUNCTIONS
     assert not NO_DEFAULT_FUNCTION & set(DEFAULT_FUNCTIONS)
@@ -472,8 +557,8 @@ def test_image_build_functions_match_header():
     options, progress = POINTER(_lib.topoloc_image_map_options), _lib.topoloc_progress_fn
     tail = [c_size_t, options, progress, c_void_p, POINTER(_lib.MapPtr)]
     expected = {
-        "topoloc_map_build_from_image_files": (c_uint32, [POINTER(c_char_p)] + tail),
-        "topoloc_map_build_from_images": (c_uint32, [POINTER(_lib.topoloc_image)] + tail),
+        "topoloc_map_build_from_image_files": (c_uint32, [POINTER(c_char_p), *tail]),
+        "topoloc_map_build_from_images": (c_uint32, [POINTER(_lib.topoloc_image), *tail]),
         "topoloc_image_map_options_init": (c_uint32, [options, c_size_t]),
     }
     for name, (restype, argtypes) in expected.items():
@@ -486,14 +571,19 @@ def _header_callbacks():
     """Function-pointer typedefs of the header: name -> (return type, [parameter types])."""
     text = _strip_comments(HEADER.read_text())
     out = {}
-    for ret, name, params in re.findall(r"typedef\s+([\w \*]+?)\s*\(\s*\*\s*(\w+)\s*\)\s*\(([^)]*)\);", text):
+    for ret, name, params in re.findall(
+        r"typedef\s+([\w \*]+?)\s*\(\s*\*\s*(\w+)\s*\)\s*\(([^)]*)\);", text
+    ):
         out[name] = (_ctype_for(ret), [_ctype_for(_split_decl(p)[0]) for p in params.split(",")])
     return out
 
 
 #: The callback typedefs of the header, their ctypes prototypes and their C signatures.
 CALLBACKS = {
-    "topoloc_progress_fn": (_lib.topoloc_progress_fn, (c_bool, [c_void_p, c_uint32, c_size_t, c_size_t])),
+    "topoloc_progress_fn": (
+        _lib.topoloc_progress_fn,
+        (c_bool, [c_void_p, c_uint32, c_size_t, c_size_t]),
+    ),
     "topoloc_log_fn": (_lib.topoloc_log_fn, (None, [c_uint32, c_char_p, c_char_p, c_void_p])),
 }
 
@@ -507,7 +597,9 @@ def test_callback_typedefs_match_ctypes():
         assert (restype, argtypes) == signature, name
         assert fn._restype_ is restype, name
         assert list(fn._argtypes_) == argtypes, name
-        assert fn._flags_ == CFUNCTYPE(c_bool)._flags_, name  # C calling convention, errno not swapped
+        assert fn._flags_ == CFUNCTYPE(c_bool)._flags_, (
+            name
+        )  # C calling convention, errno not swapped
 
 
 @needs_header
@@ -525,9 +617,21 @@ def test_progress_fn_signature_compiles_against_header(tmp_path):
         "topoloc_progress_fn f = cb;\n"
     )
     proc = subprocess.run(
-        [cc, "-std=c11", "-Werror", "-Wall", "-Wno-unused-parameter", "-c", "-I", str(HEADER.parent),
-         str(src), "-o", str(tmp_path / "progress.o")],
-        capture_output=True, text=True,
+        [
+            cc,
+            "-std=c11",
+            "-Werror",
+            "-Wall",
+            "-Wno-unused-parameter",
+            "-c",
+            "-I",
+            str(HEADER.parent),
+            str(src),
+            "-o",
+            str(tmp_path / "progress.o"),
+        ],
+        capture_output=True,
+        text=True,
     )
     assert proc.returncode == 0, proc.stderr
 
@@ -551,7 +655,7 @@ def test_struct_offsets_match_a_c_compiler(tmp_path):
             lines.append(f'printf("{name}.{field} %zu\\n", offsetof({name}, {field}));')
     src = tmp_path / "layout.c"
     src.write_text(
-        "#include <stdio.h>\n#include <stddef.h>\n#include \"topoloc.h\"\nint main(void) {\n"
+        '#include <stdio.h>\n#include <stddef.h>\n#include "topoloc.h"\nint main(void) {\n'
         + "\n".join(lines)
         + "\nreturn 0;\n}\n"
     )
@@ -596,7 +700,9 @@ def test_every_library_status_has_a_class_and_every_class_a_status():
     classes = [
         cls
         for cls in vars(_errors).values()
-        if isinstance(cls, type) and issubclass(cls, topoloc.TopolocError) and cls is not topoloc.TopolocError
+        if isinstance(cls, type)
+        and issubclass(cls, topoloc.TopolocError)
+        and cls is not topoloc.TopolocError
     ]
     by_name = {cls.STATUS_NAME: cls for cls in classes}
     assert len(by_name) == len(classes), "two classes name the same status"
@@ -685,7 +791,12 @@ def test_python_exception_hierarchy():
     assert topoloc.InvalidImageError.__bases__ == (topoloc.TopolocError, ValueError)
     assert topoloc.UninformativeImageError.__bases__ == (topoloc.TopolocError, ValueError)
     # Backend, model, describer and cancellation errors are not argument errors.
-    for cls in (topoloc.BackendUnavailableError, topoloc.ModelError, topoloc.NoDescriberError, topoloc.CancelledError):
+    for cls in (
+        topoloc.BackendUnavailableError,
+        topoloc.ModelError,
+        topoloc.NoDescriberError,
+        topoloc.CancelledError,
+    ):
         assert cls.__bases__ == (topoloc.TopolocError,), cls
         assert not issubclass(cls, (ValueError, OSError, ImportError)), cls
     # topoloc.CancelledError is an ordinary Exception, unrelated to asyncio's BaseException.
@@ -750,7 +861,9 @@ def test_env_variable_pointing_at_a_non_library(tmp_path):
 def test_relative_env_path_is_relative_to_the_working_directory(tmp_path, monkeypatch):
     os.symlink(topoloc.library_path, tmp_path / "libtopoloc.so")
     monkeypatch.chdir(tmp_path)
-    assert _lib.candidate_locations({"TOPOLOC_LIBRARY": "libtopoloc.so"}) == [("env", str(tmp_path / "libtopoloc.so"))]
+    assert _lib.candidate_locations({"TOPOLOC_LIBRARY": "libtopoloc.so"}) == [
+        ("env", str(tmp_path / "libtopoloc.so"))
+    ]
     lib, where = _lib.load_library({"TOPOLOC_LIBRARY": "libtopoloc.so"})
     assert where == str(tmp_path / "libtopoloc.so") and lib.topoloc_abi_version() == 1
 
@@ -794,10 +907,12 @@ def test_library_in_a_checkout_is_found(tmp_path):
     os.symlink(topoloc.library_path, built)
     kinds = [k for k, _ in _lib.candidate_locations({}, package_dir=pkg, use_system=False)]
     assert kinds == ["package", "checkout"]
-    lib, where = _lib.load_library({}, package_dir=pkg, use_system=False)
+    _, where = _lib.load_library({}, package_dir=pkg, use_system=False)
     assert where == str(built)
     # CARGO_TARGET_DIR is searched before <repo>/target.
-    locations = _lib.candidate_locations({"CARGO_TARGET_DIR": "/elsewhere"}, package_dir=pkg, use_system=False)
+    locations = _lib.candidate_locations(
+        {"CARGO_TARGET_DIR": "/elsewhere"}, package_dir=pkg, use_system=False
+    )
     assert locations[1] == ("checkout", "/elsewhere/release/libtopoloc.so")
     assert locations[2] == ("checkout", str(built))
 
@@ -821,9 +936,15 @@ def test_abi_mismatch_is_refused():
 
 
 def test_import_fails_cleanly_without_the_library(tmp_path):
-    env = dict(os.environ, TOPOLOC_LIBRARY=str(tmp_path / "missing.so"), PYTHONPATH=str(PACKAGE_PARENT))
+    env = dict(
+        os.environ, TOPOLOC_LIBRARY=str(tmp_path / "missing.so"), PYTHONPATH=str(PACKAGE_PARENT)
+    )
     proc = subprocess.run(
-        [sys.executable, "-c", "import topoloc"], env=env, capture_output=True, text=True, cwd=tmp_path
+        [sys.executable, "-c", "import topoloc"],
+        env=env,
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
     )
     assert proc.returncode != 0
     assert "LibraryNotFoundError" in proc.stderr
@@ -833,6 +954,8 @@ def test_import_fails_cleanly_without_the_library(tmp_path):
 def test_import_with_env_override_in_a_fresh_interpreter(tmp_path):
     env = dict(os.environ, TOPOLOC_LIBRARY=topoloc.library_path, PYTHONPATH=str(PACKAGE_PARENT))
     code = "import topoloc; print(topoloc.library_path); print(topoloc.abi_version())"
-    proc = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, cwd=tmp_path)
+    proc = subprocess.run(
+        [sys.executable, "-c", code], env=env, capture_output=True, text=True, cwd=tmp_path
+    )
     assert proc.returncode == 0, proc.stderr
     assert proc.stdout.split() == [topoloc.library_path, "1"]

@@ -13,8 +13,13 @@ import topoloc
 from conftest import KIND, MODEL, build_corridor, rot_z, unit
 
 # Explicit options so that the expectations do not depend on tuned library defaults.
-OPTIONS = dict(temperature=0.03, stay_probability=0.7, jump_probability=0.01, off_map_probability=0.01,
-               off_map_similarity=0.2)
+OPTIONS = dict(
+    temperature=0.03,
+    stay_probability=0.7,
+    jump_probability=0.01,
+    off_map_probability=0.01,
+    off_map_similarity=0.2,
+)
 
 
 def _check_candidates(r: topoloc.Result, places: int, top_k: int):
@@ -25,7 +30,12 @@ def _check_candidates(r: topoloc.Result, places: int, top_k: int):
     assert len({x.place for x in c}) == len(c)
     assert all(0.0 <= p <= 1.0 for p in probs)
     assert sum(probs) <= 1.0 + 1e-5
-    assert (c[0].place, c[0].view, c[0].probability, c[0].similarity) == (r.place, r.view, r.confidence, r.similarity)
+    assert (c[0].place, c[0].view, c[0].probability, c[0].similarity) == (
+        r.place,
+        r.view,
+        r.confidence,
+        r.similarity,
+    )
     for x in c:
         assert x.view // 2 == x.place  # corridor: views 2p, 2p+1 belong to place p
 
@@ -102,7 +112,9 @@ def test_metric_mode_follows_a_walk_with_odometry(corridor):
     results = walk(loc)
     assert [r.place for r in results] == [0, 1, 2, 3, 4, 5]
     assert all(0 < r.confidence <= 1 for r in results)
-    again = walk(topoloc.Localizer(corridor.map, mode="metric", metric_particles=500, metric_seed=3))
+    again = walk(
+        topoloc.Localizer(corridor.map, mode="metric", metric_particles=500, metric_seed=3)
+    )
     assert [(r.place, r.confidence) for r in again] == [(r.place, r.confidence) for r in results]
 
 
@@ -153,7 +165,9 @@ def test_descriptor_inputs(small_map):
         (0, 0, 2, 0),
         np.array([0, 0, 1, 0], dtype=np.float64),
         np.array([0, 0, 5, 0], dtype=np.int64),
-        np.asfortranarray(np.array([[0.0, 9.0], [0.0, 9.0], [1.0, 9.0], [0.0, 9.0]]))[:, 0],  # strided column
+        np.asfortranarray(np.array([[0.0, 9.0], [0.0, 9.0], [1.0, 9.0], [0.0, 9.0]]))[
+            :, 0
+        ],  # strided column
     ]
     for q in inputs:
         r = loc.process(q, 0.0)
@@ -255,16 +269,25 @@ def test_invalid_options(small_map, kwargs):
 def test_options_and_defaults(small_map):
     loc = topoloc.Localizer(small_map)
     assert loc.options == topoloc.localizer_options_default()
-    loc = topoloc.Localizer(small_map, mode="single_frame", temperature=0.5, top_k=2, expected_kind="toy")
+    loc = topoloc.Localizer(
+        small_map, mode="single_frame", temperature=0.5, top_k=2, expected_kind="toy"
+    )
     o = loc.options
     assert o["mode"] == "single_frame" and o["top_k"] == 2 and o["expected_kind"] == "toy"
     assert o["temperature"] == 0.5
     assert o["stay_probability"] == topoloc.localizer_options_default()["stay_probability"]
-    assert topoloc.Localizer(small_map, mode=topoloc.MODE_SINGLE_FRAME).options["mode"] == "single_frame"
+    assert (
+        topoloc.Localizer(small_map, mode=topoloc.MODE_SINGLE_FRAME).options["mode"]
+        == "single_frame"
+    )
 
 
 def test_descriptor_mismatch_at_localizer_creation(corridor):
-    for kwargs in ({"expected_kind": "dinov2"}, {"expected_model": "other"}, {"expected_kind": KIND, "expected_model": "x"}):
+    for kwargs in (
+        {"expected_kind": "dinov2"},
+        {"expected_model": "other"},
+        {"expected_kind": KIND, "expected_model": "x"},
+    ):
         with pytest.raises(topoloc.DescriptorMismatchError) as info:
             topoloc.Localizer(corridor.map, **kwargs)
         assert MODEL in info.value.message

@@ -9,7 +9,6 @@ import os
 import subprocess
 import sys
 
-import numpy as np
 import pytest
 
 import topoloc
@@ -84,13 +83,13 @@ with topoloc.MapBuilder("toy", None, 4) as b:
     b.add_edge(0, 1)
     m = b.build()
 open({str(stale)!r}, "wb").write(b"half a map")
-m.save({str(tmp_path / 'm.topoloc')!r})
-m = topoloc.Map.load({str(tmp_path / 'm.topoloc')!r})
+m.save({str(tmp_path / "m.topoloc")!r})
+m = topoloc.Map.load({str(tmp_path / "m.topoloc")!r})
 with topoloc.Localizer(m) as loc:
     for t in range(5):
         loc.process(np.eye(4, dtype=np.float32)[t % 3] + 0.1, timestamp=float(t))
 try:
-    topoloc.Map.load({str(tmp_path / 'missing.topoloc')!r})
+    topoloc.Map.load({str(tmp_path / "missing.topoloc")!r})
 except topoloc.MapIOError:
     pass
 """

@@ -48,7 +48,9 @@ def two_views():
         qz = s * (x - OFFSET[0]) + c * (z - OFFSET[2])
         u1, v1 = 300.0 * x / z + 160.0, 300.0 * y / z + 120.0
         u2, v2 = 300.0 * qx / qz + 160.0, 300.0 * y / qz + 120.0
-        if qz < 0.5 or not (0 <= u1 <= 319 and 0 <= v1 <= 239 and 0 <= u2 <= 319 and 0 <= v2 <= 239):
+        if qz < 0.5 or not (
+            0 <= u1 <= 319 and 0 <= v1 <= 239 and 0 <= u2 <= 319 and 0 <= v2 <= 239
+        ):
             continue
         first.append((u1, v1))
         second.append((u2, v2))
@@ -83,7 +85,9 @@ def detector():
 def test_generator_matches_the_c_test(views):
     first, second, descriptors, scene = views
     assert first.shape == second.shape == (POINTS, 2) and descriptors.shape == (POINTS, 32)
-    assert ((first >= 0) & (first <= [319, 239])).all() and ((second >= 0) & (second <= [319, 239])).all()
+    assert ((first >= 0) & (first <= [319, 239])).all() and (
+        (second >= 0) & (second <= [319, 239])
+    ).all()
     assert len({bytes(row) for row in descriptors}) == POINTS
     # The keypoints are the scene points' projections.
     np.testing.assert_allclose(first, 300.0 * scene[:, :2] / scene[:, 2:] + [160, 120], rtol=1e-5)
@@ -108,7 +112,9 @@ def test_options_defaults():
     assert d["odometry_candidates"] == 1 and d["odometry_search_m"] == 2.0
     with topoloc.LoopDetector("test", "loops", DIM) as det:
         assert det.options == d and det.dim == DIM
-    with topoloc.LoopDetector("test", "loops", DIM, min_inliers=40, odometry_gate=False, fx=None) as det:
+    with topoloc.LoopDetector(
+        "test", "loops", DIM, min_inliers=40, odometry_gate=False, fx=None
+    ) as det:
         assert det.options == dict(d, min_inliers=40, odometry_gate=False)
 
 
@@ -285,15 +291,23 @@ def test_save_load_and_second_session(tmp_path, detector, views):
     detector.add(10, 10.0, descriptor(1), second, descriptors)
     path = tmp_path / "loops.topomap"
     detector.save(path)
-    with topoloc.Map.load(path, expected_kind="test", expected_model="loops", expected_dim=DIM) as m:
+    with topoloc.Map.load(
+        path, expected_kind="test", expected_model="loops", expected_dim=DIM
+    ) as m:
         assert m.view_count == 2
         assert sorted(m.view_info(v).keyframe_id for v in range(m.view_count)) == [0, 10]
         again = topoloc.LoopDetector.from_map(m, **OPTIONS)
     # The map handle is not kept.
     with again:
-        assert len(again) == 2 and again.dim == DIM and again.options == dict(topoloc.loop_options_default(), **OPTIONS)
+        assert (
+            len(again) == 2
+            and again.dim == DIM
+            and again.options == dict(topoloc.loop_options_default(), **OPTIONS)
+        )
         hint = again.add(20, 20.0, descriptor(1), first, descriptors)
-        assert hint.query_id == 20 and hint.gate == topoloc.Gate.NO_CANDIDATE  # saved without features
+        assert (
+            hint.query_id == 20 and hint.gate == topoloc.Gate.NO_CANDIDATE
+        )  # saved without features
         assert len(again) == 3
         assert {c.keyframe_id for c in again.query(descriptor(1), 8)} == {0, 10, 20}
     with pytest.raises(TypeError):

@@ -90,7 +90,7 @@ def test_large_results_grow_their_buffers():
         hub = b.add_place()
         for i in range(40):
             b.add_view(hub, [1.0, i + 1.0], image=image if i == 39 else None)
-        for i in range(25):
+        for _ in range(25):
             leaf = b.add_place()
             b.add_view(leaf, [0.0, 1.0])
             b.add_edge(hub, leaf)
@@ -220,7 +220,7 @@ def test_unknown_place_and_view_on_a_map(corridor):
 
 
 def test_map_constructor_is_private():
-    with pytest.raises(TypeError, match="Map.load"):
+    with pytest.raises(TypeError, match=r"Map\.load"):
         topoloc.Map()
 
 
@@ -230,7 +230,12 @@ def test_map_constructor_is_private():
 
 
 def _assert_same_map(a: topoloc.Map, b: topoloc.Map):
-    assert (a.place_count, a.view_count, a.edge_count, a.dim) == (b.place_count, b.view_count, b.edge_count, b.dim)
+    assert (a.place_count, a.view_count, a.edge_count, a.dim) == (
+        b.place_count,
+        b.view_count,
+        b.edge_count,
+        b.dim,
+    )
     assert (a.descriptor_kind, a.descriptor_model) == (b.descriptor_kind, b.descriptor_model)
     np.testing.assert_array_equal(a.view_descriptors(), b.view_descriptors())
     for x, y in zip(a.edges(), b.edges()):
@@ -257,7 +262,9 @@ def test_save_load_round_trip(corridor, map_file):
         _assert_same_map(corridor.map, loaded)
         # The loaded map's attributes are the originals.
         assert loaded.view_info(5).keyframe_id == 1005
-        np.testing.assert_allclose(loaded.view_info(5).world_T_camera, corridor.poses[5], atol=1e-12)
+        np.testing.assert_allclose(
+            loaded.view_info(5).world_T_camera, corridor.poses[5], atol=1e-12
+        )
         assert loaded.view_image(5) == "images/place002_view1.png"
     # str, bytes and pathlib paths are all accepted.
     for path in (str(map_file), bytes(map_file), map_file):
@@ -381,7 +388,10 @@ def test_descriptor_mismatch_at_load(map_file):
         assert KIND in info.value.message
         with pytest.raises(topoloc.DescriptorMismatchError):
             topoloc.Map.from_bytes(map_file.read_bytes(), **kwargs)
-    for kwargs in ({"expected_kind": KIND, "expected_model": MODEL, "expected_dim": 64}, {"expected_kind": ""}):
+    for kwargs in (
+        {"expected_kind": KIND, "expected_model": MODEL, "expected_dim": 64},
+        {"expected_kind": ""},
+    ):
         with topoloc.Map.load(map_file, **kwargs) as m:
             assert m.dim == 64
 
@@ -398,7 +408,7 @@ def test_map_context_manager_and_close(map_file):
     assert m.closed
     assert "closed" in repr(m)
     with pytest.raises(ValueError, match="closed"):
-        m.place_count
+        _ = m.place_count
     with pytest.raises(ValueError, match="closed"):
         m.view_descriptors()
     with pytest.raises(ValueError, match="closed"):
@@ -464,23 +474,29 @@ def test_map_from_keyframes_with_poses():
 
 
 def test_map_from_keyframes_options():
-    a, b, c, d, tiny = _keyframe_descriptors()
+    a, b, c, d, _tiny = _keyframe_descriptors()
     desc = np.stack([a, b, c, d])
     poses = np.stack([rot_z(0.0, (x, 0.0, 0.0)) for x in (0.0, 1.0, 2.0, 3.0)])
     # Wide spacing but one view per place: everything merges into place 0 with one view.
-    m = topoloc.map_from_keyframes("k", "m", 32, desc, poses=poses, place_spacing_m=10.0, max_views_per_place=1)
+    m = topoloc.map_from_keyframes(
+        "k", "m", 32, desc, poses=poses, place_spacing_m=10.0, max_views_per_place=1
+    )
     assert (m.place_count, m.view_count) == (1, 1)
     # Narrow spacing: one place per keyframe; radius joins places up to 2 m apart.
-    m = topoloc.map_from_keyframes("k", "m", 32, desc, poses=poses, place_spacing_m=0.5, neighbour_radius_m=2.0)
+    m = topoloc.map_from_keyframes(
+        "k", "m", 32, desc, poses=poses, place_spacing_m=0.5, neighbour_radius_m=2.0
+    )
     assert (m.place_count, m.view_count) == (4, 4)
     assert m.edges()[0].tolist() == [[0, 1], [0, 2], [1, 2], [1, 3], [2, 3]]
     # Novelty threshold below every similarity: nothing is novel, later looks are dropped.
-    m = topoloc.map_from_keyframes("k", "m", 32, desc, poses=poses, place_spacing_m=10.0, novelty_similarity=-1.0)
+    m = topoloc.map_from_keyframes(
+        "k", "m", 32, desc, poses=poses, place_spacing_m=10.0, novelty_similarity=-1.0
+    )
     assert m.view_count == 1
 
 
 def test_map_from_keyframes_without_poses():
-    a, b, c, d, tiny = _keyframe_descriptors()
+    a, b, c, _d, tiny = _keyframe_descriptors()
     desc = np.stack([a, tiny(a), b, tiny(b), c, a])
     m = topoloc.map_from_keyframes("k", None, 32, desc)
     assert (m.place_count, m.view_count) == (4, 4)
@@ -492,7 +508,7 @@ def test_map_from_keyframes_without_poses():
 
 
 def test_map_from_keyframes_errors():
-    a, b, c, d, tiny = _keyframe_descriptors()
+    a, b, _c, _d, _tiny = _keyframe_descriptors()
     desc = np.stack([a, b])
     with pytest.raises(topoloc.EmptyMapError):
         topoloc.map_from_keyframes("k", "m", 32, np.zeros((0, 32)))
@@ -513,7 +529,9 @@ def test_map_from_keyframes_errors():
     with pytest.raises(topoloc.InvalidArgumentError, match="shape"):
         topoloc.map_from_keyframes("k", "m", 32, desc, poses=np.stack([np.eye(4)] * 3))
     with pytest.raises(topoloc.InvalidArgumentError, match="rotation"):
-        topoloc.map_from_keyframes("k", "m", 32, desc, poses=np.stack([np.eye(4), np.diag([1.0, 1, -1, 1])]))
+        topoloc.map_from_keyframes(
+            "k", "m", 32, desc, poses=np.stack([np.eye(4), np.diag([1.0, 1, -1, 1])])
+        )
     with pytest.raises(topoloc.InvalidArgumentError, match="ids"):
         topoloc.map_from_keyframes("k", "m", 32, desc, ids=[1, 2, 3])
     with pytest.raises(topoloc.InvalidArgumentError, match="non-negative"):

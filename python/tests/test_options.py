@@ -67,7 +67,9 @@ def test_option_defaults_are_left_to_the_library(call, table, struct, others):
 
 
 #: What a docstring restating an option's default or range looks like.
-RESTATED = re.compile(r"\((?:the )?default\b|, the default\b|\bdefaults? (?:to|is) |\d\.\.=?\d|>= ?\d")
+RESTATED = re.compile(
+    r"\((?:the )?default\b|, the default\b|\bdefaults? (?:to|is) |\d\.\.=?\d|>= ?\d"
+)
 
 
 @pytest.mark.parametrize("call, table, struct, others", CALLS, ids=_ids(CALLS))
@@ -87,7 +89,9 @@ def test_every_field_of_the_struct_is_one_option(struct_name):
     table = TABLES[struct_name]
     assert table.struct is _lib.STRUCTS[struct_name]
     fields = [f for option in table.options.values() for f in option.fields]
-    assert sorted(fields) == sorted(name for name, _ in table.struct._fields_ if name != "struct_size")
+    assert sorted(fields) == sorted(
+        name for name, _ in table.struct._fields_ if name != "struct_size"
+    )
 
 
 @pytest.mark.parametrize("struct_name", sorted(TABLES))

@@ -18,12 +18,15 @@ from typing import List, Optional
 import pytest
 
 import topoloc
+
 from conftest import INSTALLED, PYTHON_DIR, REPO_ROOT
 
 SETUP_PY = PYTHON_DIR / "setup.py"
 PACKAGE_DIR = Path(topoloc.__file__).resolve().parent
 needs_checkout = pytest.mark.skipif(REPO_ROOT is None, reason="not a source checkout")
-installed_only = pytest.mark.skipif(not INSTALLED, reason="only against an installed wheel (run_installed.sh)")
+installed_only = pytest.mark.skipif(
+    not INSTALLED, reason="only against an installed wheel (run_installed.sh)"
+)
 
 
 def cargo_package_version(text: str) -> Optional[str]:
@@ -91,9 +94,18 @@ def test_public_api_is_annotated():
                 if not klass.__module__.startswith("topoloc"):
                     continue
                 for member_name, member in vars(klass).items():
-                    if member_name.startswith("_") and member_name not in ("__init__", "__enter__", "__exit__", "__len__"):
+                    if member_name.startswith("_") and member_name not in (
+                        "__init__",
+                        "__enter__",
+                        "__exit__",
+                        "__len__",
+                    ):
                         continue
-                    target = member.__func__ if isinstance(member, (classmethod, staticmethod)) else member
+                    target = (
+                        member.__func__
+                        if isinstance(member, (classmethod, staticmethod))
+                        else member
+                    )
                     if isinstance(target, property):
                         target = target.fget
                     if inspect.isfunction(target) and target.__module__.startswith("topoloc"):

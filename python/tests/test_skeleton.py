@@ -19,12 +19,14 @@ VOXEL = 0.1
 def carved(size_xy, height, rooms, voxel=VOXEL) -> np.ndarray:
     """``occupied[x, y, z]``: rock with the rectangles ``rooms`` ([x0, y0, x1, y1] metres)
     carved out over the full height."""
-    nx, ny, nz = (int(round(v / voxel)) for v in (*size_xy, height))
+    nx, ny, nz = (round(v / voxel) for v in (*size_xy, height))
     centres_x = (np.arange(nx) + 0.5) * voxel
     centres_y = (np.arange(ny) + 0.5) * voxel
     free = np.zeros((nx, ny), dtype=bool)
     for x0, y0, x1, y1 in rooms:
-        free |= ((centres_x > x0) & (centres_x < x1))[:, None] & ((centres_y > y0) & (centres_y < y1))[None, :]
+        free |= ((centres_x > x0) & (centres_x < x1))[:, None] & (
+            (centres_y > y0) & (centres_y < y1)
+        )[None, :]
     return np.repeat(~free[:, :, None], nz, axis=2)
 
 
@@ -34,7 +36,9 @@ def t_junction() -> np.ndarray:
 
 def ring() -> np.ndarray:
     return carved(
-        (9.0, 7.0), 2.0, [(1.0, 1.0, 8.0, 2.2), (1.0, 4.8, 8.0, 6.0), (1.0, 1.0, 2.2, 6.0), (6.8, 1.0, 8.0, 6.0)]
+        (9.0, 7.0),
+        2.0,
+        [(1.0, 1.0, 8.0, 2.2), (1.0, 4.8, 8.0, 6.0), (1.0, 1.0, 2.2, 6.0), (6.8, 1.0, 8.0, 6.0)],
     )
 
 
@@ -59,7 +63,12 @@ def components(g: topoloc.Graph) -> int:
 def test_a_t_junction_has_one_branch_and_three_ends():
     occupied = t_junction()
     g = topoloc.skeleton_graph(occupied, VOXEL)
-    assert g.kind_counts() == {"end": 3, "corner": 0, "branch": 1, "intermediate": g.kind_counts()["intermediate"]}
+    assert g.kind_counts() == {
+        "end": 3,
+        "corner": 0,
+        "branch": 1,
+        "intermediate": g.kind_counts()["intermediate"],
+    }
     assert g.kind_counts()["intermediate"] >= 1
     assert components(g) == 1 and g.edge_count == g.place_count - 1
     branch = g.kinds.tolist().index(topoloc.NODE_BRANCH)
@@ -73,7 +82,9 @@ def test_a_t_junction_has_one_branch_and_three_ends():
     assert g.edges.dtype == np.uint32 and g.edges.shape == (g.edge_count, 2)
     assert (g.edges[:, 0] < g.edges[:, 1]).all()
     assert [tuple(e) for e in g.edges] == sorted(tuple(e) for e in g.edges)
-    np.testing.assert_allclose(g.lengths, np.linalg.norm(g.positions[g.edges[:, 0]] - g.positions[g.edges[:, 1]], axis=1))
+    np.testing.assert_allclose(
+        g.lengths, np.linalg.norm(g.positions[g.edges[:, 0]] - g.positions[g.edges[:, 1]], axis=1)
+    )
     assert (g.lengths <= 3.0).all()
     # The skeleton lies in free space, and every place on it.
     assert g.skeleton.shape[1] == 3 and len(g.skeleton) > 50
@@ -106,7 +117,7 @@ def test_axis_order_is_x_y_z_and_origin_shifts_positions():
     as_bytes = topoloc.skeleton_graph(occupied.astype(np.uint8) * 255, VOXEL)
     np.testing.assert_array_equal(as_bytes.positions, g.positions)
     shifted = topoloc.skeleton_graph(occupied, VOXEL, origin=(10.0, -5.0, 2.0))
-    np.testing.assert_allclose(shifted.positions, g.positions + [10.0, -5.0, 2.0])
+    np.testing.assert_allclose(shifted.positions, g.positions + np.array([10.0, -5.0, 2.0]))
     np.testing.assert_array_equal(shifted.skeleton, g.skeleton)
 
 
@@ -180,7 +191,9 @@ def test_bad_grids_are_refused():
     with pytest.raises(topoloc.InvalidArgumentError, match="voxel_size"):
         topoloc.skeleton_graph(np.zeros((4, 4, 3), dtype=bool), 0.0)
     with pytest.raises(topoloc.InvalidArgumentError, match="origin"):
-        topoloc.skeleton_graph(np.zeros((4, 4, 3), dtype=bool), VOXEL, origin=(0.0, float("nan"), 0.0))
+        topoloc.skeleton_graph(
+            np.zeros((4, 4, 3), dtype=bool), VOXEL, origin=(0.0, float("nan"), 0.0)
+        )
     with pytest.raises(topoloc.InvalidArgumentError, match="origin"):
         topoloc.skeleton_graph(np.zeros((4, 4, 3), dtype=bool), VOXEL, origin=(0.0, 0.0))
     with pytest.raises(topoloc.InvalidArgumentError, match="occupied"):

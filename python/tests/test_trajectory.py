@@ -13,11 +13,15 @@ import pytest
 
 import topoloc
 
-evo_trajectory = pytest.importorskip("evo.core.trajectory", reason="evo is installed by scripts/install-deps.sh")
+evo_trajectory = pytest.importorskip(
+    "evo.core.trajectory", reason="evo is installed by scripts/install-deps.sh"
+)
 from evo.core import metrics, sync  # noqa: E402
 from evo.tools import file_interface  # noqa: E402
 
-DATA = Path(os.environ.get("TOPOLOC_SHARED_DATA", Path(__file__).resolve().parents[3] / "shared" / "data"))
+DATA = Path(
+    os.environ.get("TOPOLOC_SHARED_DATA", Path(__file__).resolve().parents[3] / "shared" / "data")
+)
 TRAJECTORIES = DATA / "slam-trajectories"
 
 
@@ -35,7 +39,10 @@ def evo_figures(ref, est, alignment: str, max_diff: float = 0.01, delta: int = 1
     if alignment != "none":
         scale = est.align(ref, correct_scale=alignment == "sim3")[2]
     out = {"scale": scale}
-    for name, relation in [("ate", metrics.PoseRelation.translation_part), ("are", metrics.PoseRelation.rotation_angle_deg)]:
+    for name, relation in [
+        ("ate", metrics.PoseRelation.translation_part),
+        ("are", metrics.PoseRelation.rotation_angle_deg),
+    ]:
         ape = metrics.APE(relation)
         ape.process_data((ref, est))
         out[name] = ape.get_statistic(metrics.StatisticsType.rmse)
@@ -63,13 +70,17 @@ def generated(seed: int, n: int = 400):
     xyz = np.column_stack([6 * np.cos(a), 4 * np.sin(a), 0.5 * np.sin(3 * a)])
     yaw = a + np.pi / 2
     q_gt = np.column_stack([np.cos(yaw / 2), np.zeros(n), np.zeros(n), np.sin(yaw / 2)])
-    gt = evo_trajectory.PoseTrajectory3D(positions_xyz=xyz, orientations_quat_wxyz=q_gt, timestamps=t)
+    gt = evo_trajectory.PoseTrajectory3D(
+        positions_xyz=xyz, orientations_quat_wxyz=q_gt, timestamps=t
+    )
     drift = np.cumsum(rng.normal(0, 0.01, (n, 3)), axis=0)
     c, s = np.cos(0.4), np.sin(0.4)
     r = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
     est_xyz = 0.7 * (xyz + drift) @ r.T + [1.0, -2.0, 0.3]
     tilt = rng.normal(0, 0.02, n)
-    q_est = np.column_stack([np.cos((yaw + 0.4 + tilt) / 2), np.zeros(n), np.zeros(n), np.sin((yaw + 0.4 + tilt) / 2)])
+    q_est = np.column_stack(
+        [np.cos((yaw + 0.4 + tilt) / 2), np.zeros(n), np.zeros(n), np.sin((yaw + 0.4 + tilt) / 2)]
+    )
     keep = np.arange(0, n, 3)
     est = evo_trajectory.PoseTrajectory3D(
         positions_xyz=est_xyz[keep], orientations_quat_wxyz=q_est[keep], timestamps=t[keep] + 0.003
@@ -92,7 +103,9 @@ def test_rpe_steps_and_time_offset_agree_with_evo():
     gt, est = generated(3)
     shifted = copy.deepcopy(est)
     shifted.timestamps = shifted.timestamps + 0.525
-    report = topoloc.evaluate_trajectory(rows(gt), rows(shifted), alignment="se3", offset_s=-0.525, rpe_delta=4)
+    report = topoloc.evaluate_trajectory(
+        rows(gt), rows(shifted), alignment="se3", offset_s=-0.525, rpe_delta=4
+    )
     figures = evo_figures(gt, est, "se3", delta=4)
     assert_agrees(report, figures, pairs=est.num_poses)
     with pytest.raises(topoloc.InvalidArgumentError, match="no estimated pose"):
@@ -100,7 +113,7 @@ def test_rpe_steps_and_time_offset_agree_with_evo():
 
 
 def test_bad_input_is_refused():
-    gt, est = generated(4, n=30)
+    gt, _est = generated(4, n=30)
     good = rows(gt)
     with pytest.raises(topoloc.InvalidArgumentError):
         topoloc.evaluate_trajectory(good[:, :7], good)
@@ -121,7 +134,8 @@ def test_bad_input_is_refused():
 
 
 needs_data = pytest.mark.skipif(
-    not TRAJECTORIES.is_dir(), reason=f"{TRAJECTORIES} is absent: the real-trajectory agreement is not checked"
+    not TRAJECTORIES.is_dir(),
+    reason=f"{TRAJECTORIES} is absent: the real-trajectory agreement is not checked",
 )
 
 REAL = [
@@ -140,13 +154,23 @@ REAL = [
 def test_real_trajectories_agree_with_evo(reference, estimate, fmt, alignment):
     ref_path, est_path = TRAJECTORIES / reference, TRAJECTORIES / estimate
     if fmt == "tum":
-        ref, est = file_interface.read_tum_trajectory_file(ref_path), file_interface.read_tum_trajectory_file(est_path)
+        ref, est = (
+            file_interface.read_tum_trajectory_file(ref_path),
+            file_interface.read_tum_trajectory_file(est_path),
+        )
     else:
         # KITTI files are frame-indexed: evo pairs them by index, as frame-index timestamps do.
         stamps = lambda p: np.arange(p.num_poses, dtype=float)  # noqa: E731
-        ref_path_, est_path_ = file_interface.read_kitti_poses_file(ref_path), file_interface.read_kitti_poses_file(est_path)
-        ref = evo_trajectory.PoseTrajectory3D(poses_se3=ref_path_.poses_se3, timestamps=stamps(ref_path_))
-        est = evo_trajectory.PoseTrajectory3D(poses_se3=est_path_.poses_se3, timestamps=stamps(est_path_))
+        ref_path_, est_path_ = (
+            file_interface.read_kitti_poses_file(ref_path),
+            file_interface.read_kitti_poses_file(est_path),
+        )
+        ref = evo_trajectory.PoseTrajectory3D(
+            poses_se3=ref_path_.poses_se3, timestamps=stamps(ref_path_)
+        )
+        est = evo_trajectory.PoseTrajectory3D(
+            poses_se3=est_path_.poses_se3, timestamps=stamps(est_path_)
+        )
     report = topoloc.evaluate_trajectory_files(ref_path, est_path, format=fmt, alignment=alignment)
     assert_agrees(report, evo_figures(ref, est, alignment))
     # The TUM rows of evo's own reading give the same figures through the array entry point.

@@ -61,6 +61,7 @@ The shared library is found through ``TOPOLOC_LIBRARY``, next to this package, i
 ``target/release`` directory of a source checkout, or on the system (see :mod:`topoloc._lib`).
 """
 
+from ._describer import Describer
 from ._errors import (
     BackendUnavailableError,
     BufferTooSmallError,
@@ -95,8 +96,8 @@ from ._errors import (
 from ._lib import (
     ABI_VERSION,
     MODE_FILTER,
-    MODE_SINGLE_FRAME,
     MODE_METRIC,
+    MODE_SINGLE_FRAME,
     NODE_BRANCH,
     NODE_CORNER,
     NODE_END,
@@ -105,13 +106,17 @@ from ._lib import (
     LibraryNotFoundError,
     library_path,
 )
-from ._logging import TRACE, log_level, set_log_level
-from ._describer import Describer
 from ._localizer import Candidate, Localizer, PoseFix, Result, localizer_options_default
+from ._logging import TRACE, log_level, set_log_level
 from ._loops import Gate, LoopCandidate, LoopDetector, LoopHint, loop_options_default
 from ._map import Map, MapBuilder, ViewInfo, keyframe_options_default, map_from_keyframes
 from ._skeleton import Graph, skeleton_graph, skeleton_options_default
-from ._trajectory import ErrorStats, TrajectoryReport, evaluate_trajectory, evaluate_trajectory_files
+from ._trajectory import (
+    ErrorStats,
+    TrajectoryReport,
+    evaluate_trajectory,
+    evaluate_trajectory_files,
+)
 from ._version import abi_version, abi_version_minor, status_name, status_str, version
 
 #: Version of the loaded shared library (a wheel's own version: both are Cargo.toml's).

@@ -160,22 +160,22 @@ def _keypoint_array(
     return np.ascontiguousarray(arr, dtype=np.float32)
 
 
-def _f32_ptr(arr: NDArray[np.float32]) -> "ctypes._Pointer[c_float]":
+def _f32_ptr(arr: NDArray[np.float32]) -> ctypes._Pointer[c_float]:
     """A ``float *`` to the first value of a C-contiguous float32 array."""
     return arr.ctypes.data_as(POINTER(c_float))
 
 
-def _f64_ptr(arr: NDArray[np.float64]) -> "ctypes._Pointer[c_double]":
+def _f64_ptr(arr: NDArray[np.float64]) -> ctypes._Pointer[c_double]:
     """A ``double *`` to the first value of a C-contiguous float64 array."""
     return arr.ctypes.data_as(POINTER(c_double))
 
 
-def _u8_ptr(arr: NDArray[np.uint8]) -> "ctypes._Pointer[c_uint8]":
+def _u8_ptr(arr: NDArray[np.uint8]) -> ctypes._Pointer[c_uint8]:
     """A ``uint8_t *`` to the first value of a uint8 array."""
     return arr.ctypes.data_as(POINTER(c_uint8))
 
 
-def _matrix(values: "ctypes.Array[c_double]", n: int) -> NDArray[np.float64]:
+def _matrix(values: ctypes.Array[c_double], n: int) -> NDArray[np.float64]:
     """A new (n, n) float64 array from a C ``double[n * n]`` in row-major order."""
     return np.array(values[:], dtype=np.float64).reshape(n, n)
 
@@ -234,7 +234,7 @@ def _rows_packed(arr: NDArray[np.uint8], channels: int) -> bool:
         return False
     if w > 1 and strides[1] != channels:
         return False
-    return h == 1 or strides[0] >= w * channels
+    return bool(h == 1 or strides[0] >= w * channels)
 
 
 def _image(
@@ -324,14 +324,14 @@ def _read_array(
     count = c_size_t(0)
     capacity = 16
     for _ in range(2):
-        out = np.empty(capacity * width, dtype=dtype)
+        out: NDArray[Any] = np.empty(capacity * width, dtype=dtype)
         status = fn(*args, out.ctypes.data_as(POINTER(ctype)), out.size, byref(count))
         if status == _lib.TOPOLOC_ERR_BUFFER_TOO_SMALL and count.value > capacity:
             capacity = int(count.value)
             continue
         check(status)
         n = int(count.value)
-        items = out[: n * width].copy()
+        items: NDArray[Any] = out[: n * width].copy()
         return items if width == 1 else items.reshape(n, width)
     check(status)  # pragma: no cover
     raise AssertionError("unreachable")

@@ -7,11 +7,9 @@ from __future__ import annotations
 import threading
 from typing import Any, Callable, TypeVar
 
-
 from ._errors import (
     ConcurrentUseError,
 )
-
 
 _H = TypeVar("_H", bound="_Handle")
 
@@ -41,7 +39,7 @@ class _Handle:
             self._free(ptr)
 
     def __enter__(self: _H) -> _H:
-        self._h  # refuse a closed object
+        _ = self._h  # refuse a closed object
         return self
 
     def __exit__(self, *exc: Any) -> None:
@@ -62,9 +60,11 @@ class _SingleThreaded(_Handle):
     def _init_guard(self) -> None:
         self._busy = threading.Lock()
 
-    def _enter(self, what: str):
+    def _enter(self, what: str) -> Any:
         if not self._busy.acquire(blocking=False):
-            raise ConcurrentUseError(f"{type(self).__name__}.{what} called while another thread uses this object")
+            raise ConcurrentUseError(
+                f"{type(self).__name__}.{what} called while another thread uses this object"
+            )
         if not self._ptr:
             self._busy.release()
             raise ValueError(f"operation on a closed topoloc.{type(self).__name__}")

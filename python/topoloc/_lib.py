@@ -148,6 +148,8 @@ class topoloc_localizer(Structure):
 
 MapPtr = POINTER(topoloc_map)
 BuilderPtr = POINTER(topoloc_map_builder)
+
+
 class topoloc_graph(Structure):
     """Opaque ``topoloc_graph``."""
 
@@ -217,7 +219,8 @@ class topoloc_image_map_options(Structure):
     ]
 
 
-#: ``topoloc_progress_fn``: ``bool (*)(void *user_data, uint32_t stage, size_t done, size_t total)``.
+#: ``topoloc_progress_fn``:
+#: ``bool (*)(void *user_data, uint32_t stage, size_t done, size_t total)``.
 topoloc_progress_fn = CFUNCTYPE(c_bool, c_void_p, c_uint32, c_size_t, c_size_t)
 #: ``topoloc_log_fn`` (ABI 1.13): level, target, message, user_data.
 topoloc_log_fn = CFUNCTYPE(None, c_uint32, c_char_p, c_char_p, c_void_p)
@@ -524,7 +527,15 @@ SIGNATURES = {
     "topoloc_keyframe_options_init": (status_t, [_p(topoloc_keyframe_options), c_size_t]),
     "topoloc_map_from_keyframes": (
         status_t,
-        [c_char_p, c_char_p, c_uint32, _p(topoloc_keyframe), c_size_t, _p(topoloc_keyframe_options), _p(MapPtr)],
+        [
+            c_char_p,
+            c_char_p,
+            c_uint32,
+            _p(topoloc_keyframe),
+            c_size_t,
+            _p(topoloc_keyframe_options),
+            _p(MapPtr),
+        ],
     ),
     "topoloc_image_map_options_init": (status_t, [_p(topoloc_image_map_options), c_size_t]),
     "topoloc_map_build_from_image_files": (
@@ -558,7 +569,10 @@ SIGNATURES = {
     "topoloc_localizer_process": (status_t, [LocalizerPtr, _p(topoloc_frame), _p(topoloc_result)]),
     "topoloc_map_load_options_init": (status_t, [_p(topoloc_map_load_options), c_size_t]),
     "topoloc_map_load": (status_t, [c_char_p, _p(topoloc_map_load_options), _p(MapPtr)]),
-    "topoloc_map_load_from_memory": (status_t, [_p(c_uint8), c_size_t, _p(topoloc_map_load_options), _p(MapPtr)]),
+    "topoloc_map_load_from_memory": (
+        status_t,
+        [_p(c_uint8), c_size_t, _p(topoloc_map_load_options), _p(MapPtr)],
+    ),
     "topoloc_map_save": (status_t, [MapPtr, c_char_p]),
     "topoloc_map_free": (None, [MapPtr]),
     "topoloc_map_place_count": (status_t, [MapPtr, _p(c_size_t)]),
@@ -577,18 +591,32 @@ SIGNATURES = {
     "topoloc_map_view_descriptor": (status_t, [MapPtr, c_uint32, _p(c_float), c_size_t]),
     # Map keypoints (ABI 1.6)
     "topoloc_map_keypoint_total": (status_t, [MapPtr, _p(c_size_t)]),
-    "topoloc_map_view_keypoints": (status_t, [MapPtr, c_uint32, _p(c_float), c_size_t, _p(c_size_t)]),
+    "topoloc_map_view_keypoints": (
+        status_t,
+        [MapPtr, c_uint32, _p(c_float), c_size_t, _p(c_size_t)],
+    ),
     "topoloc_map_with_keypoint_points": (status_t, [MapPtr, _p(c_float), c_size_t, _p(MapPtr)]),
     "topoloc_skeleton_options_init": (status_t, [_p(topoloc_skeleton_options), c_size_t]),
     "topoloc_graph_from_occupancy": (
         status_t,
-        [_p(c_size_t), c_double, _p(c_double), _p(c_uint8), c_size_t, _p(topoloc_skeleton_options), _p(GraphPtr)],
+        [
+            _p(c_size_t),
+            c_double,
+            _p(c_double),
+            _p(c_uint8),
+            c_size_t,
+            _p(topoloc_skeleton_options),
+            _p(GraphPtr),
+        ],
     ),
     "topoloc_graph_free": (None, [GraphPtr]),
     "topoloc_graph_place_count": (status_t, [GraphPtr, _p(c_size_t)]),
     "topoloc_graph_edge_count": (status_t, [GraphPtr, _p(c_size_t)]),
     "topoloc_graph_place": (status_t, [GraphPtr, c_uint32, _p(c_double), _p(c_uint32)]),
-    "topoloc_graph_edge": (status_t, [GraphPtr, c_size_t, _p(c_uint32), _p(c_uint32), _p(c_double)]),
+    "topoloc_graph_edge": (
+        status_t,
+        [GraphPtr, c_size_t, _p(c_uint32), _p(c_uint32), _p(c_double)],
+    ),
     "topoloc_graph_skeleton": (status_t, [GraphPtr, _p(c_uint32), c_size_t, _p(c_size_t)]),
     # Describers (ABI 1.12)
     "topoloc_describer_options_init": (status_t, [_p(topoloc_describer_options), c_size_t]),
@@ -605,7 +633,10 @@ SIGNATURES = {
         status_t,
         [c_char_p, c_char_p, c_uint32, _p(topoloc_loop_options), _p(LoopDetectorPtr)],
     ),
-    "topoloc_loop_detector_from_map": (status_t, [MapPtr, _p(topoloc_loop_options), _p(LoopDetectorPtr)]),
+    "topoloc_loop_detector_from_map": (
+        status_t,
+        [MapPtr, _p(topoloc_loop_options), _p(LoopDetectorPtr)],
+    ),
     "topoloc_loop_detector_free": (None, [LoopDetectorPtr]),
     "topoloc_loop_keyframe_init": (status_t, [_p(topoloc_loop_keyframe), c_size_t]),
     "topoloc_loop_hint_init": (status_t, [_p(topoloc_loop_hint), c_size_t]),
@@ -615,28 +646,49 @@ SIGNATURES = {
     ),
     "topoloc_loop_detector_query": (
         status_t,
-        [LoopDetectorPtr, _p(c_float), c_size_t, _p(topoloc_loop_candidate), c_size_t, _p(c_size_t)],
+        [
+            LoopDetectorPtr,
+            _p(c_float),
+            c_size_t,
+            _p(topoloc_loop_candidate),
+            c_size_t,
+            _p(c_size_t),
+        ],
     ),
     "topoloc_loop_detector_erase": (status_t, [LoopDetectorPtr, c_uint64]),
     "topoloc_loop_detector_save": (status_t, [LoopDetectorPtr, c_char_p]),
     "topoloc_loop_detector_len": (status_t, [LoopDetectorPtr, _p(c_size_t)]),
     # Confirmed loop hints (ABI 1.10)
     "topoloc_loop_detector_confirmed_count": (status_t, [LoopDetectorPtr, _p(c_size_t)]),
-    "topoloc_loop_detector_confirmed": (status_t, [LoopDetectorPtr, c_size_t, _p(topoloc_loop_hint)]),
+    "topoloc_loop_detector_confirmed": (
+        status_t,
+        [LoopDetectorPtr, c_size_t, _p(topoloc_loop_hint)],
+    ),
     # Trajectory metrics (ABI 1.11)
     "topoloc_trajectory_options_init": (status_t, [_p(topoloc_trajectory_options), c_size_t]),
     "topoloc_trajectory_report_init": (status_t, [_p(topoloc_trajectory_report), c_size_t]),
     "topoloc_trajectory_evaluate": (
         status_t,
         [
-            _p(c_double), _p(c_double), c_size_t,
-            _p(c_double), _p(c_double), c_size_t,
-            _p(topoloc_trajectory_options), _p(topoloc_trajectory_report),
+            _p(c_double),
+            _p(c_double),
+            c_size_t,
+            _p(c_double),
+            _p(c_double),
+            c_size_t,
+            _p(topoloc_trajectory_options),
+            _p(topoloc_trajectory_report),
         ],
     ),
     "topoloc_trajectory_evaluate_files": (
         status_t,
-        [c_char_p, c_char_p, c_uint32, _p(topoloc_trajectory_options), _p(topoloc_trajectory_report)],
+        [
+            c_char_p,
+            c_char_p,
+            c_uint32,
+            _p(topoloc_trajectory_options),
+            _p(topoloc_trajectory_report),
+        ],
     ),
     "topoloc_version": (c_char_p, []),
     "topoloc_abi_version": (c_uint32, []),
@@ -689,7 +741,9 @@ def candidate_locations(
         # Absolute, so that a bare file name means "this file here", not a dlopen search.
         return [("env", os.path.abspath(os.path.expanduser(env_path)))]
 
-    found_next_to_package = sorted({str(p) for pattern in patterns for p in package_dir.glob(pattern)})
+    found_next_to_package = sorted(
+        {str(p) for pattern in patterns for p in package_dir.glob(pattern)}
+    )
     if found_next_to_package:
         # Prefer the unversioned name, then the shortest (libtopoloc.so before libtopoloc.so.0.1.0).
         found_next_to_package.sort(key=lambda p: (len(p), p))
@@ -710,7 +764,9 @@ def candidate_locations(
 
     if use_system:
         name = ctypes.util.find_library("topoloc")
-        out.append(("system", name if name else "ctypes.util.find_library('topoloc') found nothing"))
+        out.append(
+            ("system", name if name else "ctypes.util.find_library('topoloc') found nothing")
+        )
     return out
 
 
@@ -762,9 +818,7 @@ def load_library(
         except OSError as e:
             tried.append((location, f"failed to load: {e}"))
             continue
-        try:
-            getattr(lib, "topoloc_abi_version")
-        except AttributeError:
+        if not hasattr(lib, "topoloc_abi_version"):
             tried.append((location, "loaded, but it has no topoloc_abi_version: not libtopoloc"))
             continue
         _check_abi(lib, location)
@@ -774,7 +828,7 @@ def load_library(
             raise LibraryNotFoundError(
                 f"the topoloc library at {location} lacks a function of the C header ({e}); it is "
                 "older than these bindings: rebuild it with `cargo build --release --lib`",
-                tried + [(location, "missing functions")],
+                [*tried, (location, "missing functions")],
             ) from None
         return lib, location
 

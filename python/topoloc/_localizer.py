@@ -13,14 +13,23 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from . import _lib
-from ._convert import PathLike, _descriptor, _f32_ptr, _f64_ptr, _image, _IMAGE_BACKENDS, _matrix, _pose
+from ._convert import (
+    _IMAGE_BACKENDS,
+    PathLike,
+    _descriptor,
+    _f32_ptr,
+    _f64_ptr,
+    _image,
+    _matrix,
+    _pose,
+)
 from ._errors import InvalidOptionError, check
 from ._handles import _SingleThreaded
 from ._lib import lib
 from ._map import Map
 from ._options import OptionTable, choice, defaults, file_path, real, text, unsigned, unsigned64
 
-__all__ = ["Candidate", "PoseFix", "Result", "localizer_options_default", "Localizer"]
+__all__ = ["Candidate", "Localizer", "PoseFix", "Result", "localizer_options_default"]
 
 
 @dataclass(frozen=True)
@@ -50,7 +59,7 @@ class PoseFix:
 
     view: int
     inliers: int
-    world_T_camera: np.ndarray
+    world_T_camera: NDArray[np.float64]
 
     def __eq__(self, other: object) -> bool:
         """Equal view, inliers and pose (the arrays compared element by element)."""

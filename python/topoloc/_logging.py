@@ -19,7 +19,7 @@ from typing import Optional
 from . import _lib
 from ._errors import check
 
-__all__ = ["TRACE", "set_log_level", "log_level"]
+__all__ = ["TRACE", "log_level", "set_log_level"]
 
 #: Python level of the library's ``TRACE`` records (below ``logging.DEBUG``).
 TRACE = 5
@@ -38,7 +38,7 @@ def _forward(level: int, target: bytes, message: bytes, _user_data: object) -> N
         logging.getLogger(name).log(
             _TO_PYTHON.get(level, logging.ERROR), "%s", message.decode("utf-8", errors="replace")
         )
-    except Exception:  # noqa: BLE001 - a logging failure must not unwind into the library
+    except Exception:
         pass
 
 
@@ -82,7 +82,7 @@ def _off_at_exit() -> None:
     # No record may reach Python while the interpreter shuts down.
     try:
         _lib.lib.topoloc_set_log_callback(_lib.topoloc_log_fn(), 0, None)
-    except Exception:  # noqa: BLE001
+    except Exception:
         pass
 
 

@@ -34,7 +34,7 @@ from ._lib import lib
 from ._map import Map
 from ._options import OptionTable, defaults, flag, real, unsigned, unsigned64
 
-__all__ = ["Gate", "LoopHint", "LoopCandidate", "loop_options_default", "LoopDetector"]
+__all__ = ["Gate", "LoopCandidate", "LoopDetector", "LoopHint", "loop_options_default"]
 
 
 class Gate(enum.IntEnum):
@@ -149,7 +149,9 @@ def _binary_descriptors(values: Any, count: int) -> NDArray[np.uint8]:
     if isinstance(values, (bytes, bytearray, memoryview)):
         flat = np.frombuffer(values, dtype=np.uint8)
         if flat.size % 32:
-            raise InvalidArgumentError(f"keypoint_descriptors has {flat.size} bytes, not a multiple of 32")
+            raise InvalidArgumentError(
+                f"keypoint_descriptors has {flat.size} bytes, not a multiple of 32"
+            )
         arr = flat.reshape(-1, 32)
     else:
         arr = np.asarray(values)
@@ -163,7 +165,8 @@ def _binary_descriptors(values: Any, count: int) -> NDArray[np.uint8]:
             )
     if arr.shape[0] != count:
         raise InvalidArgumentError(
-            f"keypoint_descriptors has {arr.shape[0]} rows but keypoints has {count}: one per keypoint"
+            f"keypoint_descriptors has {arr.shape[0]} rows but keypoints has {count}: "
+            "one per keypoint"
         )
     return np.ascontiguousarray(arr, dtype=np.uint8)
 
@@ -206,7 +209,11 @@ class LoopDetector(_SingleThreaded):
         out = _lib.LoopDetectorPtr()
         check(
             lib.topoloc_loop_detector_new(
-                _text(kind, "kind"), _text(model, "model"), _u32(dim, "dim"), byref(opts), byref(out)
+                _text(kind, "kind"),
+                _text(model, "model"),
+                _u32(dim, "dim"),
+                byref(opts),
+                byref(out),
             )
         )
         self._finish_init(out, opts, int(dim))
@@ -296,7 +303,9 @@ class LoopDetector(_SingleThreaded):
         ts = float(timestamp)
         q = _descriptor(descriptor)
         if (keypoints is None) != (keypoint_descriptors is None):
-            raise InvalidArgumentError("give keypoints and keypoint_descriptors together (or neither)")
+            raise InvalidArgumentError(
+                "give keypoints and keypoint_descriptors together (or neither)"
+            )
         points = descriptors = scene = None
         n = 0
         if keypoints is not None:
@@ -305,7 +314,9 @@ class LoopDetector(_SingleThreaded):
             descriptors = _binary_descriptors(keypoint_descriptors, n)
         if camera_points is not None:
             if points is None:
-                raise InvalidArgumentError("camera_points needs keypoints (one scene point per keypoint)")
+                raise InvalidArgumentError(
+                    "camera_points needs keypoints (one scene point per keypoint)"
+                )
             scene = _keypoint_array(camera_points, "camera_points", 3, n)
         body = None if world_T_body is None else _pose(world_T_body, "world_T_body")
         camera = None if body_T_camera is None else _pose(body_T_camera, "body_T_camera")
@@ -370,11 +381,17 @@ class LoopDetector(_SingleThreaded):
         count = c_size_t(0)
         h = self._enter("query")
         try:
-            check(lib.topoloc_loop_detector_query(h, _f32_ptr(q), q.size, found, capacity, byref(count)))
+            check(
+                lib.topoloc_loop_detector_query(
+                    h, _f32_ptr(q), q.size, found, capacity, byref(count)
+                )
+            )
         finally:
             self._leave()
         n = min(int(count.value), capacity)
-        return [LoopCandidate(int(c.keyframe_id), int(c.place), float(c.similarity)) for c in found[:n]]
+        return [
+            LoopCandidate(int(c.keyframe_id), int(c.place), float(c.similarity)) for c in found[:n]
+        ]
 
     def erase(self, id: int) -> None:
         """Removes keyframe ``id`` and its features (e.g. when SLAM culls it).

@@ -46,15 +46,15 @@ from ._options import (
     OptionTable,
     choice,
     defaults,
-    flag,
     file_path,
+    flag,
     real,
     text,
     text_list,
     unsigned,
 )
 
-__all__ = ["ViewInfo", "Map", "MapBuilder", "keyframe_options_default", "map_from_keyframes"]
+__all__ = ["Map", "MapBuilder", "ViewInfo", "keyframe_options_default", "map_from_keyframes"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -72,7 +72,7 @@ class ViewInfo:
     view: int
     place: int
     keyframe_id: Optional[int]
-    world_T_camera: Optional[np.ndarray]
+    world_T_camera: Optional[NDArray[np.float64]]
 
 
 #: The options of :meth:`Map.load` and :meth:`Map.from_bytes`: the fields of
@@ -171,11 +171,11 @@ class _Progress:
             name: Any = _STAGES.get(stage, stage)  # a newer library's stage stays an int
             answer = self.progress(name, int(done), int(total))
             return answer is None or bool(answer)
-        except BaseException as e:  # noqa: B902 - KeyboardInterrupt too: cancel, re-raise later
+        except BaseException as e:
             self.error = e
             return False
 
-    def finish(self, status: int, out) -> None:
+    def finish(self, status: int, out: Any) -> None:
         """After the C call: re-raises the callback's exception (releasing a map built anyway),
         or raises the exception for ``status``."""
         error, self.error = self.error, None
@@ -195,7 +195,8 @@ def _image_files(paths: Union[PathLike, Sequence[PathLike]]) -> List[bytes]:
         folder = Path(os.fsdecode(paths))
         if not folder.is_dir():
             raise InvalidArgumentError(
-                f"{os.fsdecode(paths)!r} is not a folder: give a folder of images or a list of image files"
+                f"{os.fsdecode(paths)!r} is not a folder: give a folder of images or a list of "
+                "image files"
             )
         files = sorted(
             (p for p in folder.iterdir() if p.suffix.lower() in IMAGE_EXTENSIONS and p.is_file()),
@@ -230,7 +231,8 @@ class Map(_Handle):
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         raise TypeError(
-            "use Map.load(), Map.from_bytes(), Map.build_from_images(), Map.build_from_image_files(), "
+            "use Map.load(), Map.from_bytes(), Map.build_from_images(), "
+            "Map.build_from_image_files(), "
             "MapBuilder.build() or map_from_keyframes()"
         )
 
@@ -349,9 +351,7 @@ class Map(_Handle):
         prepared = [_image(img, pixel_format, f"images[{i}]") for i, img in enumerate(images)]
         array = (_lib.topoloc_image * max(len(prepared), 1))(*(img for img, _ in prepared))
         # The image array points into the prepared pixels until the call returns.
-        return cls._build(
-            lib.topoloc_map_build_from_images, array, len(prepared), given, progress
-        )
+        return cls._build(lib.topoloc_map_build_from_images, array, len(prepared), given, progress)
 
     @classmethod
     def build_from_image_files(
@@ -421,7 +421,8 @@ class Map(_Handle):
             return "<topoloc.Map (closed)>"
         return (
             f"<topoloc.Map kind={self.descriptor_kind!r} model={self.descriptor_model!r} "
-            f"dim={self.dim} places={self.place_count} views={self.view_count} edges={self.edge_count}>"
+            f"dim={self.dim} places={self.place_count} views={self.view_count} "
+            f"edges={self.edge_count}>"
         )
 
     # -- whole-map operations ------------------------------------------------------------------
@@ -431,7 +432,7 @@ class Map(_Handle):
         Raises :class:`MapIOError`."""
         check(lib.topoloc_map_save(self._h, _path(path)))
 
-    def _size(self, fn) -> int:
+    def _size(self, fn: Callable[..., int]) -> int:
         out = c_size_t(0)
         check(fn(self._h, byref(out)))
         return int(out.value)
@@ -470,18 +471,18 @@ class Map(_Handle):
 
     # -- places --------------------------------------------------------------------------------
 
-    def neighbours(self, place: int) -> np.ndarray:
+    def neighbours(self, place: int) -> NDArray[np.uint32]:
         """Places joined to ``place`` by an edge, as a uint32 array.
         Raises :class:`UnknownPlaceError`."""
         place = _u32(place, "place", UnknownPlaceError)
         return _read_array(lib.topoloc_map_neighbours, self._h, place)
 
-    def place_views(self, place: int) -> np.ndarray:
+    def place_views(self, place: int) -> NDArray[np.uint32]:
         """View ids of ``place``, as a uint32 array. Raises :class:`UnknownPlaceError`."""
         place = _u32(place, "place", UnknownPlaceError)
         return _read_array(lib.topoloc_map_place_views, self._h, place)
 
-    def place_position(self, place: int) -> Optional[np.ndarray]:
+    def place_position(self, place: int) -> Optional[NDArray[np.float64]]:
         """Position of ``place`` in metres as a float64 array of 3, or ``None`` when the map has
         none. Raises :class:`UnknownPlaceError`."""
         place = _u32(place, "place", UnknownPlaceError)
@@ -490,7 +491,7 @@ class Map(_Handle):
         check(lib.topoloc_map_place_position(self._h, place, _f64_ptr(xyz), byref(has)))
         return xyz if has.value else None
 
-    def edges(self) -> Tuple[np.ndarray, np.ndarray]:
+    def edges(self) -> Tuple[NDArray[np.uint32], NDArray[np.float32]]:
         """All edges, sorted by (a, b) with a < b: ``(pairs, weights)`` where ``pairs`` is an
         (E, 2) uint32 array and ``weights`` an (E,) float32 array."""
         h = self._h
@@ -519,7 +520,7 @@ class Map(_Handle):
         )
         return result
 
-    def view_descriptor(self, view: int) -> np.ndarray:
+    def view_descriptor(self, view: int) -> NDArray[np.float32]:
         """The unit-norm descriptor of ``view`` (a new float32 array of D values).
         Raises :class:`UnknownViewError`."""
         view = _u32(view, "view", UnknownViewError)
@@ -528,7 +529,7 @@ class Map(_Handle):
         check(lib.topoloc_map_view_descriptor(self._h, view, _f32_ptr(out), d))
         return out
 
-    def view_descriptors(self) -> np.ndarray:
+    def view_descriptors(self) -> NDArray[np.float32]:
         """All view descriptors as a new (V, D) float32 array, row ``v`` being view ``v``."""
         h = self._h
         n, d = self.view_count, self.dim
@@ -536,7 +537,11 @@ class Map(_Handle):
         base = out.ctypes.data
         row = d * out.itemsize
         for v in range(n):
-            check(lib.topoloc_map_view_descriptor(h, v, ctypes.cast(base + v * row, POINTER(c_float)), d))
+            check(
+                lib.topoloc_map_view_descriptor(
+                    h, v, ctypes.cast(base + v * row, POINTER(c_float)), d
+                )
+            )
         return out
 
     def view_image(self, view: int) -> str:
@@ -553,7 +558,7 @@ class Map(_Handle):
         from images store them): the rows :meth:`with_keypoint_points` takes."""
         return self._size(lib.topoloc_map_keypoint_total)
 
-    def view_keypoints(self, view: int) -> np.ndarray:
+    def view_keypoints(self, view: int) -> NDArray[np.float32]:
         """Pixel positions of ``view``'s keypoints as a new (N, 2) float32 array of ``x y``
         (OpenCV convention: the centre of the top-left pixel is (0, 0)), in the order
         :meth:`with_keypoint_points` expects their scene points. Raises
@@ -563,7 +568,7 @@ class Map(_Handle):
             lib.topoloc_map_view_keypoints, self._h, view, ctype=c_float, dtype=np.float32, width=2
         )
 
-    def with_keypoint_points(self, xyz: ArrayLike) -> "Map":
+    def with_keypoint_points(self, xyz: ArrayLike) -> Map:
         """A new :class:`Map`, a copy of this one whose keypoints carry their scene points: with
         it and camera intrinsics, a :class:`Localizer` reports pose fixes (:class:`PoseFix`).
 
@@ -577,7 +582,9 @@ class Map(_Handle):
         """
         points = _keypoint_array(xyz, "xyz", 3, None)
         out = _lib.MapPtr()
-        check(lib.topoloc_map_with_keypoint_points(self._h, _f32_ptr(points), points.size, byref(out)))
+        check(
+            lib.topoloc_map_with_keypoint_points(self._h, _f32_ptr(points), points.size, byref(out))
+        )
         return Map._adopt(out)
 
 
@@ -614,7 +621,11 @@ class MapBuilder(_SingleThreaded):
         out = c_uint32(0)
         h = self._enter("add_place")
         try:
-            check(lib.topoloc_map_builder_add_place(h, None if pos is None else _f64_ptr(pos), byref(out)))
+            check(
+                lib.topoloc_map_builder_add_place(
+                    h, None if pos is None else _f64_ptr(pos), byref(out)
+                )
+            )
         finally:
             self._leave()
         return int(out.value)
@@ -625,7 +636,7 @@ class MapBuilder(_SingleThreaded):
         descriptor: ArrayLike,
         keyframe_id: Optional[int] = None,
         world_T_camera: Optional[ArrayLike] = None,
-        image: Optional[Union[str, "os.PathLike[str]"]] = None,
+        image: Optional[Union[str, os.PathLike[str]]] = None,
     ) -> int:
         """Adds a view to ``place`` and returns its id.
 
@@ -655,7 +666,12 @@ class MapBuilder(_SingleThreaded):
         try:
             check(
                 lib.topoloc_map_builder_add_view(
-                    h, place, _f32_ptr(q), q.size, None if attrs is None else byref(attrs), byref(out)
+                    h,
+                    place,
+                    _f32_ptr(q),
+                    q.size,
+                    None if attrs is None else byref(attrs),
+                    byref(out),
                 )
             )
         finally:
@@ -709,8 +725,8 @@ def map_from_keyframes(
     """Builds a map from an ordered keyframe sequence (a SLAM run or image sequence).
 
     ``descriptors``: (K, D) array-like of global descriptors. ``ids``: K host keyframe ids
-    (``None``: ``0`` to ``K-1``), stored with the views they become. ``poses``: ``None`` or a (K, 4, 4)
-    array of ``world_T_camera`` rigid transforms. With poses, a keyframe joins the nearest
+    (``None``: ``0`` to ``K-1``), stored with the views they become. ``poses``: ``None`` or a
+    (K, 4, 4) array of ``world_T_camera`` rigid transforms. With poses, a keyframe joins the nearest
     place within ``place_spacing_m`` and becomes a new view there only when its appearance is
     novel (best cosine similarity below ``novelty_similarity``, at most
     ``max_views_per_place`` views); places closer than ``neighbour_radius_m`` are joined.

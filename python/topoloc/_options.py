@@ -44,7 +44,7 @@ Convert = Callable[[Any, str, Type[TopolocError]], Any]
 _SCRATCH_BYTES = 4096
 
 
-def scratch_struct(cls: Type[S]) -> Tuple[S, "ctypes.Array[c_uint64]"]:
+def scratch_struct(cls: Type[S]) -> Tuple[S, ctypes.Array[c_uint64]]:
     """A zeroed ``cls`` at the start of an oversized buffer; keep the buffer alive with it."""
     buf = (c_uint64 * (max(_SCRATCH_BYTES, ctypes.sizeof(cls)) // 8))()
     return cls.from_buffer(buf), buf

@@ -17,7 +17,7 @@ from ._errors import InvalidArgumentError, TopolocError, UnknownPlaceError, chec
 from ._lib import lib
 from ._options import Option, OptionTable, real
 
-__all__ = ["Graph", "skeleton_options_default", "skeleton_graph"]
+__all__ = ["Graph", "skeleton_graph", "skeleton_options_default"]
 
 #: ``TOPOLOC_NODE_*`` codes by name, in code order.
 NODE_KINDS = ("end", "corner", "branch", "intermediate")
@@ -40,11 +40,11 @@ class Graph:
       on, in grid order (``occupied[tuple(graph.skeleton.T)]`` is all False).
     """
 
-    positions: np.ndarray
-    kinds: np.ndarray
-    edges: np.ndarray
-    lengths: np.ndarray
-    skeleton: np.ndarray
+    positions: NDArray[np.float64]
+    kinds: NDArray[np.uint32]
+    edges: NDArray[np.uint32]
+    lengths: NDArray[np.float64]
+    skeleton: NDArray[np.int64]
 
     @property
     def place_count(self) -> int:
@@ -67,14 +67,16 @@ class Graph:
         counts = np.bincount(self.kinds, minlength=len(NODE_KINDS))
         return {name: int(counts[i]) for i, name in enumerate(NODE_KINDS)}
 
-    def neighbours(self, place: int) -> np.ndarray:
+    def neighbours(self, place: int) -> NDArray[np.uint32]:
         """Places joined to ``place``, increasing."""
         p = _int_in_range(place, "place", self.place_count - 1, UnknownPlaceError)
         a, b = self.edges[:, 0], self.edges[:, 1]
         return np.sort(np.concatenate([b[a == p], a[b == p]]))
 
     def __repr__(self) -> str:
-        return f"Graph(places={self.place_count}, edges={self.edge_count}, kinds={self.kind_counts()})"
+        return (
+            f"Graph(places={self.place_count}, edges={self.edge_count}, kinds={self.kind_counts()})"
+        )
 
 
 def _store_z_band(options: Any, value: Any, error: Type[TopolocError]) -> None:
@@ -116,12 +118,13 @@ def skeleton_options_default() -> Dict[str, Any]:
     return SKELETON_OPTIONS.default_values()
 
 
-def _occupancy_cells(occupied: Any) -> Tuple[np.ndarray, Tuple[int, int, int]]:
+def _occupancy_cells(occupied: Any) -> Tuple[NDArray[np.uint8], Tuple[int, int, int]]:
     """The cells of an ``occupied[x, y, z]`` array as uint8, x fastest, and ``(nx, ny, nz)``."""
     arr = np.asarray(occupied)
     if arr.dtype != np.bool_ and arr.dtype.kind not in "iu":
         raise TypeError(
-            f"occupied must be a bool or integer array (non-zero = occupied), got dtype {arr.dtype}; "
+            "occupied must be a bool or integer array (non-zero = occupied), "
+            f"got dtype {arr.dtype}; "
             "threshold occupancy probabilities first, e.g. occupied = probability > 0.5"
         )
     if arr.ndim == 2:

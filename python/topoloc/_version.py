@@ -10,12 +10,12 @@ from typing import Optional
 from ._lib import TOPOLOC_OK, lib
 
 __all__ = [
-    "version",
     "abi_version",
     "abi_version_minor",
+    "last_error_message",
     "status_name",
     "status_str",
-    "last_error_message",
+    "version",
 ]
 
 _U32_MASK = 0xFFFFFFFF
