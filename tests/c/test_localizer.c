@@ -248,8 +248,9 @@ static void bad_frames_leave_the_localizer_and_the_result_unchanged(const topolo
 
 static void options_shorter_than_the_first_abi_or_out_of_range_are_refused(const topoloc_map *map)
 {
-    topoloc_localizer_options options;
+    topoloc_localizer_options options, bad[4];
     topoloc_localizer *loc = NULL;
+    size_t i;
 
     SECTION();
     CHECK_OK(topoloc_localizer_options_default(&options));
@@ -260,18 +261,18 @@ static void options_shorter_than_the_first_abi_or_out_of_range_are_refused(const
     CHECK_STATUS(topoloc_localizer_new(map, &options, &loc), TOPOLOC_ERR_STRUCT_SIZE);
     CHECK(loc == NULL);
 
-    CHECK_OK(topoloc_localizer_options_default(&options));
-    options.mode = 7;
-    CHECK_ERROR(topoloc_localizer_new(map, &options, &loc), TOPOLOC_ERR_INVALID_OPTION);
-    CHECK_OK(topoloc_localizer_options_default(&options));
-    options.top_k = 0;
-    CHECK_STATUS(topoloc_localizer_new(map, &options, &loc), TOPOLOC_ERR_INVALID_OPTION);
-    CHECK_OK(topoloc_localizer_options_default(&options));
-    options.temperature = 0.0f;
-    CHECK_STATUS(topoloc_localizer_new(map, &options, &loc), TOPOLOC_ERR_INVALID_OPTION);
-    CHECK_OK(topoloc_localizer_options_default(&options));
-    options.stay_probability = 1.5f;
-    CHECK_STATUS(topoloc_localizer_new(map, &options, &loc), TOPOLOC_ERR_INVALID_OPTION);
+    /* The defaults with one option out of range in each. */
+    for (i = 0; i < 4; i++) {
+        CHECK_OK(topoloc_localizer_options_default(&bad[i]));
+    }
+    bad[0].mode = 7;
+    bad[1].top_k = 0;
+    bad[2].temperature = 0.0f;
+    bad[3].stay_probability = 1.5f;
+    for (i = 0; i < 4; i++) {
+        CHECK_STATUS(topoloc_localizer_new(map, &bad[i], &loc), TOPOLOC_ERR_INVALID_OPTION);
+    }
+    CHECK_HAS_MESSAGE();
 }
 
 static void a_localizer_expecting_another_descriptor_is_refused(const topoloc_map *map)

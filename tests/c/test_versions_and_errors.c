@@ -122,8 +122,8 @@ static void freeing_a_null_handle_does_nothing(void)
     CHECK(true);
 }
 
-static void defaults_fill_each_versioned_struct_and_its_size(void)
-{
+/* One of each versioned struct of the maps, the builder and the localizer. */
+struct versioned_structs {
     topoloc_frame frame;
     topoloc_result result;
     topoloc_localizer_options options;
@@ -131,51 +131,51 @@ static void defaults_fill_each_versioned_struct_and_its_size(void)
     topoloc_map_load_options load_options;
     topoloc_view_attributes attributes;
     topoloc_view_info info;
+};
+
+static void defaults_fill_each_versioned_struct_and_its_size(void)
+{
+    struct versioned_structs v;
 
     SECTION();
-    CHECK_OK(topoloc_frame_default(&frame));
-    CHECK(frame.struct_size == sizeof frame && frame.timestamp == 0.0);
-    CHECK_OK(topoloc_result_default(&result));
-    CHECK(result.struct_size == sizeof result && result.candidates_len == 0);
-    CHECK_OK(topoloc_localizer_options_default(&options));
-    CHECK(options.struct_size == sizeof options);
-    CHECK(options.temperature > 0.0f && options.stay_probability > 0.0f);
-    CHECK_OK(topoloc_keyframe_options_default(&kf_options));
-    CHECK(kf_options.struct_size == sizeof kf_options && kf_options.neighbour_radius_m == 3.0);
-    CHECK_OK(topoloc_map_load_options_default(&load_options));
-    CHECK(load_options.struct_size == sizeof load_options);
-    CHECK_OK(topoloc_view_attributes_default(&attributes));
-    CHECK(attributes.struct_size == sizeof attributes);
-    CHECK_OK(topoloc_view_info_default(&info));
-    CHECK(info.struct_size == sizeof info && !info.has_pose && !info.has_keyframe_id);
+    CHECK_OK(topoloc_frame_default(&v.frame));
+    CHECK(v.frame.struct_size == sizeof v.frame && v.frame.timestamp == 0.0);
+    CHECK_OK(topoloc_result_default(&v.result));
+    CHECK(v.result.struct_size == sizeof v.result && v.result.candidates_len == 0);
+    CHECK_OK(topoloc_localizer_options_default(&v.options));
+    CHECK(v.options.struct_size == sizeof v.options);
+    CHECK(v.options.temperature > 0.0f && v.options.stay_probability > 0.0f);
+    CHECK_OK(topoloc_keyframe_options_default(&v.kf_options));
+    CHECK(v.kf_options.struct_size == sizeof v.kf_options &&
+          v.kf_options.neighbour_radius_m == 3.0);
+    CHECK_OK(topoloc_map_load_options_default(&v.load_options));
+    CHECK(v.load_options.struct_size == sizeof v.load_options);
+    CHECK_OK(topoloc_view_attributes_default(&v.attributes));
+    CHECK(v.attributes.struct_size == sizeof v.attributes);
+    CHECK_OK(topoloc_view_info_default(&v.info));
+    CHECK(v.info.struct_size == sizeof v.info && !v.info.has_pose && !v.info.has_keyframe_id);
 }
 
 static void sizes_below_the_first_published_layout_are_refused_and_nothing_written(void)
 {
-    topoloc_frame frame;
-    topoloc_result result;
-    topoloc_localizer_options options;
-    topoloc_keyframe_options kf_options;
-    topoloc_map_load_options load_options;
-    topoloc_view_attributes attributes;
-    topoloc_view_info info;
+    struct versioned_structs v;
 
     SECTION();
-    memset(&frame, 0x5A, sizeof frame);
-    CHECK_ERROR(topoloc_frame_init(&frame, 0), TOPOLOC_ERR_STRUCT_SIZE);
-    CHECK(all_bytes((const unsigned char *)&frame, sizeof frame, 0x5A));
+    memset(&v.frame, 0x5A, sizeof v.frame);
+    CHECK_ERROR(topoloc_frame_init(&v.frame, 0), TOPOLOC_ERR_STRUCT_SIZE);
+    CHECK(all_bytes((const unsigned char *)&v.frame, sizeof v.frame, 0x5A));
     /* The first published (ABI 1.0) frame ends before `image`. */
-    CHECK_STATUS(topoloc_frame_init(&frame, offsetof(topoloc_frame, image) - 1),
+    CHECK_STATUS(topoloc_frame_init(&v.frame, offsetof(topoloc_frame, image) - 1),
                  TOPOLOC_ERR_STRUCT_SIZE);
     CHECK_STATUS(topoloc_localizer_options_init(
-                     &options, offsetof(topoloc_localizer_options, image_backend) - 1),
+                     &v.options, offsetof(topoloc_localizer_options, image_backend) - 1),
                  TOPOLOC_ERR_STRUCT_SIZE);
-    CHECK_STATUS(topoloc_result_init(&result, sizeof(size_t)), TOPOLOC_ERR_STRUCT_SIZE);
-    CHECK_STATUS(topoloc_localizer_options_init(&options, 1), TOPOLOC_ERR_STRUCT_SIZE);
-    CHECK_STATUS(topoloc_keyframe_options_init(&kf_options, 0), TOPOLOC_ERR_STRUCT_SIZE);
-    CHECK_STATUS(topoloc_map_load_options_init(&load_options, 0), TOPOLOC_ERR_STRUCT_SIZE);
-    CHECK_STATUS(topoloc_view_attributes_init(&attributes, 0), TOPOLOC_ERR_STRUCT_SIZE);
-    CHECK_STATUS(topoloc_view_info_init(&info, 0), TOPOLOC_ERR_STRUCT_SIZE);
+    CHECK_STATUS(topoloc_result_init(&v.result, sizeof(size_t)), TOPOLOC_ERR_STRUCT_SIZE);
+    CHECK_STATUS(topoloc_localizer_options_init(&v.options, 1), TOPOLOC_ERR_STRUCT_SIZE);
+    CHECK_STATUS(topoloc_keyframe_options_init(&v.kf_options, 0), TOPOLOC_ERR_STRUCT_SIZE);
+    CHECK_STATUS(topoloc_map_load_options_init(&v.load_options, 0), TOPOLOC_ERR_STRUCT_SIZE);
+    CHECK_STATUS(topoloc_view_attributes_init(&v.attributes, 0), TOPOLOC_ERR_STRUCT_SIZE);
+    CHECK_STATUS(topoloc_view_info_init(&v.info, 0), TOPOLOC_ERR_STRUCT_SIZE);
 }
 
 /* A newer caller's larger struct: the library fills what it knows, says so in struct_size, and
