@@ -78,7 +78,7 @@ pub struct MetricOptions {
     /// `temperature`, so that the cloud starts around the views that match the first frame
     /// best instead of spread over the whole map (a proposal; the odometry and the frames that
     /// follow correct it). Default 0.3, chosen on the suite's Test worlds with ring points
-    /// (figures in BENCHMARKS.md, "Metric mode").
+    /// (figures in docs/benchmarks/issue-04.md, "Metric mode").
     pub initial_temperature: f32,
     /// Standard deviation of a pose fix's horizontal position ([`crate::verify::locate`],
     /// with verification and a camera), metres: each fix multiplies a particle's weight by
@@ -88,7 +88,7 @@ pub struct MetricOptions {
     /// Weight a pose fix leaves to particles far from it, guarding against a wrong fix (a
     /// look-alike place whose keypoints happen to agree, a degenerate fit). Default 0.3; a
     /// lower floor let wrong fixes drag the cloud away (the comparison and the share of
-    /// far-off fixes are in BENCHMARKS.md, "Metric mode with pose fixes").
+    /// far-off fixes are in docs/benchmarks/issue-04.md, "Metric mode with pose fixes").
     pub fix_outlier: f32,
     /// Seed of the random generator. Default 0.
     pub seed: u64,

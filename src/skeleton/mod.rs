@@ -323,7 +323,7 @@ fn free_space(grid: &OccupancyGrid, options: &SkeletonOptions) -> Result<FreeSpa
 ///
 /// Cost: one pass over the free voxels per border direction and thinning iteration (about half
 /// the widest free region, in voxels), single-threaded; the graph stage after it costs far
-/// less. Timings: `cargo bench --bench skeleton`, BENCHMARKS.md.
+/// less. Timings: `cargo bench --bench skeleton`.
 pub fn skeletonize(
     grid: &OccupancyGrid,
     options: &SkeletonOptions,

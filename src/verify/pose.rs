@@ -74,7 +74,7 @@ impl PinholeCamera {
 pub struct LocateOptions {
     /// Fewest RANSAC inliers for a pose to be accepted. Default 30: fixes with fewer inliers
     /// were often far off on the suite's worlds (the shares by inlier count are in
-    /// BENCHMARKS.md, "Metric mode with pose fixes").
+    /// docs/benchmarks/issue-04.md, "Metric mode with pose fixes").
     pub min_inliers: u32,
     /// RANSAC inlier threshold: reprojection error, pixels. Default 2.0.
     pub reprojection_px: f32,

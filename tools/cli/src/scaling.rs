@@ -27,10 +27,10 @@ use topoloc_synthetic::{SyntheticWorld, WorldParams};
 /// settling); they precede the timed frames on the same walk.
 const WARMUP_FRAMES: usize = 50;
 
-/// Median describe time per frame in ms, `(JSON key, backend, ms)`, from BENCHMARKS.md
-/// ("Speed, one thread, 320x240 input", `cargo bench --bench describe`); independent of the map
-/// size.
-const DESCRIBE_MS: [(&str, &str, f64); 2] = [("onnx", "ONNX MLF", 10.2), ("vlad", "VLAD", 2.61)];
+/// Median describe time per frame in ms, `(JSON key, backend, ms)`: BENCHMARKS.md's
+/// "Descriptor and describe time" (`cargo bench --bench describe`, i8 PCA rows); independent of
+/// the map size.
+const DESCRIBE_MS: [(&str, &str, f64); 2] = [("onnx", "ONNX MLF", 7.17), ("vlad", "VLAD", 1.49)];
 
 /// Localizer configurations timed: JSON key, label in the table and plot, mode, odometry given.
 const CONFIGURATIONS: [(&str, &str, Mode, bool); 3] = [
