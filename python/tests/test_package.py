@@ -5,6 +5,7 @@ imported, carries its own library and has a platform tag."""
 
 from __future__ import annotations
 
+import ast
 import importlib.metadata
 import importlib.util
 import inspect
@@ -112,6 +113,48 @@ def test_public_api_is_annotated():
                         if getattr(target, "__qualname__", "").startswith(klass.__qualname__ + "."):
                             missing += _unannotated(f"{name}.{member_name}", target)
     assert sorted(set(missing)) == []
+
+
+#: The package's modules in import order: each imports only from the layers before its own
+#: (one way, no cycles), as src/ffi/'s modules do.
+MODULE_LAYERS = [
+    {"_lib"},
+    {"_version"},
+    {"_errors"},
+    {"_convert"},
+    {"_options", "_handles", "_logging"},
+    {"_map", "_skeleton", "_trajectory"},
+    {"_localizer", "_describer", "_loops"},
+    {"__init__"},
+]
+
+
+def _package_imports(module: Path) -> set:
+    """The package modules that ``module`` imports (``from .x import ...``, ``from . import x``)."""
+    found = set()
+    for node in ast.walk(ast.parse(module.read_text())):
+        if isinstance(node, ast.ImportFrom) and node.level == 1:
+            if node.module:
+                found.add(node.module)
+            else:
+                found.update(alias.name for alias in node.names)
+    return found
+
+
+def test_modules_import_one_way():
+    modules = {p.stem: p for p in PACKAGE_DIR.glob("*.py")}
+    assert set(modules) == set().union(*MODULE_LAYERS), "a module is missing from MODULE_LAYERS"
+    assert "_core" not in modules
+    layer = {name: i for i, names in enumerate(MODULE_LAYERS) for name in names}
+    for name, path in modules.items():
+        for imported in _package_imports(path):
+            assert layer[imported] < layer[name], f"{name} imports {imported}"
+
+
+def test_every_module_names_its_concern():
+    for path in PACKAGE_DIR.glob("*.py"):
+        doc = ast.get_docstring(ast.parse(path.read_text()))
+        assert doc and len(doc.split()) >= 8, f"{path.name} has no docstring naming its concern"
 
 
 def test_context_managers_return_their_own_type():

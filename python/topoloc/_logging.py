@@ -38,7 +38,7 @@ def _forward(level: int, target: bytes, message: bytes, _user_data: object) -> N
         logging.getLogger(name).log(
             _TO_PYTHON.get(level, logging.ERROR), "%s", message.decode("utf-8", errors="replace")
         )
-    except Exception:
+    except Exception:  # a logging failure must not unwind into the library
         pass
 
 

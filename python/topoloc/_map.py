@@ -171,7 +171,7 @@ class _Progress:
             name: Any = _STAGES.get(stage, stage)  # a newer library's stage stays an int
             answer = self.progress(name, int(done), int(total))
             return answer is None or bool(answer)
-        except BaseException as e:
+        except BaseException as e:  # KeyboardInterrupt too: cancel, re-raise later
             self.error = e
             return False
 
