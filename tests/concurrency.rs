@@ -3,7 +3,7 @@
 //! filter, single frame, metric mode with odometry, image frames described and verified), and
 //! four keyframe databases with loop detection on four threads give the hints a sequential run
 //! gives. The C side (one localizer per thread, a localizer raced by two threads, under
-//! ThreadSanitizer) is in tests/c/test_topoloc.c.
+//! ThreadSanitizer) is in tests/c/test_threads.c.
 
 mod common;
 
