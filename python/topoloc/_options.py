@@ -213,7 +213,8 @@ class OptionTable(Generic[S]):
         self.init = init
         self.error = error
         self.options: Dict[str, AnyOption] = {option.name: option for option in options}
-        assert len(self.options) == len(options), f"{what}: two options of one name"
+        if len(self.options) != len(options):
+            raise ValueError(f"{what} options: two options of one name")
 
     def __iter__(self) -> Iterator[str]:
         return iter(self.options)

@@ -83,7 +83,7 @@ def _store_z_band(options: Any, value: Any, error: Type[TopolocError]) -> None:
     try:
         z_min, z_max = (_real(v, "z_band", error) for v in value)
     except ValueError:
-        raise InvalidArgumentError(f"z_band must be (z_min, z_max), got {value!r}") from None
+        raise error(f"z_band must be (z_min, z_max), got {value!r}") from None
     options.use_z_band = True
     options.z_min_m, options.z_max_m = z_min, z_max
 
