@@ -360,32 +360,39 @@ typedef struct topoloc_localizer_options {
    */
   topoloc_mode mode;
   /**
-   * Softmax temperature of the observation likelihood (> 0). Default 0.2.
+   * Softmax temperature of the observation likelihood (> 0).
+   * Default: 0.2.
    */
   float temperature;
   /**
-   * Probability that the off-map state persists from one frame to the next. Default 0.7.
+   * Probability that the off-map state persists from one frame to the next.
+   * Default: 0.7.
    */
   float stay_probability;
   /**
-   * Probability of a jump anywhere per frame (kidnap recovery). Default 0.01.
+   * Probability of a jump anywhere per frame (kidnap recovery).
+   * Default: 0.01.
    */
   float jump_probability;
   /**
-   * Probability of entering the off-map state per frame; 0 disables off-map. Default 0.01.
+   * Probability of entering the off-map state per frame; 0 disables off-map.
+   * Default: 0.01.
    */
   float off_map_probability;
   /**
-   * Absolute floor of the off-map hypothesis' score (cosine similarity). Default 0.2.
+   * Absolute floor of the off-map hypothesis' score (cosine similarity).
+   * Default: 0.2.
    */
   float off_map_similarity;
   /**
    * Standard deviations above the expected best background score a place must reach to
-   * beat the off-map hypothesis (finite; may be negative). Default -1.0.
+   * beat the off-map hypothesis (finite; may be negative).
+   * Default: -1.
    */
   float off_map_margin;
   /**
-   * Candidates reported per frame (>= 1). Default 5.
+   * Candidates reported per frame (>= 1).
+   * Default: 5.
    */
   uint32_t top_k;
   /**
@@ -419,24 +426,29 @@ typedef struct topoloc_localizer_options {
    */
   uint32_t verify_candidates;
   /**
-   * Views checked per candidate place, those most similar to the frame, 1..=64. Default 2.
+   * Views checked per candidate place, those most similar to the frame, 1..=64.
+   * Default: 2.
    */
   uint32_t verify_views_per_candidate;
   /**
    * Log-likelihood of one inlier: a checked place's belief is multiplied by
-   * `exp(verify_inlier_weight * inliers)` (finite, >= 0). Default 0.05.
+   * `exp(verify_inlier_weight * inliers)` (finite, >= 0).
+   * Default: 0.05.
    */
   float verify_inlier_weight;
   /**
-   * Particles of `TOPOLOC_MODE_METRIC`, 1..=1,000,000. Default 2000.
+   * Particles of `TOPOLOC_MODE_METRIC`, 1..=1,000,000.
+   * Default: 2000.
    */
   uint32_t metric_particles;
   /**
-   * Temperature of a particle's appearance likelihood in metric mode (> 0). Default 1.0.
+   * Temperature of a particle's appearance likelihood in metric mode (> 0).
+   * Default: 1.
    */
   float metric_temperature;
   /**
-   * Seed of metric mode's random generator (results are deterministic). Default 0.
+   * Seed of metric mode's random generator (results are deterministic).
+   * Default: 0.
    */
   uint64_t metric_seed;
   /**
@@ -460,7 +472,8 @@ typedef struct topoloc_localizer_options {
    */
   double camera_cy;
   /**
-   * Fewest PnP RANSAC inliers for a pose fix (>= 6). Default 30.
+   * Fewest PnP RANSAC inliers for a pose fix (>= 6).
+   * Default: 30.
    */
   uint32_t pose_min_inliers;
   /**
@@ -472,7 +485,8 @@ typedef struct topoloc_localizer_options {
    */
   double verify_off_map_inliers;
   /**
-   * Inliers per e-fold of that likelihood ratio (finite, > 0). Default 4.
+   * Inliers per e-fold of that likelihood ratio (finite, > 0).
+   * Default: 4.
    */
   double verify_off_map_inlier_scale;
 } topoloc_localizer_options;
@@ -682,19 +696,23 @@ typedef struct topoloc_keyframe_options {
    */
   size_t struct_size;
   /**
-   * Distance (m) within which a keyframe joins an existing place. Default 2.0.
+   * Distance (m) within which a keyframe joins an existing place.
+   * Default: 2.
    */
   double place_spacing_m;
   /**
-   * Cosine similarity below which a keyframe's appearance is novel. Default 0.9.
+   * Cosine similarity below which a keyframe's appearance is novel.
+   * Default: 0.9.
    */
   float novelty_similarity;
   /**
-   * Places closer than this (m) are joined by an edge. Default 3.0.
+   * Places closer than this (m) are joined by an edge.
+   * Default: 3.
    */
   double neighbour_radius_m;
   /**
-   * Most views per place. Default 4.
+   * Most views per place.
+   * Default: 4.
    */
   uint32_t max_views_per_place;
 } topoloc_keyframe_options;
@@ -741,17 +759,20 @@ typedef struct topoloc_image_map_options {
   topoloc_backend backend;
   /**
    * Descriptor dimension D; with fewer than D + 1 images it becomes the number of images
-   * minus one (`topoloc_map_dim` tells). Default 512.
+   * minus one (`topoloc_map_dim` tells).
+   * Default: 512.
    */
   uint32_t dim;
   /**
    * Without poses: consecutive images per place (1, or 4 for yaw views); with poses: most
-   * views per place. Default 1.
+   * views per place.
+   * Default: 1.
    */
   uint32_t views_per_place;
   /**
    * Describing threads; 0 = one per core, at most 256 (more: `TOPOLOC_ERR_INVALID_ARGUMENT`).
-   * They are joined before the build returns. Default 0.
+   * They are joined before the build returns.
+   * Default: 0.
    */
   uint32_t threads;
   /**
@@ -767,7 +788,8 @@ typedef struct topoloc_image_map_options {
    */
   const char *onnx_taps;
   /**
-   * ONNX pooling grid rows and columns (1 = global pooling). Default 4 x 4.
+   * ONNX pooling grid rows and columns (1 = global pooling).
+   * Default: 4.
    */
   uint32_t grid_rows;
   /**
@@ -775,7 +797,8 @@ typedef struct topoloc_image_map_options {
    */
   uint32_t grid_cols;
   /**
-   * VLAD codebook size. Default 64.
+   * VLAD codebook size.
+   * Default: 64.
    */
   uint32_t vlad_clusters;
   /**
@@ -787,7 +810,8 @@ typedef struct topoloc_image_map_options {
    */
   const char *poses_tum_path;
   /**
-   * Place spacing in metres when poses are given. Default 2.0.
+   * Place spacing in metres when poses are given.
+   * Default: 2.
    */
   double place_spacing_m;
   /**
@@ -835,7 +859,8 @@ typedef struct topoloc_describer_options {
    */
   const char *onnx_runtime_path;
   /**
-   * ONNX Runtime intra-op threads, 1..=64. Default 1.
+   * ONNX Runtime intra-op threads, 1..=64.
+   * Default: 1.
    */
   uint32_t threads;
 } topoloc_describer_options;
@@ -855,35 +880,43 @@ typedef struct topoloc_skeleton_options {
    */
   bool use_z_band;
   /**
-   * Lower bound of the height band. Default 0.
+   * Lower bound of the height band.
+   * Default: 0.
    */
   double z_min_m;
   /**
-   * Upper bound of the height band (>= z_min_m). Default 0.
+   * Upper bound of the height band (>= z_min_m).
+   * Default: 0.
    */
   double z_max_m;
   /**
-   * Free voxels closer than this to an obstacle count as occupied (>= 0). Default 0.
+   * Free voxels closer than this to an obstacle count as occupied (>= 0).
+   * Default: 0.
    */
   double min_clearance_m;
   /**
-   * Nodes closer than this along the skeleton become one place (>= 0). Default 1.0.
+   * Nodes closer than this along the skeleton become one place (>= 0).
+   * Default: 1.
    */
   double merge_radius_m;
   /**
-   * Longest edge (at least two voxels); longer paths get intermediate places. Default 3.0.
+   * Longest edge (at least two voxels); longer paths get intermediate places.
+   * Default: 3.
    */
   double max_edge_m;
   /**
-   * Smallest bend (degrees, in (0, 180)) that makes a corner. Default 40.
+   * Smallest bend (degrees, in (0, 180)) that makes a corner.
+   * Default: 40.
    */
   double corner_angle_deg;
   /**
-   * Distance along the skeleton over which bends are measured (> 0). Default 0.5.
+   * Distance along the skeleton over which bends are measured (> 0).
+   * Default: 0.5.
    */
   double corner_scale_m;
   /**
-   * Dead-end branches shorter than this are removed (>= 0). Default 1.0.
+   * Dead-end branches shorter than this are removed (>= 0).
+   * Default: 1.
    */
   double min_spur_m;
 } topoloc_skeleton_options;
@@ -903,25 +936,29 @@ typedef struct topoloc_loop_options {
    */
   size_t struct_size;
   /**
-   * Loop candidates verified per keyframe, 1..=64. Default 5.
+   * Loop candidates verified per keyframe, 1..=64.
+   * Default: 5.
    */
   uint32_t candidates;
   /**
    * Keyframes with an id within this many of the new one's are never candidates (DBoW2's
-   * `max_id`; an earlier session's keyframes always may be). Default 30.
+   * `max_id`; an earlier session's keyframes always may be).
+   * Default: 30.
    */
   uint64_t exclude_recent_ids;
   /**
    * Keyframes less than this many seconds older than the new one are never candidates.
-   * Default 10.
+   * Default: 10.
    */
   double exclude_recent_s;
   /**
-   * Fewest fundamental-matrix inliers of an accepted hint, 8..=10000. Default 30.
+   * Fewest fundamental-matrix inliers of an accepted hint, 8..=10000.
+   * Default: 30.
    */
   uint32_t min_inliers;
   /**
-   * Consecutive keyframes whose best candidates must agree on the place, 1..=100. Default 3.
+   * Consecutive keyframes whose best candidates must agree on the place, 1..=100.
+   * Default: 3.
    */
   uint32_t consistent_keyframes;
   /**
@@ -930,13 +967,15 @@ typedef struct topoloc_loop_options {
    */
   bool odometry_gate;
   /**
-   * Largest rotation difference to the odometry, degrees (> 0). Default 30.
+   * Largest rotation difference to the odometry, degrees (> 0).
+   * Default: 30.
    */
   double odometry_max_rotation_deg;
   /**
    * Largest translation difference to the odometry, metres (> 0; an unscaled hint's
    * direction is scaled by the odometry's baseline), plus
-   * `odometry_max_translation_per_m` per metre travelled (ABI 1.7). Default 1.
+   * `odometry_max_translation_per_m` per metre travelled (ABI 1.7).
+   * Default: 1.
    */
   double odometry_max_translation_m;
   /**
@@ -958,41 +997,49 @@ typedef struct topoloc_loop_options {
   double cy;
   /**
    * A keyframe starts a new place when its similarity to its predecessor's place is below
-   * this, in (-1, 1]. Default 0.9.
+   * this, in (-1, 1].
+   * Default: 0.9.
    */
   float novelty_similarity;
   /**
-   * With poses, a keyframe closer than this to the previous place joins it (metres). Default 2.
+   * With poses, a keyframe closer than this to the previous place joins it (metres).
+   * Default: 2.
    */
   double place_spacing_m;
   /**
-   * With poses, a new place is linked to places within this distance (metres). Default 3.
+   * With poses, a new place is linked to places within this distance (metres).
+   * Default: 3.
    */
   double neighbour_radius_m;
   /**
    * A candidate whose id is less than this from a more similar candidate's is skipped (its
-   * stretch is still searched when the better one is refined); 0 = off. Default 10.
+   * stretch is still searched when the better one is refined); 0 = off.
+   * Default: 10.
    */
   uint64_t candidate_id_gap;
   /**
    * The odometry translation bound grows by this much per metre the odometry travelled
-   * between the two keyframes (its drift rate, >= 0; 0: a fixed bound). Default 0.02.
+   * between the two keyframes (its drift rate, >= 0; 0: a fixed bound).
+   * Default: 0.02.
    */
   double odometry_max_translation_per_m;
   /**
    * Reprojection threshold of the metric pose fit against a keyframe's 3D points, pixels
-   * (> 0). Default 5.
+   * (> 0).
+   * Default: 5.
    */
   double pose_reprojection_px;
   /**
    * How much farther than the odometry translation bound an odometry candidate may lie,
-   * metres (>= 0). Default 2.
+   * metres (>= 0).
+   * Default: 2.
    */
   double odometry_search_m;
   /**
    * Candidates proposed by the odometry besides appearance's: the keyframes nearest the new
    * one's odometry pose that could pass the odometry gate (this session's; needs poses and
-   * `odometry_gate`), 0..=64; 0 = none. Default 1.
+   * `odometry_gate`), 0..=64; 0 = none.
+   * Default: 1.
    */
   uint32_t odometry_candidates;
 } topoloc_loop_options;
@@ -1159,15 +1206,18 @@ typedef struct topoloc_trajectory_options {
    */
   topoloc_alignment alignment;
   /**
-   * Largest timestamp difference of an associated pair, seconds (>= 0). Default 0.01.
+   * Largest timestamp difference of an associated pair, seconds (>= 0).
+   * Default: 0.01.
    */
   double max_diff_s;
   /**
-   * Added to the estimate's timestamps before associating, seconds. Default 0.
+   * Added to the estimate's timestamps before associating, seconds.
+   * Default: 0.
    */
   double offset_s;
   /**
-   * The RPE's step in associated poses (>= 1). Default 1.
+   * The RPE's step in associated poses (>= 1).
+   * Default: 1.
    */
   uint32_t rpe_delta;
 } topoloc_trajectory_options;

@@ -18,7 +18,7 @@ clang-format --dry-run -Werror "${c_files[@]}"
 echo "lint: ruff and mypy --strict on python/"
 python3 -m ruff check --quiet python
 python3 -m ruff format --check --quiet python
-python3 -m mypy --strict --no-error-summary python/topoloc
+python3 -m mypy --strict --no-error-summary --config-file python/pyproject.toml python/topoloc
 
 mapfile -t shell_files < <(git ls-files '*.sh' .ci/run)
 echo "lint: shellcheck on ${#shell_files[@]} scripts"

@@ -155,10 +155,10 @@ def time_calls(variants: Dict[str, Callable[[np.ndarray, float], Any]],
 
 def zero_copy_checks(topoloc: Any, loc: Any, probe: Any, clock: Clock, dim: int) -> Dict[str, Dict[str, Any]]:
     """Whether each path hands the caller's descriptor memory to the library or a copy."""
-    from topoloc import _core  # the shim's C calls go through _core.lib
+    from topoloc import _lib  # the shim's C calls go through _lib.lib
 
     seen: Dict[str, int] = {}
-    real = _core.lib.topoloc_localizer_process
+    real = _lib.lib.topoloc_localizer_process
 
     def spy(handle: Any, frame_ref: Any, result_ref: Any) -> int:
         seen["address"] = ctypes.cast(frame_ref._obj.descriptor, ctypes.c_void_p).value or 0
@@ -172,7 +172,7 @@ def zero_copy_checks(topoloc: Any, loc: Any, probe: Any, clock: Clock, dim: int)
         "float64 contiguous": np.ascontiguousarray(base[:dim], dtype=np.float64),
     }
     out: Dict[str, Dict[str, Any]] = {}
-    _core.lib.topoloc_localizer_process = spy
+    _lib.lib.topoloc_localizer_process = spy
     try:
         for case, arr in cases.items():
             loc.process(arr, timestamp=clock())
@@ -184,7 +184,7 @@ def zero_copy_checks(topoloc: Any, loc: Any, probe: Any, clock: Clock, dim: int)
                 pyo3 = f"refused (TypeError: {str(e).splitlines()[0][:60]})"
             out[case] = {"ctypes shim": shim, "pyo3 probe": pyo3}
     finally:
-        _core.lib.topoloc_localizer_process = real
+        _lib.lib.topoloc_localizer_process = real
     return out
 
 

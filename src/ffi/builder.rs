@@ -210,13 +210,13 @@ pub struct topoloc_keyframe {
 pub struct topoloc_keyframe_options {
     /// `sizeof(topoloc_keyframe_options)`, set by the `_default` function.
     pub struct_size: usize,
-    /// Distance (m) within which a keyframe joins an existing place. Default 2.0.
+    /// Distance (m) within which a keyframe joins an existing place.
     pub place_spacing_m: f64,
-    /// Cosine similarity below which a keyframe's appearance is novel. Default 0.9.
+    /// Cosine similarity below which a keyframe's appearance is novel.
     pub novelty_similarity: f32,
-    /// Places closer than this (m) are joined by an edge. Default 3.0.
+    /// Places closer than this (m) are joined by an edge.
     pub neighbour_radius_m: f64,
-    /// Most views per place. Default 4.
+    /// Most views per place.
     pub max_views_per_place: u32,
 }
 

@@ -49,7 +49,7 @@ pub struct topoloc_describer_options {
     pub onnx_model_path: *const c_char,
     /// ONNX Runtime library; NULL or "" = `TOPOLOC_ORT_LIBRARY`, `ORT_DYLIB_PATH`, the cache.
     pub onnx_runtime_path: *const c_char,
-    /// ONNX Runtime intra-op threads, 1..=64. Default 1.
+    /// ONNX Runtime intra-op threads, 1..=64.
     pub threads: u32,
 }
 

@@ -160,13 +160,13 @@ pub struct topoloc_image_map_options {
     /// `TOPOLOC_BACKEND_ONNX` (also for `_AUTO`, the default), `_VLAD_ORB` or `_VLAD_SIFT`.
     pub backend: topoloc_backend,
     /// Descriptor dimension D; with fewer than D + 1 images it becomes the number of images
-    /// minus one (`topoloc_map_dim` tells). Default 512.
+    /// minus one (`topoloc_map_dim` tells).
     pub dim: u32,
     /// Without poses: consecutive images per place (1, or 4 for yaw views); with poses: most
-    /// views per place. Default 1.
+    /// views per place.
     pub views_per_place: u32,
     /// Describing threads; 0 = one per core, at most 256 (more: `TOPOLOC_ERR_INVALID_ARGUMENT`).
-    /// They are joined before the build returns. Default 0.
+    /// They are joined before the build returns.
     pub threads: u32,
     /// ONNX model file; NULL or "" = the cache's default (scripts/setup-models.sh).
     pub onnx_model_path: *const c_char,
@@ -174,17 +174,17 @@ pub struct topoloc_image_map_options {
     pub onnx_runtime_path: *const c_char,
     /// ONNX outputs to pool, comma-separated; NULL or "" = "f6,f13,f17,f18".
     pub onnx_taps: *const c_char,
-    /// ONNX pooling grid rows and columns (1 = global pooling). Default 4 x 4.
+    /// ONNX pooling grid rows and columns (1 = global pooling).
     pub grid_rows: u32,
     /// See `grid_rows`.
     pub grid_cols: u32,
-    /// VLAD codebook size. Default 64.
+    /// VLAD codebook size.
     pub vlad_clusters: u32,
     /// VLAD keypoints on a dense grid (true, default) or detected by ORB/SIFT (false).
     pub vlad_dense: bool,
     /// TUM trajectory with one pose per image (same order); NULL or "" = none (a sequence map).
     pub poses_tum_path: *const c_char,
-    /// Place spacing in metres when poses are given. Default 2.0.
+    /// Place spacing in metres when poses are given.
     pub place_spacing_m: f64,
     /// (ABI 1.14) How the map stores its PCA rows: `TOPOLOC_PCA_I8` (default; map format 1.5,
     /// which readers before it refuse) or `TOPOLOC_PCA_F32` (exact, four times larger).

@@ -61,20 +61,20 @@ pub struct topoloc_localizer_options {
     /// `TOPOLOC_MODE_FILTER`, `TOPOLOC_MODE_SINGLE_FRAME` or (ABI 1.3) `TOPOLOC_MODE_METRIC`
     /// (on a map without positions or view poses: `_INVALID_OPTION`).
     pub mode: topoloc_mode,
-    /// Softmax temperature of the observation likelihood (> 0). Default 0.2.
+    /// Softmax temperature of the observation likelihood (> 0).
     pub temperature: f32,
-    /// Probability that the off-map state persists from one frame to the next. Default 0.7.
+    /// Probability that the off-map state persists from one frame to the next.
     pub stay_probability: f32,
-    /// Probability of a jump anywhere per frame (kidnap recovery). Default 0.01.
+    /// Probability of a jump anywhere per frame (kidnap recovery).
     pub jump_probability: f32,
-    /// Probability of entering the off-map state per frame; 0 disables off-map. Default 0.01.
+    /// Probability of entering the off-map state per frame; 0 disables off-map.
     pub off_map_probability: f32,
-    /// Absolute floor of the off-map hypothesis' score (cosine similarity). Default 0.2.
+    /// Absolute floor of the off-map hypothesis' score (cosine similarity).
     pub off_map_similarity: f32,
     /// Standard deviations above the expected best background score a place must reach to
-    /// beat the off-map hypothesis (finite; may be negative). Default -1.0.
+    /// beat the off-map hypothesis (finite; may be negative).
     pub off_map_margin: f32,
-    /// Candidates reported per frame (>= 1). Default 5.
+    /// Candidates reported per frame (>= 1).
     pub top_k: u32,
     /// Refuse maps built with another descriptor kind; NULL or "" = any.
     pub expected_descriptor_kind: *const c_char,
@@ -96,17 +96,17 @@ pub struct topoloc_localizer_options {
     /// map storing keypoints (maps built from images do; else `_INVALID_OPTION`) and frames
     /// with images (else `_INVALID_IMAGE`). Costs a pair check per view checked (BENCHMARKS.md).
     pub verify_candidates: u32,
-    /// Views checked per candidate place, those most similar to the frame, 1..=64. Default 2.
+    /// Views checked per candidate place, those most similar to the frame, 1..=64.
     pub verify_views_per_candidate: u32,
     /// Log-likelihood of one inlier: a checked place's belief is multiplied by
-    /// `exp(verify_inlier_weight * inliers)` (finite, >= 0). Default 0.05.
+    /// `exp(verify_inlier_weight * inliers)` (finite, >= 0).
     pub verify_inlier_weight: f32,
     // ABI 1.3 (topoloc 0.1): metric mode.
-    /// Particles of `TOPOLOC_MODE_METRIC`, 1..=1,000,000. Default 2000.
+    /// Particles of `TOPOLOC_MODE_METRIC`, 1..=1,000,000.
     pub metric_particles: u32,
-    /// Temperature of a particle's appearance likelihood in metric mode (> 0). Default 1.0.
+    /// Temperature of a particle's appearance likelihood in metric mode (> 0).
     pub metric_temperature: f32,
-    /// Seed of metric mode's random generator (results are deterministic). Default 0.
+    /// Seed of metric mode's random generator (results are deterministic).
     pub metric_seed: u64,
     // ABI 1.6 (topoloc 0.1): pose fixes.
     /// Pinhole intrinsics of the frames' camera (undistorted images, pixels of the image as
@@ -121,7 +121,7 @@ pub struct topoloc_localizer_options {
     pub camera_cx: f64,
     /// Principal point y, pixels.
     pub camera_cy: f64,
-    /// Fewest PnP RANSAC inliers for a pose fix (>= 6). Default 30.
+    /// Fewest PnP RANSAC inliers for a pose fix (>= 6).
     pub pose_min_inliers: u32,
     // ABI 1.9 (topoloc 0.1): off-map evidence from verification.
     /// With verification on: the most inliers among the checked places at which a frame is as
@@ -130,7 +130,7 @@ pub struct topoloc_localizer_options {
     /// verify_off_map_inlier_scale)`). Negative: the map's feature kind's default (XFeat and
     /// cells 26, ORB 0), the default -1; 0: appearance decides; NaN: `_INVALID_OPTION`.
     pub verify_off_map_inliers: f64,
-    /// Inliers per e-fold of that likelihood ratio (finite, > 0). Default 4.
+    /// Inliers per e-fold of that likelihood ratio (finite, > 0).
     pub verify_off_map_inlier_scale: f64,
 }
 

@@ -53,6 +53,8 @@ mod loops;
 
 mod trajectory;
 
+mod option_defaults;
+
 pub use builder::*;
 pub use describer::*;
 pub use images::*;
@@ -61,6 +63,7 @@ pub use logging::*;
 pub use loops::*;
 pub use map::*;
 pub use map_keypoints::*;
+pub use option_defaults::{option_defaults, OptionDefault};
 pub use skeleton::*;
 pub use status::topoloc_status;
 pub use trajectory::*;

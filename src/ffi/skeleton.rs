@@ -32,21 +32,21 @@ pub struct topoloc_skeleton_options {
     /// Whether to use only the height band `[z_min_m, z_max_m]` (voxel centres, world z).
     /// Default false (the whole grid).
     pub use_z_band: bool,
-    /// Lower bound of the height band. Default 0.
+    /// Lower bound of the height band.
     pub z_min_m: f64,
-    /// Upper bound of the height band (>= z_min_m). Default 0.
+    /// Upper bound of the height band (>= z_min_m).
     pub z_max_m: f64,
-    /// Free voxels closer than this to an obstacle count as occupied (>= 0). Default 0.
+    /// Free voxels closer than this to an obstacle count as occupied (>= 0).
     pub min_clearance_m: f64,
-    /// Nodes closer than this along the skeleton become one place (>= 0). Default 1.0.
+    /// Nodes closer than this along the skeleton become one place (>= 0).
     pub merge_radius_m: f64,
-    /// Longest edge (at least two voxels); longer paths get intermediate places. Default 3.0.
+    /// Longest edge (at least two voxels); longer paths get intermediate places.
     pub max_edge_m: f64,
-    /// Smallest bend (degrees, in (0, 180)) that makes a corner. Default 40.
+    /// Smallest bend (degrees, in (0, 180)) that makes a corner.
     pub corner_angle_deg: f64,
-    /// Distance along the skeleton over which bends are measured (> 0). Default 0.5.
+    /// Distance along the skeleton over which bends are measured (> 0).
     pub corner_scale_m: f64,
-    /// Dead-end branches shorter than this are removed (>= 0). Default 1.0.
+    /// Dead-end branches shorter than this are removed (>= 0).
     pub min_spur_m: f64,
 }
 

@@ -479,19 +479,10 @@ fn a_result_of_the_oldest_layout_is_read_and_written_within_its_size() {
     topoloc_map_free(map);
 }
 
-/// The numeric fields of a versioned struct after its `_init`, as `(field, value)`.
-macro_rules! filled_fields {
-    ($ty:ident, $init:ident, [$($field:ident),* $(,)?]) => {{
-        let mut s = std::mem::MaybeUninit::<$ty>::zeroed();
-        assert_eq!($init(s.as_mut_ptr(), std::mem::size_of::<$ty>()), TOPOLOC_OK);
-        let s = unsafe { s.assume_init() };
-        (stringify!($ty), vec![$((stringify!($field), s.$field as f64)),*])
-    }};
-}
-
-/// `(struct, field, stated default)` for every field of the header whose doc says
-/// "Default N" (the first number after it).
-fn defaults_stated_in_header(header: &str) -> Vec<(String, String, f64)> {
+/// `(struct, field, generated, value)` of every numeric default stated in the docs of the
+/// header's struct fields: "Default: 0.2." as gen-header writes it (generated), or
+/// "Default 0.2." by hand.
+fn defaults_stated_in_header(header: &str) -> Vec<(String, String, bool, String)> {
     let mut stated = Vec::new();
     for block in header.split("typedef struct ").skip(1) {
         let Some((name, body)) = block.split_once(" {") else {
@@ -502,140 +493,62 @@ fn defaults_stated_in_header(header: &str) -> Vec<(String, String, f64)> {
             let Some((doc, decl)) = doc_and_decl.split_once("*/") else {
                 continue;
             };
-            let Some(after) = doc.split("Default ").nth(1) else {
-                continue;
-            };
-            let number: String = after
-                .chars()
-                .take_while(|c| c.is_ascii_digit() || *c == '.' || *c == '-')
-                .collect();
-            let Ok(value) = number.trim_end_matches('.').parse::<f64>() else {
-                continue;
-            };
             let decl = decl.split(';').next().unwrap_or("");
             let field = decl.split_whitespace().last().unwrap_or("");
-            let field = field
-                .trim_start_matches('*')
-                .split('[')
-                .next()
-                .unwrap_or("");
-            stated.push((name.to_string(), field.to_string(), value));
+            let field = field.trim_start_matches('*');
+            for sentence in doc.split("Default").skip(1) {
+                let generated = sentence.starts_with(": ");
+                let rest = sentence.strip_prefix(": ").unwrap_or(sentence).trim_start();
+                let value = rest.split_whitespace().next().unwrap_or("");
+                let value = value.trim_end_matches(['.', ',', ';']);
+                if value.starts_with(|c: char| c.is_ascii_digit() || c == '-') {
+                    stated.push((name.into(), field.into(), generated, value.into()));
+                }
+            }
         }
     }
     stated
 }
 
 #[test]
-fn every_default_the_header_states_is_the_value_init_writes() {
-    let header =
-        std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/include/topoloc.h")).unwrap();
-    let stated = defaults_stated_in_header(&header);
-    assert!(stated.len() >= 40, "too few defaults found: {stated:?}");
-    let filled = [
-        filled_fields!(
-            topoloc_localizer_options,
-            topoloc_localizer_options_init,
-            [
-                temperature,
-                stay_probability,
-                jump_probability,
-                off_map_probability,
-                off_map_similarity,
-                off_map_margin,
-                top_k,
-                verify_views_per_candidate,
-                verify_inlier_weight,
-                metric_particles,
-                metric_temperature,
-                metric_seed,
-                pose_min_inliers,
-                verify_off_map_inlier_scale,
-            ]
-        ),
-        filled_fields!(
-            topoloc_keyframe_options,
-            topoloc_keyframe_options_init,
-            [
-                place_spacing_m,
-                novelty_similarity,
-                neighbour_radius_m,
-                max_views_per_place
-            ]
-        ),
-        filled_fields!(
-            topoloc_image_map_options,
-            topoloc_image_map_options_init,
-            [
-                dim,
-                views_per_place,
-                threads,
-                grid_rows,
-                vlad_clusters,
-                place_spacing_m
-            ]
-        ),
-        filled_fields!(
-            topoloc_describer_options,
-            topoloc_describer_options_init,
-            [threads]
-        ),
-        filled_fields!(
-            topoloc_skeleton_options,
-            topoloc_skeleton_options_init,
-            [
-                z_min_m,
-                z_max_m,
-                min_clearance_m,
-                merge_radius_m,
-                max_edge_m,
-                corner_angle_deg,
-                corner_scale_m,
-                min_spur_m,
-            ]
-        ),
-        filled_fields!(
-            topoloc_loop_options,
-            topoloc_loop_options_init,
-            [
-                candidates,
-                exclude_recent_ids,
-                exclude_recent_s,
-                min_inliers,
-                consistent_keyframes,
-                odometry_max_rotation_deg,
-                odometry_max_translation_m,
-                novelty_similarity,
-                place_spacing_m,
-                neighbour_radius_m,
-                candidate_id_gap,
-                odometry_max_translation_per_m,
-                pose_reprojection_px,
-                odometry_search_m,
-                odometry_candidates,
-            ]
-        ),
-        filled_fields!(
-            topoloc_trajectory_options,
-            topoloc_trajectory_options_init,
-            [max_diff_s, offset_s, rpe_delta]
-        ),
-    ];
+fn every_default_in_the_header_is_generated_from_what_init_writes() {
+    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/include/topoloc.h");
+    let stated = defaults_stated_in_header(&std::fs::read_to_string(path).unwrap());
+    let generated = option_defaults();
+    assert!(generated.len() >= 40, "too few defaults: {generated:?}");
     let mut wrong = Vec::new();
-    for (name, field, value) in &stated {
-        let actual = filled
+    for (name, field, was_generated, value) in &stated {
+        let found = generated
             .iter()
-            .find(|(s, _)| s == name)
-            .and_then(|(_, fields)| fields.iter().find(|(f, _)| f == field))
-            .map(|&(_, v)| v);
-        match actual {
-            Some(v) if (v - value).abs() <= 1e-6 * value.abs().max(1.0) => {}
-            Some(v) => wrong.push(format!(
-                "{name}.{field}: header says {value}, _init writes {v}"
-            )),
-            None => wrong.push(format!(
-                "{name}.{field}: stated in the header but not checked here"
-            )),
+            .any(|d| d.struct_name == name && d.field == field && d.value == *value);
+        if !was_generated || !found {
+            wrong.push(format!(
+                "{name}.{field}: {value} (generated: {was_generated})"
+            ));
         }
     }
-    assert!(wrong.is_empty(), "{wrong:#?}");
+    assert!(
+        wrong.is_empty(),
+        "defaults written by hand or stale: {wrong:#?}"
+    );
+    assert_eq!(
+        stated.len(),
+        generated.len(),
+        "a generated default is missing"
+    );
+}
+
+#[test]
+fn a_hand_written_default_is_told_from_a_generated_one() {
+    let header = "typedef struct topoloc_x {\n  /**\n   * Scale (> 0). Default 0.5.\n   */\n  \
+                  float scale;\n  /**\n   * Count.\n   * Default: 3.\n   */\n  uint32_t *count;\n} \
+                  topoloc_x;\n";
+    let stated = defaults_stated_in_header(header);
+    assert_eq!(
+        stated,
+        [
+            ("topoloc_x".into(), "scale".into(), false, "0.5".into()),
+            ("topoloc_x".into(), "count".into(), true, "3".into()),
+        ]
+    );
 }

@@ -43,11 +43,11 @@ pub struct topoloc_trajectory_options {
     pub struct_size: usize,
     /// `TOPOLOC_ALIGN_*`. Default `TOPOLOC_ALIGN_SIM3`.
     pub alignment: topoloc_alignment,
-    /// Largest timestamp difference of an associated pair, seconds (>= 0). Default 0.01.
+    /// Largest timestamp difference of an associated pair, seconds (>= 0).
     pub max_diff_s: f64,
-    /// Added to the estimate's timestamps before associating, seconds. Default 0.
+    /// Added to the estimate's timestamps before associating, seconds.
     pub offset_s: f64,
-    /// The RPE's step in associated poses (>= 1). Default 1.
+    /// The RPE's step in associated poses (>= 1).
     pub rpe_delta: u32,
 }
 

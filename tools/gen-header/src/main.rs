@@ -1,5 +1,6 @@
 //! Generates `include/topoloc.h` from `src/ffi` with the pinned cbindgen, adding the version
-//! macros from the root Cargo.toml. With `--check`, fails (exit 1) when the checked-in header
+//! macros from the root Cargo.toml, section banners, and each option's default as the library's
+//! `_init` writes it (`topoloc::ffi::option_defaults`: no default is written by hand). With `--check`, fails (exit 1) when the checked-in header
 //! differs from what would be generated, so CI catches a stale header.
 //!
 //! Usage: `cargo run -p topoloc-gen-header [-- --check]`
@@ -197,7 +198,38 @@ fn generate(root: &Path) -> Result<Vec<u8>, String> {
     let mut out = Vec::new();
     bindings.write(&mut out);
     let text = String::from_utf8(out).map_err(|e| format!("cbindgen wrote non-UTF-8: {e}"))?;
+    let text = add_defaults(&text, &topoloc::ffi::option_defaults())?;
     Ok(add_section_banners(&text)?.into_bytes())
+}
+
+/// Ends the doc comment of every field in `defaults` with a line "Default: VALUE.".
+fn add_defaults(header: &str, defaults: &[topoloc::ffi::OptionDefault]) -> Result<String, String> {
+    let mut text = header.to_string();
+    for d in defaults {
+        let open = format!("typedef struct {} {{", d.struct_name);
+        let start = text
+            .find(&open)
+            .ok_or_else(|| format!("no struct {} in the header", d.struct_name))?;
+        let end = start
+            + text[start..]
+                .find("\n} ")
+                .ok_or_else(|| format!("struct {} does not end", d.struct_name))?
+            + 1;
+        let declaration = [format!(" {};\n", d.field), format!("*{};\n", d.field)];
+        let field_at = declaration
+            .iter()
+            .filter_map(|decl| text[start..end].find(decl.as_str()))
+            .min()
+            .map(|at| start + at)
+            .ok_or_else(|| format!("no field {} in {}", d.field, d.struct_name))?;
+        let doc_end = text[start..field_at]
+            .rfind("   */\n")
+            .map(|at| start + at)
+            .filter(|&at| !text[at..field_at].contains(';'))
+            .ok_or_else(|| format!("{}.{} has no doc comment", d.struct_name, d.field))?;
+        text.insert_str(doc_end, &format!("   * Default: {}.\n", d.value));
+    }
+    Ok(text)
 }
 
 fn main() -> ExitCode {
