@@ -5,6 +5,12 @@
  * Conventions:
  *  - Every fallible function returns topoloc_status (TOPOLOC_OK = 0); the message of the
  *    last failure on the calling thread is read with topoloc_last_error_message().
+ *  - A function's "Errors:" list names what is specific to it. Besides those, any function
+ *    may return TOPOLOC_ERR_NULL_ARGUMENT for a NULL pointer argument that is not documented
+ *    as optional, _INVALID_UTF8 for a string argument that is not UTF-8, and _PANIC; every
+ *    function taking a versioned struct (struct_size) may return _STRUCT_SIZE (a size below
+ *    the struct's first published layout, or one between published layouts); every call on a
+ *    localizer, loop detector, describer or map builder may return _CONCURRENT_USE.
  *  - Out-parameters are written only on success, except the documented `needed`/`count` sizes.
  *  - Handles come in _new/_load + _free pairs; _free(NULL) is a no-op.
  *  - Options structs start with struct_size: fill them with their _default() function.
@@ -1592,7 +1598,6 @@ topoloc_status topoloc_set_log_callback(topoloc_log_fn callback, topoloc_log_lev
 /**
  * Fills the first `size` bytes of `*options` with defaults and sets `struct_size`; call it
  * through the header macro `topoloc_map_load_options_default(options)`, which passes `sizeof *(options)`.
- * Errors: `_NULL_ARGUMENT`, `_STRUCT_SIZE` (size below the first published layout).
  */
 topoloc_status topoloc_map_load_options_init(struct topoloc_map_load_options *options, size_t size);
 
@@ -1600,7 +1605,7 @@ topoloc_status topoloc_map_load_options_init(struct topoloc_map_load_options *op
  * Loads and validates a map file (memory-mapped; the file must not be modified while the map
  * lives). `options` may be NULL. On success `*out` owns a new map: free it with
  * `topoloc_map_free`. Errors: `TOPOLOC_ERR_IO`, `_NOT_A_MAP`, `_TRUNCATED`, `_CORRUPT`,
- * `_UNSUPPORTED_VERSION`, `_DESCRIPTOR_MISMATCH`, `_NULL_ARGUMENT`, `_INVALID_UTF8`.
+ * `_UNSUPPORTED_VERSION`, `_DESCRIPTOR_MISMATCH`.
  */
 topoloc_status topoloc_map_load(const char *path, const struct topoloc_map_load_options *options, struct topoloc_map **out);
 
@@ -1611,8 +1616,7 @@ topoloc_status topoloc_map_load(const char *path, const struct topoloc_map_load_
 topoloc_status topoloc_map_load_from_memory(const uint8_t *data, size_t len, const struct topoloc_map_load_options *options, struct topoloc_map **out);
 
 /**
- * Saves a map to `path` atomically (temporary file, fsync, rename). Errors: `TOPOLOC_ERR_IO`,
- * `_NULL_ARGUMENT`, `_INVALID_UTF8`.
+ * Saves a map to `path` atomically (temporary file, fsync, rename). Errors: `TOPOLOC_ERR_IO`.
  */
 topoloc_status topoloc_map_save(const struct topoloc_map *map, const char *path);
 
@@ -1677,12 +1681,11 @@ topoloc_status topoloc_map_edge(const struct topoloc_map *map, size_t index, uin
 /**
  * Fills the first `size` bytes of `*info` with an empty view info and sets `struct_size`; call
  * it through the header macro `topoloc_view_info_default(info)`, which passes `sizeof *(info)`.
- * Errors: `_NULL_ARGUMENT`, `_STRUCT_SIZE`.
  */
 topoloc_status topoloc_view_info_init(struct topoloc_view_info *info, size_t size);
 
 /**
- * Fills `*out` with the attributes of `view`. Errors: `_UNKNOWN_VIEW`, `_STRUCT_SIZE`.
+ * Fills `*out` with the attributes of `view`. Errors: `_UNKNOWN_VIEW`.
  */
 topoloc_status topoloc_map_view_info(const struct topoloc_map *map, uint32_t view, struct topoloc_view_info *out);
 
@@ -1701,7 +1704,7 @@ topoloc_status topoloc_map_view_descriptor(const struct topoloc_map *map, uint32
 /**
  * Writes into `*total` the number of keypoints of all views together (0 when the map stores
  * none): the length, in points, of the array `topoloc_map_with_keypoint_points` takes.
- * Thread safety: as every `const topoloc_map*` accessor. Errors: `_NULL_ARGUMENT`.
+ * Thread safety: as every `const topoloc_map*` accessor.
  */
 topoloc_status topoloc_map_keypoint_total(const struct topoloc_map *map, size_t *total);
 
@@ -1710,8 +1713,7 @@ topoloc_status topoloc_map_keypoint_total(const struct topoloc_map *map, size_t 
  * of the top-left pixel is (0, 0)), into `xy` of capacity `len` floats. `*count` (if non-NULL)
  * always receives the number of keypoints; `len` must be at least `2 * count`. Keypoints are in
  * the order `topoloc_map_with_keypoint_points` expects their scene points.
- * Errors: `_UNKNOWN_VIEW`, `_INVALID_ARGUMENT` (the map stores no keypoints),
- * `_BUFFER_TOO_SMALL`, `_NULL_ARGUMENT`.
+ * Errors: `_UNKNOWN_VIEW`, `_INVALID_ARGUMENT` (the map stores no keypoints), `_BUFFER_TOO_SMALL`.
  */
 topoloc_status topoloc_map_view_keypoints(const struct topoloc_map *map, uint32_t view, float *xy, size_t len, size_t *count);
 
@@ -1724,7 +1726,7 @@ topoloc_status topoloc_map_view_keypoints(const struct topoloc_map *map, uint32_
  * On success `*out` owns the new map (release it with `topoloc_map_free`); `map` is unchanged
  * and remains the caller's. The copy holds its descriptors in memory, even when `map` was
  * memory-mapped from a file. Errors: `_INVALID_ARGUMENT` (no keypoints, wrong length, a point
- * neither finite nor all NaN), `_NULL_ARGUMENT`.
+ * neither finite nor all NaN).
  */
 topoloc_status topoloc_map_with_keypoint_points(const struct topoloc_map *map, const float *xyz, size_t len, struct topoloc_map **out);
 
@@ -1735,7 +1737,6 @@ topoloc_status topoloc_map_with_keypoint_points(const struct topoloc_map *map, c
 /**
  * Fills the first `size` bytes of `*options` with defaults and sets `struct_size`; call it
  * through the header macro `topoloc_localizer_options_default(options)`, which passes `sizeof *(options)`.
- * Errors: `_NULL_ARGUMENT`, `_STRUCT_SIZE` (size below the first published layout).
  */
 topoloc_status topoloc_localizer_options_init(struct topoloc_localizer_options *options, size_t size);
 
@@ -1744,10 +1745,10 @@ topoloc_status topoloc_localizer_options_init(struct topoloc_localizer_options *
  * `options` may be NULL for defaults. With `image_backend` `TOPOLOC_BACKEND_AUTO` and a map
  * built from images, the map's describer is loaded now (for ONNX: the runtime and model).
  * On success `*out` owns a new localizer.
- * Errors: `_INVALID_OPTION`, `_DESCRIPTOR_MISMATCH` (also another backend or model file than
- * the map's), `_BACKEND_UNAVAILABLE` (paths tried in the message; pass
- * `TOPOLOC_BACKEND_NONE` to localize descriptors only), `_MODEL`, `_NO_DESCRIBER` (a backend
- * was required but the map stores none), `_STRUCT_SIZE`, `_NULL_ARGUMENT`, `_INVALID_UTF8`.
+ * Errors: `_INVALID_OPTION`, `_DESCRIPTOR_MISMATCH` (also another backend or model file than the
+ * map's), `_BACKEND_UNAVAILABLE` (paths tried in the message; pass `TOPOLOC_BACKEND_NONE` to
+ * localize descriptors only), `_MODEL`, `_NO_DESCRIBER` (a backend was required but the map stores
+ * none).
  */
 topoloc_status topoloc_localizer_new(const struct topoloc_map *map, const struct topoloc_localizer_options *options, struct topoloc_localizer **out);
 
@@ -1764,14 +1765,12 @@ topoloc_status topoloc_localizer_reset(struct topoloc_localizer *localizer);
 /**
  * Fills the first `size` bytes of `*frame` with defaults and sets `struct_size`; call it
  * through the header macro `topoloc_frame_default(frame)`, which passes `sizeof *(frame)`.
- * Errors: `_NULL_ARGUMENT`, `_STRUCT_SIZE` (size below the first published layout).
  */
 topoloc_status topoloc_frame_init(struct topoloc_frame *frame, size_t size);
 
 /**
  * Fills the first `size` bytes of `*result` with defaults and sets `struct_size`; call it
  * through the header macro `topoloc_result_default(result)`, which passes `sizeof *(result)`.
- * Errors: `_NULL_ARGUMENT`, `_STRUCT_SIZE` (size below the first published layout).
  */
 topoloc_status topoloc_result_init(struct topoloc_result *result, size_t size);
 
@@ -1781,13 +1780,12 @@ topoloc_status topoloc_result_init(struct topoloc_result *result, size_t size);
  * A frame with `descriptor_len` 0 and an image is described first (the localizer needs a
  * describer: see `topoloc_localizer_new`).
  * Errors: `_DIMENSION_MISMATCH`, `_NON_FINITE`, `_ZERO_DESCRIPTOR`, `_TIMESTAMP`,
- * `_INVALID_ARGUMENT` (odometry not a rigid transform), `_INVALID_IMAGE`,
- * `_UNINFORMATIVE_IMAGE` (blank or featureless image: state unchanged), `_NO_DESCRIBER`,
- * `_MODEL`, `_STRUCT_SIZE`, `_NULL_ARGUMENT`. With verification on, the frame needs its image
- * (`_INVALID_IMAGE`), beside its descriptor or instead of it.
- * Cost: describing the image (if any), then one pass over the map's descriptors plus
- * O(places + edges); no allocation for descriptor frames without verification; verification
- * adds keypoint detection and a pair check per checked view (BENCHMARKS.md).
+ * `_INVALID_ARGUMENT` (odometry not a rigid transform), `_INVALID_IMAGE`, `_UNINFORMATIVE_IMAGE`
+ * (blank or featureless image: state unchanged), `_NO_DESCRIBER`, `_MODEL`. With verification on,
+ * the frame needs its image (`_INVALID_IMAGE`), beside its descriptor or instead of it. Cost:
+ * describing the image (if any), then one pass over the map's descriptors plus O(places + edges);
+ * no allocation for descriptor frames without verification; verification adds keypoint detection
+ * and a pair check per checked view (BENCHMARKS.md).
  */
 topoloc_status topoloc_localizer_process(struct topoloc_localizer *localizer, const struct topoloc_frame *frame, struct topoloc_result *result);
 
@@ -1798,7 +1796,7 @@ topoloc_status topoloc_localizer_process(struct topoloc_localizer *localizer, co
 /**
  * Starts a map whose vectors come from descriptor `kind` / `model` with dimension `dim`
  * (`model` may be NULL). On success `*out` owns a new builder.
- * Errors: `_NULL_ARGUMENT`, `_INVALID_ARGUMENT` (empty kind, dim 0), `_INVALID_UTF8`.
+ * Errors: `_INVALID_ARGUMENT` (empty kind, dim 0).
  */
 topoloc_status topoloc_map_builder_new(const char *kind, const char *model, uint32_t dim, struct topoloc_map_builder **out);
 
@@ -1815,7 +1813,6 @@ topoloc_status topoloc_map_builder_add_place(struct topoloc_map_builder *builder
 /**
  * Fills the first `size` bytes of `*attributes` with defaults and sets `struct_size`; call it
  * through the header macro `topoloc_view_attributes_default(attributes)`, which passes `sizeof *(attributes)`.
- * Errors: `_NULL_ARGUMENT`, `_STRUCT_SIZE` (size below the first published layout).
  */
 topoloc_status topoloc_view_attributes_init(struct topoloc_view_attributes *attributes, size_t size);
 
@@ -1840,7 +1837,6 @@ topoloc_status topoloc_map_builder_build(const struct topoloc_map_builder *build
 /**
  * Fills the first `size` bytes of `*options` with defaults and sets `struct_size`; call it
  * through the header macro `topoloc_keyframe_options_default(options)`, which passes `sizeof *(options)`.
- * Errors: `_NULL_ARGUMENT`, `_STRUCT_SIZE` (size below the first published layout).
  */
 topoloc_status topoloc_keyframe_options_init(struct topoloc_keyframe_options *options, size_t size);
 
@@ -1854,7 +1850,6 @@ topoloc_status topoloc_map_from_keyframes(const char *kind, const char *model, u
 /**
  * Fills the first `size` bytes of `*options` with defaults and sets `struct_size`; call it
  * through the header macro `topoloc_image_map_options_default(options)`.
- * Errors: `_NULL_ARGUMENT`, `_STRUCT_SIZE`.
  */
 topoloc_status topoloc_image_map_options_init(struct topoloc_image_map_options *options, size_t size);
 
@@ -1863,9 +1858,9 @@ topoloc_status topoloc_image_map_options_init(struct topoloc_image_map_options *
  * parallel; the map stores its describer, so localizers on it accept image frames. Views
  * record their image's index (as keyframe id) and path. `options` may be NULL for defaults
  * (ONNX backend); `progress` may be NULL. On success `*out` owns a new map.
- * Errors: `_INVALID_ARGUMENT` (fewer than 2 images, bad options, pose count), `_INVALID_IMAGE`
- * (an unreadable file; the message names it), `_BACKEND_UNAVAILABLE`, `_MODEL`, `_IO` (poses
- * file), `_CANCELLED`, `_NULL_ARGUMENT`, `_INVALID_UTF8`, `_STRUCT_SIZE`.
+ * Errors: `_INVALID_ARGUMENT` (fewer than 2 images, bad options, pose count), `_INVALID_IMAGE` (an
+ * unreadable file; the message names it), `_BACKEND_UNAVAILABLE`, `_MODEL`, `_IO` (poses file),
+ * `_CANCELLED`.
  */
 topoloc_status topoloc_map_build_from_image_files(const char *const *paths, size_t count, const struct topoloc_image_map_options *options, topoloc_progress_fn progress, void *user_data, struct topoloc_map **out);
 
@@ -1883,16 +1878,14 @@ topoloc_status topoloc_map_build_from_images(const struct topoloc_image *images,
 /**
  * Fills `*options` with the defaults. Call through the header macro
  * `topoloc_describer_options_default(options)`, which passes `sizeof *(options)`.
- * Errors: `_NULL_ARGUMENT`, `_STRUCT_SIZE`.
  */
 topoloc_status topoloc_describer_options_init(struct topoloc_describer_options *options, size_t size);
 
 /**
  * Loads the describer `map` stores (for ONNX: the runtime and the model, checked by hash).
  * `options` may be NULL for defaults. On success `*out` owns a new describer.
- * Errors: `_NO_DESCRIBER` (the map was built from descriptors), `_BACKEND_UNAVAILABLE`
- * (paths tried in the message), `_DESCRIPTOR_MISMATCH`, `_MODEL`, `_INVALID_OPTION`,
- * `_STRUCT_SIZE`, `_NULL_ARGUMENT`, `_INVALID_UTF8`.
+ * Errors: `_NO_DESCRIBER` (the map was built from descriptors), `_BACKEND_UNAVAILABLE` (paths
+ * tried in the message), `_DESCRIPTOR_MISMATCH`, `_MODEL`, `_INVALID_OPTION`.
  */
 topoloc_status topoloc_describer_new(const struct topoloc_map *map, const struct topoloc_describer_options *options, struct topoloc_describer **out);
 
@@ -1903,7 +1896,6 @@ void topoloc_describer_free(struct topoloc_describer *describer);
 
 /**
  * Writes the descriptor dimension D (the map's) to `*out`.
- * Errors: `_NULL_ARGUMENT`.
  */
 topoloc_status topoloc_describer_dim(const struct topoloc_describer *describer, size_t *out);
 
@@ -1911,8 +1903,8 @@ topoloc_status topoloc_describer_dim(const struct topoloc_describer *describer, 
  * Describes `image` into `descriptor` (capacity `capacity` floats): D values of unit norm,
  * comparable with the map's. `*len` (if not NULL) receives D, also on
  * `_BUFFER_TOO_SMALL`. The image is read only during the call.
- * Errors: `_INVALID_IMAGE` (also `TOPOLOC_PIXEL_NONE`), `_UNINFORMATIVE_IMAGE` (no content,
- * e.g. a constant image), `_BUFFER_TOO_SMALL`, `_MODEL`, `_NULL_ARGUMENT`.
+ * Errors: `_INVALID_IMAGE` (also `TOPOLOC_PIXEL_NONE`), `_UNINFORMATIVE_IMAGE` (no content, e.g. a
+ * constant image), `_BUFFER_TOO_SMALL`, `_MODEL`.
  */
 topoloc_status topoloc_describer_describe(struct topoloc_describer *describer, const struct topoloc_image *image, float *descriptor, size_t capacity, size_t *len);
 
@@ -1923,8 +1915,7 @@ topoloc_status topoloc_describer_describe(struct topoloc_describer *describer, c
 /**
  * Fills the first `size` bytes of `*options` with defaults and sets `struct_size`; call it
  * through the header macro `topoloc_skeleton_options_default(options)`, which passes
- * `sizeof *(options)`. Thread-safe. Errors: `_NULL_ARGUMENT`, `_STRUCT_SIZE` (size below the
- * first published layout).
+ * `sizeof *(options)`. Thread-safe.
  */
 topoloc_status topoloc_skeleton_options_init(struct topoloc_skeleton_options *options, size_t size);
 
@@ -1942,10 +1933,10 @@ topoloc_status topoloc_skeleton_options_init(struct topoloc_skeleton_options *op
  *
  * On success `*out` owns a new graph (free it with `topoloc_graph_free`); the same inputs give
  * the same graph. Thread-safe (no shared state); single-threaded, seconds for an office floor
- * at 0.1 m (BENCHMARKS.md). Errors: `_NULL_ARGUMENT`, `_STRUCT_SIZE`,
- * `_INVALID_ARGUMENT` (the message names the field: `dims`, `voxel_size`, `origin`,
- * `cells_len`, `cells` when every voxel is occupied, `z_band` when the band holds no free
- * voxel, `min_clearance_m` when the clearance leaves none, or another option out of range).
+ * at 0.1 m (BENCHMARKS.md). Errors: `_INVALID_ARGUMENT` (the message names the field: `dims`,
+ * `voxel_size`, `origin`, `cells_len`, `cells` when every voxel is occupied, `z_band` when the
+ * band holds no free voxel, `min_clearance_m` when the clearance leaves none, or another option
+ * out of range).
  */
 topoloc_status topoloc_graph_from_occupancy(const size_t *dims, double voxel_size, const double *origin, const uint8_t *cells, size_t cells_len, const struct topoloc_skeleton_options *options, struct topoloc_graph **out);
 
@@ -1955,27 +1946,25 @@ topoloc_status topoloc_graph_from_occupancy(const size_t *dims, double voxel_siz
 void topoloc_graph_free(struct topoloc_graph *graph);
 
 /**
- * Number of places (`*out`). Errors: `_NULL_ARGUMENT`.
+ * Number of places (`*out`).
  */
 topoloc_status topoloc_graph_place_count(const struct topoloc_graph *graph, size_t *out);
 
 /**
- * Number of undirected edges (`*out`). Errors: `_NULL_ARGUMENT`.
+ * Number of undirected edges (`*out`).
  */
 topoloc_status topoloc_graph_edge_count(const struct topoloc_graph *graph, size_t *out);
 
 /**
  * Place `place` (0..place_count): `xyz` (3 doubles) receives its world position in metres (the
  * centre of its skeleton voxel), `*kind` its `TOPOLOC_NODE_*` kind. Places come in this order:
- * branches, ends, corners, then intermediate places. Errors: `_NULL_ARGUMENT`,
- * `_UNKNOWN_PLACE`.
+ * branches, ends, corners, then intermediate places. Errors: `_UNKNOWN_PLACE`.
  */
 topoloc_status topoloc_graph_place(const struct topoloc_graph *graph, uint32_t place, double *xyz, topoloc_node_kind *kind);
 
 /**
  * Edge number `index` (0..edge_count, sorted by (a, b)): places `*a < *b` and the straight
- * distance between them, `*length_m`. Errors: `_NULL_ARGUMENT`, `_INVALID_ARGUMENT` (index out
- * of range).
+ * distance between them, `*length_m`. Errors: `_INVALID_ARGUMENT` (index out of range).
  */
 topoloc_status topoloc_graph_edge(const struct topoloc_graph *graph, size_t index, uint32_t *a, uint32_t *b, double *length_m);
 
@@ -1983,7 +1972,7 @@ topoloc_status topoloc_graph_edge(const struct topoloc_graph *graph, size_t inde
  * Copies the skeleton the graph was built on, as voxel indices `x0, y0, z0, x1, y1, z1, ...`
  * in grid order, into `xyz` of capacity `len` values. `*count` (if not NULL) receives the
  * number of values (3 per voxel), also on `TOPOLOC_ERR_BUFFER_TOO_SMALL`; call with `len` 0
- * to ask. Errors: `_NULL_ARGUMENT`, `_BUFFER_TOO_SMALL`.
+ * to ask. Errors: `_BUFFER_TOO_SMALL`.
  */
 topoloc_status topoloc_graph_skeleton(const struct topoloc_graph *graph, uint32_t *xyz, size_t len, size_t *count);
 
@@ -1994,7 +1983,6 @@ topoloc_status topoloc_graph_skeleton(const struct topoloc_graph *graph, uint32_
 /**
  * Fills the first `size` bytes of `*options` with defaults and sets `struct_size`; call it
  * through the header macro `topoloc_loop_options_default(options)`, which passes `sizeof *(options)`.
- * Errors: `_NULL_ARGUMENT`, `_STRUCT_SIZE`.
  */
 topoloc_status topoloc_loop_options_init(struct topoloc_loop_options *options, size_t size);
 
@@ -2002,8 +1990,7 @@ topoloc_status topoloc_loop_options_init(struct topoloc_loop_options *options, s
  * Creates an empty loop detector for descriptors of `descriptor_kind` (a non-empty string),
  * `descriptor_model` (may be empty) and dimension `dim`: the place graph grows from nothing.
  * `options` may be NULL for defaults. On success `*out` owns the detector.
- * Errors: `_INVALID_OPTION`, `_INVALID_ARGUMENT` (empty kind, dim 0), `_STRUCT_SIZE`,
- * `_NULL_ARGUMENT`, `_INVALID_UTF8`.
+ * Errors: `_INVALID_OPTION`, `_INVALID_ARGUMENT` (empty kind, dim 0).
  */
 topoloc_status topoloc_loop_detector_new(const char *descriptor_kind, const char *descriptor_model, uint32_t dim, const struct topoloc_loop_options *options, struct topoloc_loop_detector **out);
 
@@ -2012,7 +1999,7 @@ topoloc_status topoloc_loop_detector_new(const char *descriptor_kind, const char
  * and, where known, scene points): new keyframes (ids above the map's) close loops against
  * it. The map handle is not kept. On success `*out` owns the detector.
  * Errors: `_INVALID_OPTION` (also a view without keyframe id), `_INVALID_ARGUMENT` (ids not
- * increasing), `_STRUCT_SIZE`, `_NULL_ARGUMENT`.
+ * increasing).
  */
 topoloc_status topoloc_loop_detector_from_map(const struct topoloc_map *map, const struct topoloc_loop_options *options, struct topoloc_loop_detector **out);
 
@@ -2024,14 +2011,12 @@ void topoloc_loop_detector_free(struct topoloc_loop_detector *detector);
 /**
  * Fills the first `size` bytes of `*keyframe` with defaults and sets `struct_size`; call it
  * through the header macro `topoloc_loop_keyframe_default(keyframe)`, which passes `sizeof *(keyframe)`.
- * Errors: `_NULL_ARGUMENT`, `_STRUCT_SIZE`.
  */
 topoloc_status topoloc_loop_keyframe_init(struct topoloc_loop_keyframe *keyframe, size_t size);
 
 /**
  * Fills the first `size` bytes of `*hint` with defaults and sets `struct_size`; call it
  * through the header macro `topoloc_loop_hint_default(hint)`, which passes `sizeof *(hint)`.
- * Errors: `_NULL_ARGUMENT`, `_STRUCT_SIZE`.
  */
 topoloc_status topoloc_loop_hint_init(struct topoloc_loop_hint *hint, size_t size);
 
@@ -2041,12 +2026,11 @@ topoloc_status topoloc_loop_hint_init(struct topoloc_loop_hint *hint, size_t siz
  * candidate with the gate that decided (`has_match` 0 when there was none); at most one hint
  * per keyframe. The whole keyframe is validated first: on any error the detector and `*hint`
  * are unchanged.
- * Errors: `_DIMENSION_MISMATCH`, `_NON_FINITE` (descriptor, timestamp, poses),
- * `_ZERO_DESCRIPTOR`, `_INVALID_ARGUMENT` (duplicate or decreasing id, earlier timestamp,
- * bad keypoints or scene points, non-rigid poses), `_INVALID_OPTION` (a pose on some
- * keyframes only: the first keyframe decides whether all have one),
- * `_STRUCT_SIZE`, `_NULL_ARGUMENT`. Cost: one pass over the keyframes' descriptors and a pair
- * check per verified candidate (BENCHMARKS.md).
+ * Errors: `_DIMENSION_MISMATCH`, `_NON_FINITE` (descriptor, timestamp, poses), `_ZERO_DESCRIPTOR`,
+ * `_INVALID_ARGUMENT` (duplicate or decreasing id, earlier timestamp, bad keypoints or scene
+ * points, non-rigid poses), `_INVALID_OPTION` (a pose on some keyframes only: the first keyframe
+ * decides whether all have one). Cost: one pass over the keyframes' descriptors and a pair check
+ * per verified candidate (BENCHMARKS.md).
  */
 topoloc_status topoloc_loop_detector_add(struct topoloc_loop_detector *detector, const struct topoloc_loop_keyframe *keyframe, struct topoloc_loop_hint *hint);
 
@@ -2056,7 +2040,7 @@ topoloc_status topoloc_loop_detector_add(struct topoloc_loop_detector *detector,
  * a consistency streak, the streak's earlier keyframes, refused as `TOPOLOC_GATE_INCONSISTENT`
  * while it was short, are accepted too. Read each with `topoloc_loop_detector_confirmed`
  * before the next `_add` replaces them (errors and `_erase` keep them). 0 after an `_add`
- * whose hint was not accepted. Errors: `_NULL_ARGUMENT`.
+ * whose hint was not accepted.
  */
 topoloc_status topoloc_loop_detector_confirmed_count(const struct topoloc_loop_detector *detector, size_t *count);
 
@@ -2064,8 +2048,8 @@ topoloc_status topoloc_loop_detector_confirmed_count(const struct topoloc_loop_d
  * Writes confirmed hint `index` (0 = oldest; below `topoloc_loop_detector_confirmed_count`)
  * into `*hint` (ABI 1.10), whose `struct_size` the caller set with
  * `topoloc_loop_hint_default`: `accepted` 1, `query_id` and `query_place` the earlier
- * keyframe's, at most one accepted hint per keyframe in all. Errors: `_INVALID_ARGUMENT`
- * (index out of range; `*hint` unchanged), `_STRUCT_SIZE`, `_NULL_ARGUMENT`.
+ * keyframe's, at most one accepted hint per keyframe in all. Errors: `_INVALID_ARGUMENT` (index
+ * out of range; `*hint` unchanged).
  */
 topoloc_status topoloc_loop_detector_confirmed(const struct topoloc_loop_detector *detector, size_t index, struct topoloc_loop_hint *hint);
 
@@ -2073,13 +2057,13 @@ topoloc_status topoloc_loop_detector_confirmed(const struct topoloc_loop_detecto
  * Relocalization candidates for a descriptor that is not added (every keyframe may match),
  * most similar first, into the caller's array `(out, capacity)`; `*count` receives how many
  * were written (at most `capacity`). Errors: `_DIMENSION_MISMATCH`, `_NON_FINITE`,
- * `_ZERO_DESCRIPTOR`, `_NULL_ARGUMENT`.
+ * `_ZERO_DESCRIPTOR`.
  */
 topoloc_status topoloc_loop_detector_query(const struct topoloc_loop_detector *detector, const float *descriptor, size_t descriptor_len, struct topoloc_loop_candidate *out, size_t capacity, size_t *count);
 
 /**
  * Removes a keyframe and its features (ORB-SLAM culls keyframes).
- * Errors: `_INVALID_ARGUMENT` (no keyframe with that id), `_NULL_ARGUMENT`.
+ * Errors: `_INVALID_ARGUMENT` (no keyframe with that id).
  */
 topoloc_status topoloc_loop_detector_erase(struct topoloc_loop_detector *detector, uint64_t id);
 
@@ -2087,12 +2071,12 @@ topoloc_status topoloc_loop_detector_erase(struct topoloc_loop_detector *detecto
  * Saves the keyframes and their place graph as a topoloc map file (a view per keyframe,
  * keyframe ids kept), for a later session: `topoloc_map_load`, then
  * `topoloc_loop_detector_from_map`. Atomic (a temporary file renamed over `path`).
- * Errors: `_IO`, `_EMPTY_MAP`, `_NULL_ARGUMENT`, `_INVALID_UTF8`.
+ * Errors: `_IO`, `_EMPTY_MAP`.
  */
 topoloc_status topoloc_loop_detector_save(const struct topoloc_loop_detector *detector, const char *path);
 
 /**
- * Number of keyframes held (`*out`). Errors: `_NULL_ARGUMENT`.
+ * Number of keyframes held (`*out`).
  */
 topoloc_status topoloc_loop_detector_len(const struct topoloc_loop_detector *detector, size_t *out);
 
@@ -2103,14 +2087,12 @@ topoloc_status topoloc_loop_detector_len(const struct topoloc_loop_detector *det
 /**
  * Fills the first `size` bytes of `*options` with defaults and sets `struct_size`; call it
  * through the header macro `topoloc_trajectory_options_default(options)`.
- * Errors: `_NULL_ARGUMENT`, `_STRUCT_SIZE`.
  */
 topoloc_status topoloc_trajectory_options_init(struct topoloc_trajectory_options *options, size_t size);
 
 /**
  * Fills the first `size` bytes of `*report` with defaults and sets `struct_size`; call it
  * through the header macro `topoloc_trajectory_report_default(report)`.
- * Errors: `_NULL_ARGUMENT`, `_STRUCT_SIZE`.
  */
 topoloc_status topoloc_trajectory_report_init(struct topoloc_trajectory_report *report, size_t size);
 
@@ -2120,17 +2102,17 @@ topoloc_status topoloc_trajectory_report_init(struct topoloc_trajectory_report *
  * decreasing) and `count` poses of 7 doubles, `tx ty tz qx qy qz qw` (TUM's layout:
  * `world_T_body`, unit quaternion with w last). `options` may be NULL for defaults. On
  * success `*report` is written; on error it is unchanged. Thread-safe (no state).
- * Errors: `_INVALID_ARGUMENT` (counts, decreasing timestamps, a quaternion whose norm is not
- * 1, no associated pair, fewer than 3 pairs to align or `rpe_delta + 1` to measure,
- * degenerate positions), `_NON_FINITE`, `_INVALID_OPTION`, `_STRUCT_SIZE`, `_NULL_ARGUMENT`.
+ * Errors: `_INVALID_ARGUMENT` (counts, decreasing timestamps, a quaternion whose norm is not 1, no
+ * associated pair, fewer than 3 pairs to align or `rpe_delta + 1` to measure, degenerate
+ * positions), `_NON_FINITE`, `_INVALID_OPTION`.
  */
 topoloc_status topoloc_trajectory_evaluate(const double *reference_timestamps, const double *reference_poses, size_t reference_count, const double *estimate_timestamps, const double *estimate_poses, size_t estimate_count, const struct topoloc_trajectory_options *options, struct topoloc_trajectory_report *report);
 
 /**
  * `topoloc_trajectory_evaluate` of two trajectory files (UTF-8 paths) in `format`
  * (`TOPOLOC_TRAJECTORY_*`; `_DETECT` tells each file's format from its first data line).
- * Errors: those of `topoloc_trajectory_evaluate`, `_IO` (unreadable file), `_INVALID_ARGUMENT`
- * (a malformed line: the message names it; an unknown format), `_INVALID_UTF8`.
+ * Errors: those of `topoloc_trajectory_evaluate`, `_IO` (unreadable file), `_INVALID_ARGUMENT` (a
+ * malformed line: the message names it; an unknown format).
  */
 topoloc_status topoloc_trajectory_evaluate_files(const char *reference_path, const char *estimate_path, topoloc_trajectory_format format, const struct topoloc_trajectory_options *options, struct topoloc_trajectory_report *report);
 

@@ -28,7 +28,7 @@ impl Castable for topoloc_map_builder {
 
 /// Starts a map whose vectors come from descriptor `kind` / `model` with dimension `dim`
 /// (`model` may be NULL). On success `*out` owns a new builder.
-/// Errors: `_NULL_ARGUMENT`, `_INVALID_ARGUMENT` (empty kind, dim 0), `_INVALID_UTF8`.
+/// Errors: `_INVALID_ARGUMENT` (empty kind, dim 0).
 #[no_mangle]
 pub extern "C" fn topoloc_map_builder_new(
     kind: *const c_char,
@@ -120,7 +120,6 @@ impl Default for topoloc_view_attributes {
 
 /// Fills the first `size` bytes of `*attributes` with defaults and sets `struct_size`; call it
 /// through the header macro `topoloc_view_attributes_default(attributes)`, which passes `sizeof *(attributes)`.
-/// Errors: `_NULL_ARGUMENT`, `_STRUCT_SIZE` (size below the first published layout).
 #[no_mangle]
 pub extern "C" fn topoloc_view_attributes_init(
     attributes: *mut topoloc_view_attributes,
@@ -239,7 +238,6 @@ impl Default for topoloc_keyframe_options {
 
 /// Fills the first `size` bytes of `*options` with defaults and sets `struct_size`; call it
 /// through the header macro `topoloc_keyframe_options_default(options)`, which passes `sizeof *(options)`.
-/// Errors: `_NULL_ARGUMENT`, `_STRUCT_SIZE` (size below the first published layout).
 #[no_mangle]
 pub extern "C" fn topoloc_keyframe_options_init(
     options: *mut topoloc_keyframe_options,

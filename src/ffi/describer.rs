@@ -89,7 +89,6 @@ pub(crate) fn describer_options(
 
 /// Fills `*options` with the defaults. Call through the header macro
 /// `topoloc_describer_options_default(options)`, which passes `sizeof *(options)`.
-/// Errors: `_NULL_ARGUMENT`, `_STRUCT_SIZE`.
 #[no_mangle]
 pub extern "C" fn topoloc_describer_options_init(
     options: *mut topoloc_describer_options,
@@ -100,9 +99,8 @@ pub extern "C" fn topoloc_describer_options_init(
 
 /// Loads the describer `map` stores (for ONNX: the runtime and the model, checked by hash).
 /// `options` may be NULL for defaults. On success `*out` owns a new describer.
-/// Errors: `_NO_DESCRIBER` (the map was built from descriptors), `_BACKEND_UNAVAILABLE`
-/// (paths tried in the message), `_DESCRIPTOR_MISMATCH`, `_MODEL`, `_INVALID_OPTION`,
-/// `_STRUCT_SIZE`, `_NULL_ARGUMENT`, `_INVALID_UTF8`.
+/// Errors: `_NO_DESCRIBER` (the map was built from descriptors), `_BACKEND_UNAVAILABLE` (paths
+/// tried in the message), `_DESCRIPTOR_MISMATCH`, `_MODEL`, `_INVALID_OPTION`.
 #[no_mangle]
 pub extern "C" fn topoloc_describer_new(
     map: *const topoloc_map,
@@ -160,7 +158,6 @@ pub extern "C" fn topoloc_describer_free(describer: *mut topoloc_describer) {
 }
 
 /// Writes the descriptor dimension D (the map's) to `*out`.
-/// Errors: `_NULL_ARGUMENT`.
 #[no_mangle]
 pub extern "C" fn topoloc_describer_dim(
     describer: *const topoloc_describer,
@@ -177,8 +174,8 @@ pub extern "C" fn topoloc_describer_dim(
 /// Describes `image` into `descriptor` (capacity `capacity` floats): D values of unit norm,
 /// comparable with the map's. `*len` (if not NULL) receives D, also on
 /// `_BUFFER_TOO_SMALL`. The image is read only during the call.
-/// Errors: `_INVALID_IMAGE` (also `TOPOLOC_PIXEL_NONE`), `_UNINFORMATIVE_IMAGE` (no content,
-/// e.g. a constant image), `_BUFFER_TOO_SMALL`, `_MODEL`, `_NULL_ARGUMENT`.
+/// Errors: `_INVALID_IMAGE` (also `TOPOLOC_PIXEL_NONE`), `_UNINFORMATIVE_IMAGE` (no content, e.g. a
+/// constant image), `_BUFFER_TOO_SMALL`, `_MODEL`.
 #[no_mangle]
 pub extern "C" fn topoloc_describer_describe(
     describer: *mut topoloc_describer,

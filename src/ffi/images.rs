@@ -223,7 +223,6 @@ impl Default for topoloc_image_map_options {
 
 /// Fills the first `size` bytes of `*options` with defaults and sets `struct_size`; call it
 /// through the header macro `topoloc_image_map_options_default(options)`.
-/// Errors: `_NULL_ARGUMENT`, `_STRUCT_SIZE`.
 #[no_mangle]
 pub extern "C" fn topoloc_image_map_options_init(
     options: *mut topoloc_image_map_options,
@@ -374,9 +373,9 @@ fn build(
 /// parallel; the map stores its describer, so localizers on it accept image frames. Views
 /// record their image's index (as keyframe id) and path. `options` may be NULL for defaults
 /// (ONNX backend); `progress` may be NULL. On success `*out` owns a new map.
-/// Errors: `_INVALID_ARGUMENT` (fewer than 2 images, bad options, pose count), `_INVALID_IMAGE`
-/// (an unreadable file; the message names it), `_BACKEND_UNAVAILABLE`, `_MODEL`, `_IO` (poses
-/// file), `_CANCELLED`, `_NULL_ARGUMENT`, `_INVALID_UTF8`, `_STRUCT_SIZE`.
+/// Errors: `_INVALID_ARGUMENT` (fewer than 2 images, bad options, pose count), `_INVALID_IMAGE` (an
+/// unreadable file; the message names it), `_BACKEND_UNAVAILABLE`, `_MODEL`, `_IO` (poses file),
+/// `_CANCELLED`.
 #[no_mangle]
 pub extern "C" fn topoloc_map_build_from_image_files(
     paths: *const *const c_char,

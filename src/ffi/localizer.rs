@@ -186,7 +186,6 @@ impl Default for topoloc_localizer_options {
 
 /// Fills the first `size` bytes of `*options` with defaults and sets `struct_size`; call it
 /// through the header macro `topoloc_localizer_options_default(options)`, which passes `sizeof *(options)`.
-/// Errors: `_NULL_ARGUMENT`, `_STRUCT_SIZE` (size below the first published layout).
 #[no_mangle]
 pub extern "C" fn topoloc_localizer_options_init(
     options: *mut topoloc_localizer_options,
@@ -199,10 +198,10 @@ pub extern "C" fn topoloc_localizer_options_init(
 /// `options` may be NULL for defaults. With `image_backend` `TOPOLOC_BACKEND_AUTO` and a map
 /// built from images, the map's describer is loaded now (for ONNX: the runtime and model).
 /// On success `*out` owns a new localizer.
-/// Errors: `_INVALID_OPTION`, `_DESCRIPTOR_MISMATCH` (also another backend or model file than
-/// the map's), `_BACKEND_UNAVAILABLE` (paths tried in the message; pass
-/// `TOPOLOC_BACKEND_NONE` to localize descriptors only), `_MODEL`, `_NO_DESCRIBER` (a backend
-/// was required but the map stores none), `_STRUCT_SIZE`, `_NULL_ARGUMENT`, `_INVALID_UTF8`.
+/// Errors: `_INVALID_OPTION`, `_DESCRIPTOR_MISMATCH` (also another backend or model file than the
+/// map's), `_BACKEND_UNAVAILABLE` (paths tried in the message; pass `TOPOLOC_BACKEND_NONE` to
+/// localize descriptors only), `_MODEL`, `_NO_DESCRIBER` (a backend was required but the map stores
+/// none).
 #[no_mangle]
 pub extern "C" fn topoloc_localizer_new(
     map: *const topoloc_map,
@@ -351,7 +350,6 @@ impl Default for topoloc_frame {
 
 /// Fills the first `size` bytes of `*frame` with defaults and sets `struct_size`; call it
 /// through the header macro `topoloc_frame_default(frame)`, which passes `sizeof *(frame)`.
-/// Errors: `_NULL_ARGUMENT`, `_STRUCT_SIZE` (size below the first published layout).
 #[no_mangle]
 pub extern "C" fn topoloc_frame_init(frame: *mut topoloc_frame, size: usize) -> topoloc_status {
     init_versioned(frame, size, "frame")
@@ -456,7 +454,6 @@ impl Default for topoloc_result {
 
 /// Fills the first `size` bytes of `*result` with defaults and sets `struct_size`; call it
 /// through the header macro `topoloc_result_default(result)`, which passes `sizeof *(result)`.
-/// Errors: `_NULL_ARGUMENT`, `_STRUCT_SIZE` (size below the first published layout).
 #[no_mangle]
 pub extern "C" fn topoloc_result_init(result: *mut topoloc_result, size: usize) -> topoloc_status {
     init_versioned(result, size, "result")
@@ -467,13 +464,12 @@ pub extern "C" fn topoloc_result_init(result: *mut topoloc_result, size: usize) 
 /// A frame with `descriptor_len` 0 and an image is described first (the localizer needs a
 /// describer: see `topoloc_localizer_new`).
 /// Errors: `_DIMENSION_MISMATCH`, `_NON_FINITE`, `_ZERO_DESCRIPTOR`, `_TIMESTAMP`,
-/// `_INVALID_ARGUMENT` (odometry not a rigid transform), `_INVALID_IMAGE`,
-/// `_UNINFORMATIVE_IMAGE` (blank or featureless image: state unchanged), `_NO_DESCRIBER`,
-/// `_MODEL`, `_STRUCT_SIZE`, `_NULL_ARGUMENT`. With verification on, the frame needs its image
-/// (`_INVALID_IMAGE`), beside its descriptor or instead of it.
-/// Cost: describing the image (if any), then one pass over the map's descriptors plus
-/// O(places + edges); no allocation for descriptor frames without verification; verification
-/// adds keypoint detection and a pair check per checked view (BENCHMARKS.md).
+/// `_INVALID_ARGUMENT` (odometry not a rigid transform), `_INVALID_IMAGE`, `_UNINFORMATIVE_IMAGE`
+/// (blank or featureless image: state unchanged), `_NO_DESCRIBER`, `_MODEL`. With verification on,
+/// the frame needs its image (`_INVALID_IMAGE`), beside its descriptor or instead of it. Cost:
+/// describing the image (if any), then one pass over the map's descriptors plus O(places + edges);
+/// no allocation for descriptor frames without verification; verification adds keypoint detection
+/// and a pair check per checked view (BENCHMARKS.md).
 #[no_mangle]
 pub extern "C" fn topoloc_localizer_process(
     localizer: *mut topoloc_localizer,

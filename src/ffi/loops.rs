@@ -156,7 +156,6 @@ impl Default for topoloc_loop_options {
 
 /// Fills the first `size` bytes of `*options` with defaults and sets `struct_size`; call it
 /// through the header macro `topoloc_loop_options_default(options)`, which passes `sizeof *(options)`.
-/// Errors: `_NULL_ARGUMENT`, `_STRUCT_SIZE`.
 #[no_mangle]
 pub extern "C" fn topoloc_loop_options_init(
     options: *mut topoloc_loop_options,
@@ -207,8 +206,7 @@ fn loop_options(
 /// Creates an empty loop detector for descriptors of `descriptor_kind` (a non-empty string),
 /// `descriptor_model` (may be empty) and dimension `dim`: the place graph grows from nothing.
 /// `options` may be NULL for defaults. On success `*out` owns the detector.
-/// Errors: `_INVALID_OPTION`, `_INVALID_ARGUMENT` (empty kind, dim 0), `_STRUCT_SIZE`,
-/// `_NULL_ARGUMENT`, `_INVALID_UTF8`.
+/// Errors: `_INVALID_OPTION`, `_INVALID_ARGUMENT` (empty kind, dim 0).
 #[no_mangle]
 pub extern "C" fn topoloc_loop_detector_new(
     descriptor_kind: *const c_char,
@@ -235,7 +233,7 @@ pub extern "C" fn topoloc_loop_detector_new(
 /// and, where known, scene points): new keyframes (ids above the map's) close loops against
 /// it. The map handle is not kept. On success `*out` owns the detector.
 /// Errors: `_INVALID_OPTION` (also a view without keyframe id), `_INVALID_ARGUMENT` (ids not
-/// increasing), `_STRUCT_SIZE`, `_NULL_ARGUMENT`.
+/// increasing).
 #[no_mangle]
 pub extern "C" fn topoloc_loop_detector_from_map(
     map: *const topoloc_map,
@@ -314,7 +312,6 @@ impl Default for topoloc_loop_keyframe {
 
 /// Fills the first `size` bytes of `*keyframe` with defaults and sets `struct_size`; call it
 /// through the header macro `topoloc_loop_keyframe_default(keyframe)`, which passes `sizeof *(keyframe)`.
-/// Errors: `_NULL_ARGUMENT`, `_STRUCT_SIZE`.
 #[no_mangle]
 pub extern "C" fn topoloc_loop_keyframe_init(
     keyframe: *mut topoloc_loop_keyframe,
@@ -390,7 +387,6 @@ impl Default for topoloc_loop_hint {
 
 /// Fills the first `size` bytes of `*hint` with defaults and sets `struct_size`; call it
 /// through the header macro `topoloc_loop_hint_default(hint)`, which passes `sizeof *(hint)`.
-/// Errors: `_NULL_ARGUMENT`, `_STRUCT_SIZE`.
 #[no_mangle]
 pub extern "C" fn topoloc_loop_hint_init(
     hint: *mut topoloc_loop_hint,
@@ -488,12 +484,11 @@ fn c_hint(h: &LoopHint) -> topoloc_loop_hint {
 /// candidate with the gate that decided (`has_match` 0 when there was none); at most one hint
 /// per keyframe. The whole keyframe is validated first: on any error the detector and `*hint`
 /// are unchanged.
-/// Errors: `_DIMENSION_MISMATCH`, `_NON_FINITE` (descriptor, timestamp, poses),
-/// `_ZERO_DESCRIPTOR`, `_INVALID_ARGUMENT` (duplicate or decreasing id, earlier timestamp,
-/// bad keypoints or scene points, non-rigid poses), `_INVALID_OPTION` (a pose on some
-/// keyframes only: the first keyframe decides whether all have one),
-/// `_STRUCT_SIZE`, `_NULL_ARGUMENT`. Cost: one pass over the keyframes' descriptors and a pair
-/// check per verified candidate (BENCHMARKS.md).
+/// Errors: `_DIMENSION_MISMATCH`, `_NON_FINITE` (descriptor, timestamp, poses), `_ZERO_DESCRIPTOR`,
+/// `_INVALID_ARGUMENT` (duplicate or decreasing id, earlier timestamp, bad keypoints or scene
+/// points, non-rigid poses), `_INVALID_OPTION` (a pose on some keyframes only: the first keyframe
+/// decides whether all have one). Cost: one pass over the keyframes' descriptors and a pair check
+/// per verified candidate (BENCHMARKS.md).
 #[no_mangle]
 pub extern "C" fn topoloc_loop_detector_add(
     detector: *mut topoloc_loop_detector,
@@ -527,7 +522,7 @@ pub extern "C" fn topoloc_loop_detector_add(
 /// a consistency streak, the streak's earlier keyframes, refused as `TOPOLOC_GATE_INCONSISTENT`
 /// while it was short, are accepted too. Read each with `topoloc_loop_detector_confirmed`
 /// before the next `_add` replaces them (errors and `_erase` keep them). 0 after an `_add`
-/// whose hint was not accepted. Errors: `_NULL_ARGUMENT`.
+/// whose hint was not accepted.
 #[no_mangle]
 pub extern "C" fn topoloc_loop_detector_confirmed_count(
     detector: *const topoloc_loop_detector,
@@ -544,8 +539,8 @@ pub extern "C" fn topoloc_loop_detector_confirmed_count(
 /// Writes confirmed hint `index` (0 = oldest; below `topoloc_loop_detector_confirmed_count`)
 /// into `*hint` (ABI 1.10), whose `struct_size` the caller set with
 /// `topoloc_loop_hint_default`: `accepted` 1, `query_id` and `query_place` the earlier
-/// keyframe's, at most one accepted hint per keyframe in all. Errors: `_INVALID_ARGUMENT`
-/// (index out of range; `*hint` unchanged), `_STRUCT_SIZE`, `_NULL_ARGUMENT`.
+/// keyframe's, at most one accepted hint per keyframe in all. Errors: `_INVALID_ARGUMENT` (index
+/// out of range; `*hint` unchanged).
 #[no_mangle]
 pub extern "C" fn topoloc_loop_detector_confirmed(
     detector: *const topoloc_loop_detector,
@@ -581,7 +576,7 @@ pub struct topoloc_loop_candidate {
 /// Relocalization candidates for a descriptor that is not added (every keyframe may match),
 /// most similar first, into the caller's array `(out, capacity)`; `*count` receives how many
 /// were written (at most `capacity`). Errors: `_DIMENSION_MISMATCH`, `_NON_FINITE`,
-/// `_ZERO_DESCRIPTOR`, `_NULL_ARGUMENT`.
+/// `_ZERO_DESCRIPTOR`.
 #[no_mangle]
 pub extern "C" fn topoloc_loop_detector_query(
     detector: *const topoloc_loop_detector,
@@ -610,7 +605,7 @@ pub extern "C" fn topoloc_loop_detector_query(
 }
 
 /// Removes a keyframe and its features (ORB-SLAM culls keyframes).
-/// Errors: `_INVALID_ARGUMENT` (no keyframe with that id), `_NULL_ARGUMENT`.
+/// Errors: `_INVALID_ARGUMENT` (no keyframe with that id).
 #[no_mangle]
 pub extern "C" fn topoloc_loop_detector_erase(
     detector: *mut topoloc_loop_detector,
@@ -625,7 +620,7 @@ pub extern "C" fn topoloc_loop_detector_erase(
 /// Saves the keyframes and their place graph as a topoloc map file (a view per keyframe,
 /// keyframe ids kept), for a later session: `topoloc_map_load`, then
 /// `topoloc_loop_detector_from_map`. Atomic (a temporary file renamed over `path`).
-/// Errors: `_IO`, `_EMPTY_MAP`, `_NULL_ARGUMENT`, `_INVALID_UTF8`.
+/// Errors: `_IO`, `_EMPTY_MAP`.
 #[no_mangle]
 pub extern "C" fn topoloc_loop_detector_save(
     detector: *const topoloc_loop_detector,
@@ -638,7 +633,7 @@ pub extern "C" fn topoloc_loop_detector_save(
     })
 }
 
-/// Number of keyframes held (`*out`). Errors: `_NULL_ARGUMENT`.
+/// Number of keyframes held (`*out`).
 #[no_mangle]
 pub extern "C" fn topoloc_loop_detector_len(
     detector: *const topoloc_loop_detector,

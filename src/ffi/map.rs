@@ -60,7 +60,6 @@ impl Default for topoloc_map_load_options {
 
 /// Fills the first `size` bytes of `*options` with defaults and sets `struct_size`; call it
 /// through the header macro `topoloc_map_load_options_default(options)`, which passes `sizeof *(options)`.
-/// Errors: `_NULL_ARGUMENT`, `_STRUCT_SIZE` (size below the first published layout).
 #[no_mangle]
 pub extern "C" fn topoloc_map_load_options_init(
     options: *mut topoloc_map_load_options,
@@ -86,7 +85,7 @@ fn load_options(options: *const topoloc_map_load_options) -> Result<LoadOptions,
 /// Loads and validates a map file (memory-mapped; the file must not be modified while the map
 /// lives). `options` may be NULL. On success `*out` owns a new map: free it with
 /// `topoloc_map_free`. Errors: `TOPOLOC_ERR_IO`, `_NOT_A_MAP`, `_TRUNCATED`, `_CORRUPT`,
-/// `_UNSUPPORTED_VERSION`, `_DESCRIPTOR_MISMATCH`, `_NULL_ARGUMENT`, `_INVALID_UTF8`.
+/// `_UNSUPPORTED_VERSION`, `_DESCRIPTOR_MISMATCH`.
 #[no_mangle]
 pub extern "C" fn topoloc_map_load(
     path: *const c_char,
@@ -120,8 +119,7 @@ pub extern "C" fn topoloc_map_load_from_memory(
     })
 }
 
-/// Saves a map to `path` atomically (temporary file, fsync, rename). Errors: `TOPOLOC_ERR_IO`,
-/// `_NULL_ARGUMENT`, `_INVALID_UTF8`.
+/// Saves a map to `path` atomically (temporary file, fsync, rename). Errors: `TOPOLOC_ERR_IO`.
 #[no_mangle]
 pub extern "C" fn topoloc_map_save(map: *const topoloc_map, path: *const c_char) -> topoloc_status {
     run(|| {
@@ -339,7 +337,6 @@ impl Default for topoloc_view_info {
 
 /// Fills the first `size` bytes of `*info` with an empty view info and sets `struct_size`; call
 /// it through the header macro `topoloc_view_info_default(info)`, which passes `sizeof *(info)`.
-/// Errors: `_NULL_ARGUMENT`, `_STRUCT_SIZE`.
 #[no_mangle]
 pub extern "C" fn topoloc_view_info_init(
     info: *mut topoloc_view_info,
@@ -348,7 +345,7 @@ pub extern "C" fn topoloc_view_info_init(
     init_versioned(info, size, "info")
 }
 
-/// Fills `*out` with the attributes of `view`. Errors: `_UNKNOWN_VIEW`, `_STRUCT_SIZE`.
+/// Fills `*out` with the attributes of `view`. Errors: `_UNKNOWN_VIEW`.
 #[no_mangle]
 pub extern "C" fn topoloc_map_view_info(
     map: *const topoloc_map,

@@ -22,7 +22,7 @@ fn keypoints_of(map: &Map) -> Result<&ViewKeypoints, FfiError> {
 
 /// Writes into `*total` the number of keypoints of all views together (0 when the map stores
 /// none): the length, in points, of the array `topoloc_map_with_keypoint_points` takes.
-/// Thread safety: as every `const topoloc_map*` accessor. Errors: `_NULL_ARGUMENT`.
+/// Thread safety: as every `const topoloc_map*` accessor.
 #[no_mangle]
 pub extern "C" fn topoloc_map_keypoint_total(
     map: *const topoloc_map,
@@ -40,8 +40,7 @@ pub extern "C" fn topoloc_map_keypoint_total(
 /// of the top-left pixel is (0, 0)), into `xy` of capacity `len` floats. `*count` (if non-NULL)
 /// always receives the number of keypoints; `len` must be at least `2 * count`. Keypoints are in
 /// the order `topoloc_map_with_keypoint_points` expects their scene points.
-/// Errors: `_UNKNOWN_VIEW`, `_INVALID_ARGUMENT` (the map stores no keypoints),
-/// `_BUFFER_TOO_SMALL`, `_NULL_ARGUMENT`.
+/// Errors: `_UNKNOWN_VIEW`, `_INVALID_ARGUMENT` (the map stores no keypoints), `_BUFFER_TOO_SMALL`.
 #[no_mangle]
 pub extern "C" fn topoloc_map_view_keypoints(
     map: *const topoloc_map,
@@ -73,7 +72,7 @@ pub extern "C" fn topoloc_map_view_keypoints(
 /// On success `*out` owns the new map (release it with `topoloc_map_free`); `map` is unchanged
 /// and remains the caller's. The copy holds its descriptors in memory, even when `map` was
 /// memory-mapped from a file. Errors: `_INVALID_ARGUMENT` (no keypoints, wrong length, a point
-/// neither finite nor all NaN), `_NULL_ARGUMENT`.
+/// neither finite nor all NaN).
 #[no_mangle]
 pub extern "C" fn topoloc_map_with_keypoint_points(
     map: *const topoloc_map,

@@ -89,8 +89,7 @@ impl From<&topoloc_skeleton_options> for SkeletonOptions {
 
 /// Fills the first `size` bytes of `*options` with defaults and sets `struct_size`; call it
 /// through the header macro `topoloc_skeleton_options_default(options)`, which passes
-/// `sizeof *(options)`. Thread-safe. Errors: `_NULL_ARGUMENT`, `_STRUCT_SIZE` (size below the
-/// first published layout).
+/// `sizeof *(options)`. Thread-safe.
 #[no_mangle]
 pub extern "C" fn topoloc_skeleton_options_init(
     options: *mut topoloc_skeleton_options,
@@ -125,10 +124,10 @@ impl Castable for topoloc_graph {
 ///
 /// On success `*out` owns a new graph (free it with `topoloc_graph_free`); the same inputs give
 /// the same graph. Thread-safe (no shared state); single-threaded, seconds for an office floor
-/// at 0.1 m (BENCHMARKS.md). Errors: `_NULL_ARGUMENT`, `_STRUCT_SIZE`,
-/// `_INVALID_ARGUMENT` (the message names the field: `dims`, `voxel_size`, `origin`,
-/// `cells_len`, `cells` when every voxel is occupied, `z_band` when the band holds no free
-/// voxel, `min_clearance_m` when the clearance leaves none, or another option out of range).
+/// at 0.1 m (BENCHMARKS.md). Errors: `_INVALID_ARGUMENT` (the message names the field: `dims`,
+/// `voxel_size`, `origin`, `cells_len`, `cells` when every voxel is occupied, `z_band` when the
+/// band holds no free voxel, `min_clearance_m` when the clearance leaves none, or another option
+/// out of range).
 #[no_mangle]
 pub extern "C" fn topoloc_graph_from_occupancy(
     dims: *const usize,
@@ -183,7 +182,7 @@ pub extern "C" fn topoloc_graph_free(graph: *mut topoloc_graph) {
     free_box(graph)
 }
 
-/// Number of places (`*out`). Errors: `_NULL_ARGUMENT`.
+/// Number of places (`*out`).
 #[no_mangle]
 pub extern "C" fn topoloc_graph_place_count(
     graph: *const topoloc_graph,
@@ -192,7 +191,7 @@ pub extern "C" fn topoloc_graph_place_count(
     graph_value(graph, out, |g| g.places.len())
 }
 
-/// Number of undirected edges (`*out`). Errors: `_NULL_ARGUMENT`.
+/// Number of undirected edges (`*out`).
 #[no_mangle]
 pub extern "C" fn topoloc_graph_edge_count(
     graph: *const topoloc_graph,
@@ -216,8 +215,7 @@ fn graph_value<T>(
 
 /// Place `place` (0..place_count): `xyz` (3 doubles) receives its world position in metres (the
 /// centre of its skeleton voxel), `*kind` its `TOPOLOC_NODE_*` kind. Places come in this order:
-/// branches, ends, corners, then intermediate places. Errors: `_NULL_ARGUMENT`,
-/// `_UNKNOWN_PLACE`.
+/// branches, ends, corners, then intermediate places. Errors: `_UNKNOWN_PLACE`.
 #[no_mangle]
 pub extern "C" fn topoloc_graph_place(
     graph: *const topoloc_graph,
@@ -248,8 +246,7 @@ pub extern "C" fn topoloc_graph_place(
 }
 
 /// Edge number `index` (0..edge_count, sorted by (a, b)): places `*a < *b` and the straight
-/// distance between them, `*length_m`. Errors: `_NULL_ARGUMENT`, `_INVALID_ARGUMENT` (index out
-/// of range).
+/// distance between them, `*length_m`. Errors: `_INVALID_ARGUMENT` (index out of range).
 #[no_mangle]
 pub extern "C" fn topoloc_graph_edge(
     graph: *const topoloc_graph,
@@ -279,7 +276,7 @@ pub extern "C" fn topoloc_graph_edge(
 /// Copies the skeleton the graph was built on, as voxel indices `x0, y0, z0, x1, y1, z1, ...`
 /// in grid order, into `xyz` of capacity `len` values. `*count` (if not NULL) receives the
 /// number of values (3 per voxel), also on `TOPOLOC_ERR_BUFFER_TOO_SMALL`; call with `len` 0
-/// to ask. Errors: `_NULL_ARGUMENT`, `_BUFFER_TOO_SMALL`.
+/// to ask. Errors: `_BUFFER_TOO_SMALL`.
 #[no_mangle]
 pub extern "C" fn topoloc_graph_skeleton(
     graph: *const topoloc_graph,

@@ -552,3 +552,57 @@ fn a_hand_written_default_is_told_from_a_generated_one() {
         ]
     );
 }
+
+/// The "Errors:" lists of the header's function docs, as `(text of the list, the function)`.
+fn errors_lists(header: &str) -> Vec<(String, String)> {
+    let mut lists = Vec::new();
+    for doc_and_decl in header.split("/**").skip(1) {
+        let Some((doc, decl)) = doc_and_decl.split_once("*/") else {
+            continue;
+        };
+        let Some(list) = doc.split("Errors:").nth(1) else {
+            continue;
+        };
+        let function = decl
+            .split('(')
+            .next()
+            .unwrap_or("")
+            .split_whitespace()
+            .last();
+        let text: String = list.split_whitespace().collect::<Vec<_>>().join(" ");
+        lists.push((text, function.unwrap_or("").to_string()));
+    }
+    lists
+}
+
+#[test]
+fn errors_lists_name_only_what_the_general_rules_do_not_cover() {
+    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/include/topoloc.h");
+    let header = std::fs::read_to_string(path).unwrap();
+    assert!(header.contains("A function's \"Errors:\" list names what is specific to it"));
+    let lists = errors_lists(&header);
+    assert!(lists.len() >= 25, "too few Errors: lists: {}", lists.len());
+    let general = [
+        "_NULL_ARGUMENT`",
+        "_STRUCT_SIZE`",
+        "_INVALID_UTF8`",
+        "_PANIC`",
+        "_CONCURRENT_USE`",
+    ];
+    let mut restated = Vec::new();
+    for (list, function) in &lists {
+        for code in general {
+            // Named without a reason of its own: the general rule already says it.
+            for (at, _) in list.match_indices(code) {
+                let after = list[at + code.len()..].trim_start();
+                if !after.starts_with('(') {
+                    restated.push(format!("{function}: {code}"));
+                }
+            }
+        }
+    }
+    assert!(
+        restated.is_empty(),
+        "general errors restated: {restated:#?}"
+    );
+}

@@ -70,7 +70,6 @@ impl Default for topoloc_trajectory_options {
 
 /// Fills the first `size` bytes of `*options` with defaults and sets `struct_size`; call it
 /// through the header macro `topoloc_trajectory_options_default(options)`.
-/// Errors: `_NULL_ARGUMENT`, `_STRUCT_SIZE`.
 #[no_mangle]
 pub extern "C" fn topoloc_trajectory_options_init(
     options: *mut topoloc_trajectory_options,
@@ -152,7 +151,6 @@ impl Default for topoloc_trajectory_report {
 
 /// Fills the first `size` bytes of `*report` with defaults and sets `struct_size`; call it
 /// through the header macro `topoloc_trajectory_report_default(report)`.
-/// Errors: `_NULL_ARGUMENT`, `_STRUCT_SIZE`.
 #[no_mangle]
 pub extern "C" fn topoloc_trajectory_report_init(
     report: *mut topoloc_trajectory_report,
@@ -166,9 +164,9 @@ pub extern "C" fn topoloc_trajectory_report_init(
 /// decreasing) and `count` poses of 7 doubles, `tx ty tz qx qy qz qw` (TUM's layout:
 /// `world_T_body`, unit quaternion with w last). `options` may be NULL for defaults. On
 /// success `*report` is written; on error it is unchanged. Thread-safe (no state).
-/// Errors: `_INVALID_ARGUMENT` (counts, decreasing timestamps, a quaternion whose norm is not
-/// 1, no associated pair, fewer than 3 pairs to align or `rpe_delta + 1` to measure,
-/// degenerate positions), `_NON_FINITE`, `_INVALID_OPTION`, `_STRUCT_SIZE`, `_NULL_ARGUMENT`.
+/// Errors: `_INVALID_ARGUMENT` (counts, decreasing timestamps, a quaternion whose norm is not 1, no
+/// associated pair, fewer than 3 pairs to align or `rpe_delta + 1` to measure, degenerate
+/// positions), `_NON_FINITE`, `_INVALID_OPTION`.
 #[no_mangle]
 pub extern "C" fn topoloc_trajectory_evaluate(
     reference_timestamps: *const f64,
@@ -206,8 +204,8 @@ pub extern "C" fn topoloc_trajectory_evaluate(
 
 /// `topoloc_trajectory_evaluate` of two trajectory files (UTF-8 paths) in `format`
 /// (`TOPOLOC_TRAJECTORY_*`; `_DETECT` tells each file's format from its first data line).
-/// Errors: those of `topoloc_trajectory_evaluate`, `_IO` (unreadable file), `_INVALID_ARGUMENT`
-/// (a malformed line: the message names it; an unknown format), `_INVALID_UTF8`.
+/// Errors: those of `topoloc_trajectory_evaluate`, `_IO` (unreadable file), `_INVALID_ARGUMENT` (a
+/// malformed line: the message names it; an unknown format).
 #[no_mangle]
 pub extern "C" fn topoloc_trajectory_evaluate_files(
     reference_path: *const c_char,
