@@ -28,7 +28,7 @@ def two_views():
     """``(first, second, descriptors)``: POINTS scene points 3-8 m in front of a 300-pixel
     pinhole camera (320 x 240, principal point (160, 120)) seen from it and from the second
     camera, each with the same random 32-byte descriptor in both views (the generator of
-    tests/c/test_topoloc.c, loop_keypoints, with its 32-bit LCG), and the points in the first
+    tests/c/test_loops.c, loop_keypoints, with its 32-bit LCG), and the points in the first
     camera's frame ``(first, second, descriptors, scene)``."""
     state = 12345
     c, s = np.cos(YAW), np.sin(YAW)

@@ -315,7 +315,7 @@ inline const topoloc::Map &image_map()
 }
 
 // ---------------------------------------------------------------------------------------------
-// Two views of the same keypoints (the generator of tests/c/test_topoloc.c), for loop tests
+// Two views of the same keypoints (the generator of tests/c/test_loops.c), for loop tests
 // ---------------------------------------------------------------------------------------------
 constexpr std::size_t kLoopPoints = 60;
 

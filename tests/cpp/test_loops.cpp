@@ -1,7 +1,7 @@
 // Tests of the loop closure part of the C++ RAII layer (include/topoloc.hpp, ABI 1.5):
 // `LoopDetector` ownership and moves, `default_loop_options`, the `Gate` codes, a keyframe and
 // its revisit from another pose turning into an accepted hint (as test_loop_closure of
-// tests/c/test_topoloc.c), bad keyframes throwing with the detector unchanged, relocalization
+// tests/c/test_loops.c), bad keyframes throwing with the detector unchanged, relocalization
 // queries, a metric hint with intrinsics and scene points, and a second session from the saved
 // map. Built and run by tests/cpp/run.sh, normally and under ASan+UBSan.
 

@@ -2,7 +2,7 @@
 // camera fields and the result's `pose_fix`, `Map::keypoint_total` / `view_keypoints` against
 // each other and on a map without keypoints, `Map::with_keypoint_points` refusing a wrong length
 // with the map still usable, a revisit placed metrically end to end (as test_pose_fix of
-// tests/c/test_topoloc.c: a pinhole camera of focal 400 px, the map frame each view's optical
+// tests/c/test_images.c: a pinhole camera of focal 400 px, the map frame each view's optical
 // frame, scene points 1 m away left of the centre and 4 m right of it; the revisit moved the
 // content 2 px left, so the fix reprojects the view's scene points 2 px left of their
 // keypoints), and bad intrinsics or intrinsics on a map without scene points refused. Built and
