@@ -19,6 +19,10 @@ here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
 repo="$(cd "$here/.." && pwd)"
 work="$repo/target/fuzz"
 bin="$work/bin"
+# The instrumented build's own cargo target dir, outside the checkout: its dependencies (every
+# crate compiled with sanitizer coverage) are then built once per machine and toolchain, not
+# once per clone; cargo rebuilds what changed, the checkout's own crates always.
+build_dir="${TOPOLOC_FUZZ_TARGET_DIR:-${XDG_CACHE_HOME:-$HOME/.cache}/topoloc/fuzz-target}"
 triple="$(rustc -vV | sed -n 's/^host: //p')"
 TARGETS=(map_load describer_spec image_frame keyframe_db)
 TIMEOUT_S=10
@@ -43,10 +47,10 @@ build() {
         -Cllvm-args=-sanitizer-coverage-inline-8bit-counters
         -Cllvm-args=-sanitizer-coverage-pc-table
         -Cllvm-args=-sanitizer-coverage-trace-compares --cfg fuzzing)
-    RUSTFLAGS="${flags[*]}" CARGO_TARGET_DIR="$work" cargo build --quiet --release \
+    RUSTFLAGS="${flags[*]}" CARGO_TARGET_DIR="$build_dir" cargo build --quiet --release \
         --manifest-path "$here/Cargo.toml" --target "$triple"
     mkdir -p "$bin"
-    local lib="$work/$triple/release/libtopoloc_fuzz.a"
+    local lib="$build_dir/$triple/release/libtopoloc_fuzz.a"
     local t
     for t in "${TARGETS[@]}"; do
         # shellcheck disable=SC2046
