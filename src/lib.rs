@@ -8,8 +8,9 @@
 //! the graph.
 //!
 //! # Layers
-//! Modules are layered; a module imports only from layers below it (`tests/layers.rs` holds this
-//! order against every `use crate::` line):
+//! Modules are layered; a module imports only from layers below it. This table is the one place
+//! the layers are written: `tests/layers.rs` reads it and holds every `crate::` path of `src/`
+//! against it, and checks that the submodules of every module import each other without cycles.
 //!
 //! | layer | modules | what |
 //! |---|---|---|
