@@ -40,9 +40,8 @@ pub(crate) fn parse_condition(name: &str) -> Result<ConditionKind, String> {
 
 /// Views captured per place by `demo`, `simulate` and `suite` unless `--views-per-place` says
 /// otherwise. The seed's micro nodes are 4 views 90 degrees apart; 12 (30 degrees apart) was
-/// measured better on generated worlds (test world 0: filter MNA 0.26 with 4, 0.42 with 8,
-/// 0.50 with 12, 0.47 with 16; BENCHMARKS.md), since a query turned 45 degrees from every
-/// view shares only half its field of view with each.
+/// measured better on generated worlds (BENCHMARKS.md, "Which data chose each default"), since
+/// a query turned 45 degrees from every view shares only half its field of view with each.
 pub(crate) const VIEWS_PER_PLACE: usize = 12;
 
 /// Map capture options shared by `demo`, `simulate` and `suite`.

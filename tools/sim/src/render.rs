@@ -25,9 +25,8 @@
 //!   noise of `noise_sigma` grey levels drawn from the frame's seed.
 //!
 //! A render is single-threaded and deterministic given the world, pose, intrinsics, condition
-//! and seed; callers parallelise across frames (the renderer is `Sync`). At 320x240 a typical
-//! frame takes a median 9-15 ms on one core of the 2-core development machine (66-106 frames/s;
-//! `cargo bench -p topoloc-sim --bench render`): about half traversal, half shading.
+//! and seed; callers parallelise across frames (the renderer is `Sync`). Its time per frame:
+//! `cargo bench -p topoloc-sim --bench render` (about half traversal, half shading).
 
 use crate::camera::{Intrinsics, Pose};
 use crate::rng::SimRng;

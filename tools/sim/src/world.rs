@@ -350,8 +350,7 @@ pub struct World {
 }
 
 impl World {
-    /// Generates the world of `params` (validated first; errors name the bad field). Takes
-    /// well under 10 ms for an office at 0.1 m in a release build.
+    /// Generates the world of `params` (validated first; errors name the bad field).
     pub fn generate(params: &WorldParams) -> Result<Self, WorldError> {
         params.validate()?;
         build::generate(params)
