@@ -26,6 +26,11 @@ if ! command -v cargo >/dev/null 2>&1; then
   exit 1
 fi
 
+if ! cargo nextest --version >/dev/null 2>&1; then
+  echo "install-deps: cargo install cargo-nextest (the test runner of scripts/test.sh)"
+  cargo install --locked --quiet cargo-nextest
+fi
+
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 if ! python3 -c "import numpy, pytest, ruff, mypy" >/dev/null 2>&1; then
   echo "install-deps: pip install -r python/requirements-dev.txt"
