@@ -263,64 +263,27 @@ fn bad_frames_leave_the_state_unchanged() {
     let zero = vec![0.0; DIM as usize];
     let short = vec![1.0; DIM as usize - 1];
     let mut results = Vec::new();
+    let frame = |timestamp: f64, descriptor| Frame {
+        timestamp,
+        descriptor,
+        odometry: None,
+        image: None,
+    };
     for (i, d) in frames.iter().enumerate() {
         let t = i as f64 * 0.1;
-        assert!(matches!(
-            loc.localize(&Frame {
-                timestamp: t,
-                descriptor: &nan,
-                odometry: None,
-                image: None,
-            }),
-            Err(LocalizeError::Descriptor(_))
-        ));
-        assert!(matches!(
-            loc.localize(&Frame {
-                timestamp: t,
-                descriptor: &zero,
-                odometry: None,
-                image: None,
-            }),
-            Err(LocalizeError::Descriptor(_))
-        ));
-        assert!(matches!(
-            loc.localize(&Frame {
-                timestamp: t,
-                descriptor: &short,
-                odometry: None,
-                image: None,
-            }),
-            Err(LocalizeError::Descriptor(_))
-        ));
-        assert!(matches!(
-            loc.localize(&Frame {
-                timestamp: f64::NAN,
-                descriptor: d,
-                odometry: None,
-                image: None,
-            }),
-            Err(LocalizeError::Timestamp(_))
-        ));
-        if i > 0 {
-            assert!(matches!(
-                loc.localize(&Frame {
-                    timestamp: t - 1.0,
-                    descriptor: d,
-                    odometry: None,
-                    image: None,
-                }),
-                Err(LocalizeError::Timestamp(_))
-            ));
+        for bad in [&nan, &zero, &short] {
+            let refused = loc.localize(&frame(t, bad));
+            assert!(matches!(refused, Err(LocalizeError::Descriptor(_))));
         }
-        results.push(
-            loc.localize(&Frame {
-                timestamp: t,
-                descriptor: d,
-                odometry: None,
-                image: None,
-            })
-            .unwrap(),
-        );
+        let mut bad_times = vec![f64::NAN];
+        if i > 0 {
+            bad_times.push(t - 1.0);
+        }
+        for bad in bad_times {
+            let refused = loc.localize(&frame(bad, d));
+            assert!(matches!(refused, Err(LocalizeError::Timestamp(_))));
+        }
+        results.push(loc.localize(&frame(t, d)).unwrap());
     }
     assert_eq!(results, clean);
 }
