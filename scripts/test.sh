@@ -105,8 +105,9 @@ if [[ "$tier" == quick ]]; then
     exit 0
 fi
 
-section "Release tools (the CLI runs the demo and generates the drift demos' sequences)"
-cargo build --release --workspace --bins --quiet
+section "Release CLI (it runs the demo and generates the drift demos' sequences)"
+# As scripts/demo.sh builds it (cargo run -p topoloc-cli), so the demo finds it built.
+cargo build --release -p topoloc-cli --quiet
 
 section "The main job (scripts/demo.sh as the README runs it, on a small world)"
 bash scripts/demo.sh --rooms 2 --legs 1 --plot target/demo-smoke.png --json >target/demo-smoke.json
