@@ -12,7 +12,8 @@
 # small demo run), C (plain, ASan+UBSan, valgrind, static), C++ RAII, the CMake consumer against
 # the installed package (with the SLAM adapters and drift demos, shared and static), Python (a
 # smoke run in tree, then the whole suite against the installed wheel) and the fuzz smoke runs.
-# The release library is built once and reused by the C, C++, CMake and Python sections.
+# The release library is built once and reused by the C, C++, CMake and Python sections; a fresh
+# clone builds in the machine's shared build cache (below), so dependencies compile once.
 #
 # With CI=true (as .ci/run is run), a test that needs the ONNX or XFeat model fails instead of
 # skipping when the model is missing.
@@ -57,6 +58,16 @@ summary() {
     printf '%5d s  total\n' "$((SECONDS - started))"
 }
 trap 'status=$?; if ((status != 0)); then summary; echo "FAILED in: ${section_name:-set-up}" >&2; fi' EXIT
+
+# A checkout without a target/ folder (a fresh clone) builds in the machine's shared build cache:
+# target/ becomes a link to it, so compiled dependencies are reused across clones (cargo rebuilds
+# what changed, the checkout's own crates always). TOPOLOC_BUILD_CACHE=none keeps a private one.
+build_cache="${TOPOLOC_BUILD_CACHE:-${XDG_CACHE_HOME:-$HOME/.cache}/topoloc/target}"
+if [[ ! -e "$root/target" && "$build_cache" != none ]]; then
+    mkdir -p "$build_cache"
+    ln -s "$build_cache" "$root/target"
+    echo "test.sh: target/ -> $build_cache (the shared build cache; TOPOLOC_BUILD_CACHE=none: a private one)"
+fi
 
 section "Set-up (system packages, Python packages, models)"
 bash scripts/install-deps.sh
