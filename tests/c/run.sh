@@ -75,7 +75,6 @@ if [[ "$major" == 0 ]]; then expected_soname="libtopoloc.so.0.$minor"; else expe
 ln -s "$target/libtopoloc.so" "$build/lib/$expected_soname"
 ln -s "$expected_soname" "$build/lib/libtopoloc.so"
 # -lm: the test program itself uses libm (cos, sin).
-# shellcheck disable=SC2054 # the commas belong to the linker option
 LINK_SHARED=(-L"$build/lib" "-Wl,-rpath,$build/lib" -ltopoloc -pthread -lm)
 
 echo "library:   $target"
