@@ -7,6 +7,7 @@
 //! naming the package to install. There is no fallback font.
 
 use anyhow::{anyhow, bail, Context, Result};
+use plotters::chart::MeshStyle;
 use plotters::coord::Shift;
 use plotters::element::BitMapElement;
 use plotters::prelude::*;
@@ -85,26 +86,37 @@ pub fn write_evaluation_png(
     truth: Option<&[usize]>,
     series: &[Series<'_>],
 ) -> Result<()> {
-    validate(path, similarity, n_queries, n_map, truth, series)?;
+    let figure = Figure {
+        similarity,
+        n_queries,
+        n_map,
+        truth,
+        series,
+    };
+    validate(path, &figure)?;
     ensure_font()?;
 
     let root = BitMapBackend::new(path, IMAGE_SIZE).into_drawing_area();
-    draw(&root, title, similarity, n_queries, n_map, truth, series)
+    draw(&root, title, &figure)
         .map_err(|e| anyhow!("drawing evaluation plot {}: {e}", path.display()))?;
     root.present()
         .map_err(|e| anyhow!("writing evaluation plot {}: {e}", path.display()))?;
     Ok(())
 }
 
-/// Checks the inputs of [`write_evaluation_png`].
-fn validate(
-    path: &Path,
-    similarity: &[f32],
+/// What [`write_evaluation_png`] draws (its arguments but the path and title).
+#[derive(Clone, Copy)]
+struct Figure<'a> {
+    similarity: &'a [f32],
     n_queries: usize,
     n_map: usize,
-    truth: Option<&[usize]>,
-    series: &[Series<'_>],
-) -> Result<()> {
+    truth: Option<&'a [usize]>,
+    series: &'a [Series<'a>],
+}
+
+/// Checks the inputs of [`write_evaluation_png`].
+fn validate(path: &Path, figure: &Figure<'_>) -> Result<()> {
+    let (n_queries, n_map) = (figure.n_queries, figure.n_map);
     let is_png = path
         .extension()
         .and_then(|e| e.to_str())
@@ -118,16 +130,16 @@ fn validate(
     let expected = n_queries
         .checked_mul(n_map)
         .ok_or_else(|| anyhow!("similarity matrix size {n_queries} x {n_map} overflows"))?;
-    if similarity.len() != expected {
+    if figure.similarity.len() != expected {
         bail!(
             "similarity has {} values, expected n_queries x n_map = {n_queries} x {n_map} = {expected}",
-            similarity.len()
+            figure.similarity.len()
         );
     }
-    if let Some(truth) = truth {
+    if let Some(truth) = figure.truth {
         check_indices("ground truth", truth, n_queries, n_map, false)?;
     }
-    for s in series {
+    for s in figure.series {
         check_indices(
             &format!("series {:?} predictions", s.name),
             s.predicted,
@@ -198,17 +210,59 @@ pub(crate) fn font(size: u32) -> TextStyle<'static> {
     (FONT_FAMILY, size).into_font().into()
 }
 
-type DrawResult<T> = std::result::Result<T, Box<dyn std::error::Error + Send + Sync>>;
+/// What the drawing functions return: plotters' errors, boxed.
+pub(crate) type DrawResult<T> = std::result::Result<T, Box<dyn std::error::Error + Send + Sync>>;
+
+/// A legend entry's sample: a 20-pixel line in `style` (for `SeriesAnno::legend`).
+pub(crate) fn legend_line(
+    style: impl Into<ShapeStyle>,
+) -> impl Fn((i32, i32)) -> PathElement<(i32, i32)> {
+    let style = style.into();
+    move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], style)
+}
+
+/// Titles both axes of `mesh` and formats their ticks with `ticks`, in the plots' font sizes.
+pub(crate) fn label_axes<'b, X, Y, DB>(
+    mesh: &mut MeshStyle<'_, 'b, X, Y, DB>,
+    x_desc: &str,
+    y_desc: &str,
+    ticks: &'b dyn Fn(&f64) -> String,
+) where
+    X: Ranged<ValueType = f64>,
+    Y: Ranged<ValueType = f64>,
+    DB: DrawingBackend,
+{
+    mesh.x_desc(x_desc)
+        .y_desc(y_desc)
+        .x_label_formatter(ticks)
+        .y_label_formatter(ticks)
+        .label_style(font(14))
+        .axis_desc_style(font(16));
+}
+
+/// Draws the series labels of `chart` at `position` on a light box with a black border.
+pub(crate) fn draw_light_legend<'a, DB: DrawingBackend + 'a, CT: CoordTranslate>(
+    chart: &mut ChartContext<'a, DB, CT>,
+    position: SeriesLabelPosition,
+) -> DrawResult<()>
+where
+    DB::ErrorType: 'static,
+{
+    chart
+        .configure_series_labels()
+        .position(position)
+        .background_style(WHITE.mix(0.9))
+        .border_style(BLACK)
+        .label_font(font(15))
+        .draw()?;
+    Ok(())
+}
 
 /// Draws the whole figure onto `root`.
 fn draw<DB: DrawingBackend>(
     root: &DrawingArea<DB, Shift>,
     title: &str,
-    similarity: &[f32],
-    n_queries: usize,
-    n_map: usize,
-    truth: Option<&[usize]>,
-    series: &[Series<'_>],
+    figure: &Figure<'_>,
 ) -> DrawResult<()>
 where
     DB::ErrorType: 'static,
@@ -216,8 +270,8 @@ where
     root.fill(&WHITE)?;
     let body = root.titled(title, font(28))?;
     let (left, right) = body.split_horizontally(LEFT_PANEL_WIDTH);
-    draw_heatmap(&left, similarity, n_queries, n_map, truth, series)?;
-    draw_precision_recall(&right, series)?;
+    draw_heatmap(&left, figure)?;
+    draw_precision_recall(&right, figure.series)?;
     Ok(())
 }
 
@@ -313,18 +367,26 @@ fn pixel_cells(pixels: usize, n: usize, block: usize) -> Vec<usize> {
         .collect()
 }
 
+/// Pixels in a drawing area's pixel range (at least 1).
+fn pixels(range: &std::ops::Range<i32>) -> usize {
+    (range.end - range.start).max(1) as usize
+}
+
 /// Draws the heat map panel (with truth, predictions, legend and colour bar) onto `area`.
 fn draw_heatmap<DB: DrawingBackend>(
     area: &DrawingArea<DB, Shift>,
-    similarity: &[f32],
-    n_queries: usize,
-    n_map: usize,
-    truth: Option<&[usize]>,
-    series: &[Series<'_>],
+    figure: &Figure<'_>,
 ) -> DrawResult<()>
 where
     DB::ErrorType: 'static,
 {
+    let Figure {
+        similarity,
+        n_queries,
+        n_map,
+        truth,
+        series,
+    } = *figure;
     let (heat_area, bar_area) = area.split_horizontally(LEFT_PANEL_WIDTH - COLORBAR_WIDTH);
     let mut chart = ChartBuilder::on(&heat_area)
         .caption(
@@ -336,23 +398,13 @@ where
         .y_label_area_size(70)
         .build_cartesian_2d(0f64..n_map as f64, n_queries as f64..0f64)?;
     let integer = |v: &f64| format!("{v:.0}");
-    chart
-        .configure_mesh()
-        .disable_mesh()
-        .x_desc("map frame")
-        .y_desc("query frame")
-        .x_label_formatter(&integer)
-        .y_label_formatter(&integer)
-        .label_style(font(14))
-        .axis_desc_style(font(16))
-        .draw()?;
+    let mut mesh = chart.configure_mesh();
+    label_axes(mesh.disable_mesh(), "map frame", "query frame", &integer);
+    mesh.draw()?;
 
     // The matrix, pooled to at most one cell per pixel, rendered pixel by pixel and blitted.
     let (px_range, py_range) = chart.plotting_area().get_pixel_range();
-    let (w, h) = (
-        (px_range.end - px_range.start).max(1) as usize,
-        (py_range.end - py_range.start).max(1) as usize,
-    );
+    let (w, h) = (pixels(&px_range), pixels(&py_range));
     let pooled = max_pool(
         similarity,
         n_queries,
@@ -440,7 +492,7 @@ where
         chart
             .draw_series(runs.into_iter().map(|run| PathElement::new(run, style)))?
             .label("ground truth")
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], style));
+            .legend(legend_line(style));
     }
 
     if truth.is_some() || !series.is_empty() {
@@ -473,10 +525,7 @@ where
         .label_style(font(14))
         .draw()?;
     let (bx, by) = bar.plotting_area().get_pixel_range();
-    let (bw, bh) = (
-        (bx.end - bx.start).max(1) as usize,
-        (by.end - by.start).max(1) as usize,
-    );
+    let (bw, bh) = (pixels(&bx), pixels(&by));
     let mut buf = Vec::with_capacity(bw * bh * 3);
     for y in 0..bh {
         let c = viridis(1.0 - (y as f32 + 0.5) / bh as f32);
@@ -518,15 +567,9 @@ where
         .y_label_area_size(60)
         .build_cartesian_2d(0f64..1f64, 0f64..1.02f64)?;
     let one_decimal = |v: &f64| format!("{v:.1}");
-    chart
-        .configure_mesh()
-        .x_desc("recall")
-        .y_desc("precision")
-        .x_label_formatter(&one_decimal)
-        .y_label_formatter(&one_decimal)
-        .label_style(font(14))
-        .axis_desc_style(font(16))
-        .max_light_lines(1)
+    let mut mesh = chart.configure_mesh();
+    label_axes(&mut mesh, "recall", "precision", &one_decimal);
+    mesh.max_light_lines(1)
         .light_line_style(RGBColor(235, 235, 235))
         .draw()?;
     for (k, s) in series.iter().enumerate() {
@@ -537,9 +580,7 @@ where
                 color.stroke_width(2),
             ))?
             .label(s.name)
-            .legend(move |(x, y)| {
-                PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
-            });
+            .legend(legend_line(color.stroke_width(2)));
         if s.precision_recall.len() <= 50 {
             chart.draw_series(
                 s.precision_recall
@@ -549,13 +590,7 @@ where
         }
     }
     if !series.is_empty() {
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::LowerLeft)
-            .background_style(WHITE.mix(0.9))
-            .border_style(BLACK)
-            .label_font(font(15))
-            .draw()?;
+        draw_light_legend(&mut chart, SeriesLabelPosition::LowerLeft)?;
     }
     Ok(())
 }
@@ -563,7 +598,7 @@ where
 #[cfg(test)]
 mod tests {
     use super::*;
-    use std::time::Instant;
+    use std::time::{Duration, Instant};
 
     /// A synthetic `n_q × n_m` similarity matrix with a bright (noisy) diagonal band.
     fn diagonal_matrix(n_q: usize, n_m: usize) -> Vec<f32> {
@@ -637,11 +672,10 @@ mod tests {
         );
     }
 
-    #[test]
-    fn plot_writes_small_png() {
-        let dir = tempfile::tempdir().unwrap();
-        let path = dir.path().join("eval.png");
-        let (n_q, n_m) = (50, 60);
+    /// Writes the example plot of an `n_q × n_m` diagonal matrix to `path`, checks it and copies
+    /// it to the file named by the environment variable `sample_var` if set; returns how long
+    /// writing the PNG took.
+    fn write_example_png(path: &Path, n_q: usize, n_m: usize, sample_var: &str) -> Duration {
         let sim = diagonal_matrix(n_q, n_m);
         let (truth, single, filter, pr_s, pr_f) = example(n_q, n_m);
         let series = [
@@ -656,20 +690,21 @@ mod tests {
                 precision_recall: &pr_f,
             },
         ];
-        write_evaluation_png(
-            &path,
-            "synthetic 50 x 60",
-            &sim,
-            n_q,
-            n_m,
-            Some(&truth),
-            &series,
-        )
-        .unwrap();
-        check_png(&path);
-        if let Ok(dest) = std::env::var("TOPOLOC_PLOT_SAMPLE") {
-            std::fs::copy(&path, dest).unwrap();
+        let title = format!("synthetic {n_q} x {n_m}");
+        let start = Instant::now();
+        write_evaluation_png(path, &title, &sim, n_q, n_m, Some(&truth), &series).unwrap();
+        let elapsed = start.elapsed();
+        check_png(path);
+        if let Ok(dest) = std::env::var(sample_var) {
+            std::fs::copy(path, dest).unwrap();
         }
+        elapsed
+    }
+
+    #[test]
+    fn plot_writes_small_png() {
+        let dir = tempfile::tempdir().unwrap();
+        write_example_png(&dir.path().join("eval.png"), 50, 60, "TOPOLOC_PLOT_SAMPLE");
     }
 
     #[test]
@@ -700,7 +735,6 @@ mod tests {
     #[test]
     fn plot_rejects_bad_inputs() {
         let dir = tempfile::tempdir().unwrap();
-        let path = dir.path().join("bad.png");
         let sim = vec![0.0f32; 6];
         let ok_pred = [0usize, 1];
         let pr = [(0.0, 1.0), (1.0, 0.5)];
@@ -709,104 +743,62 @@ mod tests {
             predicted: &ok_pred,
             precision_recall: &pr,
         };
-        let err = |r: Result<()>| format!("{:#}", r.unwrap_err());
-
-        let e = err(write_evaluation_png(
-            &path,
-            "t",
-            &sim[..5],
-            2,
-            3,
-            None,
-            &[good],
-        ));
-        assert!(e.contains("similarity has 5 values"), "{e}");
-        let e = err(write_evaluation_png(&path, "t", &[], 0, 3, None, &[]));
-        assert!(e.contains("empty"), "{e}");
-        let e = err(write_evaluation_png(
-            &path,
-            "t",
-            &sim,
-            2,
-            3,
-            Some(&[0]),
-            &[good],
-        ));
-        assert!(e.contains("ground truth has 1 entries"), "{e}");
-        let e = err(write_evaluation_png(
-            &path,
-            "t",
-            &sim,
-            2,
-            3,
-            Some(&[0, 3]),
-            &[good],
-        ));
-        assert!(e.contains("query 1 has map index 3"), "{e}");
         let short = Series {
             predicted: &ok_pred[..1],
             ..good
         };
-        let e = err(write_evaluation_png(
-            &path,
-            "t",
-            &sim,
-            2,
-            3,
-            None,
-            &[good, short],
-        ));
-        assert!(e.contains("series \"s\" predictions has 1 entries"), "{e}");
-        let e = err(write_evaluation_png(
-            &path,
-            "t",
-            &sim,
-            2,
-            3,
-            Some(&[0, NO_PREDICTION]),
-            &[],
-        ));
-        assert!(e.contains("query 1 has map index"), "{e}");
-        let big = [0usize, 3];
-        let e = err(write_evaluation_png(
-            &path,
-            "t",
-            &sim,
-            2,
-            3,
-            None,
-            &[Series {
-                predicted: &big,
-                ..good
-            }],
-        ));
-        assert!(
-            e.contains("series \"s\" predictions: query 1 has map index 3"),
-            "{e}"
+        let big = Series {
+            predicted: &[0, 3],
+            ..good
+        };
+        let bad_pr = Series {
+            precision_recall: &[(0.5, 1.5)],
+            ..good
+        };
+        // (similarity, queries, truth, series, expected error); the map has 3 frames.
+        type Case<'a> = (
+            &'a [f32],
+            usize,
+            Option<&'a [usize]>,
+            &'a [Series<'a>],
+            &'a str,
         );
-        let bad_pr = [(0.5, 1.5)];
-        let e = err(write_evaluation_png(
-            &path,
-            "t",
-            &sim,
-            2,
-            3,
-            None,
-            &[Series {
-                precision_recall: &bad_pr,
-                ..good
-            }],
-        ));
-        assert!(e.contains("outside [0, 1]"), "{e}");
-        let e = err(write_evaluation_png(
-            &dir.path().join("x.jpg"),
-            "t",
-            &sim,
-            2,
-            3,
-            None,
-            &[good],
-        ));
+        let cases: [Case; 8] = [
+            (&sim[..5], 2, None, &[good], "similarity has 5 values"),
+            (&[], 0, None, &[], "empty"),
+            (&sim, 2, Some(&[0]), &[good], "ground truth has 1 entries"),
+            (&sim, 2, Some(&[0, 3]), &[good], "query 1 has map index 3"),
+            (
+                &sim,
+                2,
+                None,
+                &[good, short],
+                "series \"s\" predictions has 1 entries",
+            ),
+            (
+                &sim,
+                2,
+                Some(&[0, NO_PREDICTION]),
+                &[],
+                "query 1 has map index",
+            ),
+            (
+                &sim,
+                2,
+                None,
+                &[big],
+                "series \"s\" predictions: query 1 has map index 3",
+            ),
+            (&sim, 2, None, &[bad_pr], "outside [0, 1]"),
+        ];
+        let path = dir.path().join("bad.png");
+        for (similarity, n_q, truth, series, expected) in cases {
+            let result = write_evaluation_png(&path, "t", similarity, n_q, 3, truth, series);
+            let e = format!("{:#}", result.unwrap_err());
+            assert!(e.contains(expected), "{e}");
+        }
+        let jpg = write_evaluation_png(&dir.path().join("x.jpg"), "t", &sim, 2, 3, None, &[good]);
+        let e = format!("{:#}", jpg.unwrap_err());
         assert!(e.contains("must end in .png"), "{e}");
         assert!(!path.exists(), "nothing is written for invalid input");
     }
@@ -826,45 +818,15 @@ mod tests {
     #[test]
     #[ignore = "slow in debug builds; a timing check for release builds"]
     fn plot_large_matrix_timing() {
-        let (n_q, n_m) = (7000, 7000);
-        let sim = diagonal_matrix(n_q, n_m);
-        let (truth, single, filter, pr_s, pr_f) = example(n_q, n_m);
-        let series = [
-            Series {
-                name: "single-frame",
-                predicted: &single,
-                precision_recall: &pr_s,
-            },
-            Series {
-                name: "filter",
-                predicted: &filter,
-                precision_recall: &pr_f,
-            },
-        ];
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("large.png");
-        let start = Instant::now();
-        write_evaluation_png(
-            &path,
-            "synthetic 7000 x 7000",
-            &sim,
-            n_q,
-            n_m,
-            Some(&truth),
-            &series,
-        )
-        .unwrap();
-        let elapsed = start.elapsed();
+        let elapsed = write_example_png(&path, 7000, 7000, "TOPOLOC_PLOT_SAMPLE_LARGE");
         let size = std::fs::metadata(&path).unwrap().len();
         println!(
             "7000 x 7000 evaluation plot: {:.3} s, {} KiB",
             elapsed.as_secs_f64(),
             size / 1024
         );
-        check_png(&path);
-        if let Ok(dest) = std::env::var("TOPOLOC_PLOT_SAMPLE_LARGE") {
-            std::fs::copy(&path, dest).unwrap();
-        }
         assert!(elapsed.as_secs_f64() < 2.0, "plot took {elapsed:?}");
     }
 }

@@ -12,7 +12,9 @@
 //! Prints a markdown table (or one JSON object with `--json`) and writes a PNG of milliseconds
 //! per frame against places, both axes logarithmic.
 
-use crate::plot::{ensure_font, font, SERIES_COLORS};
+use crate::plot::{
+    draw_light_legend, ensure_font, font, label_axes, legend_line, DrawResult, SERIES_COLORS,
+};
 use crate::process::median_and_p90;
 use anyhow::{anyhow, bail, Result};
 use plotters::prelude::*;
@@ -265,8 +267,6 @@ fn write_plot(path: &Path, args: &ScalingArgs, results: &[SizeResult]) -> Result
     Ok(())
 }
 
-type DrawResult<T> = std::result::Result<T, Box<dyn std::error::Error + Send + Sync>>;
-
 /// Draws the scaling chart onto `root`.
 fn draw_plot<DB: DrawingBackend>(
     root: &DrawingArea<DB, plotters::coord::Shift>,
@@ -303,16 +303,10 @@ where
             (x_min / 1.2..x_max * 1.2).log_scale(),
             (y_min / 1.5..y_max * 1.5).log_scale(),
         )?;
-    chart
-        .configure_mesh()
-        .x_desc("places")
-        .y_desc("ms per frame (localize only)")
-        .x_label_formatter(&|v| tick(*v))
-        .y_label_formatter(&|v| tick(*v))
-        .label_style(font(14))
-        .axis_desc_style(font(16))
-        .light_line_style(RGBColor(235, 235, 235))
-        .draw()?;
+    let ticks = |v: &f64| tick(*v);
+    let mut mesh = chart.configure_mesh();
+    label_axes(&mut mesh, "places", "ms per frame (localize only)", &ticks);
+    mesh.light_line_style(RGBColor(235, 235, 235)).draw()?;
     for (k, &(_, label, ..)) in CONFIGURATIONS.iter().enumerate() {
         let color = SERIES_COLORS[k % SERIES_COLORS.len()];
         let medians: Vec<(f64, f64)> = results
@@ -322,9 +316,7 @@ where
         chart
             .draw_series(LineSeries::new(medians.clone(), color.stroke_width(2)))?
             .label(label)
-            .legend(move |(x, y)| {
-                PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
-            });
+            .legend(legend_line(color.stroke_width(2)));
         chart.draw_series(medians.iter().map(|&p| Circle::new(p, 4, color.filled())))?;
         chart.draw_series(DashedLineSeries::new(
             results.iter().map(|r| (places(r), r.timings[k].p90)),
@@ -333,14 +325,7 @@ where
             color.mix(0.7).stroke_width(1),
         ))?;
     }
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::UpperLeft)
-        .background_style(WHITE.mix(0.9))
-        .border_style(BLACK)
-        .label_font(font(15))
-        .draw()?;
-    Ok(())
+    draw_light_legend(&mut chart, SeriesLabelPosition::UpperLeft)
 }
 
 /// Axis label of a logarithmic tick: at most three significant digits, no trailing zeros.
