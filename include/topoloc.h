@@ -42,12 +42,12 @@
 
 /* Fill a versioned struct with defaults (and its struct_size) before use. */
 #define topoloc_map_load_options_default(p) topoloc_map_load_options_init((p), sizeof *(p))
-#define topoloc_view_attributes_default(p) topoloc_view_attributes_init((p), sizeof *(p))
-#define topoloc_keyframe_options_default(p) topoloc_keyframe_options_init((p), sizeof *(p))
+#define topoloc_view_info_default(p) topoloc_view_info_init((p), sizeof *(p))
 #define topoloc_localizer_options_default(p) topoloc_localizer_options_init((p), sizeof *(p))
 #define topoloc_frame_default(p) topoloc_frame_init((p), sizeof *(p))
 #define topoloc_result_default(p) topoloc_result_init((p), sizeof *(p))
-#define topoloc_view_info_default(p) topoloc_view_info_init((p), sizeof *(p))
+#define topoloc_view_attributes_default(p) topoloc_view_attributes_init((p), sizeof *(p))
+#define topoloc_keyframe_options_default(p) topoloc_keyframe_options_init((p), sizeof *(p))
 #define topoloc_image_map_options_default(p) topoloc_image_map_options_init((p), sizeof *(p))
 #define topoloc_describer_options_default(p) topoloc_describer_options_init((p), sizeof *(p))
 #define topoloc_skeleton_options_default(p) topoloc_skeleton_options_init((p), sizeof *(p))
@@ -367,37 +367,44 @@ typedef struct topoloc_localizer_options {
   topoloc_mode mode;
   /**
    * Softmax temperature of the observation likelihood (> 0).
+   * Range: finite, > 0.
    * Default: 0.2.
    */
   float temperature;
   /**
    * Probability that the off-map state persists from one frame to the next.
+   * Range: [0, 1].
    * Default: 0.7.
    */
   float stay_probability;
   /**
    * Probability of a jump anywhere per frame (kidnap recovery).
+   * Range: [0, 1].
    * Default: 0.01.
    */
   float jump_probability;
   /**
    * Probability of entering the off-map state per frame; 0 disables off-map.
+   * Range: [0, 1].
    * Default: 0.01.
    */
   float off_map_probability;
   /**
    * Absolute floor of the off-map hypothesis' score (cosine similarity).
+   * Range: [-1, 1].
    * Default: 0.2.
    */
   float off_map_similarity;
   /**
    * Standard deviations above the expected best background score a place must reach to
    * beat the off-map hypothesis (finite; may be negative).
+   * Range: finite.
    * Default: -1.
    */
   float off_map_margin;
   /**
    * Candidates reported per frame (>= 1).
+   * Range: >= 1.
    * Default: 5.
    */
   uint32_t top_k;
@@ -429,26 +436,31 @@ typedef struct topoloc_localizer_options {
    * geometric model; the result's `verified` / `inliers`). 0 = off (default). Needs a
    * map storing keypoints (maps built from images do; else `_INVALID_OPTION`) and frames
    * with images (else `_INVALID_IMAGE`). Costs a pair check per view checked (BENCHMARKS.md).
+   * Range: 0..=64.
    */
   uint32_t verify_candidates;
   /**
    * Views checked per candidate place, those most similar to the frame, 1..=64.
+   * Range: 1..=64.
    * Default: 2.
    */
   uint32_t verify_views_per_candidate;
   /**
    * Log-likelihood of one inlier: a checked place's belief is multiplied by
    * `exp(verify_inlier_weight * inliers)` (finite, >= 0).
+   * Range: finite, >= 0.
    * Default: 0.05.
    */
   float verify_inlier_weight;
   /**
    * Particles of `TOPOLOC_MODE_METRIC`, 1..=1,000,000.
+   * Range: 1..=1000000.
    * Default: 2000.
    */
   uint32_t metric_particles;
   /**
    * Temperature of a particle's appearance likelihood in metric mode (> 0).
+   * Range: finite, > 0.
    * Default: 1.
    */
   float metric_temperature;
@@ -479,6 +491,7 @@ typedef struct topoloc_localizer_options {
   double camera_cy;
   /**
    * Fewest PnP RANSAC inliers for a pose fix (>= 6).
+   * Range: 6..=10000.
    * Default: 30.
    */
   uint32_t pose_min_inliers;
@@ -492,6 +505,7 @@ typedef struct topoloc_localizer_options {
   double verify_off_map_inliers;
   /**
    * Inliers per e-fold of that likelihood ratio (finite, > 0).
+   * Range: finite, > 0.
    * Default: 4.
    */
   double verify_off_map_inlier_scale;
@@ -703,21 +717,25 @@ typedef struct topoloc_keyframe_options {
   size_t struct_size;
   /**
    * Distance (m) within which a keyframe joins an existing place.
+   * Range: finite, > 0.
    * Default: 2.
    */
   double place_spacing_m;
   /**
    * Cosine similarity below which a keyframe's appearance is novel.
+   * Range: [-1, 1].
    * Default: 0.9.
    */
   float novelty_similarity;
   /**
    * Places closer than this (m) are joined by an edge.
+   * Range: finite, >= 0.
    * Default: 3.
    */
   double neighbour_radius_m;
   /**
    * Most views per place.
+   * Range: >= 1.
    * Default: 4.
    */
   uint32_t max_views_per_place;
@@ -766,18 +784,21 @@ typedef struct topoloc_image_map_options {
   /**
    * Descriptor dimension D; with fewer than D + 1 images it becomes the number of images
    * minus one (`topoloc_map_dim` tells).
+   * Range: 1..=16384.
    * Default: 512.
    */
   uint32_t dim;
   /**
    * Without poses: consecutive images per place (1, or 4 for yaw views); with poses: most
    * views per place.
+   * Range: 1..=64.
    * Default: 1.
    */
   uint32_t views_per_place;
   /**
    * Describing threads; 0 = one per core, at most 256 (more: `TOPOLOC_ERR_INVALID_ARGUMENT`).
    * They are joined before the build returns.
+   * Range: 0..=256.
    * Default: 0.
    */
   uint32_t threads;
@@ -795,15 +816,18 @@ typedef struct topoloc_image_map_options {
   const char *onnx_taps;
   /**
    * ONNX pooling grid rows and columns (1 = global pooling).
+   * Range: 1..=32.
    * Default: 4.
    */
   uint32_t grid_rows;
   /**
    * See `grid_rows`.
+   * Range: 1..=32.
    */
   uint32_t grid_cols;
   /**
    * VLAD codebook size.
+   * Range: 2..=1024.
    * Default: 64.
    */
   uint32_t vlad_clusters;
@@ -817,6 +841,7 @@ typedef struct topoloc_image_map_options {
   const char *poses_tum_path;
   /**
    * Place spacing in metres when poses are given.
+   * Range: finite, > 0.
    * Default: 2.
    */
   double place_spacing_m;
@@ -866,6 +891,7 @@ typedef struct topoloc_describer_options {
   const char *onnx_runtime_path;
   /**
    * ONNX Runtime intra-op threads, 1..=64.
+   * Range: 1..=64.
    * Default: 1.
    */
   uint32_t threads;
@@ -887,41 +913,49 @@ typedef struct topoloc_skeleton_options {
   bool use_z_band;
   /**
    * Lower bound of the height band.
+   * Range: finite.
    * Default: 0.
    */
   double z_min_m;
   /**
    * Upper bound of the height band (>= z_min_m).
+   * Range: finite.
    * Default: 0.
    */
   double z_max_m;
   /**
    * Free voxels closer than this to an obstacle count as occupied (>= 0).
+   * Range: finite, >= 0.
    * Default: 0.
    */
   double min_clearance_m;
   /**
    * Nodes closer than this along the skeleton become one place (>= 0).
+   * Range: finite, >= 0.
    * Default: 1.
    */
   double merge_radius_m;
   /**
    * Longest edge (at least two voxels); longer paths get intermediate places.
+   * Range: finite, > 0.
    * Default: 3.
    */
   double max_edge_m;
   /**
    * Smallest bend (degrees, in (0, 180)) that makes a corner.
+   * Range: (0, 180).
    * Default: 40.
    */
   double corner_angle_deg;
   /**
    * Distance along the skeleton over which bends are measured (> 0).
+   * Range: finite, > 0.
    * Default: 0.5.
    */
   double corner_scale_m;
   /**
    * Dead-end branches shorter than this are removed (>= 0).
+   * Range: finite, >= 0.
    * Default: 1.
    */
   double min_spur_m;
@@ -943,6 +977,7 @@ typedef struct topoloc_loop_options {
   size_t struct_size;
   /**
    * Loop candidates verified per keyframe, 1..=64.
+   * Range: 1..=64.
    * Default: 5.
    */
   uint32_t candidates;
@@ -954,16 +989,19 @@ typedef struct topoloc_loop_options {
   uint64_t exclude_recent_ids;
   /**
    * Keyframes less than this many seconds older than the new one are never candidates.
+   * Range: finite, >= 0.
    * Default: 10.
    */
   double exclude_recent_s;
   /**
    * Fewest fundamental-matrix inliers of an accepted hint, 8..=10000.
+   * Range: 8..=10000.
    * Default: 30.
    */
   uint32_t min_inliers;
   /**
    * Consecutive keyframes whose best candidates must agree on the place, 1..=100.
+   * Range: 1..=100.
    * Default: 3.
    */
   uint32_t consistent_keyframes;
@@ -974,6 +1012,7 @@ typedef struct topoloc_loop_options {
   bool odometry_gate;
   /**
    * Largest rotation difference to the odometry, degrees (> 0).
+   * Range: finite, > 0.
    * Default: 30.
    */
   double odometry_max_rotation_deg;
@@ -981,6 +1020,7 @@ typedef struct topoloc_loop_options {
    * Largest translation difference to the odometry, metres (> 0; an unscaled hint's
    * direction is scaled by the odometry's baseline), plus
    * `odometry_max_translation_per_m` per metre travelled (ABI 1.7).
+   * Range: finite, > 0.
    * Default: 1.
    */
   double odometry_max_translation_m;
@@ -1004,16 +1044,19 @@ typedef struct topoloc_loop_options {
   /**
    * A keyframe starts a new place when its similarity to its predecessor's place is below
    * this, in (-1, 1].
+   * Range: [-1, 1].
    * Default: 0.9.
    */
   float novelty_similarity;
   /**
    * With poses, a keyframe closer than this to the previous place joins it (metres).
+   * Range: finite, >= 0.
    * Default: 2.
    */
   double place_spacing_m;
   /**
    * With poses, a new place is linked to places within this distance (metres).
+   * Range: finite, >= 0.
    * Default: 3.
    */
   double neighbour_radius_m;
@@ -1026,18 +1069,21 @@ typedef struct topoloc_loop_options {
   /**
    * The odometry translation bound grows by this much per metre the odometry travelled
    * between the two keyframes (its drift rate, >= 0; 0: a fixed bound).
+   * Range: finite, >= 0.
    * Default: 0.02.
    */
   double odometry_max_translation_per_m;
   /**
    * Reprojection threshold of the metric pose fit against a keyframe's 3D points, pixels
    * (> 0).
+   * Range: finite, > 0.
    * Default: 5.
    */
   double pose_reprojection_px;
   /**
    * How much farther than the odometry translation bound an odometry candidate may lie,
    * metres (>= 0).
+   * Range: finite, >= 0.
    * Default: 2.
    */
   double odometry_search_m;
@@ -1045,6 +1091,7 @@ typedef struct topoloc_loop_options {
    * Candidates proposed by the odometry besides appearance's: the keyframes nearest the new
    * one's odometry pose that could pass the odometry gate (this session's; needs poses and
    * `odometry_gate`), 0..=64; 0 = none.
+   * Range: 0..=64.
    * Default: 1.
    */
   uint32_t odometry_candidates;
@@ -1213,16 +1260,19 @@ typedef struct topoloc_trajectory_options {
   topoloc_alignment alignment;
   /**
    * Largest timestamp difference of an associated pair, seconds (>= 0).
+   * Range: finite, >= 0.
    * Default: 0.01.
    */
   double max_diff_s;
   /**
    * Added to the estimate's timestamps before associating, seconds.
+   * Range: finite.
    * Default: 0.
    */
   double offset_s;
   /**
    * The RPE's step in associated poses (>= 1).
+   * Range: >= 1.
    * Default: 1.
    */
   uint32_t rpe_delta;

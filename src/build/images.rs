@@ -9,6 +9,7 @@
 //! source image as its keyframe id and the image's path (when built from files).
 
 use super::keyframes::{from_keyframes, Keyframe, KeyframeOptions};
+use crate::bounds::Bounds;
 use crate::describe::describer::{fit, BackendConfig, Extractor, FitOptions, RawFeatures};
 use crate::descriptor::DescriptorIdentity;
 use crate::errors::VisionError;
@@ -66,6 +67,15 @@ impl Default for ImageMapOptions {
 
 /// The most describing threads a build accepts ([`ImageMapOptions::threads`]).
 pub const MAX_BUILD_THREADS: usize = 256;
+
+impl ImageMapOptions {
+    /// Accepted values of [`Self::threads`] (0: one per core).
+    pub const THREADS_RANGE: Bounds = Bounds::whole(0, MAX_BUILD_THREADS as u64);
+    /// Accepted values of [`Self::views_per_place`].
+    pub const VIEWS_PER_PLACE_RANGE: Bounds = Bounds::whole(1, 64);
+    /// Accepted values of [`Self::keypoints`] (0: none stored).
+    pub const KEYPOINTS_RANGE: Bounds = Bounds::whole(0, MAX_KEYPOINTS as u64);
+}
 
 /// Where an image comes from.
 #[derive(Clone, Copy, Debug)]
@@ -234,20 +244,15 @@ fn check_request(
         ))
         .into());
     }
-    if options.threads > MAX_BUILD_THREADS {
-        return Err(MapError::InvalidArgument(format!(
-            "threads is {}, must lie in 0..={MAX_BUILD_THREADS} (0 = one per core)",
-            options.threads
-        ))
-        .into());
-    }
-    if !(1..=64).contains(&options.views_per_place) {
-        return Err(MapError::InvalidArgument(format!(
-            "views_per_place is {}, must lie in 1..=64",
-            options.views_per_place
-        ))
-        .into());
-    }
+    ImageMapOptions::THREADS_RANGE
+        .check("threads (0 = one per core)", options.threads)
+        .and_then(|()| {
+            ImageMapOptions::VIEWS_PER_PLACE_RANGE.check("views_per_place", options.views_per_place)
+        })
+        .and_then(|()| {
+            ImageMapOptions::KEYPOINTS_RANGE.check("keypoints (0 = none)", options.keypoints)
+        })
+        .map_err(MapError::InvalidArgument)?;
     if options.keypoints > 0
         && options.features == FeatureKind::Cells
         && !matches!(options.backend, BackendConfig::Onnx(_))
@@ -256,13 +261,6 @@ fn check_request(
             "features is cells: dense cells come from a CNN feature map and need the ONNX backend"
                 .into(),
         )
-        .into());
-    }
-    if options.keypoints > MAX_KEYPOINTS {
-        return Err(MapError::InvalidArgument(format!(
-            "keypoints is {}, must lie in 0..={MAX_KEYPOINTS} (0 = none)",
-            options.keypoints
-        ))
         .into());
     }
     Ok(())

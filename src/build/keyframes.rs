@@ -8,6 +8,7 @@
 //! place, and is dropped as redundant otherwise. Edges join the places of consecutive keyframes
 //! and, with positions, all places closer than `neighbour_radius_m`.
 
+use crate::bounds::Bounds;
 use crate::descriptor::{normalize_descriptor_into, DescriptorIdentity};
 use crate::map::{Map, MapBuilder, MapError, PlaceId, ViewAttributes};
 use nalgebra::{Isometry3, Point3};
@@ -48,21 +49,29 @@ impl Default for KeyframeOptions {
 }
 
 impl KeyframeOptions {
+    /// Accepted values of [`Self::place_spacing_m`].
+    pub const PLACE_SPACING_M_RANGE: Bounds = Bounds::above(0.0);
+    /// Accepted values of [`Self::neighbour_radius_m`].
+    pub const NEIGHBOUR_RADIUS_M_RANGE: Bounds = Bounds::at_least(0.0);
+    /// Accepted values of [`Self::novelty_similarity`] (a cosine).
+    pub const NOVELTY_SIMILARITY_RANGE: Bounds = Bounds::closed(-1.0, 1.0);
+    /// Accepted values of [`Self::max_views_per_place`].
+    pub const MAX_VIEWS_PER_PLACE_RANGE: Bounds = Bounds::whole_at_least(1);
+
     fn validate(&self) -> Result<(), MapError> {
-        let bad = |what: &str| Err(MapError::InvalidArgument(what.to_string()));
-        if !(self.place_spacing_m.is_finite() && self.place_spacing_m > 0.0) {
-            return bad("place_spacing_m must be finite and > 0");
-        }
-        if !(self.neighbour_radius_m.is_finite() && self.neighbour_radius_m >= 0.0) {
-            return bad("neighbour_radius_m must be finite and >= 0");
-        }
-        if !(-1.0..=1.0).contains(&self.novelty_similarity) {
-            return bad("novelty_similarity must lie in [-1, 1]");
-        }
-        if self.max_views_per_place == 0 {
-            return bad("max_views_per_place must be at least 1");
-        }
-        Ok(())
+        Self::PLACE_SPACING_M_RANGE
+            .check("place_spacing_m", self.place_spacing_m)
+            .and_then(|()| {
+                Self::NEIGHBOUR_RADIUS_M_RANGE.check("neighbour_radius_m", self.neighbour_radius_m)
+            })
+            .and_then(|()| {
+                Self::NOVELTY_SIMILARITY_RANGE.check("novelty_similarity", self.novelty_similarity)
+            })
+            .and_then(|()| {
+                Self::MAX_VIEWS_PER_PLACE_RANGE
+                    .check("max_views_per_place", self.max_views_per_place)
+            })
+            .map_err(MapError::InvalidArgument)
     }
 }
 

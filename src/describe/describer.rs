@@ -10,6 +10,7 @@ use super::limits;
 use super::onnx::{DenseTap, OnnxMlf, OnnxOptions};
 use super::pca::{Components, Pca, PcaPrecision};
 use super::vlad::{Codebook, LocalExtractor, LocalFeature, LocalFeatures, VladOptions};
+use crate::bounds::Bounds;
 use crate::descriptor::DescriptorIdentity;
 use crate::errors::VisionError;
 use crate::image::ImageView;
@@ -468,6 +469,13 @@ pub struct FitOptions {
     pub pca_precision: PcaPrecision,
 }
 
+impl FitOptions {
+    /// Accepted values of [`Self::dim`].
+    pub const DIM_RANGE: Bounds = Bounds::whole(1, limits::MAX_PCA_OUTPUT_DIM as u64);
+    /// Accepted values of [`Self::pca_samples`].
+    pub const PCA_SAMPLES_RANGE: Bounds = Bounds::whole_at_least(2);
+}
+
 impl Default for FitOptions {
     fn default() -> Self {
         Self {
@@ -493,14 +501,10 @@ pub fn fit(
             raws.len()
         )));
     }
-    if !(1..=limits::MAX_PCA_OUTPUT_DIM).contains(&options.dim) || options.pca_samples < 2 {
-        return Err(VisionError::InvalidArgument(format!(
-            "descriptor dimension {} must lie in 1..={} and PCA samples {} >= 2",
-            options.dim,
-            limits::MAX_PCA_OUTPUT_DIM,
-            options.pca_samples
-        )));
-    }
+    FitOptions::DIM_RANGE
+        .check("descriptor dimension", options.dim)
+        .and_then(|()| FitOptions::PCA_SAMPLES_RANGE.check("PCA samples", options.pca_samples))
+        .map_err(VisionError::InvalidArgument)?;
     spec.validate()?;
     let (codebook, vectors) = match spec {
         BackendSpec::Onnx { .. } => {

@@ -19,6 +19,9 @@ pub const MAX_TAP_NAME_BYTES: usize = 256;
 /// 1280 channels that is 5 MB, where the probe's 100,000 x 100,000 grid aborted the host.
 pub const MAX_POOL_GRID: usize = 32;
 
+/// Accepted rows or columns of an ONNX pooling grid.
+pub const POOL_GRID_RANGE: Bounds = Bounds::whole(1, MAX_POOL_GRID as u64);
+
 /// Smallest network or VLAD input side, in pixels (as [`crate::describe::vlad::VladOptions`]
 /// always accepted).
 pub const MIN_INPUT_SIDE: u32 = 32;
@@ -38,6 +41,7 @@ pub const MAX_PCA_OUTPUT_DIM: usize = 16_384;
 /// Length of the hexadecimal SHA-256 of an ONNX model file.
 pub const SHA256_HEX_LEN: usize = 64;
 
+use crate::bounds::Bounds;
 use crate::errors::VisionError;
 
 /// Checks an ONNX configuration against the bounds above: 1..=[`MAX_TAPS`] taps with non-empty
@@ -64,12 +68,10 @@ pub fn check_onnx_config(
             tap.get(..64).unwrap_or(tap)
         ));
     }
-    if !grid.iter().all(|g| (1..=MAX_POOL_GRID).contains(g)) {
-        return bad(format!(
-            "ONNX pooling grid is {}x{}, each side must lie in 1..={MAX_POOL_GRID}",
-            grid[0], grid[1]
-        ));
-    }
+    POOL_GRID_RANGE
+        .check("ONNX pooling grid rows", grid[0])
+        .and_then(|()| POOL_GRID_RANGE.check("ONNX pooling grid columns", grid[1]))
+        .map_err(VisionError::InvalidArgument)?;
     check_input_size(input_size, "ONNX")
 }
 

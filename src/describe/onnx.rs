@@ -2,6 +2,7 @@
 //! it until an ONNX model is asked for), whose selected feature maps become a multi-level vector.
 
 use super::mlf::{multi_level, FeatureMap};
+use crate::bounds::Bounds;
 use crate::errors::VisionError;
 use crate::image::ImageView;
 pub use crate::onnx_runtime::cache_dir;
@@ -33,6 +34,11 @@ pub struct OnnxOptions {
     pub input_size: (u32, u32),
     /// ONNX Runtime intra-op threads.
     pub threads: usize,
+}
+
+impl OnnxOptions {
+    /// Accepted values of [`Self::threads`].
+    pub const THREADS_RANGE: Bounds = Bounds::whole(1, 64);
 }
 
 impl Default for OnnxOptions {
@@ -78,6 +84,9 @@ pub struct OnnxMlf {
 impl OnnxMlf {
     /// Loads the runtime and the model; fails with a typed error naming every path tried.
     pub fn new(options: OnnxOptions) -> Result<Self, VisionError> {
+        OnnxOptions::THREADS_RANGE
+            .check("ONNX threads", options.threads)
+            .map_err(VisionError::InvalidArgument)?;
         super::limits::check_onnx_config(
             &options.taps,
             [options.grid.0, options.grid.1],

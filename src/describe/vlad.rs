@@ -18,6 +18,7 @@
 //! the map's descriptor identity. PCA whitening of the VLAD vectors is done by the caller.
 
 use super::mlf::l2_normalize;
+use crate::bounds::Bounds;
 use crate::errors::VisionError;
 use crate::image::ImageView;
 use opencv::core::{KeyPoint, Mat, Ptr, Size, TermCriteria, Vector, CV_32F, CV_8U};
@@ -94,21 +95,17 @@ impl Default for VladOptions {
 }
 
 impl VladOptions {
+    /// Accepted values of [`Self::clusters`].
+    pub const CLUSTERS_RANGE: Bounds = Bounds::whole(2, 1024);
+    /// Accepted values of [`Self::max_features`].
+    pub const MAX_FEATURES_RANGE: Bounds = Bounds::whole(10, 20_000);
+
     /// Checks every option against its accepted range ([`VisionError::InvalidArgument`]).
     pub fn validate(&self) -> Result<(), VisionError> {
-        let bad = |m: String| Err(VisionError::InvalidArgument(m));
-        if !(2..=1024).contains(&self.clusters) {
-            return bad(format!(
-                "VLAD clusters is {}, must be in 2..=1024",
-                self.clusters
-            ));
-        }
-        if !(10..=20_000).contains(&self.max_features) {
-            return bad(format!(
-                "VLAD max_features is {}, must be in 10..=20000",
-                self.max_features
-            ));
-        }
+        Self::CLUSTERS_RANGE
+            .check("VLAD clusters", self.clusters)
+            .and_then(|()| Self::MAX_FEATURES_RANGE.check("VLAD max_features", self.max_features))
+            .map_err(VisionError::InvalidArgument)?;
         super::limits::check_input_size([self.input_size.0, self.input_size.1], "VLAD")
     }
 }

@@ -63,7 +63,7 @@ pub use logging::*;
 pub use loops::*;
 pub use map::*;
 pub use map_keypoints::*;
-pub use option_defaults::{option_defaults, OptionDefault};
+pub use option_defaults::{option_defaults, option_ranges, OptionDefault, OptionRange};
 pub use skeleton::*;
 pub use status::topoloc_status;
 pub use trajectory::*;

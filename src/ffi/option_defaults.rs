@@ -1,8 +1,21 @@
-//! The defaults of the C ABI's options structs, as their `_init` functions write them (which
-//! is what the Rust options' `Default` gives). `tools/gen-header` carries them into the docs of
-//! `include/topoloc.h`, so that no default is written by hand in a C, C++ or Python doc.
+//! The defaults and ranges of the C ABI's options fields: the defaults as their `_init`
+//! functions write them (which is what the Rust options' `Default` gives), the ranges as the
+//! Rust options' bounds constants (which their `validate` checks). `tools/gen-header` carries
+//! both into the docs of `include/topoloc.h`, so that neither is written by hand in a C, C++
+//! or Python doc.
 
 use super::*;
+use crate::bounds::Bounds;
+use crate::build::{ImageMapOptions, KeyframeOptions};
+use crate::describe::describer::FitOptions;
+use crate::describe::limits::POOL_GRID_RANGE;
+use crate::describe::onnx::OnnxOptions;
+use crate::describe::vlad::VladOptions;
+use crate::eval::TrajectoryOptions;
+use crate::localize::{LocalizerOptions, MetricOptions};
+use crate::loops::{DatabaseOptions, HintOptions, OdometryGate};
+use crate::skeleton::SkeletonOptions;
+use crate::verify::{LocateOptions, VerificationOptions, RANSAC_THRESHOLD_PX_RANGE};
 use std::mem::{size_of, MaybeUninit};
 
 /// One field's default.
@@ -124,4 +137,141 @@ pub fn option_defaults() -> Vec<OptionDefault> {
         ),
     ]
     .concat()
+}
+
+/// One field's accepted values.
+#[derive(Clone, Debug, PartialEq)]
+pub struct OptionRange {
+    /// The C struct, e.g. `topoloc_loop_options`.
+    pub struct_name: &'static str,
+    /// The field, e.g. `candidates`.
+    pub field: &'static str,
+    /// The Rust bounds the field is checked against.
+    pub bounds: Bounds,
+}
+
+/// `OptionRange`s of one struct's fields, each with the Rust constant that bounds it.
+macro_rules! ranges_of {
+    ($ty:ident, [$($field:ident: $bounds:expr),* $(,)?]) => {
+        vec![$(OptionRange { struct_name: stringify!($ty), field: stringify!($field), bounds: $bounds }),*]
+    };
+}
+
+/// Every documented range of the options structs' numeric fields, struct by struct in header
+/// order. Fields whose sentinel values (0 = none, negative = default) lie outside the Rust
+/// bounds state their rule in their own doc.
+pub fn option_ranges() -> Vec<OptionRange> {
+    [
+        ranges_of!(
+            topoloc_localizer_options,
+            [
+                temperature: LocalizerOptions::TEMPERATURE_RANGE,
+                stay_probability: LocalizerOptions::PROBABILITY_RANGE,
+                jump_probability: LocalizerOptions::PROBABILITY_RANGE,
+                off_map_probability: LocalizerOptions::PROBABILITY_RANGE,
+                off_map_similarity: LocalizerOptions::OFF_MAP_SIMILARITY_RANGE,
+                off_map_margin: LocalizerOptions::OFF_MAP_MARGIN_RANGE,
+                top_k: LocalizerOptions::TOP_K_RANGE,
+                verify_candidates: VerificationOptions::CANDIDATES_RANGE,
+                verify_views_per_candidate: VerificationOptions::VIEWS_PER_CANDIDATE_RANGE,
+                verify_inlier_weight: VerificationOptions::INLIER_WEIGHT_RANGE,
+                metric_particles: MetricOptions::PARTICLES_RANGE,
+                metric_temperature: MetricOptions::TEMPERATURE_RANGE,
+                pose_min_inliers: LocateOptions::MIN_INLIERS_RANGE,
+                verify_off_map_inlier_scale: VerificationOptions::OFF_MAP_INLIER_SCALE_RANGE,
+            ]
+        ),
+        ranges_of!(
+            topoloc_keyframe_options,
+            [
+                place_spacing_m: KeyframeOptions::PLACE_SPACING_M_RANGE,
+                novelty_similarity: KeyframeOptions::NOVELTY_SIMILARITY_RANGE,
+                neighbour_radius_m: KeyframeOptions::NEIGHBOUR_RADIUS_M_RANGE,
+                max_views_per_place: KeyframeOptions::MAX_VIEWS_PER_PLACE_RANGE,
+            ]
+        ),
+        ranges_of!(
+            topoloc_image_map_options,
+            [
+                dim: FitOptions::DIM_RANGE,
+                views_per_place: ImageMapOptions::VIEWS_PER_PLACE_RANGE,
+                threads: ImageMapOptions::THREADS_RANGE,
+                grid_rows: POOL_GRID_RANGE,
+                grid_cols: POOL_GRID_RANGE,
+                vlad_clusters: VladOptions::CLUSTERS_RANGE,
+                place_spacing_m: KeyframeOptions::PLACE_SPACING_M_RANGE,
+            ]
+        ),
+        ranges_of!(topoloc_describer_options, [threads: OnnxOptions::THREADS_RANGE]),
+        ranges_of!(
+            topoloc_skeleton_options,
+            [
+                z_min_m: SkeletonOptions::Z_RANGE,
+                z_max_m: SkeletonOptions::Z_RANGE,
+                min_clearance_m: SkeletonOptions::DISTANCE_RANGE,
+                merge_radius_m: SkeletonOptions::DISTANCE_RANGE,
+                max_edge_m: SkeletonOptions::LENGTH_RANGE,
+                corner_angle_deg: SkeletonOptions::CORNER_ANGLE_DEG_RANGE,
+                corner_scale_m: SkeletonOptions::LENGTH_RANGE,
+                min_spur_m: SkeletonOptions::DISTANCE_RANGE,
+            ]
+        ),
+        ranges_of!(
+            topoloc_loop_options,
+            [
+                candidates: HintOptions::CANDIDATES_RANGE,
+                exclude_recent_s: HintOptions::EXCLUDE_RECENT_S_RANGE,
+                min_inliers: HintOptions::MIN_INLIERS_RANGE,
+                consistent_keyframes: HintOptions::CONSISTENT_KEYFRAMES_RANGE,
+                odometry_max_rotation_deg: OdometryGate::BOUND_RANGE,
+                odometry_max_translation_m: OdometryGate::BOUND_RANGE,
+                novelty_similarity: DatabaseOptions::NOVELTY_SIMILARITY_RANGE,
+                place_spacing_m: DatabaseOptions::DISTANCE_RANGE,
+                neighbour_radius_m: DatabaseOptions::DISTANCE_RANGE,
+                odometry_max_translation_per_m: OdometryGate::PER_M_RANGE,
+                pose_reprojection_px: RANSAC_THRESHOLD_PX_RANGE,
+                odometry_search_m: HintOptions::ODOMETRY_SEARCH_M_RANGE,
+                odometry_candidates: HintOptions::ODOMETRY_CANDIDATES_RANGE,
+            ]
+        ),
+        ranges_of!(
+            topoloc_trajectory_options,
+            [
+                max_diff_s: TrajectoryOptions::MAX_DIFF_S_RANGE,
+                offset_s: TrajectoryOptions::OFFSET_S_RANGE,
+                rpe_delta: TrajectoryOptions::RPE_DELTA_RANGE,
+            ]
+        ),
+    ]
+    .concat()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_documented_default_lies_in_its_documented_range() {
+        let defaults = option_defaults();
+        let ranges = option_ranges();
+        assert!(ranges.len() >= 45, "too few ranges: {}", ranges.len());
+        let mut checked = 0;
+        for range in &ranges {
+            let default = defaults
+                .iter()
+                .find(|d| d.struct_name == range.struct_name && d.field == range.field);
+            if let Some(default) = default {
+                let value: f64 = default.value.parse().unwrap();
+                assert!(
+                    range.bounds.contains(value),
+                    "{}.{} defaults to {value}, outside {}",
+                    range.struct_name,
+                    range.field,
+                    range.bounds
+                );
+                checked += 1;
+            }
+        }
+        assert!(checked >= 35, "only {checked} defaults checked");
+    }
 }

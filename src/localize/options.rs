@@ -4,6 +4,7 @@
 use super::filter::FilterParams;
 use super::particles::MetricOptions;
 use super::LocalizeError;
+use crate::bounds::Bounds;
 use crate::descriptor::ExpectedDescriptor;
 use crate::verify::VerificationOptions;
 
@@ -95,43 +96,51 @@ impl Default for LocalizerOptions {
 }
 
 impl LocalizerOptions {
-    pub(super) fn filter_params(&self) -> Result<FilterParams, LocalizeError> {
-        let bad = |msg: &str| Err(LocalizeError::InvalidOption(msg.to_string()));
-        let prob = |x: f32| x.is_finite() && (0.0..=1.0).contains(&x);
-        if !(self.temperature.is_finite() && self.temperature > 0.0) {
-            return bad("temperature must be finite and > 0");
-        }
-        if !(self.off_map_temperature.is_finite() && self.off_map_temperature > 0.0) {
-            return bad("off_map_temperature must be finite and > 0");
-        }
-        if !prob(self.stay_probability) {
-            return bad("stay_probability must lie in [0, 1]");
-        }
-        if !prob(self.jump_probability) || !prob(self.off_map_probability) {
-            return bad("jump_probability and off_map_probability must lie in [0, 1]");
+    /// Accepted values of [`Self::temperature`] and [`Self::off_map_temperature`].
+    pub const TEMPERATURE_RANGE: Bounds = Bounds::above(0.0);
+    /// Accepted values of every probability: [`Self::stay_probability`],
+    /// [`Self::jump_probability`], [`Self::off_map_probability`], the [`Self::speeds`],
+    /// [`Self::speed_change_probability`] and [`Self::turn_probability`].
+    pub const PROBABILITY_RANGE: Bounds = Bounds::closed(0.0, 1.0);
+    /// Accepted values of [`Self::off_map_similarity`] (a cosine).
+    pub const OFF_MAP_SIMILARITY_RANGE: Bounds = Bounds::closed(-1.0, 1.0);
+    /// Accepted values of [`Self::off_map_margin`].
+    pub const OFF_MAP_MARGIN_RANGE: Bounds = Bounds::finite();
+    /// Accepted values of [`Self::top_k`].
+    pub const TOP_K_RANGE: Bounds = Bounds::whole_at_least(1);
+
+    /// Checks every field's own range, then the rules that join fields.
+    fn check_ranges(&self) -> Result<(), String> {
+        Self::TEMPERATURE_RANGE.check("temperature", self.temperature)?;
+        Self::TEMPERATURE_RANGE.check("off_map_temperature", self.off_map_temperature)?;
+        for (name, p) in [
+            ("stay_probability", self.stay_probability),
+            ("jump_probability", self.jump_probability),
+            ("off_map_probability", self.off_map_probability),
+            ("speed_change_probability", self.speed_change_probability),
+            ("turn_probability", self.turn_probability),
+        ] {
+            Self::PROBABILITY_RANGE.check(name, p)?;
         }
         if self.jump_probability + self.off_map_probability >= 1.0 {
-            return bad("jump_probability + off_map_probability must be below 1");
+            return Err("jump_probability + off_map_probability must be below 1".into());
         }
-        if !(self.off_map_similarity.is_finite() && (-1.0..=1.0).contains(&self.off_map_similarity))
-        {
-            return bad("off_map_similarity must lie in [-1, 1]");
+        Self::OFF_MAP_SIMILARITY_RANGE.check("off_map_similarity", self.off_map_similarity)?;
+        Self::OFF_MAP_MARGIN_RANGE.check("off_map_margin", self.off_map_margin)?;
+        if self.speeds.is_empty() || self.speeds.len() > MAX_SPEED_CLASSES {
+            return Err(format!(
+                "speeds holds {} values, must hold 1 to {MAX_SPEED_CLASSES}",
+                self.speeds.len()
+            ));
         }
-        if !self.off_map_margin.is_finite() {
-            return bad("off_map_margin must be finite");
+        for &speed in &self.speeds {
+            Self::PROBABILITY_RANGE.check("speeds value", speed)?;
         }
-        if self.speeds.is_empty()
-            || self.speeds.len() > MAX_SPEED_CLASSES
-            || !self.speeds.iter().all(|&v| prob(v))
-        {
-            return bad("speeds must hold 1 to 8 values in [0, 1]");
-        }
-        if !prob(self.speed_change_probability) || !prob(self.turn_probability) {
-            return bad("speed_change_probability and turn_probability must lie in [0, 1]");
-        }
-        if self.top_k == 0 {
-            return bad("top_k must be at least 1");
-        }
+        Self::TOP_K_RANGE.check("top_k", self.top_k)
+    }
+
+    pub(super) fn filter_params(&self) -> Result<FilterParams, LocalizeError> {
+        self.check_ranges().map_err(LocalizeError::InvalidOption)?;
         self.verification
             .validate()
             .map_err(LocalizeError::InvalidOption)?;

@@ -33,6 +33,7 @@
 //! Deterministic: the random generator is seeded from [`MetricOptions::seed`] and reset with
 //! the localizer.
 
+use crate::bounds::Bounds;
 use crate::map::Map;
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 use rand::rngs::SmallRng;
@@ -120,11 +121,19 @@ impl Default for MetricOptions {
 pub const MAX_PARTICLES: usize = 1_000_000;
 
 impl MetricOptions {
+    /// Accepted values of [`Self::particles`].
+    pub const PARTICLES_RANGE: Bounds = Bounds::whole(1, MAX_PARTICLES as u64);
+    /// Accepted values of the noises, windows, spreads and tolerances.
+    pub const SPREAD_RANGE: Bounds = Bounds::at_least(0.0);
+    /// Accepted values of [`Self::injection`].
+    pub const INJECTION_RANGE: Bounds = Bounds::closed(0.0, 1.0);
+    /// Accepted values of [`Self::temperature`], [`Self::initial_temperature`] and
+    /// [`Self::fix_sigma_m`].
+    pub const TEMPERATURE_RANGE: Bounds = Bounds::above(0.0);
+
     /// Checks every field; the message names the first bad one.
     pub fn validate(&self) -> Result<(), String> {
-        if self.particles == 0 || self.particles > MAX_PARTICLES {
-            return Err(format!("metric.particles must lie in 1..={MAX_PARTICLES}"));
-        }
+        Self::PARTICLES_RANGE.check("metric.particles", self.particles)?;
         let non_negative = [
             ("metric.translation_noise", self.translation_noise),
             ("metric.rotation_noise_rad", self.rotation_noise_rad),
@@ -140,21 +149,15 @@ impl MetricOptions {
             ("metric.fix_outlier", self.fix_outlier),
         ];
         for (name, value) in non_negative {
-            if !(value.is_finite() && value >= 0.0) {
-                return Err(format!("{name} must be finite and >= 0"));
-            }
+            Self::SPREAD_RANGE.check(name, value)?;
         }
-        if !(self.injection.is_finite() && (0.0..=1.0).contains(&self.injection)) {
-            return Err("metric.injection must lie in [0, 1]".into());
-        }
+        Self::INJECTION_RANGE.check("metric.injection", self.injection)?;
         for (name, value) in [
             ("metric.temperature", self.temperature),
             ("metric.initial_temperature", self.initial_temperature),
             ("metric.fix_sigma_m", self.fix_sigma_m),
         ] {
-            if !(value.is_finite() && value > 0.0) {
-                return Err(format!("{name} must be finite and > 0"));
-            }
+            Self::TEMPERATURE_RANGE.check(name, value)?;
         }
         Ok(())
     }

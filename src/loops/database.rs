@@ -12,6 +12,7 @@
 //! loop query is for.
 
 use super::LoopsError;
+use crate::bounds::Bounds;
 use crate::descriptor::{normalize_descriptor_into, row_similarities, DescriptorIdentity};
 use crate::map::{is_finite_pose, Map, MapBuilder, PlaceId, ViewAttributes};
 use nalgebra::{Isometry3, Point3};
@@ -44,18 +45,19 @@ impl Default for DatabaseOptions {
 }
 
 impl DatabaseOptions {
+    /// Accepted values of [`Self::novelty_similarity`] (a cosine).
+    pub const NOVELTY_SIMILARITY_RANGE: Bounds = Bounds::closed(-1.0, 1.0);
+    /// Accepted values of [`Self::place_spacing_m`] and [`Self::neighbour_radius_m`], metres.
+    pub const DISTANCE_RANGE: Bounds = Bounds::at_least(0.0);
+
     fn validate(&self) -> Result<(), LoopsError> {
-        let bad = |m: &str| Err(LoopsError::InvalidOption(m.into()));
-        if !(-1.0..=1.0).contains(&self.novelty_similarity) {
-            return bad("novelty_similarity must lie in [-1, 1]");
-        }
-        if !(self.place_spacing_m.is_finite() && self.place_spacing_m >= 0.0) {
-            return bad("place_spacing_m must be finite and >= 0");
-        }
-        if !(self.neighbour_radius_m.is_finite() && self.neighbour_radius_m >= 0.0) {
-            return bad("neighbour_radius_m must be finite and >= 0");
-        }
-        Ok(())
+        Self::NOVELTY_SIMILARITY_RANGE
+            .check("novelty_similarity", self.novelty_similarity)
+            .and_then(|()| Self::DISTANCE_RANGE.check("place_spacing_m", self.place_spacing_m))
+            .and_then(|()| {
+                Self::DISTANCE_RANGE.check("neighbour_radius_m", self.neighbour_radius_m)
+            })
+            .map_err(LoopsError::InvalidOption)
     }
 }
 

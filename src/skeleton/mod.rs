@@ -33,6 +33,7 @@ mod thinning;
 
 pub use distance::{squared_distance_transform, GridBorder};
 
+use crate::bounds::Bounds;
 use nalgebra::Point3;
 pub use occupancy::{OccupancyGrid, Voxel, MAX_VOXELS};
 
@@ -94,46 +95,38 @@ impl SkeletonOptions {
     /// Checks every option on its own; fails with [`SkeletonError::InvalidArgument`] naming the
     /// field. ([`skeleton_graph`] also checks `max_edge_m` against the grid's voxel size.)
     pub fn validate(&self) -> Result<(), SkeletonError> {
-        let invalid = |field: &str, value: f64, rule: &str| {
-            Err(SkeletonError::InvalidArgument(format!(
-                "{field} {value}: must be {rule}"
-            )))
-        };
+        self.check_ranges().map_err(SkeletonError::InvalidArgument)
+    }
+
+    /// Accepted values of each end of [`Self::z_band`], metres (z_min must not exceed z_max).
+    pub const Z_RANGE: Bounds = Bounds::finite();
+    /// Accepted values of [`Self::min_clearance_m`], [`Self::merge_radius_m`] and
+    /// [`Self::min_spur_m`], metres.
+    pub const DISTANCE_RANGE: Bounds = Bounds::at_least(0.0);
+    /// Accepted values of [`Self::max_edge_m`] and [`Self::corner_scale_m`], metres (the
+    /// skeleton also needs them at least two and four voxels long).
+    pub const LENGTH_RANGE: Bounds = Bounds::above(0.0);
+    /// Accepted values of [`Self::corner_angle_deg`], degrees.
+    pub const CORNER_ANGLE_DEG_RANGE: Bounds = Bounds::open(0.0, 180.0);
+
+    fn check_ranges(&self) -> Result<(), String> {
         if let Some((lo, hi)) = self.z_band {
-            if !(lo.is_finite() && hi.is_finite()) {
-                return Err(SkeletonError::InvalidArgument(format!(
-                    "z_band [{lo}, {hi}]: both bounds must be finite"
-                )));
-            }
+            Self::Z_RANGE.check("z_band z_min", lo)?;
+            Self::Z_RANGE.check("z_band z_max", hi)?;
             if lo > hi {
-                return Err(SkeletonError::InvalidArgument(format!(
-                    "z_band [{lo}, {hi}]: z_min must not exceed z_max"
-                )));
-            }
-        }
-        let non_negative = [
-            ("min_clearance_m", self.min_clearance_m),
-            ("merge_radius_m", self.merge_radius_m),
-            ("min_spur_m", self.min_spur_m),
-        ];
-        for (field, value) in non_negative {
-            if !(value.is_finite() && value >= 0.0) {
-                return invalid(field, value, "finite and >= 0");
+                return Err(format!("z_band [{lo}, {hi}]: z_min must not exceed z_max"));
             }
         }
         for (field, value) in [
-            ("max_edge_m", self.max_edge_m),
-            ("corner_scale_m", self.corner_scale_m),
+            ("min_clearance_m", self.min_clearance_m),
+            ("merge_radius_m", self.merge_radius_m),
+            ("min_spur_m", self.min_spur_m),
         ] {
-            if !(value.is_finite() && value > 0.0) {
-                return invalid(field, value, "finite and > 0");
-            }
+            Self::DISTANCE_RANGE.check(field, value)?;
         }
-        let angle = self.corner_angle_deg;
-        if !(angle > 0.0 && angle < 180.0) {
-            return invalid("corner_angle_deg", angle, "in (0, 180) degrees");
-        }
-        Ok(())
+        Self::LENGTH_RANGE.check("max_edge_m", self.max_edge_m)?;
+        Self::LENGTH_RANGE.check("corner_scale_m", self.corner_scale_m)?;
+        Self::CORNER_ANGLE_DEG_RANGE.check("corner_angle_deg", self.corner_angle_deg)
     }
 
     /// [`validate`](Self::validate) plus the checks that need the grid.

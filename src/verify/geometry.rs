@@ -3,6 +3,7 @@
 //! one rigid scene seen from two poses.
 
 use super::keypoints::{Descriptor, DescriptorsRef, KeypointsRef, DESCRIPTOR_BYTES};
+use crate::bounds::Bounds;
 use crate::errors::VisionError;
 use faer::linalg::matmul::matmul;
 use faer::{Accum, Mat as FaerMat, MatRef, Par};
@@ -17,6 +18,13 @@ pub(crate) const ANY_COSINE: f32 = -1.0;
 
 /// Fewest matches a fundamental matrix is fitted to (the 8-point algorithm's minimum).
 pub const MIN_MATCHES: usize = 8;
+
+/// Accepted values of a RANSAC threshold (epipolar distance or reprojection error), pixels.
+pub const RANSAC_THRESHOLD_PX_RANGE: Bounds = Bounds::above(0.0);
+/// Accepted values of a RANSAC iteration budget.
+pub const RANSAC_ITERATIONS_RANGE: Bounds = Bounds::whole(1, 100_000);
+/// Accepted values of the fewest inliers of a fundamental matrix or relative pose.
+pub const PAIR_MIN_INLIERS_RANGE: Bounds = Bounds::whole(MIN_MATCHES as u64, 10_000);
 
 /// The robust estimator that fits the fundamental matrix.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -73,29 +81,19 @@ impl PairOptions {
 
     /// Fails with a message naming the field out of range.
     pub fn validate(&self) -> Result<(), String> {
-        if !(1..=256).contains(&self.max_hamming) {
-            return Err(format!(
-                "max_hamming is {}, must lie in 1..=256",
-                self.max_hamming
-            ));
-        }
-        if !(-1.0..=1.0).contains(&self.min_cosine) {
-            return Err(format!(
-                "min_cosine is {}, must lie in -1..=1",
-                self.min_cosine
-            ));
-        }
-        if !(self.ransac_threshold_px.is_finite() && self.ransac_threshold_px > 0.0) {
-            return Err("ransac_threshold_px must be finite and > 0".into());
-        }
-        if !(self.confidence.is_finite() && self.confidence > 0.0 && self.confidence < 1.0) {
-            return Err("confidence must lie in (0, 1)".into());
-        }
-        if !(1..=100_000).contains(&self.max_iterations) {
-            return Err("max_iterations must lie in 1..=100000".into());
-        }
-        Ok(())
+        Self::MAX_HAMMING_RANGE.check("max_hamming", self.max_hamming)?;
+        Self::MIN_COSINE_RANGE.check("min_cosine", self.min_cosine)?;
+        RANSAC_THRESHOLD_PX_RANGE.check("ransac_threshold_px", self.ransac_threshold_px)?;
+        Self::CONFIDENCE_RANGE.check("confidence", self.confidence)?;
+        RANSAC_ITERATIONS_RANGE.check("max_iterations", self.max_iterations)
     }
+
+    /// Accepted values of [`Self::max_hamming`].
+    pub const MAX_HAMMING_RANGE: Bounds = Bounds::whole(1, 256);
+    /// Accepted values of [`Self::min_cosine`].
+    pub const MIN_COSINE_RANGE: Bounds = Bounds::closed(-1.0, 1.0);
+    /// Accepted values of [`Self::confidence`].
+    pub const CONFIDENCE_RANGE: Bounds = Bounds::open(0.0, 1.0);
 }
 
 /// Outcome of [`check_pair`].

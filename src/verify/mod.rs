@@ -14,6 +14,8 @@
 //! with the most inliers is used to place the camera metrically ([`locate`]): a pose fix for
 //! the host's pose graph and, in metric mode, a measurement of the particles' position.
 
+use crate::bounds::Bounds;
+
 mod cells;
 mod depth;
 mod detector;
@@ -28,7 +30,8 @@ pub use depth::{camera_points_from_depth, DepthImage};
 pub use detector::FeatureDetector;
 pub use geometry::{
     check_pair, fit_pair, fit_pair_reaching, spatial_check, FundamentalEstimator, PairCheck,
-    PairFit, PairOptions, SpatialCheck, MIN_MATCHES,
+    PairFit, PairOptions, SpatialCheck, MIN_MATCHES, PAIR_MIN_INLIERS_RANGE,
+    RANSAC_ITERATIONS_RANGE, RANSAC_THRESHOLD_PX_RANGE,
 };
 pub use keypoints::{
     CellDescriptor, Descriptor, Descriptors, DescriptorsRef, FeatureKind, KeypointDetector,
@@ -143,40 +146,33 @@ impl VerificationOptions {
         self.candidates > 0
     }
 
+    /// Accepted values of [`Self::candidates`] (0: verification off).
+    pub const CANDIDATES_RANGE: Bounds = Bounds::whole(0, 64);
+    /// Accepted values of [`Self::views_per_candidate`].
+    pub const VIEWS_PER_CANDIDATE_RANGE: Bounds = Bounds::whole(1, 64);
+    /// Accepted values of [`Self::inlier_weight`].
+    pub const INLIER_WEIGHT_RANGE: Bounds = Bounds::at_least(0.0);
+    /// Accepted values of [`Self::off_map_inliers`] when set.
+    pub const OFF_MAP_INLIERS_RANGE: Bounds = Bounds::at_least(0.0);
+    /// Accepted values of [`Self::off_map_inlier_scale`].
+    pub const OFF_MAP_INLIER_SCALE_RANGE: Bounds = Bounds::above(0.0);
+    /// Accepted values of [`Self::query_keypoints`].
+    pub const QUERY_KEYPOINTS_RANGE: Bounds = Bounds::whole(1, MAX_KEYPOINTS as u64);
+
     /// Fails with a message naming the field out of range.
     pub fn validate(&self) -> Result<(), String> {
-        if self.candidates > 64 {
-            return Err(format!(
-                "verification.candidates is {}, must lie in 0..=64",
-                self.candidates
-            ));
+        Self::CANDIDATES_RANGE.check("verification.candidates", self.candidates)?;
+        Self::VIEWS_PER_CANDIDATE_RANGE
+            .check("verification.views_per_candidate", self.views_per_candidate)?;
+        Self::INLIER_WEIGHT_RANGE.check("verification.inlier_weight", self.inlier_weight)?;
+        if let Some(n) = self.off_map_inliers {
+            Self::OFF_MAP_INLIERS_RANGE.check("verification.off_map_inliers", n)?;
         }
-        if !(1..=64).contains(&self.views_per_candidate) {
-            return Err(format!(
-                "verification.views_per_candidate is {}, must lie in 1..=64",
-                self.views_per_candidate
-            ));
-        }
-        if !(self.inlier_weight.is_finite() && self.inlier_weight >= 0.0) {
-            return Err("verification.inlier_weight must be finite and >= 0".into());
-        }
-        if let Some(n) = self
-            .off_map_inliers
-            .filter(|n| !(n.is_finite() && *n >= 0.0))
-        {
-            return Err(format!(
-                "verification.off_map_inliers is {n}, must be finite and >= 0"
-            ));
-        }
-        if !(self.off_map_inlier_scale.is_finite() && self.off_map_inlier_scale > 0.0) {
-            return Err("verification.off_map_inlier_scale must be finite and > 0".into());
-        }
-        if !(1..=MAX_KEYPOINTS).contains(&self.query_keypoints) {
-            return Err(format!(
-                "verification.query_keypoints is {}, must lie in 1..={MAX_KEYPOINTS}",
-                self.query_keypoints
-            ));
-        }
+        Self::OFF_MAP_INLIER_SCALE_RANGE.check(
+            "verification.off_map_inlier_scale",
+            self.off_map_inlier_scale,
+        )?;
+        Self::QUERY_KEYPOINTS_RANGE.check("verification.query_keypoints", self.query_keypoints)?;
         if let Some(camera) = &self.camera {
             camera.validate().map_err(|e| format!("verification.{e}"))?;
             if self.candidates == 0 {

@@ -7,8 +7,11 @@
 //!
 //! [`ViewKeypoints`]: super::ViewKeypoints
 
-use super::geometry::{mutual_matches, ANY_COSINE};
+use super::geometry::{
+    mutual_matches, ANY_COSINE, RANSAC_ITERATIONS_RANGE, RANSAC_THRESHOLD_PX_RANGE,
+};
 use super::keypoints::KeypointsRef;
+use crate::bounds::Bounds;
 use crate::errors::VisionError;
 use nalgebra::{
     Isometry3, Matrix3, Point3, Rotation3, Translation3, UnitQuaternion, Vector2, Vector3,
@@ -41,18 +44,16 @@ impl PinholeCamera {
     /// Fails with a message naming the bad field: focal lengths must be finite and > 0, the
     /// principal point finite.
     pub fn validate(&self) -> Result<(), String> {
-        for (name, f) in [("fx", self.fx), ("fy", self.fy)] {
-            if !(f.is_finite() && f > 0.0) {
-                return Err(format!("camera.{name} is {f}, must be finite and > 0"));
-            }
-        }
-        for (name, c) in [("cx", self.cx), ("cy", self.cy)] {
-            if !c.is_finite() {
-                return Err(format!("camera.{name} is {c}, must be finite"));
-            }
-        }
-        Ok(())
+        Self::FOCAL_RANGE.check("camera.fx", self.fx)?;
+        Self::FOCAL_RANGE.check("camera.fy", self.fy)?;
+        Self::PRINCIPAL_POINT_RANGE.check("camera.cx", self.cx)?;
+        Self::PRINCIPAL_POINT_RANGE.check("camera.cy", self.cy)
     }
+
+    /// Accepted values of the focal lengths [`Self::fx`] and [`Self::fy`], pixels.
+    pub const FOCAL_RANGE: Bounds = Bounds::above(0.0);
+    /// Accepted values of the principal point [`Self::cx`], [`Self::cy`], pixels.
+    pub const PRINCIPAL_POINT_RANGE: Bounds = Bounds::finite();
 
     /// The pixel of a point in the camera's optical frame; `None` behind the camera.
     pub fn project(&self, p: &Vector3<f64>) -> Option<Vector2<f64>> {
@@ -95,20 +96,13 @@ impl Default for LocateOptions {
 impl LocateOptions {
     /// Fails with a message naming the field out of range.
     pub fn validate(&self) -> Result<(), String> {
-        if !(MIN_PAIRS as u32..=10_000).contains(&self.min_inliers) {
-            return Err(format!(
-                "min_inliers is {}, must lie in {MIN_PAIRS}..=10000",
-                self.min_inliers
-            ));
-        }
-        if !(self.reprojection_px.is_finite() && self.reprojection_px > 0.0) {
-            return Err("reprojection_px must be finite and > 0".into());
-        }
-        if !(1..=100_000).contains(&self.max_iterations) {
-            return Err("max_iterations must lie in 1..=100000".into());
-        }
-        Ok(())
+        Self::MIN_INLIERS_RANGE.check("min_inliers", self.min_inliers)?;
+        RANSAC_THRESHOLD_PX_RANGE.check("reprojection_px", self.reprojection_px)?;
+        RANSAC_ITERATIONS_RANGE.check("max_iterations", self.max_iterations)
     }
+
+    /// Accepted values of [`Self::min_inliers`].
+    pub const MIN_INLIERS_RANGE: Bounds = Bounds::whole(MIN_PAIRS as u64, 10_000);
 }
 
 /// A camera pose found by [`locate`].

@@ -14,9 +14,13 @@
 //! Sampson distance does not see the translation's length, so a unit-variance prior (1 m^2)
 //! is added along the translation direction: hosts estimate the scale themselves.
 
-use super::geometry::{mutual_matches, PairFit, ANY_COSINE};
+use super::geometry::{
+    mutual_matches, PairFit, ANY_COSINE, PAIR_MIN_INLIERS_RANGE, RANSAC_ITERATIONS_RANGE,
+    RANSAC_THRESHOLD_PX_RANGE,
+};
 use super::keypoints::KeypointsRef;
 use super::pose::{locate_pairs_seeded, LocateOptions, PinholeCamera};
+use crate::bounds::Bounds;
 use crate::errors::VisionError;
 use nalgebra::{
     Isometry3, Matrix3, Matrix6, Point3, Rotation3, Translation3, UnitQuaternion, Vector2, Vector3,
@@ -61,26 +65,15 @@ impl Default for RelativePoseOptions {
 impl RelativePoseOptions {
     /// Fails with a message naming the field out of range.
     pub fn validate(&self) -> Result<(), String> {
-        if !(8..=10_000).contains(&self.min_inliers) {
-            return Err(format!(
-                "min_inliers is {}, must lie in 8..=10000",
-                self.min_inliers
-            ));
-        }
-        if !(self.threshold_px.is_finite() && self.threshold_px > 0.0) {
-            return Err("threshold_px must be finite and > 0".into());
-        }
-        if !(self.reprojection_px.is_finite() && self.reprojection_px > 0.0) {
-            return Err("reprojection_px must be finite and > 0".into());
-        }
-        if !(1..=100_000).contains(&self.max_iterations) {
-            return Err("max_iterations must lie in 1..=100000".into());
-        }
-        if !(self.min_parallax_deg.is_finite() && (0.0..90.0).contains(&self.min_parallax_deg)) {
-            return Err("min_parallax_deg must lie in [0, 90)".into());
-        }
-        Ok(())
+        PAIR_MIN_INLIERS_RANGE.check("min_inliers", self.min_inliers)?;
+        RANSAC_THRESHOLD_PX_RANGE.check("threshold_px", self.threshold_px)?;
+        RANSAC_THRESHOLD_PX_RANGE.check("reprojection_px", self.reprojection_px)?;
+        RANSAC_ITERATIONS_RANGE.check("max_iterations", self.max_iterations)?;
+        Self::MIN_PARALLAX_DEG_RANGE.check("min_parallax_deg", self.min_parallax_deg)
     }
+
+    /// Accepted values of [`Self::min_parallax_deg`].
+    pub const MIN_PARALLAX_DEG_RANGE: Bounds = Bounds::half_open(0.0, 90.0);
 }
 
 /// A relative pose found by [`relative_pose`].

@@ -1,7 +1,13 @@
 //! Association by timestamps and Umeyama alignment, with evo's contracts.
 
 use super::{Trajectory, TrajectoryError};
+use crate::bounds::Bounds;
 use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
+
+/// Accepted values of the largest timestamp difference of an associated pair, seconds.
+pub(super) const MAX_DIFF_S_RANGE: Bounds = Bounds::at_least(0.0);
+/// Accepted values of the offset added to the estimate's timestamps, seconds.
+pub(super) const OFFSET_S_RANGE: Bounds = Bounds::finite();
 
 /// How an estimate is aligned to its reference before the errors are measured.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -66,11 +72,10 @@ pub fn associate(
     max_diff_s: f64,
     offset_s: f64,
 ) -> Result<Vec<(usize, usize)>, TrajectoryError> {
-    if !(max_diff_s.is_finite() && max_diff_s >= 0.0 && offset_s.is_finite()) {
-        return Err(TrajectoryError::InvalidOption(format!(
-            "max_diff_s {max_diff_s} must be finite and >= 0, offset_s {offset_s} finite"
-        )));
-    }
+    MAX_DIFF_S_RANGE
+        .check("max_diff_s", max_diff_s)
+        .and_then(|()| OFFSET_S_RANGE.check("offset_s", offset_s))
+        .map_err(TrajectoryError::InvalidOption)?;
     let estimate_longer = estimate.len() > reference.len();
     let (short, long, offset) = match estimate_longer {
         true => (&reference.timestamps, &estimate.timestamps, offset_s),

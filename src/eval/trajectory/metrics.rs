@@ -1,7 +1,8 @@
 //! ATE, ARE, RPE and R_traj of an estimate against its reference.
 
-use super::align::{associate, umeyama, Alignment, Similarity};
+use super::align::{associate, umeyama, Alignment, Similarity, MAX_DIFF_S_RANGE, OFFSET_S_RANGE};
 use super::{path_length, Trajectory, TrajectoryError};
+use crate::bounds::Bounds;
 use nalgebra::{Isometry3, Translation3, Vector3};
 
 /// How [`evaluate`] associates and aligns.
@@ -17,6 +18,15 @@ pub struct TrajectoryOptions {
     /// The RPE's step, in associated pairs: the motion from pair 0 to `rpe_delta`, from
     /// `rpe_delta` to `2 rpe_delta`, ... (evo's `--delta` in frames). Default 1.
     pub rpe_delta: usize,
+}
+
+impl TrajectoryOptions {
+    /// Accepted values of [`Self::max_diff_s`], seconds.
+    pub const MAX_DIFF_S_RANGE: Bounds = MAX_DIFF_S_RANGE;
+    /// Accepted values of [`Self::offset_s`], seconds.
+    pub const OFFSET_S_RANGE: Bounds = OFFSET_S_RANGE;
+    /// Accepted values of [`Self::rpe_delta`].
+    pub const RPE_DELTA_RANGE: Bounds = Bounds::whole_at_least(1);
 }
 
 impl Default for TrajectoryOptions {
@@ -106,11 +116,9 @@ pub fn evaluate(
     estimate: &Trajectory,
     options: &TrajectoryOptions,
 ) -> Result<TrajectoryReport, TrajectoryError> {
-    if options.rpe_delta == 0 {
-        return Err(TrajectoryError::InvalidOption(
-            "rpe_delta must be at least 1".into(),
-        ));
-    }
+    TrajectoryOptions::RPE_DELTA_RANGE
+        .check("rpe_delta", options.rpe_delta)
+        .map_err(TrajectoryError::InvalidOption)?;
     let pairs = associate(reference, estimate, options.max_diff_s, options.offset_s)?;
     if pairs.len() <= options.rpe_delta {
         return Err(TrajectoryError::TooFewPairs(format!(

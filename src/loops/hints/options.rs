@@ -2,8 +2,10 @@
 //! agreement gate.
 
 use super::super::error::LoopsError;
+use crate::bounds::Bounds;
 use crate::verify::{
     FeatureKind, FundamentalEstimator, PairOptions, PinholeCamera, RelativePoseOptions,
+    PAIR_MIN_INLIERS_RANGE,
 };
 
 /// The odometry agreement gate: bounds on the difference between the hint's relative pose and
@@ -110,7 +112,52 @@ impl Default for HintOptions {
     }
 }
 
+impl OdometryGate {
+    /// Accepted values of [`Self::max_rotation_deg`] and [`Self::max_translation_m`].
+    pub const BOUND_RANGE: Bounds = Bounds::above(0.0);
+    /// Accepted values of [`Self::max_translation_per_m`].
+    pub const PER_M_RANGE: Bounds = Bounds::at_least(0.0);
+
+    fn check_ranges(&self) -> Result<(), String> {
+        Self::BOUND_RANGE.check("odometry max_rotation_deg", self.max_rotation_deg)?;
+        Self::BOUND_RANGE.check("odometry max_translation_m", self.max_translation_m)?;
+        Self::PER_M_RANGE.check("odometry max_translation_per_m", self.max_translation_per_m)
+    }
+}
+
 impl HintOptions {
+    /// Accepted values of [`Self::candidates`].
+    pub const CANDIDATES_RANGE: Bounds = Bounds::whole(1, 64);
+    /// Accepted values of [`Self::exclude_recent_s`].
+    pub const EXCLUDE_RECENT_S_RANGE: Bounds = Bounds::at_least(0.0);
+    /// Accepted values of [`Self::min_inliers`].
+    pub const MIN_INLIERS_RANGE: Bounds = PAIR_MIN_INLIERS_RANGE;
+    /// Accepted values of [`Self::consistent_keyframes`].
+    pub const CONSISTENT_KEYFRAMES_RANGE: Bounds = Bounds::whole(1, 100);
+    /// Accepted values of [`Self::odometry_candidates`] (0: none).
+    pub const ODOMETRY_CANDIDATES_RANGE: Bounds = Bounds::whole(0, 64);
+    /// Accepted values of [`Self::odometry_search_m`].
+    pub const ODOMETRY_SEARCH_M_RANGE: Bounds = Bounds::at_least(0.0);
+    /// Accepted values of [`Self::refine_keyframes`] (0: no refinement).
+    pub const REFINE_KEYFRAMES_RANGE: Bounds = Bounds::whole(0, 64);
+
+    fn check_ranges(&self) -> Result<(), String> {
+        Self::CANDIDATES_RANGE.check("candidates", self.candidates)?;
+        Self::EXCLUDE_RECENT_S_RANGE.check("exclude_recent_s", self.exclude_recent_s)?;
+        Self::MIN_INLIERS_RANGE.check("min_inliers", self.min_inliers)?;
+        Self::CONSISTENT_KEYFRAMES_RANGE
+            .check("consistent_keyframes", self.consistent_keyframes)?;
+        if let Some(gate) = &self.odometry {
+            gate.check_ranges()?;
+        }
+        if let Some(camera) = &self.camera {
+            camera.validate()?;
+        }
+        Self::ODOMETRY_CANDIDATES_RANGE.check("odometry_candidates", self.odometry_candidates)?;
+        Self::ODOMETRY_SEARCH_M_RANGE.check("odometry_search_m", self.odometry_search_m)?;
+        Self::REFINE_KEYFRAMES_RANGE.check("refine_keyframes", self.refine_keyframes)
+    }
+
     /// The matching and fit options for features of `kind`.
     pub fn pair_for(&self, kind: FeatureKind) -> &PairOptions {
         match kind {
@@ -121,55 +168,7 @@ impl HintOptions {
 
     /// Fails with [`LoopsError::InvalidOption`] naming the field out of range.
     pub fn validate(&self) -> Result<(), LoopsError> {
-        let bad = |m: String| Err(LoopsError::InvalidOption(m));
-        if !(1..=64).contains(&self.candidates) {
-            return bad(format!(
-                "candidates is {}, must lie in 1..=64",
-                self.candidates
-            ));
-        }
-        if !(self.exclude_recent_s.is_finite() && self.exclude_recent_s >= 0.0) {
-            return bad("exclude_recent_s must be finite and >= 0".into());
-        }
-        if !(8..=10_000).contains(&self.min_inliers) {
-            return bad(format!(
-                "min_inliers is {}, must lie in 8..=10000",
-                self.min_inliers
-            ));
-        }
-        if !(1..=100).contains(&self.consistent_keyframes) {
-            return bad(format!(
-                "consistent_keyframes is {}, must lie in 1..=100",
-                self.consistent_keyframes
-            ));
-        }
-        if let Some(g) = &self.odometry {
-            let positive = |v: f64| v.is_finite() && v > 0.0;
-            if !(positive(g.max_rotation_deg) && positive(g.max_translation_m)) {
-                return bad("odometry bounds must be finite and > 0".into());
-            }
-            if !(g.max_translation_per_m.is_finite() && g.max_translation_per_m >= 0.0) {
-                return bad("odometry max_translation_per_m must be finite and >= 0".into());
-            }
-        }
-        if let Some(camera) = &self.camera {
-            camera.validate().map_err(LoopsError::InvalidOption)?;
-        }
-        if self.odometry_candidates > 64 {
-            return bad(format!(
-                "odometry_candidates is {}, must lie in 0..=64",
-                self.odometry_candidates
-            ));
-        }
-        if !(self.odometry_search_m.is_finite() && self.odometry_search_m >= 0.0) {
-            return bad("odometry_search_m must be finite and >= 0".into());
-        }
-        if self.refine_keyframes > 64 {
-            return bad(format!(
-                "refine_keyframes is {}, must lie in 0..=64",
-                self.refine_keyframes
-            ));
-        }
+        self.check_ranges().map_err(LoopsError::InvalidOption)?;
         self.pair
             .validate()
             .map_err(|e| LoopsError::InvalidOption(format!("pair: {e}")))?;

@@ -1,7 +1,9 @@
 //! Generates `include/topoloc.h` from `src/ffi` with the pinned cbindgen, adding the version
-//! macros from the root Cargo.toml, section banners, and each option's default as the library's
-//! `_init` writes it (`topoloc::ffi::option_defaults`: no default is written by hand). With `--check`, fails (exit 1) when the checked-in header
-//! differs from what would be generated, so CI catches a stale header.
+//! macros from the root Cargo.toml, a `_default` macro per `_init` function, section banners,
+//! and each option field's range and default from the library itself
+//! (`topoloc::ffi::option_ranges`, the Rust options' bounds; `topoloc::ffi::option_defaults`,
+//! what `_init` writes): neither is written by hand. With `--check`, fails (exit 1) when the
+//! checked-in header differs from what would be generated, so CI catches a stale header.
 //!
 //! Usage: `cargo run -p topoloc-gen-header [-- --check]`
 
@@ -36,26 +38,22 @@ fn package_version(root: &Path) -> Result<(String, String, String), String> {
     }
 }
 
-/// `T_default(p)` macros over the exported `T_init(p, size)` functions: they pass the size of
+/// `T_default(p)` macros over every exported `T_init(p, size)` function: they pass the size of
 /// the caller's struct, so that a newer library never writes past an older caller's struct.
-const DEFAULT_MACROS: &str = "
-/* Fill a versioned struct with defaults (and its struct_size) before use. */
-#define topoloc_map_load_options_default(p) topoloc_map_load_options_init((p), sizeof *(p))
-#define topoloc_view_attributes_default(p) topoloc_view_attributes_init((p), sizeof *(p))
-#define topoloc_keyframe_options_default(p) topoloc_keyframe_options_init((p), sizeof *(p))
-#define topoloc_localizer_options_default(p) topoloc_localizer_options_init((p), sizeof *(p))
-#define topoloc_frame_default(p) topoloc_frame_init((p), sizeof *(p))
-#define topoloc_result_default(p) topoloc_result_init((p), sizeof *(p))
-#define topoloc_view_info_default(p) topoloc_view_info_init((p), sizeof *(p))
-#define topoloc_image_map_options_default(p) topoloc_image_map_options_init((p), sizeof *(p))
-#define topoloc_describer_options_default(p) topoloc_describer_options_init((p), sizeof *(p))
-#define topoloc_skeleton_options_default(p) topoloc_skeleton_options_init((p), sizeof *(p))
-#define topoloc_loop_options_default(p) topoloc_loop_options_init((p), sizeof *(p))
-#define topoloc_loop_keyframe_default(p) topoloc_loop_keyframe_init((p), sizeof *(p))
-#define topoloc_loop_hint_default(p) topoloc_loop_hint_init((p), sizeof *(p))
-#define topoloc_trajectory_options_default(p) topoloc_trajectory_options_init((p), sizeof *(p))
-#define topoloc_trajectory_report_default(p) topoloc_trajectory_report_init((p), sizeof *(p))
-";
+fn default_macros(header: &str) -> String {
+    let mut macros = String::from(
+        "\n/* Fill a versioned struct with defaults (and its struct_size) before use. */\n",
+    );
+    for line in header.lines() {
+        let Some(name) = function_name(line).and_then(|f| f.strip_suffix("_init")) else {
+            continue;
+        };
+        macros.push_str(&format!(
+            "#define {name}_default(p) {name}_init((p), sizeof *(p))\n"
+        ));
+    }
+    macros
+}
 
 /// The header's sections of functions, in reading order: a banner and the functions' name
 /// prefixes. cbindgen writes functions in the order of src/ffi/mod.rs's modules; this only
@@ -182,13 +180,11 @@ fn function_name(line: &str) -> Option<&str> {
     name.starts_with("topoloc_").then_some(name)
 }
 
-fn generate(root: &Path) -> Result<Vec<u8>, String> {
-    let (major, minor, patch) = package_version(root)?;
+/// cbindgen's header of src/ffi, with `after_includes` after the includes.
+fn cbindgen_header(root: &Path, after_includes: String) -> Result<String, String> {
     let mut config =
         cbindgen::Config::from_file(root.join("cbindgen.toml")).map_err(|e| e.to_string())?;
-    config.after_includes = Some(format!(
-        "\n#define TOPOLOC_VERSION_MAJOR {major}\n#define TOPOLOC_VERSION_MINOR {minor}\n#define TOPOLOC_VERSION_PATCH {patch}\n#define TOPOLOC_VERSION_STRING \"{major}.{minor}.{patch}\"\n{DEFAULT_MACROS}"
-    ));
+    config.after_includes = Some(after_includes);
     let bindings = cbindgen::Builder::new()
         .with_config(config)
         // cbindgen follows the `mod` declarations of src/ffi/mod.rs to the other files.
@@ -197,37 +193,56 @@ fn generate(root: &Path) -> Result<Vec<u8>, String> {
         .map_err(|e| format!("cbindgen: {e}"))?;
     let mut out = Vec::new();
     bindings.write(&mut out);
-    let text = String::from_utf8(out).map_err(|e| format!("cbindgen wrote non-UTF-8: {e}"))?;
-    let text = add_defaults(&text, &topoloc::ffi::option_defaults())?;
+    String::from_utf8(out).map_err(|e| format!("cbindgen wrote non-UTF-8: {e}"))
+}
+
+fn generate(root: &Path) -> Result<Vec<u8>, String> {
+    let (major, minor, patch) = package_version(root)?;
+    let versions = format!(
+        "\n#define TOPOLOC_VERSION_MAJOR {major}\n#define TOPOLOC_VERSION_MINOR {minor}\n#define TOPOLOC_VERSION_PATCH {patch}\n#define TOPOLOC_VERSION_STRING \"{major}.{minor}.{patch}\"\n"
+    );
+    // The `_default` macros name the `_init` functions, which only the generated header lists.
+    let functions = cbindgen_header(root, versions.clone())?;
+    let text = cbindgen_header(root, versions + &default_macros(&functions))?;
+    let ranges = topoloc::ffi::option_ranges()
+        .into_iter()
+        .map(|r| (r.struct_name, r.field, format!("Range: {}.", r.bounds)));
+    let defaults = topoloc::ffi::option_defaults()
+        .into_iter()
+        .map(|d| (d.struct_name, d.field, format!("Default: {}.", d.value)));
+    let text = add_field_notes(&text, ranges.chain(defaults))?;
     Ok(add_section_banners(&text)?.into_bytes())
 }
 
-/// Ends the doc comment of every field in `defaults` with a line "Default: VALUE.".
-fn add_defaults(header: &str, defaults: &[topoloc::ffi::OptionDefault]) -> Result<String, String> {
+/// Ends the doc comment of each `(struct, field, note)`'s field with a line `note`, in order.
+fn add_field_notes<'a>(
+    header: &str,
+    notes: impl Iterator<Item = (&'a str, &'a str, String)>,
+) -> Result<String, String> {
     let mut text = header.to_string();
-    for d in defaults {
-        let open = format!("typedef struct {} {{", d.struct_name);
+    for (struct_name, field, note) in notes {
+        let open = format!("typedef struct {} {{", struct_name);
         let start = text
             .find(&open)
-            .ok_or_else(|| format!("no struct {} in the header", d.struct_name))?;
+            .ok_or_else(|| format!("no struct {} in the header", struct_name))?;
         let end = start
             + text[start..]
                 .find("\n} ")
-                .ok_or_else(|| format!("struct {} does not end", d.struct_name))?
+                .ok_or_else(|| format!("struct {} does not end", struct_name))?
             + 1;
-        let declaration = [format!(" {};\n", d.field), format!("*{};\n", d.field)];
+        let declaration = [format!(" {};\n", field), format!("*{};\n", field)];
         let field_at = declaration
             .iter()
             .filter_map(|decl| text[start..end].find(decl.as_str()))
             .min()
             .map(|at| start + at)
-            .ok_or_else(|| format!("no field {} in {}", d.field, d.struct_name))?;
+            .ok_or_else(|| format!("no field {} in {}", field, struct_name))?;
         let doc_end = text[start..field_at]
             .rfind("   */\n")
             .map(|at| start + at)
             .filter(|&at| !text[at..field_at].contains(';'))
-            .ok_or_else(|| format!("{}.{} has no doc comment", d.struct_name, d.field))?;
-        text.insert_str(doc_end, &format!("   * Default: {}.\n", d.value));
+            .ok_or_else(|| format!("{}.{} has no doc comment", struct_name, field))?;
+        text.insert_str(doc_end, &format!("   * {note}\n"));
     }
     Ok(text)
 }
