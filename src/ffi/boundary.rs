@@ -72,10 +72,43 @@ pub(crate) fn check_out<T>(ptr: *mut T, name: &str) -> Result<(), FfiError> {
     }
 }
 
+/// Writes an optional out-parameter (a size the caller may not want): NULL is skipped.
+pub(crate) fn write_optional<T>(ptr: *mut T, value: T) {
+    if !ptr.is_null() {
+        write_out(ptr, value);
+    }
+}
+
 /// Writes an out-parameter checked with [`check_out`].
 pub(crate) fn write_out<T>(ptr: *mut T, value: T) {
     // SAFETY: checked non-NULL by `check_out`; the caller provides writable storage for a T.
     unsafe { ptr.write(value) }
+}
+
+/// The body of an out-parameter: checks that `ptr` is non-NULL, then computes `value` and
+/// writes it only when that succeeds.
+pub(crate) fn fill_out<T>(
+    ptr: *mut T,
+    name: &str,
+    value: impl FnOnce() -> Result<T, FfiError>,
+) -> Result<(), FfiError> {
+    check_out(ptr, name)?;
+    write_out(ptr, value()?);
+    Ok(())
+}
+
+/// Converts each element of the C array `items` named `name`, passing `convert` the element's
+/// name for messages (`name[i]`); the first error stops.
+pub(crate) fn convert_each<'a, T, U>(
+    items: &'a [T],
+    name: &str,
+    mut convert: impl FnMut(&'a T, &str) -> Result<U, FfiError>,
+) -> Result<Vec<U>, FfiError> {
+    items
+        .iter()
+        .enumerate()
+        .map(|(i, element)| convert(element, &format!("{name}[{i}]")))
+        .collect()
 }
 
 /// Views `(ptr, len)` as a slice; `len == 0` gives an empty slice whatever `ptr` is.
@@ -130,9 +163,7 @@ pub(crate) fn copy_c_string(
     needed: *mut usize,
 ) -> Result<(), FfiError> {
     let required = text.len() + 1;
-    if !needed.is_null() {
-        write_out(needed, required);
-    }
+    write_optional(needed, required);
     if len < required {
         return Err(FfiError::new(
             TOPOLOC_ERR_BUFFER_TOO_SMALL,
@@ -156,9 +187,7 @@ pub(crate) fn write_array<T: Copy>(
     len: usize,
     count: *mut usize,
 ) -> Result<(), FfiError> {
-    if !count.is_null() {
-        write_out(count, values.len());
-    }
+    write_optional(count, values.len());
     if len < values.len() {
         return Err(FfiError::new(
             TOPOLOC_ERR_BUFFER_TOO_SMALL,

@@ -1,12 +1,12 @@
 //! C functions that build maps: the incremental builder and the keyframe path.
 
-use super::boundary::{check_out, optional_string, run, slice, string, write_out};
+use super::boundary::{convert_each, fill_out, optional_string, run, slice, string};
 use super::convert::optional_pose;
 use super::error::FfiError;
 use super::handles::{enter, free_exclusive, new_exclusive, Castable, Opaque, OwnedExclusive};
 use super::map::{map_handle, topoloc_map};
 use super::topoloc_status;
-use super::versioned::{init_versioned, read_versioned, Versioned};
+use super::versioned::{init_versioned, read_optional, versioned};
 use crate::build::{from_keyframes, Keyframe, KeyframeOptions};
 use crate::descriptor::DescriptorIdentity;
 use crate::map::{MapBuilder, ViewAttributes};
@@ -38,12 +38,11 @@ pub extern "C" fn topoloc_map_builder_new(
 ) -> topoloc_status {
     run(|| {
         let identity = identity(kind, model, dim)?;
-        check_out(out, "out")?;
-        write_out(
-            out,
-            new_exclusive::<topoloc_map_builder>(MapBuilder::new(identity)),
-        );
-        Ok(())
+        fill_out(out, "out", || {
+            Ok(new_exclusive::<topoloc_map_builder>(MapBuilder::new(
+                identity,
+            )))
+        })
     })
 }
 
@@ -72,16 +71,16 @@ pub extern "C" fn topoloc_map_builder_add_place(
 ) -> topoloc_status {
     run(|| {
         let mut builder = enter(builder, "builder")?;
-        check_out(place_out, "place_out")?;
-        let position = match position.is_null() {
-            true => None,
-            false => {
-                let p = slice(position, 3, "position")?;
-                Some(Point3::new(p[0], p[1], p[2]))
-            }
-        };
-        write_out(place_out, builder.add_place(position)?);
-        Ok(())
+        fill_out(place_out, "place_out", || {
+            let position = match position.is_null() {
+                true => None,
+                false => {
+                    let p = slice(position, 3, "position")?;
+                    Some(Point3::new(p[0], p[1], p[2]))
+                }
+            };
+            Ok(builder.add_place(position)?)
+        })
     })
 }
 
@@ -102,14 +101,9 @@ pub struct topoloc_view_attributes {
     pub image: *const c_char,
 }
 
-impl Versioned for topoloc_view_attributes {
-    const LAYOUTS: &'static [usize] = &[std::mem::size_of::<Self>()];
-}
-
-impl Default for topoloc_view_attributes {
-    fn default() -> Self {
+versioned! {
+    topoloc_view_attributes {
         Self {
-            struct_size: std::mem::size_of::<Self>(),
             has_keyframe_id: false,
             keyframe_id: 0,
             world_T_camera: std::ptr::null(),
@@ -143,19 +137,15 @@ pub extern "C" fn topoloc_map_builder_add_view(
     run(|| {
         let mut builder = enter(builder, "builder")?;
         let descriptor = slice(descriptor, len, "descriptor")?;
-        check_out(view_out, "view_out")?;
-        let attributes = if attributes.is_null() {
-            ViewAttributes::default()
-        } else {
-            let a = read_versioned(attributes, topoloc_view_attributes::default(), "attributes")?;
-            ViewAttributes {
+        fill_out(view_out, "view_out", || {
+            let a = read_optional(attributes, "attributes")?;
+            let attributes = ViewAttributes {
                 keyframe_id: a.has_keyframe_id.then_some(a.keyframe_id),
                 world_t_camera: optional_pose(a.world_T_camera, "attributes.world_T_camera")?,
                 image: optional_string(a.image, "attributes.image")?,
-            }
-        };
-        write_out(view_out, builder.add_view(place, descriptor, attributes)?);
-        Ok(())
+            };
+            Ok(builder.add_view(place, descriptor, attributes)?)
+        })
     })
 }
 
@@ -182,9 +172,7 @@ pub extern "C" fn topoloc_map_builder_build(
 ) -> topoloc_status {
     run(|| {
         let builder = enter(builder, "builder")?;
-        check_out(out, "out")?;
-        write_out(out, map_handle(builder.build()?));
-        Ok(())
+        fill_out(out, "out", || Ok(map_handle(builder.build()?)))
     })
 }
 
@@ -219,15 +207,10 @@ pub struct topoloc_keyframe_options {
     pub max_views_per_place: u32,
 }
 
-impl Versioned for topoloc_keyframe_options {
-    const LAYOUTS: &'static [usize] = &[std::mem::size_of::<Self>()];
-}
-
-impl Default for topoloc_keyframe_options {
-    fn default() -> Self {
+versioned! {
+    topoloc_keyframe_options {
         let d = KeyframeOptions::default();
         Self {
-            struct_size: std::mem::size_of::<Self>(),
             place_spacing_m: d.place_spacing_m,
             novelty_similarity: d.novelty_similarity,
             neighbour_radius_m: d.neighbour_radius_m,
@@ -262,40 +245,29 @@ pub extern "C" fn topoloc_map_from_keyframes(
     run(|| {
         let identity = identity(kind, model, dim)?;
         let raw = slice(keyframes, count, "keyframes")?;
-        check_out(out, "out")?;
-        let o = if options.is_null() {
-            topoloc_keyframe_options::default()
-        } else {
-            read_versioned(options, topoloc_keyframe_options::default(), "options")?
-        };
-        let options = KeyframeOptions {
-            place_spacing_m: o.place_spacing_m,
-            novelty_similarity: o.novelty_similarity,
-            neighbour_radius_m: o.neighbour_radius_m,
-            max_views_per_place: o.max_views_per_place,
-        };
-        let keyframes = raw
-            .iter()
-            .enumerate()
-            .map(|(i, k)| {
+        fill_out(out, "out", || {
+            let o = read_optional(options, "options")?;
+            let options = KeyframeOptions {
+                place_spacing_m: o.place_spacing_m,
+                novelty_similarity: o.novelty_similarity,
+                neighbour_radius_m: o.neighbour_radius_m,
+                max_views_per_place: o.max_views_per_place,
+            };
+            let keyframes = convert_each(raw, "keyframes", |k, name| {
                 Ok(Keyframe {
                     id: k.id,
                     descriptor: slice(
                         k.descriptor,
                         k.descriptor_len,
-                        &format!("keyframes[{i}].descriptor"),
+                        &format!("{name}.descriptor"),
                     )?,
                     world_t_camera: optional_pose(
                         k.world_T_camera,
-                        &format!("keyframes[{i}].world_T_camera"),
+                        &format!("{name}.world_T_camera"),
                     )?,
                 })
-            })
-            .collect::<Result<Vec<_>, FfiError>>()?;
-        write_out(
-            out,
-            map_handle(from_keyframes(identity, &keyframes, &options)?),
-        );
-        Ok(())
+            })?;
+            Ok(map_handle(from_keyframes(identity, &keyframes, &options)?))
+        })
     })
 }

@@ -2,15 +2,15 @@
 //! images computes the global descriptors it gives a loop detector (or a keyframe builder)
 //! exactly as the map's views were described.
 
-use super::boundary::{check_out, optional_string, run, slice, write_array, write_out};
+use super::boundary::{fill_out, optional_string, run, slice, write_array, write_optional};
 use super::error::FfiError;
 use super::handles::{
-    clone_arc, enter, free_exclusive, new_exclusive, Castable, Opaque, OwnedExclusive,
+    clone_arc, enter, free_exclusive, handle_value, new_exclusive, Castable, Opaque, OwnedExclusive,
 };
 use super::images::{backend_family, backend_kind, image_view, topoloc_backend, topoloc_image};
 use super::map::topoloc_map;
 use super::topoloc_status;
-use super::versioned::{init_versioned, read_versioned, Versioned};
+use super::versioned::{init_versioned, read_optional, versioned};
 use crate::describe::{Describer, DescriberOptions};
 use crate::localize::LocalizeError;
 use std::ffi::c_char;
@@ -53,20 +53,15 @@ pub struct topoloc_describer_options {
     pub threads: u32,
 }
 
-impl Default for topoloc_describer_options {
-    fn default() -> Self {
+versioned! {
+    topoloc_describer_options {
         Self {
-            struct_size: std::mem::size_of::<Self>(),
             backend: super::images::TOPOLOC_BACKEND_AUTO,
             onnx_model_path: std::ptr::null(),
             onnx_runtime_path: std::ptr::null(),
             threads: 1,
         }
     }
-}
-
-impl Versioned for topoloc_describer_options {
-    const LAYOUTS: &'static [usize] = &[std::mem::size_of::<Self>()];
 }
 
 /// The Rust describer options a backend code and two optional C paths stand for (shared with
@@ -109,45 +104,39 @@ pub extern "C" fn topoloc_describer_new(
 ) -> topoloc_status {
     run(|| {
         let map = clone_arc(map, "map")?;
-        check_out(out, "out")?;
-        let o = if options.is_null() {
-            topoloc_describer_options::default()
-        } else {
-            read_versioned(options, topoloc_describer_options::default(), "options")?
-        };
-        if o.backend == super::images::TOPOLOC_BACKEND_NONE {
-            return Err(FfiError::new(
-                topoloc_status::TOPOLOC_ERR_INVALID_OPTION,
-                "a describer needs a backend: TOPOLOC_BACKEND_NONE describes nothing".to_string(),
-            ));
-        }
-        if !(1..=64).contains(&o.threads) {
-            return Err(FfiError::new(
-                topoloc_status::TOPOLOC_ERR_INVALID_OPTION,
-                format!("threads {} must lie in 1..=64", o.threads),
-            ));
-        }
-        let model = map.describer().cloned().ok_or_else(|| {
-            LocalizeError::NoDescriber(format!(
-                "the map ({}) stores no describer; it was built from descriptors, not images",
-                map.descriptor()
-            ))
-        })?;
-        let options = describer_options(
-            o.backend,
-            o.onnx_model_path,
-            o.onnx_runtime_path,
-            o.threads as usize,
-        )?;
-        let describer = Describer::new(model, &options)?;
-        write_out(
-            out,
-            new_exclusive::<topoloc_describer>(DescriberState {
+        fill_out(out, "out", || {
+            let o = read_optional(options, "options")?;
+            if o.backend == super::images::TOPOLOC_BACKEND_NONE {
+                return Err(FfiError::new(
+                    topoloc_status::TOPOLOC_ERR_INVALID_OPTION,
+                    "a describer needs a backend: TOPOLOC_BACKEND_NONE describes nothing"
+                        .to_string(),
+                ));
+            }
+            if !(1..=64).contains(&o.threads) {
+                return Err(FfiError::new(
+                    topoloc_status::TOPOLOC_ERR_INVALID_OPTION,
+                    format!("threads {} must lie in 1..=64", o.threads),
+                ));
+            }
+            let model = map.describer().cloned().ok_or_else(|| {
+                LocalizeError::NoDescriber(format!(
+                    "the map ({}) stores no describer; it was built from descriptors, not images",
+                    map.descriptor()
+                ))
+            })?;
+            let options = describer_options(
+                o.backend,
+                o.onnx_model_path,
+                o.onnx_runtime_path,
+                o.threads as usize,
+            )?;
+            let describer = Describer::new(model, &options)?;
+            Ok(new_exclusive::<topoloc_describer>(DescriberState {
                 describer,
                 scratch: Vec::new(),
-            }),
-        );
-        Ok(())
+            }))
+        })
     })
 }
 
@@ -163,11 +152,8 @@ pub extern "C" fn topoloc_describer_dim(
     describer: *const topoloc_describer,
     out: *mut usize,
 ) -> topoloc_status {
-    run(|| {
-        let state = enter(describer, "describer")?;
-        check_out(out, "out")?;
-        write_out(out, state.describer.identity().dim as usize);
-        Ok(())
+    handle_value(describer, "describer", out, "out", |state| {
+        state.describer.identity().dim as usize
     })
 }
 
@@ -197,9 +183,7 @@ pub extern "C" fn topoloc_describer_describe(
         let dim = state.describer.identity().dim as usize;
         if capacity < dim {
             // The size contract of `write_array`, checked before the forward pass is paid for.
-            if !len.is_null() {
-                write_out(len, dim);
-            }
+            write_optional(len, dim);
             return Err(FfiError::new(
                 topoloc_status::TOPOLOC_ERR_BUFFER_TOO_SMALL,
                 format!("buffer holds {capacity} floats, {dim} needed"),

@@ -11,8 +11,9 @@
 //! with `TOPOLOC_ERR_CONCURRENT_USE` instead of letting two threads share a `&mut`) and dropped
 //! by [`free_exclusive`].
 
-use super::boundary::run_void;
+use super::boundary::{fill_out, run, run_void};
 use super::error::FfiError;
+use super::status::topoloc_status;
 use std::cell::UnsafeCell;
 use std::marker::PhantomData;
 use std::ops::{Deref, DerefMut};
@@ -104,6 +105,56 @@ where
     // SAFETY: a non-NULL handle came from `new_box` / `new_arc` for this type and is live for
     // the call (C contract); both point at a `C::RustType`.
     unsafe { handle.cast::<C::RustType>().as_ref() }.ok_or_else(|| FfiError::null(name))
+}
+
+/// Ownerships a call may read a value through: borrowed ([`try_ref`]) or entered ([`enter`]).
+pub(crate) trait Readable: Sized {
+    /// Runs `read` on the value behind `handle`, or fails as [`try_ref`] or [`enter`] does.
+    fn read<C: Castable<Ownership = Self>, R>(
+        handle: *const C,
+        name: &str,
+        read: impl FnOnce(&C::RustType) -> R,
+    ) -> Result<R, FfiError>;
+}
+
+impl<O: Direct> Readable for O {
+    fn read<C: Castable<Ownership = Self>, R>(
+        handle: *const C,
+        name: &str,
+        read: impl FnOnce(&C::RustType) -> R,
+    ) -> Result<R, FfiError> {
+        Ok(read(try_ref(handle, name)?))
+    }
+}
+
+impl Readable for OwnedExclusive {
+    fn read<C: Castable<Ownership = Self>, R>(
+        handle: *const C,
+        name: &str,
+        read: impl FnOnce(&C::RustType) -> R,
+    ) -> Result<R, FfiError> {
+        Ok(read(&*enter(handle, name)?))
+    }
+}
+
+/// The body of an accessor that writes one value read from a handle (`name`) to the
+/// out-parameter `out` (`out_name`): the handle is checked first, then `out`.
+pub(crate) fn handle_value<C, T>(
+    handle: *const C,
+    name: &str,
+    out: *mut T,
+    out_name: &str,
+    read: impl FnOnce(&C::RustType) -> T,
+) -> topoloc_status
+where
+    C: Castable,
+    C::Ownership: Readable,
+{
+    run(|| {
+        C::Ownership::read(handle, name, |value| {
+            fill_out(out, out_name, || Ok(read(value)))
+        })?
+    })
 }
 
 /// A value that one call at a time may use, checked: the busy flag is taken with one atomic

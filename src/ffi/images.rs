@@ -1,11 +1,11 @@
 //! C functions and types for images: the image view passed in frames, and maps built from
 //! image files or pixel buffers with a progress callback.
 
-use super::boundary::{check_out, optional_string, run, slice, string};
+use super::boundary::{convert_each, fill_out, optional_string, run, slice, string};
 use super::error::FfiError;
 use super::map::{map_handle, topoloc_map};
 use super::topoloc_status;
-use super::versioned::{init_versioned, read_versioned, Versioned};
+use super::versioned::{init_versioned, read_optional, versioned};
 use crate::build::{
     build_from_images, read_tum, BuildStage, ImageLayout, ImageMapOptions, ImageSource,
 };
@@ -191,18 +191,11 @@ pub struct topoloc_image_map_options {
     pub pca_precision: topoloc_pca_precision,
 }
 
-impl Versioned for topoloc_image_map_options {
-    const LAYOUTS: &'static [usize] = &[
-        std::mem::offset_of!(Self, pca_precision),
-        std::mem::size_of::<Self>(),
-    ];
-}
-
-impl Default for topoloc_image_map_options {
-    fn default() -> Self {
+// ABI 1.0 to 1.13 ended before `pca_precision`.
+versioned! {
+    topoloc_image_map_options [pca_precision] {
         let onnx = OnnxOptions::default();
         Self {
-            struct_size: std::mem::size_of::<Self>(),
             backend: TOPOLOC_BACKEND_AUTO,
             dim: FitOptions::default().dim as u32,
             views_per_place: 1,
@@ -261,11 +254,7 @@ pub(crate) fn backend_kind(
 fn image_map_options(
     options: *const topoloc_image_map_options,
 ) -> Result<(ImageMapOptions, Option<String>), FfiError> {
-    let o = if options.is_null() {
-        topoloc_image_map_options::default()
-    } else {
-        read_versioned(options, topoloc_image_map_options::default(), "options")?
-    };
+    let o = read_optional(options, "options")?;
     let backend = match o.backend {
         TOPOLOC_BACKEND_AUTO | TOPOLOC_BACKEND_ONNX => {
             let mut onnx = OnnxOptions {
@@ -331,42 +320,42 @@ fn build(
     user_data: *mut c_void,
     out: *mut *mut topoloc_map,
 ) -> Result<(), FfiError> {
-    check_out(out, "out")?;
-    let (options, poses_path) = image_map_options(options)?;
-    let poses = match poses_path {
-        Some(path) => Some(
-            read_tum(Path::new(&path))?
-                .into_iter()
-                .map(|p| p.world_t_camera)
-                .collect::<Vec<_>>(),
-        ),
-        None => None,
-    };
-    let mut report = |stage: BuildStage, done: usize, total: usize| match progress {
-        // SAFETY: the caller passes a valid callback and its user data.
-        Some(callback) => unsafe {
-            callback(
-                user_data,
-                match stage {
-                    BuildStage::Describing => TOPOLOC_STAGE_DESCRIBING,
-                    BuildStage::Fitting => TOPOLOC_STAGE_FITTING,
-                },
-                done,
-                total,
-            )
-        },
-        None => true,
-    };
-    let (map, _) = build_from_images(
-        sources,
-        poses
-            .as_deref()
-            .map_or(ImageLayout::Sequence, ImageLayout::Keyframes),
-        &options,
-        &mut report,
-    )?;
-    super::boundary::write_out(out, map_handle(map));
-    Ok(())
+    fill_out(out, "out", || {
+        let (options, poses_path) = image_map_options(options)?;
+        let poses = match poses_path {
+            Some(path) => Some(
+                read_tum(Path::new(&path))?
+                    .into_iter()
+                    .map(|p| p.world_t_camera)
+                    .collect::<Vec<_>>(),
+            ),
+            None => None,
+        };
+        let mut report = |stage: BuildStage, done: usize, total: usize| match progress {
+            // SAFETY: the caller passes a valid callback and its user data.
+            Some(callback) => unsafe {
+                callback(
+                    user_data,
+                    match stage {
+                        BuildStage::Describing => TOPOLOC_STAGE_DESCRIBING,
+                        BuildStage::Fitting => TOPOLOC_STAGE_FITTING,
+                    },
+                    done,
+                    total,
+                )
+            },
+            None => true,
+        };
+        let (map, _) = build_from_images(
+            sources,
+            poses
+                .as_deref()
+                .map_or(ImageLayout::Sequence, ImageLayout::Keyframes),
+            &options,
+            &mut report,
+        )?;
+        Ok(map_handle(map))
+    })
 }
 
 /// Builds a map from `count` image files (any format OpenCV reads), describing them in
@@ -386,16 +375,9 @@ pub extern "C" fn topoloc_map_build_from_image_files(
     out: *mut *mut topoloc_map,
 ) -> topoloc_status {
     run(|| {
-        let pointers = slice(paths, count, "paths")?;
-        let names = pointers
-            .iter()
-            .enumerate()
-            .map(|(i, &p)| string(p, &format!("paths[{i}]")))
-            .collect::<Result<Vec<_>, _>>()?;
-        let sources: Vec<ImageSource> = names
-            .iter()
-            .map(|n| ImageSource::File(Path::new(n)))
-            .collect();
+        let sources = convert_each(slice(paths, count, "paths")?, "paths", |&path, name| {
+            Ok(ImageSource::File(Path::new(string(path, name)?)))
+        })?;
         build(&sources, options, progress, user_data, out)
     })
 }
@@ -413,21 +395,16 @@ pub extern "C" fn topoloc_map_build_from_images(
     out: *mut *mut topoloc_map,
 ) -> topoloc_status {
     run(|| {
-        let images = slice(images, count, "images")?;
-        let sources = images
-            .iter()
-            .enumerate()
-            .map(|(i, image)| {
-                image_view(image, &format!("images[{i}]"))?
-                    .map(ImageSource::Pixels)
-                    .ok_or_else(|| {
-                        FfiError::new(
-                            topoloc_status::TOPOLOC_ERR_INVALID_IMAGE,
-                            format!("images[{i}] has format TOPOLOC_PIXEL_NONE"),
-                        )
-                    })
-            })
-            .collect::<Result<Vec<_>, _>>()?;
+        let sources = convert_each(slice(images, count, "images")?, "images", |image, name| {
+            image_view(image, name)?
+                .map(ImageSource::Pixels)
+                .ok_or_else(|| {
+                    FfiError::new(
+                        topoloc_status::TOPOLOC_ERR_INVALID_IMAGE,
+                        format!("{name} has format TOPOLOC_PIXEL_NONE"),
+                    )
+                })
+        })?;
         build(&sources, options, progress, user_data, out)
     })
 }

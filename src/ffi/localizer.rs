@@ -1,6 +1,6 @@
 //! C functions of the localizer: create, process a frame, reset, free.
 
-use super::boundary::{check_out, run, slice, write_out};
+use super::boundary::{fill_out, run, slice};
 use super::convert::{expected_descriptor, optional_camera, optional_pose, pose_to_row_major};
 use super::describer::describer_options;
 use super::error::FfiError;
@@ -13,7 +13,7 @@ use super::images::{
 };
 use super::map::topoloc_map;
 use super::topoloc_status;
-use super::versioned::{init_versioned, read_versioned, write_versioned, Versioned};
+use super::versioned::{init_versioned, read_optional, read_versioned, versioned, write_versioned};
 use crate::localize::{Frame, Localization, Localizer, LocalizerOptions, MetricOptions, Mode};
 use crate::verify::{LocateOptions, VerificationOptions};
 use nalgebra::Isometry3;
@@ -134,26 +134,19 @@ pub struct topoloc_localizer_options {
     pub verify_off_map_inlier_scale: f64,
 }
 
-impl Versioned for topoloc_localizer_options {
-    /// ABI 1.0 ended before `image_backend`; 1.1 added the image fields, 1.2 verification,
-    /// 1.3 metric mode, 1.6 pose fixes, 1.9 off-map evidence from verification (its fields
-    /// are 8 bytes wide so that the 1.6 layout, padded after `pose_min_inliers`, still ends
-    /// where they start).
-    const LAYOUTS: &'static [usize] = &[
-        std::mem::offset_of!(Self, image_backend),
-        std::mem::offset_of!(Self, verify_candidates),
-        std::mem::offset_of!(Self, metric_particles),
-        std::mem::offset_of!(Self, camera_fx),
-        std::mem::offset_of!(Self, verify_off_map_inliers),
-        std::mem::size_of::<Self>(),
-    ];
-}
-
-impl Default for topoloc_localizer_options {
-    fn default() -> Self {
+// ABI 1.0 ended before `image_backend`; 1.1 added the image fields, 1.2 verification, 1.3
+// metric mode, 1.6 pose fixes, 1.9 off-map evidence from verification (its fields are 8 bytes
+// wide so that the 1.6 layout, padded after `pose_min_inliers`, still ends where they start).
+versioned! {
+    topoloc_localizer_options [
+        image_backend,
+        verify_candidates,
+        metric_particles,
+        camera_fx,
+        verify_off_map_inliers,
+    ] {
         let d = LocalizerOptions::default();
         Self {
-            struct_size: std::mem::size_of::<Self>(),
             mode: TOPOLOC_MODE_FILTER,
             temperature: d.temperature,
             stay_probability: d.stay_probability,
@@ -210,34 +203,31 @@ pub extern "C" fn topoloc_localizer_new(
 ) -> topoloc_status {
     run(|| {
         let map = clone_arc(map, "map")?;
-        check_out(out, "out")?;
-        let o = if options.is_null() {
-            topoloc_localizer_options::default()
-        } else {
-            read_versioned(options, topoloc_localizer_options::default(), "options")?
-        };
-        let options = localizer_options(&o)?;
-        let has_describer = map.describer().is_some();
-        // Unknown backend codes are refused before the map is looked at.
-        backend_kind(o.image_backend, None)?;
-        let localizer = match (o.image_backend, has_describer) {
-            (TOPOLOC_BACKEND_NONE, _) | (TOPOLOC_BACKEND_AUTO, false) => {
-                Localizer::new(map, options)?
-            }
-            _ => {
-                let describer =
-                    describer_options(o.image_backend, o.onnx_model_path, o.onnx_runtime_path, 1)?;
-                Localizer::with_describer(map, options, &describer)?
-            }
-        };
-        write_out(
-            out,
-            new_exclusive::<topoloc_localizer>(LocalizerState {
+        fill_out(out, "out", || {
+            let o = read_optional(options, "options")?;
+            let options = localizer_options(&o)?;
+            let has_describer = map.describer().is_some();
+            // Unknown backend codes are refused before the map is looked at.
+            backend_kind(o.image_backend, None)?;
+            let localizer = match (o.image_backend, has_describer) {
+                (TOPOLOC_BACKEND_NONE, _) | (TOPOLOC_BACKEND_AUTO, false) => {
+                    Localizer::new(map, options)?
+                }
+                _ => {
+                    let describer = describer_options(
+                        o.image_backend,
+                        o.onnx_model_path,
+                        o.onnx_runtime_path,
+                        1,
+                    )?;
+                    Localizer::with_describer(map, options, &describer)?
+                }
+            };
+            Ok(new_exclusive::<topoloc_localizer>(LocalizerState {
                 localizer,
                 scratch: Localization::default(),
-            }),
-        );
-        Ok(())
+            }))
+        })
     })
 }
 
@@ -327,18 +317,10 @@ pub struct topoloc_frame {
     pub image: topoloc_image,
 }
 
-impl Versioned for topoloc_frame {
-    /// ABI 1.0 ended before `image`; 1.1 added it.
-    const LAYOUTS: &'static [usize] = &[
-        std::mem::offset_of!(Self, image),
-        std::mem::size_of::<Self>(),
-    ];
-}
-
-impl Default for topoloc_frame {
-    fn default() -> Self {
+// ABI 1.0 ended before `image`; 1.1 added it.
+versioned! {
+    topoloc_frame [image] {
         Self {
-            struct_size: std::mem::size_of::<Self>(),
             timestamp: 0.0,
             descriptor: std::ptr::null(),
             descriptor_len: 0,
@@ -419,19 +401,10 @@ pub struct topoloc_result {
     pub world_T_camera: [f64; 16],
 }
 
-impl Versioned for topoloc_result {
-    /// ABI 1.0 and 1.1 ended before `verified`; 1.2 added verification, 1.6 pose fixes.
-    const LAYOUTS: &'static [usize] = &[
-        std::mem::offset_of!(Self, verified),
-        std::mem::offset_of!(Self, has_pose_fix),
-        std::mem::size_of::<Self>(),
-    ];
-}
-
-impl Default for topoloc_result {
-    fn default() -> Self {
+// ABI 1.0 and 1.1 ended before `verified`; 1.2 added verification, 1.6 pose fixes.
+versioned! {
+    topoloc_result [verified, has_pose_fix] {
         Self {
-            struct_size: std::mem::size_of::<Self>(),
             frame_index: 0,
             place: 0,
             view: 0,
@@ -479,13 +452,9 @@ pub extern "C" fn topoloc_localizer_process(
     run(|| {
         let mut in_use = enter(localizer, "localizer")?;
         let state = &mut *in_use;
-        let f = read_versioned(frame, topoloc_frame::default(), "frame")?;
+        let f = read_versioned(frame, "frame")?;
         // The caller's result is read through its own layout only (it may be an older one).
-        let caller = read_versioned(
-            result as *const topoloc_result,
-            topoloc_result::default(),
-            "result",
-        )?;
+        let caller = read_versioned(result.cast_const(), "result")?;
         let (buffer, capacity) = (caller.candidates, caller.candidates_capacity);
         if buffer.is_null() && capacity > 0 {
             return Err(FfiError::null("result.candidates"));
@@ -512,7 +481,6 @@ pub extern "C" fn topoloc_localizer_process(
         write_versioned(
             result,
             topoloc_result {
-                struct_size: std::mem::size_of::<topoloc_result>(),
                 frame_index: out.frame_index,
                 place: out.place,
                 view: out.view,
@@ -532,6 +500,7 @@ pub extern "C" fn topoloc_localizer_process(
                     &out.pose_fix
                         .map_or_else(Isometry3::identity, |f| f.world_t_optical),
                 ),
+                ..topoloc_result::default()
             },
             "result",
         )

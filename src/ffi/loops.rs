@@ -1,15 +1,17 @@
 //! C functions of loop closure (ABI 1.5): a loop detector (keyframe database with each
 //! keyframe's local features) that turns every added keyframe into at most one gated hint.
 
-use super::boundary::{check_out, run, slice, string, write_array, write_out};
+use super::boundary::{check_out, fill_out, run, slice, string, write_array};
 use super::convert::{optional_camera, optional_pose, pose_to_row_major};
 use super::error::FfiError;
 use super::handles::{
-    enter, free_exclusive, new_exclusive, try_ref, Castable, Opaque, OwnedExclusive,
+    enter, free_exclusive, handle_value, new_exclusive, try_ref, Castable, Opaque, OwnedExclusive,
 };
 use super::map::topoloc_map;
 use super::topoloc_status;
-use super::versioned::{init_versioned, read_versioned, write_versioned, Versioned};
+use super::versioned::{
+    check_versioned, init_versioned, read_optional, read_versioned, versioned, write_versioned,
+};
 use crate::descriptor::DescriptorIdentity;
 use crate::loops::{
     DatabaseOptions, Gate, HintOptions, KeyframeDatabase, KeyframeEntry, KeyframeFeatures,
@@ -113,23 +115,17 @@ pub struct topoloc_loop_options {
     pub odometry_candidates: u32,
 }
 
-impl Versioned for topoloc_loop_options {
-    /// ABI 1.5 ended before `candidate_id_gap`, ABI 1.6 before
-    /// `odometry_max_translation_per_m`, ABI 1.7 before `odometry_search_m`.
-    const LAYOUTS: &'static [usize] = &[
-        std::mem::offset_of!(Self, candidate_id_gap),
-        std::mem::offset_of!(Self, odometry_max_translation_per_m),
-        std::mem::offset_of!(Self, odometry_search_m),
-        std::mem::size_of::<Self>(),
-    ];
-}
-
-impl Default for topoloc_loop_options {
-    fn default() -> Self {
+// ABI 1.5 ended before `candidate_id_gap`, ABI 1.6 before `odometry_max_translation_per_m`,
+// ABI 1.7 before `odometry_search_m`.
+versioned! {
+    topoloc_loop_options [
+        candidate_id_gap,
+        odometry_max_translation_per_m,
+        odometry_search_m,
+    ] {
         let (h, d) = (HintOptions::default(), DatabaseOptions::default());
         let gate = h.odometry.unwrap_or_default();
         Self {
-            struct_size: std::mem::size_of::<Self>(),
             candidates: h.candidates as u32,
             exclude_recent_ids: h.exclude_recent_ids,
             exclude_recent_s: h.exclude_recent_s,
@@ -168,11 +164,7 @@ pub extern "C" fn topoloc_loop_options_init(
 fn loop_options(
     options: *const topoloc_loop_options,
 ) -> Result<(HintOptions, DatabaseOptions), FfiError> {
-    let o = if options.is_null() {
-        topoloc_loop_options::default()
-    } else {
-        read_versioned(options, topoloc_loop_options::default(), "options")?
-    };
+    let o = read_optional(options, "options")?;
     let camera = optional_camera(o.fx, o.fy, o.cx, o.cy);
     let hints = HintOptions {
         candidates: o.candidates as usize,
@@ -216,16 +208,16 @@ pub extern "C" fn topoloc_loop_detector_new(
     out: *mut *mut topoloc_loop_detector,
 ) -> topoloc_status {
     run(|| {
-        check_out(out, "out")?;
-        let identity = DescriptorIdentity::new(
-            string(descriptor_kind, "descriptor_kind")?,
-            string(descriptor_model, "descriptor_model")?,
-            dim,
-        )?;
-        let (hints, database) = loop_options(options)?;
-        let detector = LoopDetector::new(KeyframeDatabase::new(identity, database)?, hints)?;
-        write_out(out, new_exclusive::<topoloc_loop_detector>(detector));
-        Ok(())
+        fill_out(out, "out", || {
+            let identity = DescriptorIdentity::new(
+                string(descriptor_kind, "descriptor_kind")?,
+                string(descriptor_model, "descriptor_model")?,
+                dim,
+            )?;
+            let (hints, database) = loop_options(options)?;
+            let detector = LoopDetector::new(KeyframeDatabase::new(identity, database)?, hints)?;
+            Ok(new_exclusive::<topoloc_loop_detector>(detector))
+        })
     })
 }
 
@@ -242,11 +234,11 @@ pub extern "C" fn topoloc_loop_detector_from_map(
 ) -> topoloc_status {
     run(|| {
         let map = try_ref(map, "map")?;
-        check_out(out, "out")?;
-        let (hints, database) = loop_options(options)?;
-        let detector = LoopDetector::from_map(map, database, hints)?;
-        write_out(out, new_exclusive::<topoloc_loop_detector>(detector));
-        Ok(())
+        fill_out(out, "out", || {
+            let (hints, database) = loop_options(options)?;
+            let detector = LoopDetector::from_map(map, database, hints)?;
+            Ok(new_exclusive::<topoloc_loop_detector>(detector))
+        })
     })
 }
 
@@ -288,14 +280,9 @@ pub struct topoloc_loop_keyframe {
     pub camera_points: *const f32,
 }
 
-impl Versioned for topoloc_loop_keyframe {
-    const LAYOUTS: &'static [usize] = &[std::mem::size_of::<Self>()];
-}
-
-impl Default for topoloc_loop_keyframe {
-    fn default() -> Self {
+versioned! {
+    topoloc_loop_keyframe {
         Self {
-            struct_size: std::mem::size_of::<Self>(),
             id: 0,
             timestamp: 0.0,
             descriptor: std::ptr::null(),
@@ -360,14 +347,9 @@ pub struct topoloc_loop_hint {
     pub covariance: [f64; 36],
 }
 
-impl Versioned for topoloc_loop_hint {
-    const LAYOUTS: &'static [usize] = &[std::mem::size_of::<Self>()];
-}
-
-impl Default for topoloc_loop_hint {
-    fn default() -> Self {
+versioned! {
+    topoloc_loop_hint {
         Self {
-            struct_size: std::mem::size_of::<Self>(),
             query_id: 0,
             query_place: 0,
             has_match: false,
@@ -497,9 +479,9 @@ pub extern "C" fn topoloc_loop_detector_add(
 ) -> topoloc_status {
     run(|| {
         let mut detector = enter(detector, "detector")?;
-        let k = read_versioned(keyframe, topoloc_loop_keyframe::default(), "keyframe")?;
+        let k = read_versioned(keyframe, "keyframe")?;
         // Checks the caller's hint struct before anything changes.
-        read_versioned(hint as *const _, topoloc_loop_hint::default(), "hint")?;
+        check_versioned(hint, "hint")?;
         let entry = KeyframeEntry {
             id: k.id,
             timestamp: k.timestamp,
@@ -528,11 +510,8 @@ pub extern "C" fn topoloc_loop_detector_confirmed_count(
     detector: *const topoloc_loop_detector,
     count: *mut usize,
 ) -> topoloc_status {
-    run(|| {
-        let detector = enter(detector, "detector")?;
-        check_out(count, "count")?;
-        write_out(count, detector.confirmed().len());
-        Ok(())
+    handle_value(detector, "detector", count, "count", |d| {
+        d.confirmed().len()
     })
 }
 
@@ -549,7 +528,7 @@ pub extern "C" fn topoloc_loop_detector_confirmed(
 ) -> topoloc_status {
     run(|| {
         let detector = enter(detector, "detector")?;
-        read_versioned(hint as *const _, topoloc_loop_hint::default(), "hint")?;
+        check_versioned(hint, "hint")?;
         let confirmed = detector.confirmed();
         let Some(h) = confirmed.get(index) else {
             return Err(FfiError::invalid(format!(
@@ -639,10 +618,5 @@ pub extern "C" fn topoloc_loop_detector_len(
     detector: *const topoloc_loop_detector,
     out: *mut usize,
 ) -> topoloc_status {
-    run(|| {
-        let detector = enter(detector, "detector")?;
-        check_out(out, "out")?;
-        write_out(out, detector.database().len());
-        Ok(())
-    })
+    handle_value(detector, "detector", out, "out", |d| d.database().len())
 }

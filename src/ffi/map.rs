@@ -1,11 +1,13 @@
 //! C functions on maps: load, save, free and read-only accessors.
 
-use super::boundary::{check_out, copy_c_string, run, slice, string, write_array, write_out};
+use super::boundary::{
+    check_out, copy_c_string, fill_out, run, slice, string, write_array, write_out,
+};
 use super::convert::{expected_descriptor, pose_to_row_major};
 use super::error::FfiError;
-use super::handles::{free_arc, new_arc, try_ref, Castable, Opaque, OwnedArc};
+use super::handles::{free_arc, handle_value, new_arc, try_ref, Castable, Opaque, OwnedArc};
 use super::topoloc_status;
-use super::versioned::{init_versioned, read_versioned, write_versioned, Versioned};
+use super::versioned::{init_versioned, read_optional, versioned, write_versioned};
 use crate::map::{LoadOptions, Map};
 use std::ffi::c_char;
 use std::sync::Arc;
@@ -43,14 +45,9 @@ pub struct topoloc_map_load_options {
     pub expected_descriptor_dim: u32,
 }
 
-impl Versioned for topoloc_map_load_options {
-    const LAYOUTS: &'static [usize] = &[std::mem::size_of::<Self>()];
-}
-
-impl Default for topoloc_map_load_options {
-    fn default() -> Self {
+versioned! {
+    topoloc_map_load_options {
         Self {
-            struct_size: std::mem::size_of::<Self>(),
             expected_descriptor_kind: std::ptr::null(),
             expected_descriptor_model: std::ptr::null(),
             expected_descriptor_dim: 0,
@@ -68,11 +65,9 @@ pub extern "C" fn topoloc_map_load_options_init(
     init_versioned(options, size, "options")
 }
 
+/// The Rust options a C caller's options stand for (NULL: defaults).
 fn load_options(options: *const topoloc_map_load_options) -> Result<LoadOptions, FfiError> {
-    if options.is_null() {
-        return Ok(LoadOptions::default());
-    }
-    let o = read_versioned(options, topoloc_map_load_options::default(), "options")?;
+    let o = read_optional(options, "options")?;
     Ok(LoadOptions {
         expected: expected_descriptor(
             o.expected_descriptor_kind,
@@ -94,10 +89,9 @@ pub extern "C" fn topoloc_map_load(
 ) -> topoloc_status {
     run(|| {
         let path = string(path, "path")?;
-        check_out(out, "out")?;
-        let map = Map::load(path, &load_options(options)?)?;
-        write_out(out, map_handle(map));
-        Ok(())
+        fill_out(out, "out", || {
+            Ok(map_handle(Map::load(path, &load_options(options)?)?))
+        })
     })
 }
 
@@ -112,10 +106,9 @@ pub extern "C" fn topoloc_map_load_from_memory(
 ) -> topoloc_status {
     run(|| {
         let bytes = slice(data, len, "data")?;
-        check_out(out, "out")?;
-        let map = Map::from_bytes(bytes, &load_options(options)?)?;
-        write_out(out, map_handle(map));
-        Ok(())
+        fill_out(out, "out", || {
+            Ok(map_handle(Map::from_bytes(bytes, &load_options(options)?)?))
+        })
     })
 }
 
@@ -141,7 +134,7 @@ pub extern "C" fn topoloc_map_place_count(
     map: *const topoloc_map,
     out: *mut usize,
 ) -> topoloc_status {
-    map_value(map, out, |m| m.place_count())
+    handle_value(map, "map", out, "out", |m| m.place_count())
 }
 
 /// Number of views (`*out`).
@@ -150,7 +143,7 @@ pub extern "C" fn topoloc_map_view_count(
     map: *const topoloc_map,
     out: *mut usize,
 ) -> topoloc_status {
-    map_value(map, out, |m| m.view_count())
+    handle_value(map, "map", out, "out", |m| m.view_count())
 }
 
 /// Number of undirected edges (`*out`).
@@ -159,7 +152,7 @@ pub extern "C" fn topoloc_map_edge_count(
     map: *const topoloc_map,
     out: *mut usize,
 ) -> topoloc_status {
-    map_value(map, out, |m| m.edge_count())
+    handle_value(map, "map", out, "out", |m| m.edge_count())
 }
 
 /// Descriptor dimension D (`*out`).
@@ -168,20 +161,7 @@ pub extern "C" fn topoloc_map_descriptor_dim(
     map: *const topoloc_map,
     out: *mut u32,
 ) -> topoloc_status {
-    map_value(map, out, |m| m.descriptor().dim)
-}
-
-fn map_value<T>(
-    map: *const topoloc_map,
-    out: *mut T,
-    read: impl FnOnce(&Map) -> T,
-) -> topoloc_status {
-    run(|| {
-        let map = try_ref(map, "map")?;
-        check_out(out, "out")?;
-        write_out(out, read(map));
-        Ok(())
-    })
+    handle_value(map, "map", out, "out", |m| m.descriptor().dim)
 }
 
 /// Copies the descriptor kind (NUL-terminated) into `buf` of `len` bytes. `*needed` (if not
@@ -318,14 +298,9 @@ pub struct topoloc_view_info {
     pub world_T_camera: [f64; 16],
 }
 
-impl Versioned for topoloc_view_info {
-    const LAYOUTS: &'static [usize] = &[std::mem::size_of::<Self>()];
-}
-
-impl Default for topoloc_view_info {
-    fn default() -> Self {
+versioned! {
+    topoloc_view_info {
         Self {
-            struct_size: std::mem::size_of::<Self>(),
             place: 0,
             has_keyframe_id: false,
             keyframe_id: 0,
@@ -360,12 +335,12 @@ pub extern "C" fn topoloc_map_view_info(
         write_versioned(
             out,
             topoloc_view_info {
-                struct_size: std::mem::size_of::<topoloc_view_info>(),
                 place: record.place,
                 has_keyframe_id: record.keyframe_id.is_some(),
                 keyframe_id: record.keyframe_id.unwrap_or(0),
                 has_pose: record.world_t_camera.is_some(),
                 world_T_camera: pose_to_row_major(&pose),
+                ..topoloc_view_info::default()
             },
             "out",
         )

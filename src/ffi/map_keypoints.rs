@@ -2,9 +2,9 @@
 //! the 3D scene point of each keypoint (from depth or a SLAM system's map points) so that a
 //! localizer with camera intrinsics reports metric pose fixes.
 
-use super::boundary::{check_out, run, slice, write_array, write_out};
+use super::boundary::{fill_out, run, slice, write_array, write_optional};
 use super::error::FfiError;
-use super::handles::try_ref;
+use super::handles::{handle_value, try_ref};
 use super::map::{map_handle, topoloc_map};
 use super::topoloc_status;
 use crate::map::{Map, MapError};
@@ -28,11 +28,8 @@ pub extern "C" fn topoloc_map_keypoint_total(
     map: *const topoloc_map,
     total: *mut usize,
 ) -> topoloc_status {
-    run(|| {
-        let map = try_ref(map, "map")?;
-        check_out(total, "total")?;
-        write_out(total, map.keypoints().map_or(0, ViewKeypoints::total));
-        Ok(())
+    handle_value(map, "map", total, "total", |m| {
+        m.keypoints().map_or(0, ViewKeypoints::total)
     })
 }
 
@@ -57,9 +54,7 @@ pub extern "C" fn topoloc_map_view_keypoints(
             .view(view as usize)
             .map(|k| k.points)
             .unwrap_or_default();
-        if !count.is_null() {
-            write_out(count, points.len());
-        }
+        write_optional(count, points.len());
         write_array(points.as_flattened(), xy, len, std::ptr::null_mut())
     })
 }
@@ -82,21 +77,20 @@ pub extern "C" fn topoloc_map_with_keypoint_points(
 ) -> topoloc_status {
     run(|| {
         let map = try_ref(map, "map")?;
-        check_out(out, "out")?;
-        let total = keypoints_of(map)?.total();
-        if len != 3 * total {
-            return Err(MapError::InvalidArgument(format!(
-                "xyz holds {len} floats, the map's {total} keypoints need {}",
-                3 * total
-            ))
-            .into());
-        }
-        let points = slice(xyz, len, "xyz")?
-            .chunks_exact(3)
-            .map(|p| [p[0], p[1], p[2]])
-            .collect();
-        let copy = map.with_keypoint_world_points(points)?;
-        write_out(out, map_handle(copy));
-        Ok(())
+        fill_out(out, "out", || {
+            let total = keypoints_of(map)?.total();
+            if len != 3 * total {
+                return Err(MapError::InvalidArgument(format!(
+                    "xyz holds {len} floats, the map's {total} keypoints need {}",
+                    3 * total
+                ))
+                .into());
+            }
+            let points = slice(xyz, len, "xyz")?
+                .chunks_exact(3)
+                .map(|p| [p[0], p[1], p[2]])
+                .collect();
+            Ok(map_handle(map.with_keypoint_world_points(points)?))
+        })
     })
 }

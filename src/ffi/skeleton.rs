@@ -1,11 +1,11 @@
 //! C functions of skeleton map building: a topological graph of places from an occupancy voxel
 //! grid (see `topoloc::skeleton::skeleton_graph`).
 
-use super::boundary::{check_out, run, slice, write_array, write_out};
+use super::boundary::{check_out, fill_out, run, slice, write_array, write_out};
 use super::error::FfiError;
-use super::handles::{free_box, new_box, try_ref, Castable, Opaque, OwnedBox};
+use super::handles::{free_box, handle_value, new_box, try_ref, Castable, Opaque, OwnedBox};
 use super::topoloc_status;
-use super::versioned::{init_versioned, read_versioned, Versioned};
+use super::versioned::{init_versioned, read_optional, versioned};
 use crate::map::MapError;
 use crate::skeleton::{skeleton_graph, OccupancyGrid, SkeletonOptions, TopoGraph};
 use nalgebra::Point3;
@@ -50,19 +50,14 @@ pub struct topoloc_skeleton_options {
     pub min_spur_m: f64,
 }
 
-impl Versioned for topoloc_skeleton_options {
-    const LAYOUTS: &'static [usize] = &[std::mem::size_of::<Self>()];
-}
-
-impl Default for topoloc_skeleton_options {
-    fn default() -> Self {
+versioned! {
+    topoloc_skeleton_options {
         let d = SkeletonOptions::default();
         let (z_min_m, z_max_m) = d.z_band.unwrap_or_default();
         Self {
-            struct_size: std::mem::size_of::<Self>(),
             use_z_band: d.z_band.is_some(),
-            z_min_m,
-            z_max_m,
+            z_min_m: z_min_m,
+            z_max_m: z_max_m,
             min_clearance_m: d.min_clearance_m,
             merge_radius_m: d.merge_radius_m,
             max_edge_m: d.max_edge_m,
@@ -143,36 +138,26 @@ pub extern "C" fn topoloc_graph_from_occupancy(
         let dims = [d[0], d[1], d[2]];
         let o = slice(origin, 3, "origin")?;
         let cells = slice(cells, cells_len, "cells")?;
-        check_out(out, "out")?;
-        let options = if options.is_null() {
-            SkeletonOptions::default()
-        } else {
-            SkeletonOptions::from(&read_versioned(
-                options,
-                topoloc_skeleton_options::default(),
-                "options",
-            )?)
-        };
-        let count = dims.iter().try_fold(1usize, |n, &k| n.checked_mul(k));
-        if count.is_some_and(|n| n != cells_len && !dims.contains(&0)) {
-            return Err(FfiError::invalid(format!(
-                "cells_len {cells_len}: dims {dims:?} need {} cells",
-                count.unwrap_or(0)
-            )));
-        }
-        let mut occupied = Vec::new();
-        occupied.try_reserve_exact(cells.len()).map_err(|_| {
-            FfiError::invalid(format!(
-                "cells_len {cells_len}: not enough memory to copy the grid"
-            ))
-        })?;
-        occupied.extend(cells.iter().map(|&c| c != 0));
-        let grid = OccupancyGrid::new(dims, voxel_size, Point3::new(o[0], o[1], o[2]), occupied)?;
-        write_out(
-            out,
-            new_box::<topoloc_graph>(skeleton_graph(&grid, &options)?),
-        );
-        Ok(())
+        fill_out(out, "out", || {
+            let options = SkeletonOptions::from(&read_optional(options, "options")?);
+            let count = dims.iter().try_fold(1usize, |n, &k| n.checked_mul(k));
+            if count.is_some_and(|n| n != cells_len && !dims.contains(&0)) {
+                return Err(FfiError::invalid(format!(
+                    "cells_len {cells_len}: dims {dims:?} need {} cells",
+                    count.unwrap_or(0)
+                )));
+            }
+            let mut occupied = Vec::new();
+            occupied.try_reserve_exact(cells.len()).map_err(|_| {
+                FfiError::invalid(format!(
+                    "cells_len {cells_len}: not enough memory to copy the grid"
+                ))
+            })?;
+            occupied.extend(cells.iter().map(|&c| c != 0));
+            let grid =
+                OccupancyGrid::new(dims, voxel_size, Point3::new(o[0], o[1], o[2]), occupied)?;
+            Ok(new_box::<topoloc_graph>(skeleton_graph(&grid, &options)?))
+        })
     })
 }
 
@@ -188,7 +173,7 @@ pub extern "C" fn topoloc_graph_place_count(
     graph: *const topoloc_graph,
     out: *mut usize,
 ) -> topoloc_status {
-    graph_value(graph, out, |g| g.places.len())
+    handle_value(graph, "graph", out, "out", |g| g.places.len())
 }
 
 /// Number of undirected edges (`*out`).
@@ -197,20 +182,7 @@ pub extern "C" fn topoloc_graph_edge_count(
     graph: *const topoloc_graph,
     out: *mut usize,
 ) -> topoloc_status {
-    graph_value(graph, out, |g| g.edges.len())
-}
-
-fn graph_value<T>(
-    graph: *const topoloc_graph,
-    out: *mut T,
-    read: impl FnOnce(&TopoGraph) -> T,
-) -> topoloc_status {
-    run(|| {
-        let graph = try_ref(graph, "graph")?;
-        check_out(out, "out")?;
-        write_out(out, read(graph));
-        Ok(())
-    })
+    handle_value(graph, "graph", out, "out", |g| g.edges.len())
 }
 
 /// Place `place` (0..place_count): `xyz` (3 doubles) receives its world position in metres (the

@@ -5,7 +5,9 @@ use super::boundary::{run, slice, string};
 use super::convert::pose_to_row_major;
 use super::error::FfiError;
 use super::status::topoloc_status::{self, *};
-use super::versioned::{init_versioned, read_versioned, write_versioned, Versioned};
+use super::versioned::{
+    check_versioned, init_versioned, read_optional, versioned, write_versioned,
+};
 use crate::eval::{
     evaluate, Alignment, ErrorStats, Trajectory, TrajectoryError, TrajectoryFormat,
     TrajectoryOptions, TrajectoryReport,
@@ -51,15 +53,10 @@ pub struct topoloc_trajectory_options {
     pub rpe_delta: u32,
 }
 
-impl Versioned for topoloc_trajectory_options {
-    const LAYOUTS: &'static [usize] = &[std::mem::size_of::<Self>()];
-}
-
-impl Default for topoloc_trajectory_options {
-    fn default() -> Self {
+versioned! {
+    topoloc_trajectory_options {
         let d = TrajectoryOptions::default();
         Self {
-            struct_size: std::mem::size_of::<Self>(),
             alignment: TOPOLOC_ALIGN_SIM3,
             max_diff_s: d.max_diff_s,
             offset_s: d.offset_s,
@@ -127,14 +124,9 @@ pub struct topoloc_trajectory_report {
     pub length_ratio: f64,
 }
 
-impl Versioned for topoloc_trajectory_report {
-    const LAYOUTS: &'static [usize] = &[std::mem::size_of::<Self>()];
-}
-
-impl Default for topoloc_trajectory_report {
-    fn default() -> Self {
+versioned! {
+    topoloc_trajectory_report {
         Self {
-            struct_size: std::mem::size_of::<Self>(),
             pairs: 0,
             scale: 1.0,
             alignment: pose_to_row_major(&Isometry3::identity()),
@@ -178,13 +170,7 @@ pub extern "C" fn topoloc_trajectory_evaluate(
     options: *const topoloc_trajectory_options,
     report: *mut topoloc_trajectory_report,
 ) -> topoloc_status {
-    run(|| {
-        read_versioned(
-            report as *const _,
-            topoloc_trajectory_report::default(),
-            "report",
-        )?;
-        let options = trajectory_options(options)?;
+    evaluate_into(report, options, || {
         let reference = trajectory(
             reference_timestamps,
             reference_poses,
@@ -197,8 +183,7 @@ pub extern "C" fn topoloc_trajectory_evaluate(
             estimate_count,
             "estimate",
         )?;
-        let judged = evaluate(&reference, &estimate, &options)?;
-        write_versioned(report, c_report(&judged), "report")
+        Ok((reference, estimate))
     })
 }
 
@@ -214,15 +199,24 @@ pub extern "C" fn topoloc_trajectory_evaluate_files(
     options: *const topoloc_trajectory_options,
     report: *mut topoloc_trajectory_report,
 ) -> topoloc_status {
-    run(|| {
-        read_versioned(
-            report as *const _,
-            topoloc_trajectory_report::default(),
-            "report",
-        )?;
-        let options = trajectory_options(options)?;
+    evaluate_into(report, options, || {
         let reference = read_file(string(reference_path, "reference_path")?, format)?;
         let estimate = read_file(string(estimate_path, "estimate_path")?, format)?;
+        Ok((reference, estimate))
+    })
+}
+
+/// The body of both evaluating functions: checks `report`, reads the options, then the
+/// trajectories (`reference`, `estimate`), and writes what evaluating them measured.
+fn evaluate_into(
+    report: *mut topoloc_trajectory_report,
+    options: *const topoloc_trajectory_options,
+    trajectories: impl FnOnce() -> Result<(Trajectory, Trajectory), FfiError>,
+) -> topoloc_status {
+    run(|| {
+        check_versioned(report, "report")?;
+        let options = trajectory_options(options)?;
+        let (reference, estimate) = trajectories()?;
         let judged = evaluate(&reference, &estimate, &options)?;
         write_versioned(report, c_report(&judged), "report")
     })
@@ -231,10 +225,7 @@ pub extern "C" fn topoloc_trajectory_evaluate_files(
 fn trajectory_options(
     options: *const topoloc_trajectory_options,
 ) -> Result<TrajectoryOptions, FfiError> {
-    let o = match options.is_null() {
-        true => topoloc_trajectory_options::default(),
-        false => read_versioned(options, topoloc_trajectory_options::default(), "options")?,
-    };
+    let o = read_optional(options, "options")?;
     let alignment = match o.alignment {
         TOPOLOC_ALIGN_NONE => Alignment::None,
         TOPOLOC_ALIGN_SE3 => Alignment::Se3,

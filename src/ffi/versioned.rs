@@ -7,11 +7,43 @@ use super::error::FfiError;
 use super::status::topoloc_status::{self, *};
 
 /// Structs passed across the ABI whose first field is `struct_size`, so that fields can be
-/// appended in later versions.
-pub(crate) trait Versioned: Copy {
+/// appended in later versions. `Default` is what `_init` writes and what fields beyond a
+/// caller's layout read as; implement both with [`versioned!`].
+pub(crate) trait Versioned: Copy + Default {
     /// Sizes of the published layouts, oldest first; the last is `size_of::<Self>()`.
     const LAYOUTS: &'static [usize];
 }
+
+/// Implements [`Versioned`] and `Default` for a versioned struct:
+/// `versioned!(T [f, g] { let ...; Self { fields } })` publishes the layouts that end before
+/// fields `f` and `g` (oldest first; none when the struct never grew) and then the whole struct,
+/// and makes `T::default()` the given fields with `struct_size` set to `size_of::<T>()`.
+macro_rules! versioned {
+    (
+        $ty:ident $([$($ended_before:ident),+ $(,)?])? {
+            $(let $binding:pat = $init:expr;)*
+            Self { $($field:ident: $value:expr),+ $(,)? }
+        }
+    ) => {
+        impl $crate::ffi::versioned::Versioned for $ty {
+            const LAYOUTS: &'static [usize] = &[
+                $($(std::mem::offset_of!(Self, $ended_before),)+)?
+                std::mem::size_of::<Self>(),
+            ];
+        }
+
+        impl Default for $ty {
+            fn default() -> Self {
+                $(let $binding = $init;)*
+                Self {
+                    struct_size: std::mem::size_of::<Self>(),
+                    $($field: $value),+
+                }
+            }
+        }
+    };
+}
+pub(crate) use versioned;
 
 /// How many bytes of a caller's struct of `size` bytes this library reads or writes: the size of
 /// the newest layout it knows when the caller's is that or larger (a newer caller), else the
@@ -40,15 +72,10 @@ fn layout_bytes<T: Versioned>(size: usize, name: &str) -> Result<usize, FfiError
 }
 
 /// Reads a versioned struct written by the caller: `struct_size` must be a published layout
-/// size or larger ([`layout_bytes`]); fields beyond the caller's layout keep their values from
-/// `defaults`.
-pub(crate) fn read_versioned<T: Versioned>(
-    ptr: *const T,
-    defaults: T,
-    name: &str,
-) -> Result<T, FfiError> {
+/// size or larger ([`layout_bytes`]); fields beyond the caller's layout read as their defaults.
+pub(crate) fn read_versioned<T: Versioned>(ptr: *const T, name: &str) -> Result<T, FfiError> {
     let copy = struct_size_of(ptr, name)?;
-    let mut value = defaults;
+    let mut value = T::default();
     // SAFETY: the caller's struct is at least `copy` bytes long (its struct_size says so), `copy`
     // ends on a field boundary of T, and `value` is a T, so the first `copy` bytes of both are
     // valid to copy.
@@ -56,6 +83,22 @@ pub(crate) fn read_versioned<T: Versioned>(
         std::ptr::copy_nonoverlapping(ptr.cast::<u8>(), (&mut value as *mut T).cast::<u8>(), copy)
     };
     Ok(value)
+}
+
+/// Like [`read_versioned`] for the arguments that may be NULL (options): NULL reads as
+/// `T::default()`.
+pub(crate) fn read_optional<T: Versioned>(ptr: *const T, name: &str) -> Result<T, FfiError> {
+    if ptr.is_null() {
+        Ok(T::default())
+    } else {
+        read_versioned(ptr, name)
+    }
+}
+
+/// Checks a caller's output struct (non-NULL, a published `struct_size`) before anything is
+/// computed or changed; [`write_versioned`] fills it on success.
+pub(crate) fn check_versioned<T: Versioned>(ptr: *mut T, name: &str) -> Result<(), FfiError> {
+    struct_size_of(ptr.cast_const(), name).map(|_| ())
 }
 
 /// Reads the leading `struct_size` field of a caller's versioned struct and returns how many of
