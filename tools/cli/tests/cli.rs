@@ -6,25 +6,18 @@ use std::path::Path;
 
 mod common;
 use common::{
-    build_vlad_map, fails_with, json, place, seen_again, simulate_tiny, topoloc, write_pgm,
+    build_vlad_map, eval_dataset, fails_with, json, place, read_json, s, simulate_tiny, topoloc,
+    tum_rows, write_intrinsics, write_pgm, write_places,
 };
 
 #[test]
 fn build_map_and_eval_follow_the_contract() {
     let dir = tempfile::tempdir().unwrap();
     let (map_dir, query_dir) = (dir.path().join("map"), dir.path().join("query"));
-    std::fs::create_dir_all(&map_dir).unwrap();
-    std::fs::create_dir_all(&query_dir).unwrap();
     let places = 12;
-    for i in 0..places {
-        let image = place(i);
-        write_pgm(&map_dir.join(format!("{i:03}.pgm")), &image);
-        // The query: the same place, brighter and shifted by 4 pixels.
-        let query = seen_again(&image);
-        write_pgm(&query_dir.join(format!("{i:03}.pgm")), &query);
-    }
+    // The queries: the same places, brighter and shifted by 4 pixels.
+    write_places(&map_dir, &query_dir, places);
     let map = dir.path().join("places.topoloc");
-    let s = |p: &Path| p.to_str().unwrap().to_string();
 
     let built = build_vlad_map(&map_dir, &map);
     assert_eq!(built["places"], places);
@@ -128,40 +121,31 @@ fn build_map_and_eval_follow_the_contract() {
         Some(0.0),
         "{verified}"
     );
-    let out = eval(&["--off-map-inliers", "20"]);
-    assert!(!out.status.success());
-    assert!(String::from_utf8_lossy(&out.stderr).contains("--verify"));
+    fails_with(&eval(&["--off-map-inliers", "20"]), &["--verify"]);
 }
 
 #[test]
 fn failures_name_what_is_wrong() {
     let dir = tempfile::tempdir().unwrap();
-    let missing = dir.path().join("no-such-folder");
-    let out = topoloc(&[
+    let (missing, out) = (
+        s(&dir.path().join("no-such-folder")),
+        s(&dir.path().join("m.topoloc")),
+    );
+    let not_a_map = dir.path().join("not-a-map.topoloc");
+    std::fs::write(&not_a_map, b"hello").unwrap();
+    let (not_a_map, images) = (s(&not_a_map), s(dir.path()));
+    let build = [
         "build-map",
         "--images",
-        missing.to_str().unwrap(),
+        &missing,
         "--backend",
         "vlad",
         "--out",
-        dir.path().join("m.topoloc").to_str().unwrap(),
-    ]);
-    assert!(!out.status.success());
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(stderr.contains("no-such-folder"), "{stderr}");
-
-    let not_a_map = dir.path().join("not-a-map.topoloc");
-    std::fs::write(&not_a_map, b"hello").unwrap();
-    let out = topoloc(&[
-        "eval",
-        "--map",
-        not_a_map.to_str().unwrap(),
-        "--images",
-        dir.path().to_str().unwrap(),
-    ]);
-    assert!(!out.status.success());
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(stderr.contains("not-a-map.topoloc"), "{stderr}");
+        &out,
+    ];
+    let eval = ["eval", "--map", &not_a_map, "--images", &images];
+    fails_with(&topoloc(&build), &["no-such-folder"]);
+    fails_with(&topoloc(&eval), &["not-a-map.topoloc"]);
 }
 
 #[test]
@@ -259,15 +243,15 @@ fn demo_runs_the_whole_pipeline_and_reports_the_contract_keys() {
     let png = std::fs::read(&plot).unwrap();
     assert_eq!(&png[1..4], b"PNG");
     // Bad input names the option.
-    let out = topoloc(&["demo", "--condition", "foggy"]);
-    assert!(!out.status.success());
-    assert!(String::from_utf8_lossy(&out.stderr).contains("--condition foggy"));
+    fails_with(
+        &topoloc(&["demo", "--condition", "foggy"]),
+        &["--condition foggy"],
+    );
 }
 
 #[test]
 fn simulate_writes_a_dataset_that_eval_reads() {
     let dir = tempfile::tempdir().unwrap();
-    let s = |p: &Path| p.to_str().unwrap().to_string();
     let out = dir.path().join("sim");
     let summary = simulate_tiny(&out, 4, &[]);
     let places = summary["places"].as_u64().unwrap();
@@ -301,25 +285,17 @@ fn simulate_writes_a_dataset_that_eval_reads() {
     let poses = std::fs::read_to_string(traj.join("groundtruth.txt")).unwrap();
     let poses = poses.lines().filter(|l| !l.starts_with('#')).count();
     assert_eq!(poses, frames);
-    let manifest: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(traj.join("manifest.json")).unwrap())
-            .unwrap();
+    let manifest = read_json(&traj.join("manifest.json"));
     assert_eq!(manifest["frame_count"].as_u64(), Some(frames as u64));
     assert_eq!(manifest["style"], "office");
 
     // eval reads it: the seed's graph metrics, single-frame, filter, filter with odometry.
     let predictions = dir.path().join("predictions.csv");
-    let report = json(&topoloc(&[
-        "eval",
-        "--map",
-        &s(&map),
-        "--dataset",
-        &s(&traj),
-        "--odometry",
-        "--predictions",
-        &s(&predictions),
-        "--json",
-    ]));
+    let report = json(&eval_dataset(
+        &map,
+        &traj,
+        &["--odometry", "--predictions", &s(&predictions)],
+    ));
     for key in [
         "mna",
         "oha",
@@ -367,9 +343,7 @@ fn simulate_writes_a_dataset_that_eval_reads() {
 
     // Failures name what is wrong. A non-empty output folder:
     let failed = topoloc(&["simulate", "--backend", "vlad", "--out", &s(&out)]);
-    assert!(!failed.status.success());
-    let stderr = String::from_utf8_lossy(&failed.stderr);
-    assert!(stderr.contains("not empty"), "{stderr}");
+    fails_with(&failed, &["not empty"]);
     // A map of another world (here: of eight images) has another graph:
     let images = dir.path().join("images");
     std::fs::create_dir_all(&images).unwrap();
@@ -378,32 +352,26 @@ fn simulate_writes_a_dataset_that_eval_reads() {
     }
     let other = dir.path().join("other.topoloc");
     build_vlad_map(&images, &other);
-    let eval = |map: &Path, dataset: &Path| {
-        let out = topoloc(&["eval", "--map", &s(map), "--dataset", &s(dataset), "--json"]);
-        assert!(!out.status.success());
-        String::from_utf8_lossy(&out.stderr).into_owned()
+    let eval = |map: &Path, dataset: &Path, needles: &[&str]| {
+        fails_with(&eval_dataset(map, dataset, &[]), needles);
     };
-    let stderr = eval(&other, &traj);
-    assert!(
-        stderr.contains("graph.json")
-            && stderr.contains(&format!("8 places, the dataset's graph {places}")),
-        "{stderr}"
-    );
+    let other_graph = format!("8 places, the dataset's graph {places}");
+    eval(&other, &traj, &["graph.json", &other_graph]);
     // The same place count, but a place moved:
     let graph_path = traj.join("graph.json");
-    let mut graph: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&graph_path).unwrap()).unwrap();
+    let mut graph = read_json(&graph_path);
     let x = graph["places"][0]["position"][0].as_f64().unwrap();
     graph["places"][0]["position"][0] = serde_json::json!(x + 1.0);
     std::fs::write(&graph_path, graph.to_string()).unwrap();
-    let stderr = eval(&map, &traj);
-    assert!(stderr.contains("place 0 is at"), "{stderr}");
+    eval(&map, &traj, &["place 0 is at"]);
     // A file of the dataset missing, and no dataset at all:
     std::fs::remove_file(traj.join("nodes.csv")).unwrap();
-    let stderr = eval(&map, &traj);
-    assert!(stderr.contains("nodes.csv"), "{stderr}");
-    let stderr = eval(&map, &dir.path().join("no-such-dataset"));
-    assert!(stderr.contains("no-such-dataset"), "{stderr}");
+    eval(&map, &traj, &["nodes.csv"]);
+    eval(
+        &map,
+        &dir.path().join("no-such-dataset"),
+        &["no-such-dataset"],
+    );
 }
 
 #[test]
@@ -503,20 +471,13 @@ fn suite_reports_mean_and_std_per_split_and_configuration() {
             }
         }
     }
-    let out = topoloc(&["suite", "--splits", "tr-x"]);
-    assert!(!out.status.success());
-    assert!(String::from_utf8_lossy(&out.stderr).contains("tr-x"));
+    fails_with(&topoloc(&["suite", "--splits", "tr-x"]), &["tr-x"]);
 }
 
 #[test]
 fn suite_refuses_unknown_or_empty_configuration_lists() {
     let out = topoloc(&["suite", "--configurations", "filter,bogus"]);
-    assert!(!out.status.success());
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(
-        stderr.contains("unknown configuration 'bogus'") && stderr.contains("metric+odometry"),
-        "{stderr}"
-    );
+    fails_with(&out, &["unknown configuration 'bogus'", "metric+odometry"]);
     let out = topoloc(&[
         "suite",
         "--verify",
@@ -524,7 +485,7 @@ fn suite_refuses_unknown_or_empty_configuration_lists() {
         "--configurations",
         "metric+odometry+verification",
     ]);
-    fails_with(&out, "no configuration to run");
+    fails_with(&out, &["no configuration to run"]);
 }
 
 /// With depth images (`simulate --depth`, `loops --depth`), keyframes carry 3D points and hints
@@ -533,7 +494,6 @@ fn suite_refuses_unknown_or_empty_configuration_lists() {
 #[test]
 fn loops_with_depth_images_give_metric_hints() {
     let dir = tempfile::tempdir().unwrap();
-    let s = |p: &Path| p.to_str().unwrap().to_string();
     let out = dir.path().join("sim");
     let summary = simulate_tiny(&out, 4, &["--depth"]);
     let traj = out.join("traj-000");
@@ -542,24 +502,11 @@ fn loops_with_depth_images_give_metric_hints() {
         std::fs::read_dir(traj.join("depth")).unwrap().count(),
         frames
     );
-    let manifest: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(traj.join("manifest.json")).unwrap())
-            .unwrap();
+    let manifest = read_json(&traj.join("manifest.json"));
     assert_eq!(manifest["depth_scale"], 1000.0);
-    let k: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(traj.join("intrinsics.json")).unwrap())
-            .unwrap();
     let intrinsics = dir.path().join("k.txt");
-    // topoloc-sim puts the centre of the top-left pixel at (0.5, 0.5), OpenCV at (0, 0).
-    let kf = |key: &str| k[key].as_f64().unwrap();
-    let text = format!(
-        "{} {} {} {}",
-        kf("fx"),
-        kf("fy"),
-        kf("cx") - 0.5,
-        kf("cy") - 0.5
-    );
-    std::fs::write(&intrinsics, text).unwrap();
+    // In OpenCV's pixel convention (the centre of the top-left pixel at (0, 0)).
+    write_intrinsics(&traj, &intrinsics, 0.5);
     let run = |depth: Option<&Path>| {
         let mut args = vec![
             "--images".to_string(),
@@ -634,26 +581,17 @@ fn loops_with_depth_images_give_metric_hints() {
         "--out",
         &csv,
     ]);
-    let stderr = String::from_utf8_lossy(&failed.stderr);
-    assert!(
-        !failed.status.success() && stderr.contains("000003.png"),
-        "{stderr}"
-    );
+    fails_with(&failed, &["000003.png"]);
     let failed = topoloc(&[
         "loops", "--images", &images, "--depth", &depth, "--out", &csv,
     ]);
-    let stderr = String::from_utf8_lossy(&failed.stderr);
-    assert!(
-        !failed.status.success() && stderr.contains("--intrinsics"),
-        "{stderr}"
-    );
+    fails_with(&failed, &["--intrinsics"]);
 }
 
 /// The hints file and report of `topoloc loops`: `dir/map` holds 12 places, `dir/query` the
 /// same places again (shifted, brighter).
 fn loops_report(dir: &Path, args: &[&str]) -> (serde_json::Value, Vec<Vec<String>>) {
     let out = dir.join(format!("hints-{}.csv", args.len()));
-    let s = |p: &Path| p.to_str().unwrap().to_string();
     let mut all = vec![
         "loops".to_string(),
         "--out".into(),
@@ -679,19 +617,15 @@ fn loops_follows_the_contract_online_and_against_a_map() {
         dir.path().join("query"),
         dir.path().join("both"),
     );
-    for d in [&map_dir, &query_dir, &both] {
-        std::fs::create_dir_all(d).unwrap();
-    }
     let places = 12;
+    write_places(&map_dir, &query_dir, places);
+    // Both sessions in one folder: the map's images, then the queries.
+    std::fs::create_dir_all(&both).unwrap();
     for i in 0..places {
-        let image = place(i);
-        let query = seen_again(&image);
-        write_pgm(&map_dir.join(format!("{i:03}.pgm")), &image);
-        write_pgm(&query_dir.join(format!("{i:03}.pgm")), &query);
-        write_pgm(&both.join(format!("a{i:03}.pgm")), &image);
-        write_pgm(&both.join(format!("b{i:03}.pgm")), &query);
+        let name = format!("{i:03}.pgm");
+        std::fs::copy(map_dir.join(&name), both.join(format!("a{name}"))).unwrap();
+        std::fs::copy(query_dir.join(&name), both.join(format!("b{name}"))).unwrap();
     }
-    let s = |p: &Path| p.to_str().unwrap().to_string();
     let map = dir.path().join("places.topoloc");
     build_vlad_map(&map_dir, &map);
     let header = "query_index,matched_index,inliers,confidence,scale_known,tx,ty,tz,qx,qy,qz,qw";
@@ -782,12 +716,7 @@ fn loops_follows_the_contract_online_and_against_a_map() {
     let refused = |extra: &[&str], needle: &str| {
         let mut args = vec!["loops", "--images", &images, "--map", &map, "--out", &csv];
         args.extend_from_slice(extra);
-        let failed = topoloc(&args);
-        let stderr = String::from_utf8_lossy(&failed.stderr);
-        assert!(
-            !failed.status.success() && stderr.contains(needle),
-            "{stderr}"
-        );
+        fails_with(&topoloc(&args), &[needle]);
     };
     refused(&["--intrinsics", &s(&bad)], "fy");
     refused(
@@ -806,11 +735,7 @@ fn ate_judges_the_simulated_odometry_against_its_ground_truth() {
     let traj = out.join("traj-000");
     let (odometry, truth) = (traj.join("odometry.txt"), traj.join("groundtruth.txt"));
     let (odometry, truth) = (odometry.to_str().unwrap(), truth.to_str().unwrap());
-    let frames = std::fs::read_to_string(truth)
-        .unwrap()
-        .lines()
-        .filter(|l| !l.starts_with('#') && !l.trim().is_empty())
-        .count();
+    let frames = tum_rows(Path::new(truth)).len();
     let ate = |align: &str| {
         let report = json(&topoloc(&[
             "ate", odometry, truth, "--align", align, "--json",
@@ -836,28 +761,14 @@ fn ate_judges_the_simulated_odometry_against_its_ground_truth() {
     let bad = dir.path().join("notes.txt");
     std::fs::write(&bad, "just some words\n").unwrap();
     let failed = topoloc(&["ate", bad.to_str().unwrap(), truth]);
-    assert!(!failed.status.success());
-    let stderr = String::from_utf8_lossy(&failed.stderr);
-    assert!(
-        stderr.contains("notes.txt") && stderr.contains("--format"),
-        "{stderr}"
-    );
+    fails_with(&failed, &["notes.txt", "--format"]);
 }
 
 #[test]
 fn bench_memory_measures_every_stage_of_an_image_map() {
     let dir = tempfile::tempdir().unwrap();
     let (map_dir, query_dir) = (dir.path().join("map"), dir.path().join("query"));
-    std::fs::create_dir_all(&map_dir).unwrap();
-    std::fs::create_dir_all(&query_dir).unwrap();
-    for i in 0..8 {
-        write_pgm(&map_dir.join(format!("{i:03}.pgm")), &place(i));
-        write_pgm(
-            &query_dir.join(format!("{i:03}.pgm")),
-            &seen_again(&place(i)),
-        );
-    }
-    let s = |p: &Path| p.to_str().unwrap().to_string();
+    write_places(&map_dir, &query_dir, 8);
     // The PCA rows: i8 by default, f32 on request (larger file, another identity).
     let map = dir.path().join("i8.topoloc");
     let built = build_vlad_map(&map_dir, &map);
@@ -884,16 +795,12 @@ fn bench_memory_measures_every_stage_of_an_image_map() {
         size(&exact)
     );
 
-    let report = json(&topoloc(&[
-        "bench-memory",
-        "--map",
-        &s(&map),
-        "--images",
-        &s(&query_dir),
-        "--frames",
-        "5",
-        "--json",
-    ]));
+    let (map_arg, queries) = (s(&map), s(&query_dir));
+    let bench = |extra: &[&str]| {
+        let args = ["bench-memory", "--map", &map_arg, "--images", &queries];
+        topoloc(&[&args[..], extra].concat())
+    };
+    let report = json(&bench(&["--frames", "5", "--json"]));
     assert_eq!(report["frames"], 5);
     assert_eq!(report["places"], 8);
     assert_eq!(report["generated"], false);
@@ -919,14 +826,5 @@ fn bench_memory_measures_every_stage_of_an_image_map() {
     let alone = topoloc(&["bench-memory", "--map", &s(&map)]);
     assert!(!alone.status.success());
     std::fs::write(query_dir.join("notes.txt"), "not an image").unwrap();
-    let refused = topoloc(&[
-        "bench-memory",
-        "--map",
-        &s(&map),
-        "--images",
-        &s(&query_dir),
-        "--frames",
-        "50",
-    ]);
-    fails_with(&refused, "notes.txt");
+    fails_with(&bench(&["--frames", "50"]), &["notes.txt"]);
 }

@@ -14,8 +14,8 @@ use std::process::{Command, Output, Stdio};
 
 mod common;
 use common::{
-    build_vlad_map, json, place, seen_again, simulate_tiny, topoloc, write_pgm_sized as write_pgm,
-    H, W,
+    build_vlad_map, eval_dataset, json, place, read_json, s, seen_again, simulate_tiny, topoloc,
+    tum_rows, write_intrinsics, write_pgm_sized as write_pgm, write_places, H, W,
 };
 
 /// Places of the PGM map (one image each).
@@ -24,10 +24,6 @@ const PLACES: usize = 12;
 /// Place `i` seen again: brighter and shifted by 4 pixels.
 fn query(i: usize) -> Vec<u8> {
     seen_again(&place(i as u64))
-}
-
-fn s(p: &Path) -> String {
-    p.to_str().unwrap().to_string()
 }
 
 fn stderr(out: &Output) -> String {
@@ -62,33 +58,29 @@ fn failure(args: &[&str]) -> String {
     stderr(&out)
 }
 
-/// The PGM fixture: a map of `PLACES` images and a query folder `000.pgm`..`011.pgm` (place
-/// i seen again).
-struct Pgm {
-    _dir: tempfile::TempDir,
+/// A map and its queries in a temporary folder (removed on drop), where tests write more.
+struct Fixture {
+    dir: tempfile::TempDir,
     map: PathBuf,
+    /// The query frames: a folder of images ([`pgm`]) or a dataset folder ([`sim`]).
     queries: PathBuf,
-    root: PathBuf,
 }
 
-fn pgm() -> Pgm {
+impl Fixture {
+    fn root(&self) -> &Path {
+        self.dir.path()
+    }
+}
+
+/// The PGM fixture: a map of `PLACES` images and a query folder `000.pgm`..`011.pgm` (place
+/// i seen again).
+fn pgm() -> Fixture {
     let dir = tempfile::tempdir().unwrap();
-    let root = dir.path().to_path_buf();
-    let (map_dir, queries) = (root.join("map"), root.join("queries"));
-    std::fs::create_dir_all(&map_dir).unwrap();
-    std::fs::create_dir_all(&queries).unwrap();
-    for i in 0..PLACES {
-        write_pgm(&map_dir.join(format!("{i:03}.pgm")), W, H, &place(i as u64));
-        write_pgm(&queries.join(format!("{i:03}.pgm")), W, H, &query(i));
-    }
-    let map = root.join("places.topoloc");
+    let (map_dir, queries) = (dir.path().join("map"), dir.path().join("queries"));
+    write_places(&map_dir, &queries, PLACES as u64);
+    let map = dir.path().join("places.topoloc");
     build_vlad_map(&map_dir, &map);
-    Pgm {
-        _dir: dir,
-        map,
-        queries,
-        root,
-    }
+    Fixture { dir, map, queries }
 }
 
 /// Checks the keys and types of a result line and its candidates (ranked, `top_k` of them).
@@ -130,17 +122,27 @@ fn check_result(line: &Value, top_k: usize) {
     }
 }
 
+/// Checks the results of the PGM fixture's queries: one per query, each with `top_k`
+/// candidates, frame `i` from `source(i)`, and place `i` found for all but at most one.
+fn check_pgm_queries(lines: &[Value], top_k: usize, source: impl Fn(usize) -> String) {
+    assert_eq!(lines.len(), PLACES);
+    let mut right = 0;
+    for (i, line) in lines.iter().enumerate() {
+        check_result(line, top_k);
+        assert_eq!(line["frame"], i);
+        assert_eq!(line["source"], source(i));
+        right += usize::from(line["place"] == i);
+    }
+    assert!(right >= PLACES - 1, "R@1 {right}/{PLACES}");
+}
+
 #[test]
 fn image_folder_streams_one_ranked_result_per_frame() {
     let fixture = &pgm();
     let (map, queries) = (s(&fixture.map), s(&fixture.queries));
     let lines = json_lines(&["--map", &map, "--images", &queries, "--top-k", "3"]);
-    assert_eq!(lines.len(), PLACES);
-    let mut right = 0;
+    check_pgm_queries(&lines, 3, |i| format!("{i:03}.pgm"));
     for (i, line) in lines.iter().enumerate() {
-        check_result(line, 3);
-        assert_eq!(line["frame"], i);
-        assert_eq!(line["source"], format!("{i:03}.pgm"));
         // Numeric names are the timestamps (seconds).
         assert_eq!(line["timestamp"].as_f64(), Some(i as f64));
         assert_eq!(line["odometry"], false);
@@ -148,9 +150,7 @@ fn image_folder_streams_one_ranked_result_per_frame() {
         assert_eq!(line["off_map"], false, "the map's own places: {line}");
         // Views record their source image as keyframe id; place i is map image i.
         assert_eq!(line["keyframe"], line["view"]);
-        right += usize::from(line["place"] == i);
     }
-    assert!(right >= PLACES - 1, "R@1 {right}/{PLACES}");
 
     // --max-frames, --stride and --fps.
     let lines = json_lines(&["--map", &map, "--images", &queries, "--max-frames", "4"]);
@@ -189,7 +189,7 @@ fn image_folder_streams_one_ranked_result_per_frame() {
 #[test]
 fn frames_that_fail_are_error_lines_and_the_stream_goes_on() {
     let fixture = &pgm();
-    let dir = fixture.root.join("mixed");
+    let dir = fixture.root().join("mixed");
     std::fs::create_dir_all(&dir).unwrap();
     for i in 0..6 {
         write_pgm(&dir.join(format!("{i:03}.pgm")), W, H, &query(i));
@@ -251,7 +251,7 @@ fn frames_that_fail_are_error_lines_and_the_stream_goes_on() {
     );
 
     // No frame localized at all: non-zero exit after the error lines.
-    let bad = fixture.root.join("all-bad");
+    let bad = fixture.root().join("all-bad");
     std::fs::create_dir_all(&bad).unwrap();
     std::fs::write(bad.join("a.png"), "text").unwrap();
     let out = topoloc(&["localize", "--map", &s(&fixture.map), "--images", &s(&bad)]);
@@ -265,7 +265,7 @@ fn bad_input_exits_non_zero_naming_what_is_wrong() {
     let fixture = &pgm();
     let (map, queries) = (s(&fixture.map), s(&fixture.queries));
     let tum = |name: &str, text: &str| {
-        let path = fixture.root.join(name);
+        let path = fixture.root().join(name);
         std::fs::write(&path, text).unwrap();
         s(&path)
     };
@@ -290,12 +290,12 @@ fn bad_input_exits_non_zero_naming_what_is_wrong() {
         &format!("{good}2 0 0 0 0 0 0 1\n1 0 0 0 0 0 0 1\n"),
     ));
     assert!(err.contains("line 3, field 1 (timestamp)"), "{err}");
-    let err = with_odometry(&s(&fixture.root.join("missing.txt")));
+    let err = with_odometry(&s(&fixture.root().join("missing.txt")));
     assert!(err.contains("missing.txt"), "{err}");
 
     let err = failure(&[
         "--map",
-        &s(&fixture.root.join("none.topoloc")),
+        &s(&fixture.root().join("none.topoloc")),
         "--images",
         &queries,
     ]);
@@ -313,7 +313,7 @@ fn bad_input_exits_non_zero_naming_what_is_wrong() {
         d[k] = 1.0;
         builder.add_view(p, &d, Default::default()).unwrap();
     }
-    let bare = fixture.root.join("bare.topoloc");
+    let bare = fixture.root().join("bare.topoloc");
     builder.build().unwrap().save(&bare).unwrap();
     let err = failure(&["--map", &s(&bare), "--images", &queries]);
     assert!(
@@ -322,7 +322,7 @@ fn bad_input_exits_non_zero_naming_what_is_wrong() {
     );
 
     // Unnumbered file names give no frame times for odometry.
-    let named = fixture.root.join("named");
+    let named = fixture.root().join("named");
     std::fs::create_dir_all(&named).unwrap();
     write_pgm(&named.join("left.pgm"), W, H, &query(0));
     let good = tum("good.txt", good);
@@ -345,7 +345,12 @@ fn bad_input_exits_non_zero_naming_what_is_wrong() {
         err.contains("no frame time is within 0.02 s of a pose"),
         "{err}"
     );
-    let err = failure(&["--map", &map, "--images", &s(&fixture.root.join("no-dir"))]);
+    let err = failure(&[
+        "--map",
+        &map,
+        "--images",
+        &s(&fixture.root().join("no-dir")),
+    ]);
     assert!(err.contains("--images") && err.contains("no-dir"), "{err}");
     let err = failure(&["--map", &map, "--video", &good]);
     assert!(err.contains("--video") && err.contains("good.txt"), "{err}");
@@ -360,7 +365,7 @@ fn bad_input_exits_non_zero_naming_what_is_wrong() {
 #[test]
 fn video_frames_take_the_container_times() {
     let fixture = &pgm();
-    let video = fixture.root.join("queries.avi");
+    let video = fixture.root().join("queries.avi");
     let fourcc = videoio::VideoWriter::fourcc('M', 'J', 'P', 'G').unwrap();
     let size = Size::new(W as i32, H as i32);
     let mut writer =
@@ -378,27 +383,21 @@ fn video_frames_take_the_container_times() {
 
     let map = s(&fixture.map);
     let lines = json_lines(&["--map", &map, "--video", &s(&video)]);
-    assert_eq!(lines.len(), PLACES);
-    let mut right = 0;
+    check_pgm_queries(&lines, 5, |i| format!("frame {i}"));
     for (i, line) in lines.iter().enumerate() {
-        check_result(line, 5);
-        assert_eq!(line["frame"], i);
-        assert_eq!(line["source"], format!("frame {i}"));
         let t = line["timestamp"].as_f64().unwrap();
         assert!(
             (t - 0.25 * i as f64).abs() < 1e-6,
             "4 fps container: {line}"
         );
-        right += usize::from(line["place"] == i);
     }
-    assert!(right >= PLACES - 1, "R@1 {right}/{PLACES} through MJPEG");
 
     // Odometry by container time from --start-time: every frame has a pose, every frame but
     // the first a motion.
     let poses: String = (0..PLACES)
         .map(|i| format!("{} {i} 0 0 0 0 0 1\n", 50.0 + 0.25 * i as f64))
         .collect();
-    let odometry = fixture.root.join("video-odometry.txt");
+    let odometry = fixture.root().join("video-odometry.txt");
     std::fs::write(&odometry, poses).unwrap();
     let lines = json_lines(&[
         "--map",
@@ -420,49 +419,15 @@ fn video_frames_take_the_container_times() {
     }
 }
 
-/// A tiny simulated world (bright light, 12 views per place), its dataset folder `traj-000`
-/// and `eval --dataset --odometry`'s report.
-struct Sim {
-    _dir: tempfile::TempDir,
-    map: PathBuf,
-    traj: PathBuf,
-    eval: Value,
-}
-
-fn sim() -> Sim {
+/// A tiny simulated world (bright light, 12 views per place) with its dataset folder
+/// `traj-000` as the queries, and `eval --dataset --odometry`'s report.
+fn sim() -> (Fixture, Value) {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("sim");
     simulate_tiny(&out, 12, &["--condition", "bright"]);
-    let run = |args: &[&str]| json(&topoloc(args));
-    let (map, traj) = (out.join("map.topoloc"), out.join("traj-000"));
-    let eval = run(&[
-        "eval",
-        "--map",
-        &s(&map),
-        "--dataset",
-        &s(&traj),
-        "--odometry",
-        "--json",
-    ]);
-    Sim {
-        _dir: dir,
-        map,
-        traj,
-        eval,
-    }
-}
-
-/// Rows of a TUM file: (timestamp, [tx, ty, tz]).
-fn tum_rows(path: &Path) -> Vec<(f64, [f64; 3])> {
-    std::fs::read_to_string(path)
-        .unwrap()
-        .lines()
-        .filter(|l| !l.starts_with('#') && !l.trim().is_empty())
-        .map(|l| {
-            let v: Vec<f64> = l.split_whitespace().map(|x| x.parse().unwrap()).collect();
-            (v[0], [v[1], v[2], v[3]])
-        })
-        .collect()
+    let (map, queries) = (out.join("map.topoloc"), out.join("traj-000"));
+    let eval = json(&eval_dataset(&map, &queries, &["--odometry"]));
+    (Fixture { dir, map, queries }, eval)
 }
 
 /// The true place of every frame (`nodes.csv`) and each place's neighbours (`graph.json`).
@@ -473,8 +438,7 @@ fn truth(traj: &Path) -> (Vec<u64>, Vec<Vec<u64>>) {
         .skip(1)
         .map(|l| l.split(',').nth(1).unwrap().parse().unwrap())
         .collect();
-    let graph: Value =
-        serde_json::from_str(&std::fs::read_to_string(traj.join("graph.json")).unwrap()).unwrap();
+    let graph = read_json(&traj.join("graph.json"));
     let mut neighbours = vec![Vec::new(); graph["places"].as_array().unwrap().len()];
     for edge in graph["edges"].as_array().unwrap() {
         let (a, b) = (edge[0].as_u64().unwrap(), edge[1].as_u64().unwrap());
@@ -501,32 +465,24 @@ fn accuracy(lines: &[Value], truth: &[u64], neighbours: &[Vec<u64>]) -> (f64, f6
 /// pipe checks.
 #[test]
 fn simulated_sequence_with_odometry_verification_and_a_closing_pipe() {
-    let sim = sim();
-    odometry_is_matched_by_time_and_fed_as_relative_motion(&sim);
+    let (sim, eval) = sim();
+    odometry_is_matched_by_time_and_fed_as_relative_motion(&sim, &eval);
     verification_with_intrinsics_gives_pose_fixes_near_the_truth(&sim);
     closing_stdout_ends_the_stream_cleanly(&sim);
 }
 
-fn odometry_is_matched_by_time_and_fed_as_relative_motion(sim: &Sim) {
-    let (map, images) = (s(&sim.map), s(&sim.traj.join("images")));
-    let odometry = s(&sim.traj.join("odometry.txt"));
+fn odometry_is_matched_by_time_and_fed_as_relative_motion(sim: &Fixture, eval: &Value) {
+    let (map, images) = (s(&sim.map), s(&sim.queries.join("images")));
+    let odometry = s(&sim.queries.join("odometry.txt"));
     let odometry = odometry.as_str();
-    let (places, neighbours) = truth(&sim.traj);
+    let (places, neighbours) = truth(&sim.queries);
     let frames = places.len();
     assert!(frames >= 100, "{frames} frames");
 
     // The dataset's frames are 4 Hz from t = 0, as its TUM files say.
-    let without = json_lines(&["--map", &map, "--images", &images, "--fps", "4"]);
-    let with = json_lines(&[
-        "--map",
-        &map,
-        "--images",
-        &images,
-        "--fps",
-        "4",
-        "--odometry",
-        odometry,
-    ]);
+    let at_4hz = ["--map", &map, "--images", &images, "--fps", "4"];
+    let without = json_lines(&at_4hz);
+    let with = json_lines(&[&at_4hz[..], &["--odometry", odometry]].concat());
     assert_eq!(with.len(), frames);
     for (i, line) in with.iter().enumerate() {
         check_result(line, 5);
@@ -537,47 +493,31 @@ fn odometry_is_matched_by_time_and_fed_as_relative_motion(sim: &Sim) {
     // filter with odometry is mostly right: the true place or a neighbour.
     let (mna, oha) = accuracy(&without, &places, &neighbours);
     let (mna_odo, oha_odo) = accuracy(&with, &places, &neighbours);
-    let figure = |config: &str, key: &str| sim.eval[config][key].as_f64().unwrap();
-    assert!(
-        (mna - figure("filter", "mna")).abs() < 1e-9,
-        "{mna} vs {}",
-        sim.eval
-    );
-    assert!(
-        (oha - figure("filter", "oha")).abs() < 1e-9,
-        "{oha} vs {}",
-        sim.eval
-    );
-    assert!(
-        (mna_odo - figure("filter_odometry", "mna")).abs() < 1e-9,
-        "{mna_odo}"
-    );
-    assert!(
-        (oha_odo - figure("filter_odometry", "oha")).abs() < 1e-9,
-        "{oha_odo}"
-    );
+    for (config, key, streamed) in [
+        ("filter", "mna", mna),
+        ("filter", "oha", oha),
+        ("filter_odometry", "mna", mna_odo),
+        ("filter_odometry", "oha", oha_odo),
+    ] {
+        let measured = eval[config][key].as_f64().unwrap();
+        assert!(
+            (streamed - measured).abs() < 1e-9,
+            "{config}.{key}: {streamed} vs {eval}"
+        );
+    }
     assert!(oha_odo >= 0.75, "OHA with odometry {oha_odo}");
     assert!(oha_odo > oha, "odometry helps: {oha_odo} vs {oha}");
 
     // Poses off by 10 ms still match within the default 20 ms; not within 5 ms.
-    let args = [
-        "--map",
-        &map,
-        "--images",
-        &images,
-        "--fps",
-        "4",
-        "--start-time",
-        "0.01",
-    ];
-    let shifted = json_lines(&[&args[..], &["--odometry", odometry, "--max-frames", "8"]].concat());
-    assert!(shifted.iter().skip(1).all(|l| l["odometry"] == true));
-    assert_eq!(shifted[3]["odometry_timestamp"].as_f64(), Some(0.75));
-    let tight = [
-        &args[..],
-        &["--odometry", odometry, "--odometry-tolerance", "0.005"],
+    let late = [
+        &at_4hz[..],
+        &["--start-time", "0.01", "--odometry", odometry],
     ]
     .concat();
+    let shifted = json_lines(&[&late[..], &["--max-frames", "8"]].concat());
+    assert!(shifted.iter().skip(1).all(|l| l["odometry"] == true));
+    assert_eq!(shifted[3]["odometry_timestamp"].as_f64(), Some(0.75));
+    let tight = [&late[..], &["--odometry-tolerance", "0.005"]].concat();
     assert!(failure(&tight).contains("within 0.005 s"));
 
     // Frames 10-14 lose their poses: they get none, frame 15 (after a frame without a pose)
@@ -591,20 +531,10 @@ fn odometry_is_matched_by_time_and_fed_as_relative_motion(sim: &Sim) {
         })
         .map(|l| format!("{l}\n"))
         .collect();
-    let gappy = sim.traj.join("gappy.txt");
+    let gappy = sim.queries.join("gappy.txt");
     std::fs::write(&gappy, kept).unwrap();
-    let args = [
-        "--map",
-        &map,
-        "--images",
-        &images,
-        "--fps",
-        "4",
-        "--max-frames",
-        "20",
-    ];
     let gappy = s(&gappy);
-    let lines = json_lines(&[&args[..], &["--odometry", gappy.as_str()]].concat());
+    let lines = json_lines(&[&at_4hz[..], &["--max-frames", "20", "--odometry", &gappy]].concat());
     for (i, line) in lines.iter().enumerate() {
         let has_pose = !(10..15).contains(&i);
         assert_eq!(line["odometry_timestamp"].is_null(), !has_pose, "{line}");
@@ -612,19 +542,15 @@ fn odometry_is_matched_by_time_and_fed_as_relative_motion(sim: &Sim) {
     }
 }
 
-fn verification_with_intrinsics_gives_pose_fixes_near_the_truth(sim: &Sim) {
-    let intrinsics: Value =
-        serde_json::from_str(&std::fs::read_to_string(sim.traj.join("intrinsics.json")).unwrap())
-            .unwrap();
-    let camera = sim.traj.join("camera.txt");
-    let k = |key: &str| intrinsics[key].as_f64().unwrap().to_string();
-    std::fs::write(&camera, [k("fx"), k("fy"), k("cx"), k("cy")].join(" ")).unwrap();
+fn verification_with_intrinsics_gives_pose_fixes_near_the_truth(sim: &Fixture) {
+    let camera = sim.queries.join("camera.txt");
+    write_intrinsics(&sim.queries, &camera, 0.0);
     let frames = 40;
     let lines = json_lines(&[
         "--map",
         &s(&sim.map),
         "--images",
-        &s(&sim.traj.join("images")),
+        &s(&sim.queries.join("images")),
         "--fps",
         "4",
         "--verify",
@@ -635,7 +561,7 @@ fn verification_with_intrinsics_gives_pose_fixes_near_the_truth(sim: &Sim) {
         &frames.to_string(),
     ]);
     assert_eq!(lines.len(), frames);
-    let truth = tum_rows(&sim.traj.join("groundtruth.txt"));
+    let truth = tum_rows(&sim.queries.join("groundtruth.txt"));
     let mut errors = Vec::new();
     for (line, (_, position)) in lines.iter().zip(&truth) {
         check_result(line, 5);
@@ -652,18 +578,11 @@ fn verification_with_intrinsics_gives_pose_fixes_near_the_truth(sim: &Sim) {
             continue;
         }
         assert!(fix["inliers"].as_u64().unwrap() >= 30, "{fix}");
-        let t: Vec<f64> = fix["translation"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .map(|v| v.as_f64().unwrap())
-            .collect();
-        let q: Vec<f64> = fix["quaternion"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .map(|v| v.as_f64().unwrap())
-            .collect();
+        let numbers = |key: &str| -> Vec<f64> {
+            let values = fix[key].as_array().unwrap();
+            values.iter().map(|v| v.as_f64().unwrap()).collect()
+        };
+        let (t, q) = (numbers("translation"), numbers("quaternion"));
         assert!(
             (q.iter().map(|x| x * x).sum::<f64>() - 1.0).abs() < 1e-6,
             "{fix}"
@@ -684,7 +603,7 @@ fn verification_with_intrinsics_gives_pose_fixes_near_the_truth(sim: &Sim) {
     assert!(median < 0.15, "median pose fix error {median} m");
 }
 
-fn closing_stdout_ends_the_stream_cleanly(sim: &Sim) {
+fn closing_stdout_ends_the_stream_cleanly(sim: &Fixture) {
     // 169 JSON lines are well over a pipe's 64 KiB: the writer blocks, then finds it closed.
     let mut child = Command::new(env!("CARGO_BIN_EXE_topoloc"))
         .args([
@@ -693,7 +612,7 @@ fn closing_stdout_ends_the_stream_cleanly(sim: &Sim) {
             "--map",
             &s(&sim.map),
             "--images",
-            &s(&sim.traj.join("images")),
+            &s(&sim.queries.join("images")),
         ])
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())

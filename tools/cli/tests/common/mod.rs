@@ -1,5 +1,5 @@
 //! Shared by the CLI integration tests: generated grey "places" (the library tests' generator),
-//! PGM files of them, and running the `topoloc` binary.
+//! PGM files of them, running the `topoloc` binary, and reading what it and `simulate` write.
 #![allow(dead_code)] // each test crate uses its own part
 
 use std::path::Path;
@@ -36,6 +36,57 @@ pub fn write_pgm(path: &Path, pixels: &[u8]) {
     write_pgm_sized(path, W, H, pixels);
 }
 
+/// Creates the folders `map_dir` and `query_dir` and writes `places` places into them,
+/// `000.pgm`, `001.pgm`, ...: place `i` in `map_dir`, the same place seen again in `query_dir`.
+pub fn write_places(map_dir: &Path, query_dir: &Path, places: u64) {
+    std::fs::create_dir_all(map_dir).unwrap();
+    std::fs::create_dir_all(query_dir).unwrap();
+    for i in 0..places {
+        let image = place(i);
+        write_pgm(&map_dir.join(format!("{i:03}.pgm")), &image);
+        write_pgm(&query_dir.join(format!("{i:03}.pgm")), &seen_again(&image));
+    }
+}
+
+/// A path as a command-line argument.
+pub fn s(path: &Path) -> String {
+    path.to_str().unwrap().to_string()
+}
+
+/// A JSON file, parsed.
+pub fn read_json(path: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
+}
+
+/// Rows of a TUM file: (timestamp, [tx, ty, tz]).
+pub fn tum_rows(path: &Path) -> Vec<(f64, [f64; 3])> {
+    std::fs::read_to_string(path)
+        .unwrap()
+        .lines()
+        .filter(|l| !l.starts_with('#') && !l.trim().is_empty())
+        .map(|l| {
+            let v: Vec<f64> = l.split_whitespace().map(|x| x.parse().unwrap()).collect();
+            (v[0], [v[1], v[2], v[3]])
+        })
+        .collect()
+}
+
+/// Writes the camera of the dataset folder `traj` (its `intrinsics.json`) to `path` as the
+/// CLI's intrinsics file `fx fy cx cy`, the principal point moved by `-centre` pixels
+/// (topoloc-sim puts the centre of the top-left pixel at (0.5, 0.5), OpenCV at (0, 0)).
+pub fn write_intrinsics(traj: &Path, path: &Path, centre: f64) {
+    let k = read_json(&traj.join("intrinsics.json"));
+    let k = |key: &str| k[key].as_f64().unwrap();
+    let text = format!(
+        "{} {} {} {}",
+        k("fx"),
+        k("fy"),
+        k("cx") - centre,
+        k("cy") - centre
+    );
+    std::fs::write(path, text).unwrap();
+}
+
 /// Runs the `topoloc` binary with `args`, capturing its output.
 pub fn topoloc(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_topoloc"))
@@ -44,15 +95,17 @@ pub fn topoloc(args: &[&str]) -> Output {
         .expect("topoloc runs")
 }
 
-/// The one JSON object on the stdout of a successful run.
-/// Asserts that a run failed and that its stderr names `needle`.
+/// Asserts that a run failed and that its stderr names each of `needles`.
 #[track_caller]
-pub fn fails_with(output: &Output, needle: &str) {
+pub fn fails_with(output: &Output, needles: &[&str]) {
     let stderr = String::from_utf8_lossy(&output.stderr);
     assert!(!output.status.success(), "succeeded: {stderr}");
-    assert!(stderr.contains(needle), "'{needle}' not in: {stderr}");
+    for needle in needles {
+        assert!(stderr.contains(needle), "'{needle}' not in: {stderr}");
+    }
 }
 
+/// The one JSON object on the stdout of a successful run.
 pub fn json(output: &Output) -> serde_json::Value {
     assert!(
         output.status.success(),
@@ -88,6 +141,13 @@ pub fn simulate_tiny(out: &Path, views_per_place: usize, extra: &[&str]) -> serd
     ];
     args.extend_from_slice(extra);
     json(&topoloc(&args))
+}
+
+/// `topoloc eval --json` of the dataset folder `dataset` against `map`, with `extra` arguments.
+pub fn eval_dataset(map: &Path, dataset: &Path, extra: &[&str]) -> Output {
+    let (map, dataset) = (s(map), s(dataset));
+    let args = ["eval", "--map", &map, "--dataset", &dataset, "--json"];
+    topoloc(&[&args[..], extra].concat())
 }
 
 /// `topoloc build-map --backend vlad` of the images in `images` into `map`; its JSON summary.
