@@ -200,6 +200,34 @@ pub struct DatasetWriter {
     depth: std::sync::atomic::AtomicBool,
 }
 
+/// What [`DatasetWriter`] is given for one image, as its errors name it.
+struct BufferKind {
+    /// The buffer's name.
+    name: &'static str,
+    /// What its values are.
+    units: &'static str,
+    /// Values per pixel.
+    per_pixel: usize,
+    /// The image it becomes.
+    image: &'static str,
+}
+
+/// Packed RGB8 rows of a frame's image.
+const RGB8_BUFFER: BufferKind = BufferKind {
+    name: "image",
+    units: "bytes",
+    per_pixel: 3,
+    image: "RGB8 image",
+};
+
+/// A frame's depth in metres, one value per pixel.
+const DEPTH_BUFFER: BufferKind = BufferKind {
+    name: "depth",
+    units: "values",
+    per_pixel: 1,
+    image: "image",
+};
+
 impl DatasetWriter {
     /// Creates `root` (and `root/images`); refuses a folder that already holds anything and
     /// invalid intrinsics (naming the field).
@@ -229,22 +257,28 @@ impl DatasetWriter {
         &self.root
     }
 
+    /// Checks that a `kind` buffer of `len` units for the image at `path` holds one pixel's
+    /// worth for every pixel of the intrinsics' size.
+    fn check_buffer(&self, path: &Path, kind: &BufferKind, len: usize) -> Result<(), DatasetError> {
+        let (w, h) = (self.intrinsics.width, self.intrinsics.height);
+        let needed = w as usize * h as usize * kind.per_pixel;
+        if len == needed {
+            return Ok(());
+        }
+        let BufferKind {
+            name, units, image, ..
+        } = kind;
+        let message =
+            format!("{name} buffer holds {len} {units}, a {w}x{h} {image} needs {needed}");
+        Err(invalid(path, None, message))
+    }
+
     /// Writes frame `frame`'s image, packed RGB8 rows of the intrinsics' size, as PNG. Takes
     /// `&self`: frames may be written from several threads, in any order.
     pub fn write_image(&self, frame: usize, rgb: &[u8]) -> Result<PathBuf, DatasetError> {
         let path = self.root.join(image_name(frame));
         let (w, h) = (self.intrinsics.width, self.intrinsics.height);
-        let needed = w as usize * h as usize * 3;
-        if rgb.len() != needed {
-            return Err(invalid(
-                &path,
-                None,
-                format!(
-                    "image buffer holds {} bytes, a {w}x{h} RGB8 image needs {needed}",
-                    rgb.len()
-                ),
-            ));
-        }
+        self.check_buffer(&path, &RGB8_BUFFER, rgb.len())?;
         let cv = |e: opencv::Error| invalid(&path, None, format!("OpenCV: {e}"));
         let packed = Mat::new_rows_cols_with_bytes::<Vec3b>(h as i32, w as i32, rgb).map_err(cv)?;
         let mut bgr = Mat::default();
@@ -263,17 +297,7 @@ impl DatasetWriter {
     pub fn write_depth(&self, frame: usize, metres: &[f32]) -> Result<PathBuf, DatasetError> {
         let path = self.root.join(depth_name(frame));
         let (w, h) = (self.intrinsics.width, self.intrinsics.height);
-        let needed = w as usize * h as usize;
-        if metres.len() != needed {
-            return Err(invalid(
-                &path,
-                None,
-                format!(
-                    "depth buffer holds {} values, a {w}x{h} image needs {needed}",
-                    metres.len()
-                ),
-            ));
-        }
+        self.check_buffer(&path, &DEPTH_BUFFER, metres.len())?;
         let units: Vec<u16> = metres
             .iter()
             .map(|&m| {
@@ -418,6 +442,18 @@ fn check_manifest(path: &Path, m: &Manifest) -> Result<(), DatasetError> {
         .map_err(|msg| invalid(path, None, format!("odometry_noise: {msg}")))
 }
 
+/// Checks that the file (or folder) at `path` holds `count` `what`, one for each of `n` frames.
+fn check_count(path: &Path, count: usize, what: &str, n: usize) -> Result<(), DatasetError> {
+    if count == n {
+        return Ok(());
+    }
+    Err(invalid(
+        path,
+        None,
+        format!("{count} {what} for {n} frames"),
+    ))
+}
+
 /// Checks a pose list: `n` poses, finite non-decreasing timestamps, and (for odometry) the
 /// timestamps of `reference`.
 fn check_poses(
@@ -426,13 +462,7 @@ fn check_poses(
     n: usize,
     reference: Option<&[TimedPose]>,
 ) -> Result<(), DatasetError> {
-    if poses.len() != n {
-        return Err(invalid(
-            path,
-            None,
-            format!("{} poses for {n} frames", poses.len()),
-        ));
-    }
+    check_count(path, poses.len(), "poses", n)?;
     for (k, p) in poses.iter().enumerate() {
         let t = p.timestamp;
         let earlier = k > 0 && t < poses[k - 1].timestamp;
@@ -466,13 +496,7 @@ fn check_nodes(
     rows: impl ExactSizeIterator<Item = (usize, FrameTruth)>,
     n: usize,
 ) -> Result<(), DatasetError> {
-    if rows.len() != n {
-        return Err(invalid(
-            path,
-            None,
-            format!("{} rows for {n} frames", rows.len()),
-        ));
-    }
+    check_count(path, rows.len(), "rows", n)?;
     let offsets = graph.view_offsets();
     let places = graph.places.len();
     for (k, (line, t)) in rows.enumerate() {
@@ -547,13 +571,7 @@ fn check_frame_pngs(
             .is_some_and(|e| e.eq_ignore_ascii_case("png"));
         count += usize::from(is_png);
     }
-    if count != n {
-        return Err(invalid(
-            &dir,
-            None,
-            format!("{count} PNG images for {n} frames"),
-        ));
-    }
+    check_count(&dir, count, "PNG images", n)?;
     for frame in 0..n {
         let path = root.join(name(frame));
         if !path.is_file() {

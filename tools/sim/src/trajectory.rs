@@ -115,6 +115,22 @@ fn check_range(field: &'static str, value: f64, min: f64, max: f64) -> Result<()
     )
 }
 
+/// Checks the interval option `field`: both bounds finite and `ok(lo, hi)`.
+fn check_interval(
+    field: &'static str,
+    (lo, hi): (f64, f64),
+    ok: impl FnOnce(f64, f64) -> bool,
+    expected: &str,
+) -> Result<(), TrajectoryError> {
+    let finite = lo.is_finite() && hi.is_finite();
+    check(
+        field,
+        format!("({lo}, {hi})"),
+        finite && ok(lo, hi),
+        expected,
+    )
+}
+
 /// Where paths may go.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default)]
@@ -140,11 +156,10 @@ impl PlannerOptions {
     /// Checks ranges; the error names the field.
     pub fn validate(&self) -> Result<(), TrajectoryError> {
         check_range("planner.clearance_m", self.clearance_m, 0.0, 5.0)?;
-        let (lo, hi) = self.band;
-        check(
+        check_interval(
             "planner.band",
-            format!("({lo}, {hi})"),
-            lo.is_finite() && hi.is_finite() && lo <= hi,
+            self.band,
+            |lo, hi| lo <= hi,
             "must be finite with z_min <= z_max",
         )
     }
@@ -155,11 +170,10 @@ impl MotionOptions {
     /// Checks ranges; the error names the field.
     pub fn validate(&self) -> Result<(), TrajectoryError> {
         check_range("motion.rate_hz", self.rate_hz, 1.0, 100.0)?;
-        let (lo, hi) = self.speed_range_mps;
-        check(
+        check_interval(
             "motion.speed_range_mps",
-            format!("({lo}, {hi})"),
-            lo.is_finite() && hi.is_finite() && 0.0 < lo && lo <= hi && hi <= 5.0,
+            self.speed_range_mps,
+            |lo, hi| 0.0 < lo && lo <= hi && hi <= 5.0,
             "must satisfy 0 < min <= max <= 5",
         )?;
         check_range("motion.accel_mps2", self.accel_mps2, 0.05, 10.0)?;

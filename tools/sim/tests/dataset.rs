@@ -7,7 +7,9 @@ use std::path::Path;
 use topoloc::build::TimedPose;
 use topoloc::skeleton::OccupancyGrid;
 use topoloc_sim::camera::Intrinsics;
-use topoloc_sim::dataset::{image_name, Dataset, DatasetError, DatasetInfo, DatasetWriter};
+use topoloc_sim::dataset::{
+    image_name, Dataset, DatasetError, DatasetInfo, DatasetWriter, Manifest,
+};
 use topoloc_sim::ground_truth::{ground_truth, visits, FrameTruth, PlaceGraph};
 use topoloc_sim::odometry::{odometry, OdometryNoise};
 use topoloc_sim::trajectory::{Planner, PlannerOptions, TrajectorySpec};
@@ -80,33 +82,63 @@ fn image(k: &Intrinsics, frame: usize) -> Vec<u8> {
     rgb
 }
 
-/// Everything a dataset holds, as written.
-struct Written {
+/// A flight through the ring world and everything a dataset of it holds.
+struct Ring {
+    k: Intrinsics,
     graph: PlaceGraph,
     ground_truth: Vec<TimedPose>,
     odometry: Vec<TimedPose>,
     nodes: Vec<FrameTruth>,
 }
 
-/// Writes a dataset of the ring world along `frames` poses.
-fn write(root: &Path, frames: Vec<TimedPose>, rate_hz: f64) -> Written {
-    let grid = ring_world();
-    let graph = ring_graph();
-    let k = Intrinsics::from_hfov(32, 24, 90.0);
-    let nodes = ground_truth(&grid, &graph, &frames).unwrap();
-    let odom = odometry(&frames, &OdometryNoise::typical_vio(), 9).unwrap();
-    let writer = DatasetWriter::create(root, k).unwrap();
-    for f in 0..frames.len() {
-        writer.write_image(f, &image(&k, f)).unwrap();
+impl Ring {
+    /// The ring world flown along `frames` poses.
+    fn along(frames: Vec<TimedPose>) -> Self {
+        let graph = ring_graph();
+        Self {
+            k: Intrinsics::from_hfov(32, 24, 90.0),
+            nodes: ground_truth(&ring_world(), &graph, &frames).unwrap(),
+            odometry: odometry(&frames, &OdometryNoise::typical_vio(), 9).unwrap(),
+            ground_truth: frames,
+            graph,
+        }
     }
-    writer
-        .finish(&info(rate_hz), &graph, &frames, &odom, &nodes)
-        .unwrap();
-    Written {
-        graph,
-        ground_truth: frames,
-        odometry: odom,
-        nodes,
+
+    /// A writer into `root` that has the images of the first `count` frames.
+    fn writer(&self, root: &Path, count: usize) -> DatasetWriter {
+        let writer = DatasetWriter::create(root, self.k).unwrap();
+        for f in 0..count {
+            writer.write_image(f, &image(&self.k, f)).unwrap();
+        }
+        writer
+    }
+
+    /// Finishes `writer` with the flight's records but `odometry`, at `rate_hz`.
+    fn finish(
+        &self,
+        writer: DatasetWriter,
+        rate_hz: f64,
+        odometry: &[TimedPose],
+    ) -> Result<Manifest, DatasetError> {
+        let (graph, nodes) = (&self.graph, &self.nodes);
+        writer.finish(&info(rate_hz), graph, &self.ground_truth, odometry, nodes)
+    }
+}
+
+/// Writes a dataset of the ring world along `frames` poses.
+fn write(root: &Path, frames: Vec<TimedPose>, rate_hz: f64) -> Ring {
+    let ring = Ring::along(frames);
+    let writer = ring.writer(root, ring.ground_truth.len());
+    ring.finish(writer, rate_hz, &ring.odometry).unwrap();
+    ring
+}
+
+/// Asserts that the error message `err` names each of `words`.
+#[track_caller]
+fn assert_names(err: impl std::fmt::Display, words: &[&str]) {
+    let err = err.to_string();
+    for word in words {
+        assert!(err.contains(word), "'{word}' not in: {err}");
     }
 }
 
@@ -135,11 +167,9 @@ fn a_looping_trajectory_round_trips_through_the_folder() {
         },
     )
     .unwrap();
+    // The default flight: four legs 5 m or more apart, one of them back to an earlier goal.
     let spec = TrajectorySpec {
         seed: 5,
-        goals: 4,
-        revisits: 1,
-        min_goal_distance_m: 5.0,
         ..TrajectorySpec::default()
     };
     let trajectory = planner.random_trajectory(&spec).unwrap();
@@ -219,48 +249,35 @@ fn edit(path: &Path, change: impl FnOnce(String) -> String) {
     std::fs::write(path, change(text)).unwrap();
 }
 
-/// Damage: replace the first `from` by `to` in `file`.
-fn replace(file: &'static str, from: &'static str, to: &'static str) -> Damage {
-    Box::new(move |root| edit(&root.join(file), |t| t.replacen(from, to, 1)))
-}
-
 type Damage = Box<dyn FnOnce(&Path)>;
 
 #[test]
 fn damaged_folders_are_refused_naming_the_file() {
-    let cases: Vec<(&str, Damage, Vec<&str>)> = vec![
+    // Edits: the first `from` in `file` replaced by `to`; the error names the file and `words`.
+    let edits: [(&str, &str, &str, &[&str]); 8] = [
+        ("graph.json", "[", "{", &["line"]),
+        ("manifest.json", "\"split\"", "\"splat\"", &["split"]),
+        ("manifest.json", "\"1.1\"", "\"2.1\"", &["2.1", "newer"]),
+        ("manifest.json", "topoloc-sim-dataset", "tum", &["format"]),
+        ("groundtruth.txt", " 1.5 ", " x ", &["line 2", "'x'"]),
+        ("nodes.csv", "\n3,", "\n3,x", &["line 5", "place"]),
+        ("nodes.csv", "\n2,0,", "\n2,9,", &["line 4", "place 9"]),
+        ("nodes.csv", "frame,", "query,", &["line 1", "header"]),
+    ];
+    for (file, from, to, words) in edits {
+        let err = open_damaged(|root| edit(&root.join(file), |t| t.replacen(from, to, 1)));
+        assert_names(err, &[&[file], words].concat());
+    }
+    let cases: Vec<(Damage, Vec<&str>)> = vec![
         (
-            "no folder",
             Box::new(|r| std::fs::remove_dir_all(r).unwrap()),
             vec!["ds", "dataset folder is missing"],
         ),
         (
-            "no manifest",
             Box::new(|r| std::fs::remove_file(r.join("manifest.json")).unwrap()),
             vec!["manifest.json", "missing"],
         ),
         (
-            "bad JSON",
-            replace("graph.json", "[", "{"),
-            vec!["graph.json", "line"],
-        ),
-        (
-            "missing key",
-            replace("manifest.json", "\"split\"", "\"splat\""),
-            vec!["manifest.json", "split"],
-        ),
-        (
-            "newer version",
-            replace("manifest.json", "\"1.1\"", "\"2.1\""),
-            vec!["manifest.json", "2.1", "newer"],
-        ),
-        (
-            "another format",
-            replace("manifest.json", "topoloc-sim-dataset", "tum"),
-            vec!["manifest.json", "format"],
-        ),
-        (
-            "bad intrinsics",
             Box::new(|r| {
                 edit(&r.join("intrinsics.json"), |t| {
                     let mut k: serde_json::Value = serde_json::from_str(&t).unwrap();
@@ -271,12 +288,10 @@ fn damaged_folders_are_refused_naming_the_file() {
             vec!["intrinsics.json", "fx"],
         ),
         (
-            "missing image",
             Box::new(|r| std::fs::remove_file(r.join(image_name(3))).unwrap()),
             vec!["000003.png", "missing"],
         ),
         (
-            "extra image",
             Box::new(|r| {
                 std::fs::copy(r.join(image_name(0)), r.join("images/extra.png"))
                     .map(drop)
@@ -285,12 +300,6 @@ fn damaged_folders_are_refused_naming_the_file() {
             vec!["images", "13 PNG images for 12 frames"],
         ),
         (
-            "bad TUM line",
-            replace("groundtruth.txt", " 1.5 ", " x "),
-            vec!["groundtruth.txt", "line 2", "'x'"],
-        ),
-        (
-            "short odometry",
             Box::new(|r| {
                 edit(&r.join("odometry.txt"), |t| {
                     t.lines().take(5).collect::<Vec<_>>().join("\n")
@@ -298,77 +307,40 @@ fn damaged_folders_are_refused_naming_the_file() {
             }),
             vec!["odometry.txt", "4 poses for 12 frames"],
         ),
-        (
-            "bad node row",
-            replace("nodes.csv", "\n3,", "\n3,x"),
-            vec!["nodes.csv line 5", "place"],
-        ),
-        (
-            "unknown place",
-            replace("nodes.csv", "\n2,0,", "\n2,9,"),
-            vec!["nodes.csv line 4", "place 9"],
-        ),
-        (
-            "bad header",
-            replace("nodes.csv", "frame,", "query,"),
-            vec!["nodes.csv line 1", "header"],
-        ),
     ];
-    for (name, damage, expected) in cases {
-        let err = open_damaged(damage);
-        for word in expected {
-            assert!(err.contains(word), "{name}: '{word}' not in: {err}");
-        }
+    for (damage, words) in cases {
+        assert_names(open_damaged(damage), &words);
     }
 }
 
 #[test]
 fn the_writer_refuses_bad_input_naming_the_file() {
     let dir = tempfile::tempdir().unwrap();
-    let k = Intrinsics::from_hfov(32, 24, 90.0);
+    let ring = Ring::along(straight_frames());
+    let k = ring.k;
     std::fs::write(dir.path().join("stale.txt"), "x").unwrap();
     let err = DatasetWriter::create(dir.path(), k).unwrap_err();
     assert!(matches!(err, DatasetError::NotEmpty { .. }), "{err}");
     let bad_k = Intrinsics { width: 0, ..k };
-    assert!(DatasetWriter::create(&dir.path().join("a"), bad_k)
-        .unwrap_err()
-        .to_string()
-        .contains("intrinsics.width"));
+    let err = DatasetWriter::create(&dir.path().join("a"), bad_k).unwrap_err();
+    assert_names(err, &["intrinsics.width"]);
 
-    let frames = straight_frames();
-    let graph = ring_graph();
-    let nodes = ground_truth(&ring_world(), &graph, &frames).unwrap();
-    let writer = DatasetWriter::create(&dir.path().join("b"), k).unwrap();
-    let err = writer.write_image(0, &[0; 10]).unwrap_err().to_string();
-    assert!(
-        err.contains("000000.png") && err.contains("needs 2304"),
-        "{err}"
-    );
-    for f in 0..frames.len() - 1 {
-        writer.write_image(f, &image(&k, f)).unwrap();
-    }
-    let err = writer
-        .finish(&info(10.0), &graph, &frames, &frames, &nodes)
-        .unwrap_err()
-        .to_string();
-    assert!(
-        err.contains("images") && err.contains("11 PNG images for 12 frames"),
-        "{err}"
-    );
+    let n = ring.ground_truth.len();
+    let writer = ring.writer(&dir.path().join("b"), n - 1);
+    let err = writer.write_image(0, &[0; 10]).unwrap_err();
+    assert_names(err, &["000000.png", "needs 2304"]);
+    let err = ring.finish(writer, 10.0, &ring.ground_truth).unwrap_err();
+    assert_names(err, &["images", "11 PNG images for 12 frames"]);
     assert!(
         !dir.path().join("b/manifest.json").exists(),
         "no manifest for an incomplete dataset"
     );
 
     let writer = DatasetWriter::create(&dir.path().join("c"), k).unwrap();
-    let err = writer
-        .finish(&info(10.0), &graph, &frames, &frames[1..], &nodes)
-        .unwrap_err()
-        .to_string();
-    assert!(
-        err.contains("odometry.txt") && err.contains("11 poses for 12 frames"),
-        "{err}"
-    );
+    let err = ring
+        .finish(writer, 10.0, &ring.ground_truth[1..])
+        .unwrap_err();
+    assert_names(err, &["odometry.txt", "11 poses for 12 frames"]);
 }
 
 /// Depth images (format 1.1) are written as 16-bit millimetres, listed in the manifest, read
@@ -376,10 +348,8 @@ fn the_writer_refuses_bad_input_naming_the_file() {
 #[test]
 fn depth_images_round_trip_and_are_complete() {
     let dir = tempfile::tempdir().unwrap();
-    let k = Intrinsics::from_hfov(32, 24, 90.0);
-    let frames = straight_frames();
-    let graph = ring_graph();
-    let nodes = ground_truth(&ring_world(), &graph, &frames).unwrap();
+    let ring = Ring::along(straight_frames());
+    let n = ring.ground_truth.len();
     let depth_of = |f: usize| -> Vec<f32> {
         (0..32 * 24)
             .map(|i| match i % 7 {
@@ -390,19 +360,13 @@ fn depth_images_round_trip_and_are_complete() {
     };
 
     let root = dir.path().join("with-depth");
-    let writer = DatasetWriter::create(&root, k).unwrap();
-    for f in 0..frames.len() {
-        writer.write_image(f, &image(&k, f)).unwrap();
+    let writer = ring.writer(&root, n);
+    for f in 0..n {
         writer.write_depth(f, &depth_of(f)).unwrap();
     }
-    let err = writer.write_depth(0, &[1.0; 5]).unwrap_err().to_string();
-    assert!(
-        err.contains("depth/000000.png") && err.contains("needs 768"),
-        "{err}"
-    );
-    writer
-        .finish(&info(10.0), &graph, &frames, &frames, &nodes)
-        .unwrap();
+    let err = writer.write_depth(0, &[1.0; 5]).unwrap_err();
+    assert_names(err, &["depth/000000.png", "needs 768"]);
+    ring.finish(writer, 10.0, &ring.ground_truth).unwrap();
     let dataset = Dataset::open(&root).unwrap();
     assert_eq!(dataset.manifest.depth_scale, Some(1000.0));
     assert!(dataset
@@ -432,19 +396,10 @@ fn depth_images_round_trip_and_are_complete() {
     let dataset = Dataset::open(&plain).unwrap();
     assert_eq!(dataset.manifest.depth_scale, None);
     assert!(dataset.depth_path(0).is_none());
-    let writer = DatasetWriter::create(&dir.path().join("partial"), k).unwrap();
-    for f in 0..frames.len() {
-        writer.write_image(f, &image(&k, f)).unwrap();
-    }
+    let writer = ring.writer(&dir.path().join("partial"), n);
     writer.write_depth(0, &depth_of(0)).unwrap();
-    let err = writer
-        .finish(&info(10.0), &graph, &frames, &frames, &nodes)
-        .unwrap_err()
-        .to_string();
-    assert!(
-        err.contains("depth") && err.contains("1 PNG images for 12 frames"),
-        "{err}"
-    );
+    let err = ring.finish(writer, 10.0, &ring.ground_truth).unwrap_err();
+    assert_names(err, &["depth", "1 PNG images for 12 frames"]);
     let manifest = root.join("manifest.json");
     let text = std::fs::read_to_string(&manifest).unwrap();
     std::fs::write(
@@ -452,10 +407,8 @@ fn depth_images_round_trip_and_are_complete() {
         text.replace("\"depth_scale\": 1000.0", "\"depth_scale\": -1.0"),
     )
     .unwrap();
-    let err = Dataset::open(&root).unwrap_err().to_string();
-    assert!(err.contains("depth_scale is -1"), "{err}");
+    assert_names(Dataset::open(&root).unwrap_err(), &["depth_scale is -1"]);
     std::fs::write(&manifest, text).unwrap();
     std::fs::remove_file(root.join("depth/000004.png")).unwrap();
-    let err = Dataset::open(&root).unwrap_err().to_string();
-    assert!(err.contains("depth/000004.png"), "{err}");
+    assert_names(Dataset::open(&root).unwrap_err(), &["depth/000004.png"]);
 }
