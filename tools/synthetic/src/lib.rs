@@ -124,34 +124,45 @@ impl WorldParams {
         if self.dim > u32::MAX as usize {
             return bad("dim", "must fit in 32 bits");
         }
-        for (field, x) in [
-            ("extra_edges", self.extra_edges),
-            ("aliasing", self.aliasing),
-        ] {
-            if !(x.is_finite() && (0.0..=1.0).contains(&x)) {
-                return bad(field, "must be a probability in [0, 1]");
-            }
-        }
-        for (field, x) in [
-            ("place_spacing", self.place_spacing),
-            ("speed", self.speed),
-            ("frame_rate", self.frame_rate),
-        ] {
-            if !(x.is_finite() && x > 0.0) {
-                return bad(field, "must be finite and > 0");
-            }
-        }
-        let non_negative = [
-            ("alias_deviation", self.alias_deviation),
-            ("view_distinctness", self.view_distinctness),
-            ("query_noise", self.query_noise),
-            ("condition_shift", self.condition_shift),
-            ("odometry_noise", self.odometry_noise),
-            ("odometry_yaw_noise", self.odometry_yaw_noise),
+        // Real-valued fields, finite and in range: (fields, range check, what is expected).
+        type RealChecks<'a> = (&'a [(&'static str, f64)], fn(f64) -> bool, &'a str);
+        let reals: [RealChecks; 3] = [
+            (
+                &[
+                    ("extra_edges", self.extra_edges),
+                    ("aliasing", self.aliasing),
+                ],
+                |x| (0.0..=1.0).contains(&x),
+                "must be a probability in [0, 1]",
+            ),
+            (
+                &[
+                    ("place_spacing", self.place_spacing),
+                    ("speed", self.speed),
+                    ("frame_rate", self.frame_rate),
+                ],
+                |x| x > 0.0,
+                "must be finite and > 0",
+            ),
+            (
+                &[
+                    ("alias_deviation", self.alias_deviation),
+                    ("view_distinctness", self.view_distinctness),
+                    ("query_noise", self.query_noise),
+                    ("condition_shift", self.condition_shift),
+                    ("odometry_noise", self.odometry_noise),
+                    ("odometry_yaw_noise", self.odometry_yaw_noise),
+                ],
+                |x| x >= 0.0,
+                "must be finite and >= 0",
+            ),
         ];
-        for (field, x) in non_negative {
-            if !(x.is_finite() && x >= 0.0) {
-                return bad(field, "must be finite and >= 0");
+        for (fields, in_range, reason) in reals {
+            if let Some(&(field, _)) = fields
+                .iter()
+                .find(|&&(_, x)| !(x.is_finite() && in_range(x)))
+            {
+                return bad(field, reason);
             }
         }
         Ok(())
