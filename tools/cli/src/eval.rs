@@ -200,21 +200,23 @@ fn run_images(args: &EvalArgs, images: &Path, map: &Arc<Map>) -> Result<()> {
     };
     let timestamps: Vec<f64> = (0..files.len()).map(|i| i as f64).collect();
     let mut similarity = vec![f32::NAN; files.len() * map_images];
+    let queries = Queries {
+        described: &described,
+        timestamps: &timestamps,
+        odometry: None,
+        images: (args.verify > 0).then_some((files.as_slice(), read)),
+    };
     let mut runs = Vec::new();
     for &(name, mode, _) in configurations(args) {
-        let queries = Queries {
-            described: &described,
-            timestamps: &timestamps,
-            odometry: None,
-            images: (args.verify > 0).then_some((files.as_slice(), read)),
-        };
+        let similarity = (mode == Mode::SingleFrame).then_some((&mut similarity, map_images));
+        let mut localizer = localizer(args, map, mode)?;
         let run = localize_all(
             name,
-            &mut localizer(args, map, mode)?,
+            &mut localizer,
             &queries,
             &view_image,
             args.tolerance,
-            (mode == Mode::SingleFrame).then_some((&mut similarity, map_images)),
+            similarity,
         )?;
         runs.push(run);
     }
@@ -303,22 +305,20 @@ fn run_dataset(args: &EvalArgs, root: &Path, map: &Arc<Map>) -> Result<()> {
     report.insert("trajectory_seed".into(), json!(info.trajectory_seed));
     report.insert("condition".into(), json!(info.condition));
     report.insert("places".into(), json!(map.place_count()));
+    let with_odometry = Queries {
+        described: &described,
+        timestamps: &timestamps,
+        odometry: Some(&increments),
+        images: (args.verify > 0).then_some((paths.as_slice(), read)),
+    };
     let mut runs = Vec::new();
     for &(name, mode, odometry) in configurations(args) {
         let queries = Queries {
-            described: &described,
-            timestamps: &timestamps,
-            odometry: odometry.then_some(increments.as_slice()),
-            images: (args.verify > 0).then_some((paths.as_slice(), read)),
+            odometry: with_odometry.odometry.filter(|_| odometry),
+            ..with_odometry
         };
-        let run = localize_all(
-            name,
-            &mut localizer(args, map, mode)?,
-            &queries,
-            &view_image,
-            0,
-            None,
-        )?;
+        let mut localizer = localizer(args, map, mode)?;
+        let run = localize_all(name, &mut localizer, &queries, &view_image, 0, None)?;
         let (metrics, pr) = graph_metrics(&run, &truth, &hops, &RECALL_DEPTHS)?;
         let mut summary = json!({
             "mna": metrics.mna,
