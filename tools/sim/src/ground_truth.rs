@@ -253,8 +253,8 @@ pub fn visits(truth: &[FrameTruth]) -> Vec<Visit> {
 mod tests {
     use super::*;
     use crate::camera::pose;
-    use crate::trajectory::tests::two_rooms;
-    use crate::trajectory::{MotionOptions, Planner, PlannerOptions};
+    use crate::trajectory::tests::{two_rooms, two_rooms_planner};
+    use crate::trajectory::MotionOptions;
 
     fn at(x: f64, y: f64, yaw: f64) -> TimedPose {
         TimedPose {
@@ -325,8 +325,7 @@ mod tests {
 
     #[test]
     fn a_loop_revisits_places() {
-        let grid = two_rooms();
-        let planner = Planner::new(&grid, PlannerOptions::default()).unwrap();
+        let (grid, planner) = two_rooms_planner();
         let waypoints = [
             Point3::new(2.0, 2.0, 1.5),
             Point3::new(14.0, 4.0, 1.5),

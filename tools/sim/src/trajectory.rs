@@ -548,6 +548,13 @@ impl Planner {
 pub(crate) mod tests {
     use super::*;
 
+    /// [`two_rooms`] and its planner with the default options.
+    pub(crate) fn two_rooms_planner() -> (OccupancyGrid, Planner) {
+        let grid = two_rooms();
+        let planner = Planner::new(&grid, PlannerOptions::default()).unwrap();
+        (grid, planner)
+    }
+
     /// Two 6 x 6 m rooms joined by a 4 m corridor 1.2 m wide, 3 m high, 0.1 m voxels, floor
     /// and ceiling slabs; the rooms span x 0-6 and 10-16, y 0-6, the corridor y 2.4-3.6.
     pub(crate) fn two_rooms() -> OccupancyGrid {
@@ -568,8 +575,7 @@ pub(crate) mod tests {
 
     #[test]
     fn plans_through_the_corridor_with_clearance() {
-        let grid = two_rooms();
-        let planner = Planner::new(&grid, PlannerOptions::default()).unwrap();
+        let (_, planner) = two_rooms_planner();
         let (start, goal) = (Point3::new(1.0, 1.0, 1.2), Point3::new(15.0, 5.0, 1.5));
         let path = planner.plan(start, goal).unwrap();
         assert_eq!((path[0], *path.last().unwrap()), (start, goal));
@@ -710,8 +716,7 @@ pub(crate) mod tests {
 
     #[test]
     fn frames_follow_the_path_at_the_rate_with_the_heading() {
-        let grid = two_rooms();
-        let planner = Planner::new(&grid, PlannerOptions::default()).unwrap();
+        let (_, planner) = two_rooms_planner();
         let waypoints = [Point3::new(1.0, 3.0, 1.2), Point3::new(15.0, 3.0, 1.2)];
         let motion = MotionOptions {
             yaw_noise_std_rad: 0.0,
@@ -753,8 +758,7 @@ pub(crate) mod tests {
 
     #[test]
     fn heading_turns_at_a_limited_rate_and_noise_is_seeded() {
-        let grid = two_rooms();
-        let planner = Planner::new(&grid, PlannerOptions::default()).unwrap();
+        let (_, planner) = two_rooms_planner();
         let waypoints = [
             Point3::new(1.0, 1.0, 1.2),
             Point3::new(5.0, 5.0, 1.2),
@@ -797,8 +801,7 @@ pub(crate) mod tests {
 
     #[test]
     fn random_trajectories_loop_back_and_are_deterministic() {
-        let grid = two_rooms();
-        let planner = Planner::new(&grid, PlannerOptions::default()).unwrap();
+        let (_, planner) = two_rooms_planner();
         let spec = TrajectorySpec {
             seed: 11,
             goals: 4,
