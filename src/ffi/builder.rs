@@ -3,7 +3,7 @@
 use super::boundary::{convert_each, fill_out, optional_string, run, slice, string};
 use super::convert::optional_pose;
 use super::error::FfiError;
-use super::handles::{enter, free_exclusive, new_exclusive, Castable, Opaque, OwnedExclusive};
+use super::handles::{castable, free_exclusive, new_exclusive, run_on, run_on_mut, Opaque};
 use super::map::{map_handle, topoloc_map};
 use super::topoloc_status;
 use super::versioned::{init_versioned, read_optional, versioned};
@@ -17,14 +17,9 @@ use std::ffi::c_char;
 /// released by `topoloc_map_builder_free`. Not thread-safe: use from one thread at a time. A call made while another call uses it
 /// (another thread, or a callback re-entering it) fails with `TOPOLOC_ERR_CONCURRENT_USE` and
 /// changes nothing (ABI 1.13).
-pub struct topoloc_map_builder {
-    _opaque: Opaque,
-}
+pub struct topoloc_map_builder(Opaque);
 
-impl Castable for topoloc_map_builder {
-    type Ownership = OwnedExclusive;
-    type RustType = MapBuilder;
-}
+castable!(topoloc_map_builder: OwnedExclusive => MapBuilder);
 
 /// Starts a map whose vectors come from descriptor `kind` / `model` with dimension `dim`
 /// (`model` may be NULL). On success `*out` owns a new builder.
@@ -69,8 +64,7 @@ pub extern "C" fn topoloc_map_builder_add_place(
     position: *const f64,
     place_out: *mut u32,
 ) -> topoloc_status {
-    run(|| {
-        let mut builder = enter(builder, "builder")?;
+    run_on_mut(builder, "builder", |builder| {
         fill_out(place_out, "place_out", || {
             let position = match position.is_null() {
                 true => None,
@@ -134,8 +128,7 @@ pub extern "C" fn topoloc_map_builder_add_view(
     attributes: *const topoloc_view_attributes,
     view_out: *mut u32,
 ) -> topoloc_status {
-    run(|| {
-        let mut builder = enter(builder, "builder")?;
+    run_on_mut(builder, "builder", |builder| {
         let descriptor = slice(descriptor, len, "descriptor")?;
         fill_out(view_out, "view_out", || {
             let a = read_optional(attributes, "attributes")?;
@@ -157,8 +150,8 @@ pub extern "C" fn topoloc_map_builder_add_edge(
     b: u32,
     weight: f32,
 ) -> topoloc_status {
-    run(|| {
-        enter(builder, "builder")?.add_edge(a, b, weight)?;
+    run_on_mut(builder, "builder", |builder| {
+        builder.add_edge(a, b, weight)?;
         Ok(())
     })
 }
@@ -170,8 +163,7 @@ pub extern "C" fn topoloc_map_builder_build(
     builder: *const topoloc_map_builder,
     out: *mut *mut topoloc_map,
 ) -> topoloc_status {
-    run(|| {
-        let builder = enter(builder, "builder")?;
+    run_on(builder, "builder", |builder| {
         fill_out(out, "out", || Ok(map_handle(builder.build()?)))
     })
 }

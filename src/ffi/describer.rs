@@ -2,15 +2,13 @@
 //! images computes the global descriptors it gives a loop detector (or a keyframe builder)
 //! exactly as the map's views were described.
 
-use super::boundary::{fill_out, optional_string, run, slice, write_array, write_optional};
+use super::boundary::{optional_string, slice, write_array, write_optional};
 use super::error::FfiError;
-use super::handles::{
-    clone_arc, enter, free_exclusive, handle_value, new_exclusive, Castable, Opaque, OwnedExclusive,
-};
+use super::handles::{castable, free_exclusive, handle_value, new_exclusive, run_on_mut, Opaque};
 use super::images::{backend_family, backend_kind, image_view, topoloc_backend, topoloc_image};
-use super::map::topoloc_map;
+use super::map::{new_on_map, topoloc_map};
 use super::topoloc_status;
-use super::versioned::{init_versioned, read_optional, versioned};
+use super::versioned::{init_versioned, versioned};
 use crate::describe::{Describer, DescriberOptions};
 use crate::localize::LocalizeError;
 use std::ffi::c_char;
@@ -20,9 +18,7 @@ use std::ffi::c_char;
 /// is shared). Single-threaded state: one thread at a time (it may move between threads). A call made while another call uses it
 /// (another thread, or a callback re-entering it) fails with `TOPOLOC_ERR_CONCURRENT_USE` and
 /// changes nothing (ABI 1.13).
-pub struct topoloc_describer {
-    _opaque: Opaque,
-}
+pub struct topoloc_describer(Opaque);
 
 /// The describer and the buffer its descriptors are written to.
 pub(crate) struct DescriberState {
@@ -30,10 +26,7 @@ pub(crate) struct DescriberState {
     scratch: Vec<f32>,
 }
 
-impl Castable for topoloc_describer {
-    type Ownership = OwnedExclusive;
-    type RustType = DescriberState;
-}
+castable!(topoloc_describer: OwnedExclusive => DescriberState);
 
 /// Where the describer finds its runtime files. Initialise with
 /// `topoloc_describer_options_default`.
@@ -102,41 +95,35 @@ pub extern "C" fn topoloc_describer_new(
     options: *const topoloc_describer_options,
     out: *mut *mut topoloc_describer,
 ) -> topoloc_status {
-    run(|| {
-        let map = clone_arc(map, "map")?;
-        fill_out(out, "out", || {
-            let o = read_optional(options, "options")?;
-            if o.backend == super::images::TOPOLOC_BACKEND_NONE {
-                return Err(FfiError::new(
-                    topoloc_status::TOPOLOC_ERR_INVALID_OPTION,
-                    "a describer needs a backend: TOPOLOC_BACKEND_NONE describes nothing"
-                        .to_string(),
-                ));
-            }
-            if !(1..=64).contains(&o.threads) {
-                return Err(FfiError::new(
-                    topoloc_status::TOPOLOC_ERR_INVALID_OPTION,
-                    format!("threads {} must lie in 1..=64", o.threads),
-                ));
-            }
-            let model = map.describer().cloned().ok_or_else(|| {
-                LocalizeError::NoDescriber(format!(
-                    "the map ({}) stores no describer; it was built from descriptors, not images",
-                    map.descriptor()
-                ))
-            })?;
-            let options = describer_options(
-                o.backend,
-                o.onnx_model_path,
-                o.onnx_runtime_path,
-                o.threads as usize,
-            )?;
-            let describer = Describer::new(model, &options)?;
-            Ok(new_exclusive::<topoloc_describer>(DescriberState {
-                describer,
-                scratch: Vec::new(),
-            }))
-        })
+    new_on_map(map, options, out, |map, o: topoloc_describer_options| {
+        if o.backend == super::images::TOPOLOC_BACKEND_NONE {
+            return Err(FfiError::invalid_option(
+                "a describer needs a backend: TOPOLOC_BACKEND_NONE describes nothing",
+            ));
+        }
+        if !(1..=64).contains(&o.threads) {
+            return Err(FfiError::invalid_option(format!(
+                "threads {} must lie in 1..=64",
+                o.threads
+            )));
+        }
+        let model = map.describer().cloned().ok_or_else(|| {
+            LocalizeError::NoDescriber(format!(
+                "the map ({}) stores no describer; it was built from descriptors, not images",
+                map.descriptor()
+            ))
+        })?;
+        let options = describer_options(
+            o.backend,
+            o.onnx_model_path,
+            o.onnx_runtime_path,
+            o.threads as usize,
+        )?;
+        let describer = Describer::new(model, &options)?;
+        Ok(new_exclusive::<topoloc_describer>(DescriberState {
+            describer,
+            scratch: Vec::new(),
+        }))
     })
 }
 
@@ -170,9 +157,7 @@ pub extern "C" fn topoloc_describer_describe(
     capacity: usize,
     len: *mut usize,
 ) -> topoloc_status {
-    run(|| {
-        let mut in_use = enter(describer, "describer")?;
-        let state = &mut *in_use;
+    run_on_mut(describer, "describer", |state| {
         let image = &slice(image, 1, "image")?[0];
         let view = image_view(image, "image")?.ok_or_else(|| {
             FfiError::new(

@@ -38,6 +38,10 @@ impl FfiError {
         Self::new(TOPOLOC_ERR_INVALID_ARGUMENT, message)
     }
 
+    pub fn invalid_option(message: impl Into<String>) -> Self {
+        Self::new(TOPOLOC_ERR_INVALID_OPTION, message)
+    }
+
     /// `name` is in use by another call (another thread, or a callback re-entering it).
     pub fn concurrent_use(name: &str) -> Self {
         Self::new(

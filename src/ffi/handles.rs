@@ -3,7 +3,7 @@
 //! here and a cast to the wrong type or the wrong owner does not compile.
 //!
 //! A handle type is an empty struct (C sees `typedef struct topoloc_x topoloc_x;`) with a
-//! [`Castable`] impl. `Box` handles are created by [`new_box`], borrowed by [`try_ref`] and
+//! [`Castable`] impl ([`castable!`]). `Box` handles are created by [`new_box`], borrowed by [`try_ref`] and
 //! dropped by [`free_box`]; `Arc` handles by [`new_arc`], [`try_ref`],
 //! [`clone_arc`] (a new strong reference, e.g. a localizer keeping its map) and [`free_arc`].
 //! `Exclusive` handles (per-camera state that C must use from one thread at a time) are
@@ -43,7 +43,19 @@ pub(crate) trait Castable {
     type RustType;
 }
 
-/// The body of an opaque handle type: no fields C could see, not constructible from Rust, and
+/// Ties a handle type to its Rust value and ownership:
+/// `castable!(topoloc_map: OwnedArc => Map);`.
+macro_rules! castable {
+    ($handle:ident: $ownership:ident => $rust:ty) => {
+        impl $crate::ffi::handles::Castable for $handle {
+            type Ownership = $crate::ffi::handles::$ownership;
+            type RustType = $rust;
+        }
+    };
+}
+pub(crate) use castable;
+
+/// The body of an opaque handle type (`pub struct topoloc_x(Opaque);`): no fields C could see, not constructible from Rust, and
 /// neither `Send` nor `Sync` by accident (the pointee decides that).
 pub(crate) type Opaque = PhantomData<*mut ()>;
 
@@ -150,11 +162,32 @@ where
     C: Castable,
     C::Ownership: Readable,
 {
-    run(|| {
-        C::Ownership::read(handle, name, |value| {
-            fill_out(out, out_name, || Ok(read(value)))
-        })?
+    run_on(handle, name, |value| {
+        fill_out(out, out_name, || Ok(read(value)))
     })
+}
+
+/// Runs an entry point's body ([`run`]) on the value behind `handle` (`name`), which is checked
+/// first.
+pub(crate) fn run_on<C>(
+    handle: *const C,
+    name: &str,
+    body: impl FnOnce(&C::RustType) -> Result<(), FfiError>,
+) -> topoloc_status
+where
+    C: Castable,
+    C::Ownership: Readable,
+{
+    run(|| C::Ownership::read(handle, name, body)?)
+}
+
+/// [`run_on`] for the calls that change the value behind an `Exclusive` handle.
+pub(crate) fn run_on_mut<C: Castable<Ownership = OwnedExclusive>>(
+    handle: *mut C,
+    name: &str,
+    body: impl FnOnce(&mut C::RustType) -> Result<(), FfiError>,
+) -> topoloc_status {
+    run(|| body(&mut *enter(handle, name)?))
 }
 
 /// A value that one call at a time may use, checked: the busy flag is taken with one atomic

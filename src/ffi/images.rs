@@ -244,10 +244,9 @@ pub(crate) fn backend_kind(
         TOPOLOC_BACKEND_NONE => Ok(None),
         TOPOLOC_BACKEND_ONNX => Ok(Some(BackendKind::Onnx)),
         TOPOLOC_BACKEND_VLAD_ORB | TOPOLOC_BACKEND_VLAD_SIFT => Ok(Some(BackendKind::Vlad)),
-        other => Err(FfiError::new(
-            topoloc_status::TOPOLOC_ERR_INVALID_OPTION,
-            format!("backend {other} is not a TOPOLOC_BACKEND_* value"),
-        )),
+        other => Err(FfiError::invalid_option(format!(
+            "backend {other} is not a TOPOLOC_BACKEND_* value"
+        ))),
     }
 }
 

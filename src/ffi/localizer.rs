@@ -1,19 +1,17 @@
 //! C functions of the localizer: create, process a frame, reset, free.
 
-use super::boundary::{fill_out, run, slice};
+use super::boundary::slice;
 use super::convert::{expected_descriptor, optional_camera, optional_pose, pose_to_row_major};
 use super::describer::describer_options;
 use super::error::FfiError;
-use super::handles::{
-    clone_arc, enter, free_exclusive, new_exclusive, Castable, Opaque, OwnedExclusive,
-};
+use super::handles::{castable, free_exclusive, new_exclusive, run_on_mut, Opaque};
 use super::images::{
     backend_kind, image_view, topoloc_backend, topoloc_image, TOPOLOC_BACKEND_AUTO,
     TOPOLOC_BACKEND_NONE,
 };
-use super::map::topoloc_map;
+use super::map::{new_on_map, topoloc_map};
 use super::topoloc_status;
-use super::versioned::{init_versioned, read_optional, read_versioned, versioned, write_versioned};
+use super::versioned::{init_versioned, read_versioned, versioned, write_versioned};
 use crate::localize::{Frame, Localization, Localizer, LocalizerOptions, MetricOptions, Mode};
 use crate::verify::{LocateOptions, VerificationOptions};
 use nalgebra::Isometry3;
@@ -36,9 +34,7 @@ pub const TOPOLOC_MODE_METRIC: topoloc_mode = 2;
 /// move between threads). It keeps its own reference to the map. A call made while another call uses it
 /// (another thread, or a callback re-entering it) fails with `TOPOLOC_ERR_CONCURRENT_USE` and
 /// changes nothing (ABI 1.13).
-pub struct topoloc_localizer {
-    _opaque: Opaque,
-}
+pub struct topoloc_localizer(Opaque);
 
 /// What a localizer handle owns: the localizer and the result buffer its frames reuse.
 pub(crate) struct LocalizerState {
@@ -46,10 +42,7 @@ pub(crate) struct LocalizerState {
     scratch: Localization,
 }
 
-impl Castable for topoloc_localizer {
-    type Ownership = OwnedExclusive;
-    type RustType = LocalizerState;
-}
+castable!(topoloc_localizer: OwnedExclusive => LocalizerState);
 
 /// Localizer parameters. Initialise with `topoloc_localizer_options_default`; the defaults and
 /// meaning of each field are those of the Rust `LocalizerOptions`.
@@ -201,33 +194,25 @@ pub extern "C" fn topoloc_localizer_new(
     options: *const topoloc_localizer_options,
     out: *mut *mut topoloc_localizer,
 ) -> topoloc_status {
-    run(|| {
-        let map = clone_arc(map, "map")?;
-        fill_out(out, "out", || {
-            let o = read_optional(options, "options")?;
-            let options = localizer_options(&o)?;
-            let has_describer = map.describer().is_some();
-            // Unknown backend codes are refused before the map is looked at.
-            backend_kind(o.image_backend, None)?;
-            let localizer = match (o.image_backend, has_describer) {
-                (TOPOLOC_BACKEND_NONE, _) | (TOPOLOC_BACKEND_AUTO, false) => {
-                    Localizer::new(map, options)?
-                }
-                _ => {
-                    let describer = describer_options(
-                        o.image_backend,
-                        o.onnx_model_path,
-                        o.onnx_runtime_path,
-                        1,
-                    )?;
-                    Localizer::with_describer(map, options, &describer)?
-                }
-            };
-            Ok(new_exclusive::<topoloc_localizer>(LocalizerState {
-                localizer,
-                scratch: Localization::default(),
-            }))
-        })
+    new_on_map(map, options, out, |map, o| {
+        let options = localizer_options(&o)?;
+        let has_describer = map.describer().is_some();
+        // Unknown backend codes are refused before the map is looked at.
+        backend_kind(o.image_backend, None)?;
+        let localizer = match (o.image_backend, has_describer) {
+            (TOPOLOC_BACKEND_NONE, _) | (TOPOLOC_BACKEND_AUTO, false) => {
+                Localizer::new(map, options)?
+            }
+            _ => {
+                let describer =
+                    describer_options(o.image_backend, o.onnx_model_path, o.onnx_runtime_path, 1)?;
+                Localizer::with_describer(map, options, &describer)?
+            }
+        };
+        Ok(new_exclusive::<topoloc_localizer>(LocalizerState {
+            localizer,
+            scratch: Localization::default(),
+        }))
     })
 }
 
@@ -237,12 +222,7 @@ fn localizer_options(o: &topoloc_localizer_options) -> Result<LocalizerOptions, 
         TOPOLOC_MODE_FILTER => Mode::Filter,
         TOPOLOC_MODE_SINGLE_FRAME => Mode::SingleFrame,
         TOPOLOC_MODE_METRIC => Mode::Metric,
-        other => {
-            return Err(FfiError::new(
-                topoloc_status::TOPOLOC_ERR_INVALID_OPTION,
-                format!("unknown mode {other}"),
-            ))
-        }
+        other => return Err(FfiError::invalid_option(format!("unknown mode {other}"))),
     };
     Ok(LocalizerOptions {
         mode,
@@ -291,8 +271,8 @@ pub extern "C" fn topoloc_localizer_free(localizer: *mut topoloc_localizer) {
 /// Forgets all history; the next frame is treated as the first.
 #[no_mangle]
 pub extern "C" fn topoloc_localizer_reset(localizer: *mut topoloc_localizer) -> topoloc_status {
-    run(|| {
-        enter(localizer, "localizer")?.localizer.reset();
+    run_on_mut(localizer, "localizer", |state| {
+        state.localizer.reset();
         Ok(())
     })
 }
@@ -449,9 +429,7 @@ pub extern "C" fn topoloc_localizer_process(
     frame: *const topoloc_frame,
     result: *mut topoloc_result,
 ) -> topoloc_status {
-    run(|| {
-        let mut in_use = enter(localizer, "localizer")?;
-        let state = &mut *in_use;
+    run_on_mut(localizer, "localizer", |state| {
         let f = read_versioned(frame, "frame")?;
         // The caller's result is read through its own layout only (it may be an older one).
         let caller = read_versioned(result.cast_const(), "result")?;

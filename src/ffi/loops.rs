@@ -5,7 +5,7 @@ use super::boundary::{check_out, fill_out, run, slice, string, write_array};
 use super::convert::{optional_camera, optional_pose, pose_to_row_major};
 use super::error::FfiError;
 use super::handles::{
-    enter, free_exclusive, handle_value, new_exclusive, try_ref, Castable, Opaque, OwnedExclusive,
+    castable, free_exclusive, handle_value, new_exclusive, run_on, run_on_mut, Opaque,
 };
 use super::map::topoloc_map;
 use super::topoloc_status;
@@ -25,14 +25,9 @@ use std::ffi::c_char;
 /// Single-threaded state: one thread at a time (it may move between threads). A call made while another call uses it
 /// (another thread, or a callback re-entering it) fails with `TOPOLOC_ERR_CONCURRENT_USE` and
 /// changes nothing (ABI 1.13).
-pub struct topoloc_loop_detector {
-    _opaque: Opaque,
-}
+pub struct topoloc_loop_detector(Opaque);
 
-impl Castable for topoloc_loop_detector {
-    type Ownership = OwnedExclusive;
-    type RustType = LoopDetector;
-}
+castable!(topoloc_loop_detector: OwnedExclusive => LoopDetector);
 
 /// Which gate decided a hint: one of the `TOPOLOC_GATE_*` values.
 pub type topoloc_gate = u32;
@@ -232,8 +227,7 @@ pub extern "C" fn topoloc_loop_detector_from_map(
     options: *const topoloc_loop_options,
     out: *mut *mut topoloc_loop_detector,
 ) -> topoloc_status {
-    run(|| {
-        let map = try_ref(map, "map")?;
+    run_on(map, "map", |map| {
         fill_out(out, "out", || {
             let (hints, database) = loop_options(options)?;
             let detector = LoopDetector::from_map(map, database, hints)?;
@@ -477,8 +471,7 @@ pub extern "C" fn topoloc_loop_detector_add(
     keyframe: *const topoloc_loop_keyframe,
     hint: *mut topoloc_loop_hint,
 ) -> topoloc_status {
-    run(|| {
-        let mut detector = enter(detector, "detector")?;
+    run_on_mut(detector, "detector", |detector| {
         let k = read_versioned(keyframe, "keyframe")?;
         // Checks the caller's hint struct before anything changes.
         check_versioned(hint, "hint")?;
@@ -526,8 +519,7 @@ pub extern "C" fn topoloc_loop_detector_confirmed(
     index: usize,
     hint: *mut topoloc_loop_hint,
 ) -> topoloc_status {
-    run(|| {
-        let detector = enter(detector, "detector")?;
+    run_on(detector, "detector", |detector| {
         check_versioned(hint, "hint")?;
         let confirmed = detector.confirmed();
         let Some(h) = confirmed.get(index) else {
@@ -565,8 +557,7 @@ pub extern "C" fn topoloc_loop_detector_query(
     capacity: usize,
     count: *mut usize,
 ) -> topoloc_status {
-    run(|| {
-        let detector = enter(detector, "detector")?;
+    run_on(detector, "detector", |detector| {
         check_out(count, "count")?;
         let descriptor = slice(descriptor, descriptor_len, "descriptor")?;
         let found: Vec<topoloc_loop_candidate> = detector
@@ -590,8 +581,8 @@ pub extern "C" fn topoloc_loop_detector_erase(
     detector: *mut topoloc_loop_detector,
     id: u64,
 ) -> topoloc_status {
-    run(|| {
-        enter(detector, "detector")?.erase(id)?;
+    run_on_mut(detector, "detector", |detector| {
+        detector.erase(id)?;
         Ok(())
     })
 }
@@ -605,8 +596,7 @@ pub extern "C" fn topoloc_loop_detector_save(
     detector: *const topoloc_loop_detector,
     path: *const c_char,
 ) -> topoloc_status {
-    run(|| {
-        let detector = enter(detector, "detector")?;
+    run_on(detector, "detector", |detector| {
         detector.database().save(string(path, "path")?)?;
         Ok(())
     })

@@ -5,10 +5,12 @@ use super::boundary::{
 };
 use super::convert::{expected_descriptor, pose_to_row_major};
 use super::error::FfiError;
-use super::handles::{free_arc, handle_value, new_arc, try_ref, Castable, Opaque, OwnedArc};
+use super::handles::{
+    castable, clone_arc, free_arc, handle_value, new_arc, run_on, try_ref, Opaque,
+};
 use super::topoloc_status;
-use super::versioned::{init_versioned, read_optional, versioned, write_versioned};
-use crate::map::{LoadOptions, Map};
+use super::versioned::{init_versioned, read_optional, versioned, write_versioned, Versioned};
+use crate::map::{Edge, LoadOptions, Map};
 use std::ffi::c_char;
 use std::sync::Arc;
 
@@ -17,18 +19,28 @@ use std::sync::Arc;
 /// `topoloc_map_free`. Thread safety: a `const topoloc_map*` may be used from many threads at
 /// once, and localizers keep their own reference, so a map may be freed while localizers that
 /// were created from it are still in use.
-pub struct topoloc_map {
-    _opaque: Opaque,
-}
+pub struct topoloc_map(Opaque);
 
-impl Castable for topoloc_map {
-    type Ownership = OwnedArc;
-    type RustType = Map;
-}
+castable!(topoloc_map: OwnedArc => Map);
 
 /// Gives C a new map handle holding the only reference to `map`.
 pub(crate) fn map_handle(map: Map) -> *mut topoloc_map {
     new_arc(Arc::new(map))
+}
+
+/// The body of the functions that make a handle on a map with versioned options
+/// (`topoloc_localizer_new`, `topoloc_describer_new`): checks `map`, then `out`, then reads the
+/// options (NULL: defaults) and writes the handle `make` returns, which may keep the map.
+pub(crate) fn new_on_map<O: Versioned, H>(
+    map: *const topoloc_map,
+    options: *const O,
+    out: *mut *mut H,
+    make: impl FnOnce(Arc<Map>, O) -> Result<*mut H, FfiError>,
+) -> topoloc_status {
+    run(|| {
+        let map = clone_arc(map, "map")?;
+        fill_out(out, "out", || make(map, read_optional(options, "options")?))
+    })
 }
 
 /// Options of `topoloc_map_load`. Initialise with `topoloc_map_load_options_default`.
@@ -115,8 +127,7 @@ pub extern "C" fn topoloc_map_load_from_memory(
 /// Saves a map to `path` atomically (temporary file, fsync, rename). Errors: `TOPOLOC_ERR_IO`.
 #[no_mangle]
 pub extern "C" fn topoloc_map_save(map: *const topoloc_map, path: *const c_char) -> topoloc_status {
-    run(|| {
-        let map = try_ref(map, "map")?;
+    run_on(map, "map", |map| {
         map.save(string(path, "path")?)?;
         Ok(())
     })
@@ -210,8 +221,8 @@ pub extern "C" fn topoloc_map_neighbours(
     len: usize,
     count: *mut usize,
 ) -> topoloc_status {
-    run(|| {
-        let (ids, _) = try_ref(map, "map")?.neighbours(place)?;
+    run_on(map, "map", |map| {
+        let (ids, _) = map.neighbours(place)?;
         write_array(ids, buf, len, count)
     })
 }
@@ -225,8 +236,8 @@ pub extern "C" fn topoloc_map_place_views(
     len: usize,
     count: *mut usize,
 ) -> topoloc_status {
-    run(|| {
-        let views = try_ref(map, "map")?.place_views(place)?;
+    run_on(map, "map", |map| {
+        let views = map.place_views(place)?;
         write_array(views, buf, len, count)
     })
 }
@@ -240,8 +251,8 @@ pub extern "C" fn topoloc_map_place_position(
     xyz: *mut f64,
     has_position: *mut bool,
 ) -> topoloc_status {
-    run(|| {
-        let position = try_ref(map, "map")?.place_position(place)?;
+    run_on(map, "map", |map| {
+        let position = map.place_position(place)?;
         check_out(xyz, "xyz")?;
         check_out(has_position, "has_position")?;
         let p = position.map_or([0.0; 3], |p| [p.x, p.y, p.z]);
@@ -260,22 +271,37 @@ pub extern "C" fn topoloc_map_edge(
     b: *mut u32,
     weight: *mut f32,
 ) -> topoloc_status {
-    run(|| {
-        let map = try_ref(map, "map")?;
-        let edge = *map.edges().get(index).ok_or_else(|| {
-            FfiError::invalid(format!(
-                "edge index {index} out of range (the map has {} edges)",
-                map.edge_count()
-            ))
-        })?;
-        check_out(a, "a")?;
-        check_out(b, "b")?;
-        check_out(weight, "weight")?;
-        write_out(a, edge.a);
-        write_out(b, edge.b);
-        write_out(weight, edge.weight);
-        Ok(())
+    run_on(map, "map", |map| {
+        let parts = |e: Edge| (e.a, e.b, e.weight);
+        write_edge(map.edges(), index, "map", parts, (a, b, weight), "weight")
     })
+}
+
+/// The body of `topoloc_map_edge` and `topoloc_graph_edge`: edge `index` of the `edges` of a
+/// `what` (map, graph), split by `parts` into its two places and its value, is written to the
+/// out-parameters `(a, b, value)`, the last named `value_name`; all three are checked first.
+pub(crate) fn write_edge<E: Copy, T>(
+    edges: &[E],
+    index: usize,
+    what: &str,
+    parts: impl FnOnce(E) -> (u32, u32, T),
+    (a, b, value): (*mut u32, *mut u32, *mut T),
+    value_name: &str,
+) -> Result<(), FfiError> {
+    let edge = *edges.get(index).ok_or_else(|| {
+        FfiError::invalid(format!(
+            "edge index {index} out of range (the {what} has {} edges)",
+            edges.len()
+        ))
+    })?;
+    check_out(a, "a")?;
+    check_out(b, "b")?;
+    check_out(value, value_name)?;
+    let (edge_a, edge_b, edge_value) = parts(edge);
+    write_out(a, edge_a);
+    write_out(b, edge_b);
+    write_out(value, edge_value);
+    Ok(())
 }
 
 /// Attributes of one view, filled by `topoloc_map_view_info`. Initialise with
@@ -327,8 +353,8 @@ pub extern "C" fn topoloc_map_view_info(
     view: u32,
     out: *mut topoloc_view_info,
 ) -> topoloc_status {
-    run(|| {
-        let record = try_ref(map, "map")?.view(view)?;
+    run_on(map, "map", |map| {
+        let record = map.view(view)?;
         let pose = record
             .world_t_camera
             .unwrap_or_else(nalgebra::Isometry3::identity);
@@ -357,8 +383,8 @@ pub extern "C" fn topoloc_map_view_image(
     len: usize,
     needed: *mut usize,
 ) -> topoloc_status {
-    run(|| {
-        let record = try_ref(map, "map")?.view(view)?;
+    run_on(map, "map", |map| {
+        let record = map.view(view)?;
         copy_c_string(
             record.image.as_deref().unwrap_or("").as_bytes(),
             buf,
@@ -377,8 +403,8 @@ pub extern "C" fn topoloc_map_view_descriptor(
     buf: *mut f32,
     len: usize,
 ) -> topoloc_status {
-    run(|| {
-        let descriptor = try_ref(map, "map")?.view_descriptor(view)?;
+    run_on(map, "map", |map| {
+        let descriptor = map.view_descriptor(view)?;
         write_array(descriptor, buf, len, std::ptr::null_mut())
     })
 }

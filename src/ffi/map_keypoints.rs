@@ -2,9 +2,9 @@
 //! the 3D scene point of each keypoint (from depth or a SLAM system's map points) so that a
 //! localizer with camera intrinsics reports metric pose fixes.
 
-use super::boundary::{fill_out, run, slice, write_array, write_optional};
+use super::boundary::{fill_out, slice, write_array, write_optional};
 use super::error::FfiError;
-use super::handles::{handle_value, try_ref};
+use super::handles::{handle_value, run_on};
 use super::map::{map_handle, topoloc_map};
 use super::topoloc_status;
 use crate::map::{Map, MapError};
@@ -46,8 +46,7 @@ pub extern "C" fn topoloc_map_view_keypoints(
     len: usize,
     count: *mut usize,
 ) -> topoloc_status {
-    run(|| {
-        let map = try_ref(map, "map")?;
+    run_on(map, "map", |map| {
         map.view(view)?;
         let keypoints = keypoints_of(map)?;
         let points = keypoints
@@ -75,8 +74,7 @@ pub extern "C" fn topoloc_map_with_keypoint_points(
     len: usize,
     out: *mut *mut topoloc_map,
 ) -> topoloc_status {
-    run(|| {
-        let map = try_ref(map, "map")?;
+    run_on(map, "map", |map| {
         fill_out(out, "out", || {
             let total = keypoints_of(map)?.total();
             if len != 3 * total {

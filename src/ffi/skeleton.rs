@@ -3,11 +3,12 @@
 
 use super::boundary::{check_out, fill_out, run, slice, write_array, write_out};
 use super::error::FfiError;
-use super::handles::{free_box, handle_value, new_box, try_ref, Castable, Opaque, OwnedBox};
+use super::handles::{castable, free_box, handle_value, new_box, run_on, Opaque};
+use super::map::write_edge;
 use super::topoloc_status;
 use super::versioned::{init_versioned, read_optional, versioned};
 use crate::map::MapError;
-use crate::skeleton::{skeleton_graph, OccupancyGrid, SkeletonOptions, TopoGraph};
+use crate::skeleton::{skeleton_graph, GraphEdge, OccupancyGrid, SkeletonOptions, TopoGraph};
 use nalgebra::Point3;
 
 /// Kind of a graph place: one of the `TOPOLOC_NODE_*` values.
@@ -97,14 +98,9 @@ pub extern "C" fn topoloc_skeleton_options_init(
 /// edges (place pairs with their length), plus the skeleton it was built on. Created by
 /// `topoloc_graph_from_occupancy`, released by `topoloc_graph_free`. Immutable: a
 /// `const topoloc_graph*` may be used from many threads at once.
-pub struct topoloc_graph {
-    _opaque: Opaque,
-}
+pub struct topoloc_graph(Opaque);
 
-impl Castable for topoloc_graph {
-    type Ownership = OwnedBox;
-    type RustType = TopoGraph;
-}
+castable!(topoloc_graph: OwnedBox => TopoGraph);
 
 /// Builds the topological graph of the free space of an occupancy voxel grid: the free space
 /// (optionally limited to a height band, minus a clearance) is thinned to a one-voxel-thin 3D
@@ -195,8 +191,7 @@ pub extern "C" fn topoloc_graph_place(
     xyz: *mut f64,
     kind: *mut topoloc_node_kind,
 ) -> topoloc_status {
-    run(|| {
-        let graph = try_ref(graph, "graph")?;
+    run_on(graph, "graph", |graph| {
         let p = graph
             .places
             .get(place as usize)
@@ -227,21 +222,16 @@ pub extern "C" fn topoloc_graph_edge(
     b: *mut u32,
     length_m: *mut f64,
 ) -> topoloc_status {
-    run(|| {
-        let graph = try_ref(graph, "graph")?;
-        let edge = *graph.edges.get(index).ok_or_else(|| {
-            FfiError::invalid(format!(
-                "edge index {index} out of range (the graph has {} edges)",
-                graph.edges.len()
-            ))
-        })?;
-        check_out(a, "a")?;
-        check_out(b, "b")?;
-        check_out(length_m, "length_m")?;
-        write_out(a, edge.a);
-        write_out(b, edge.b);
-        write_out(length_m, edge.length_m);
-        Ok(())
+    run_on(graph, "graph", |graph| {
+        let parts = |e: GraphEdge| (e.a, e.b, e.length_m);
+        write_edge(
+            &graph.edges,
+            index,
+            "graph",
+            parts,
+            (a, b, length_m),
+            "length_m",
+        )
     })
 }
 
@@ -256,8 +246,7 @@ pub extern "C" fn topoloc_graph_skeleton(
     len: usize,
     count: *mut usize,
 ) -> topoloc_status {
-    run(|| {
-        let graph = try_ref(graph, "graph")?;
+    run_on(graph, "graph", |graph| {
         // Voxel indices fit in 32 bits: a grid holds at most 2^31 voxels.
         let values: Vec<u32> = graph
             .skeleton

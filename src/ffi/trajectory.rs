@@ -231,10 +231,9 @@ fn trajectory_options(
         TOPOLOC_ALIGN_SE3 => Alignment::Se3,
         TOPOLOC_ALIGN_SIM3 => Alignment::Sim3,
         other => {
-            return Err(FfiError::new(
-                TOPOLOC_ERR_INVALID_OPTION,
-                format!("options.alignment is {other}, not a TOPOLOC_ALIGN_* value"),
-            ))
+            return Err(FfiError::invalid_option(format!(
+                "options.alignment is {other}, not a TOPOLOC_ALIGN_* value"
+            )))
         }
     };
     Ok(TrajectoryOptions {
