@@ -66,17 +66,22 @@ fn small_localizer() -> (*mut topoloc_map, *mut topoloc_localizer) {
     (map, localizer)
 }
 
+/// A descriptor frame for the small map (D = 4), reading `descriptor`.
+fn descriptor_frame(descriptor: &[f32; 4]) -> topoloc_frame {
+    topoloc_frame {
+        descriptor: descriptor.as_ptr(),
+        descriptor_len: 4,
+        ..Default::default()
+    }
+}
+
 /// Processes one descriptor frame of the small map, which must succeed.
 fn process_descriptor(
     localizer: *mut topoloc_localizer,
     query: [f32; 4],
     result: *mut topoloc_result,
 ) {
-    let frame = topoloc_frame {
-        descriptor: query.as_ptr(),
-        descriptor_len: 4,
-        ..Default::default()
-    };
+    let frame = descriptor_frame(&query);
     assert_eq!(
         topoloc_localizer_process(localizer, &frame, result),
         TOPOLOC_OK
@@ -207,9 +212,7 @@ fn a_struct_size_between_published_layouts_is_refused() {
     let descriptor = [1.0f32, 0.0, 0.0, 0.0];
     let frame = topoloc_frame {
         struct_size: v1_0 + 8,
-        descriptor: descriptor.as_ptr(),
-        descriptor_len: 4,
-        ..Default::default()
+        ..descriptor_frame(&descriptor)
     };
     assert_eq!(
         topoloc_localizer_process(localizer, &frame, &mut result),
@@ -243,22 +246,14 @@ fn process_leaves_result_untouched_on_error_and_fills_candidates() {
     };
     result.place = 77;
     let nan = [f32::NAN, 0.0, 0.0, 0.0];
-    let frame = topoloc_frame {
-        descriptor: nan.as_ptr(),
-        descriptor_len: 4,
-        ..Default::default()
-    };
+    let frame = descriptor_frame(&nan);
     assert_eq!(
         topoloc_localizer_process(localizer, &frame, &mut result),
         TOPOLOC_ERR_NON_FINITE
     );
     assert_eq!(result.place, 77);
     let query = [0.0f32, 0.0, 0.9, 0.1];
-    let frame = topoloc_frame {
-        descriptor: query.as_ptr(),
-        descriptor_len: 4,
-        ..Default::default()
-    };
+    let frame = descriptor_frame(&query);
     assert_eq!(
         topoloc_localizer_process(localizer, &frame, &mut result),
         TOPOLOC_OK
