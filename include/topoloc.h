@@ -366,7 +366,7 @@ typedef struct topoloc_localizer_options {
    */
   topoloc_mode mode;
   /**
-   * Softmax temperature of the observation likelihood (> 0).
+   * Softmax temperature of the observation likelihood.
    * Range: finite, > 0.
    * Default: 0.2.
    */
@@ -397,13 +397,13 @@ typedef struct topoloc_localizer_options {
   float off_map_similarity;
   /**
    * Standard deviations above the expected best background score a place must reach to
-   * beat the off-map hypothesis (finite; may be negative).
+   * beat the off-map hypothesis (may be negative).
    * Range: finite.
    * Default: -1.
    */
   float off_map_margin;
   /**
-   * Candidates reported per frame (>= 1).
+   * Candidates reported per frame.
    * Range: >= 1.
    * Default: 5.
    */
@@ -431,7 +431,7 @@ typedef struct topoloc_localizer_options {
    */
   const char *onnx_runtime_path;
   /**
-   * Most probable places verified geometrically per frame against the frame's image, 0..=64
+   * Most probable places verified geometrically per frame against the frame's image
    * (matches of the local features the map stores, ORB, XFeat or dense cells, and a RANSAC
    * geometric model; the result's `verified` / `inliers`). 0 = off (default). Needs a
    * map storing keypoints (maps built from images do; else `_INVALID_OPTION`) and frames
@@ -440,26 +440,26 @@ typedef struct topoloc_localizer_options {
    */
   uint32_t verify_candidates;
   /**
-   * Views checked per candidate place, those most similar to the frame, 1..=64.
+   * Views checked per candidate place, those most similar to the frame.
    * Range: 1..=64.
    * Default: 2.
    */
   uint32_t verify_views_per_candidate;
   /**
    * Log-likelihood of one inlier: a checked place's belief is multiplied by
-   * `exp(verify_inlier_weight * inliers)` (finite, >= 0).
+   * `exp(verify_inlier_weight * inliers)`.
    * Range: finite, >= 0.
    * Default: 0.05.
    */
   float verify_inlier_weight;
   /**
-   * Particles of `TOPOLOC_MODE_METRIC`, 1..=1,000,000.
+   * Particles of `TOPOLOC_MODE_METRIC`.
    * Range: 1..=1000000.
    * Default: 2000.
    */
   uint32_t metric_particles;
   /**
-   * Temperature of a particle's appearance likelihood in metric mode (> 0).
+   * Temperature of a particle's appearance likelihood in metric mode.
    * Range: finite, > 0.
    * Default: 1.
    */
@@ -490,7 +490,7 @@ typedef struct topoloc_localizer_options {
    */
   double camera_cy;
   /**
-   * Fewest PnP RANSAC inliers for a pose fix (>= 6).
+   * Fewest PnP RANSAC inliers for a pose fix.
    * Range: 6..=10000.
    * Default: 30.
    */
@@ -504,7 +504,7 @@ typedef struct topoloc_localizer_options {
    */
   double verify_off_map_inliers;
   /**
-   * Inliers per e-fold of that likelihood ratio (finite, > 0).
+   * Inliers per e-fold of that likelihood ratio.
    * Range: finite, > 0.
    * Default: 4.
    */
@@ -796,7 +796,7 @@ typedef struct topoloc_image_map_options {
    */
   uint32_t views_per_place;
   /**
-   * Describing threads; 0 = one per core, at most 256 (more: `TOPOLOC_ERR_INVALID_ARGUMENT`).
+   * Describing threads; 0 = one per core (beyond the range: `TOPOLOC_ERR_INVALID_ARGUMENT`).
    * They are joined before the build returns.
    * Range: 0..=256.
    * Default: 0.
@@ -890,7 +890,7 @@ typedef struct topoloc_describer_options {
    */
   const char *onnx_runtime_path;
   /**
-   * ONNX Runtime intra-op threads, 1..=64.
+   * ONNX Runtime intra-op threads.
    * Range: 1..=64.
    * Default: 1.
    */
@@ -918,19 +918,19 @@ typedef struct topoloc_skeleton_options {
    */
   double z_min_m;
   /**
-   * Upper bound of the height band (>= z_min_m).
+   * Upper bound of the height band (not below `z_min_m`).
    * Range: finite.
    * Default: 0.
    */
   double z_max_m;
   /**
-   * Free voxels closer than this to an obstacle count as occupied (>= 0).
+   * Free voxels closer than this to an obstacle count as occupied.
    * Range: finite, >= 0.
    * Default: 0.
    */
   double min_clearance_m;
   /**
-   * Nodes closer than this along the skeleton become one place (>= 0).
+   * Nodes closer than this along the skeleton become one place.
    * Range: finite, >= 0.
    * Default: 1.
    */
@@ -942,19 +942,19 @@ typedef struct topoloc_skeleton_options {
    */
   double max_edge_m;
   /**
-   * Smallest bend (degrees, in (0, 180)) that makes a corner.
+   * Smallest bend, degrees, that makes a corner.
    * Range: (0, 180).
    * Default: 40.
    */
   double corner_angle_deg;
   /**
-   * Distance along the skeleton over which bends are measured (> 0).
+   * Distance along the skeleton over which bends are measured.
    * Range: finite, > 0.
    * Default: 0.5.
    */
   double corner_scale_m;
   /**
-   * Dead-end branches shorter than this are removed (>= 0).
+   * Dead-end branches shorter than this are removed.
    * Range: finite, >= 0.
    * Default: 1.
    */
@@ -976,7 +976,7 @@ typedef struct topoloc_loop_options {
    */
   size_t struct_size;
   /**
-   * Loop candidates verified per keyframe, 1..=64.
+   * Loop candidates verified per keyframe.
    * Range: 1..=64.
    * Default: 5.
    */
@@ -994,13 +994,13 @@ typedef struct topoloc_loop_options {
    */
   double exclude_recent_s;
   /**
-   * Fewest fundamental-matrix inliers of an accepted hint, 8..=10000.
+   * Fewest fundamental-matrix inliers of an accepted hint.
    * Range: 8..=10000.
    * Default: 30.
    */
   uint32_t min_inliers;
   /**
-   * Consecutive keyframes whose best candidates must agree on the place, 1..=100.
+   * Consecutive keyframes whose best candidates must agree on the place.
    * Range: 1..=100.
    * Default: 3.
    */
@@ -1011,14 +1011,14 @@ typedef struct topoloc_loop_options {
    */
   bool odometry_gate;
   /**
-   * Largest rotation difference to the odometry, degrees (> 0).
+   * Largest rotation difference to the odometry, degrees.
    * Range: finite, > 0.
    * Default: 30.
    */
   double odometry_max_rotation_deg;
   /**
-   * Largest translation difference to the odometry, metres (> 0; an unscaled hint's
-   * direction is scaled by the odometry's baseline), plus
+   * Largest translation difference to the odometry, metres (an unscaled hint's direction
+   * is scaled by the odometry's baseline), plus
    * `odometry_max_translation_per_m` per metre travelled (ABI 1.7).
    * Range: finite, > 0.
    * Default: 1.
@@ -1068,21 +1068,21 @@ typedef struct topoloc_loop_options {
   uint64_t candidate_id_gap;
   /**
    * The odometry translation bound grows by this much per metre the odometry travelled
-   * between the two keyframes (its drift rate, >= 0; 0: a fixed bound).
+   * between the two keyframes (its drift rate; 0: a fixed bound).
    * Range: finite, >= 0.
    * Default: 0.02.
    */
   double odometry_max_translation_per_m;
   /**
-   * Reprojection threshold of the metric pose fit against a keyframe's 3D points, pixels
-   * (> 0).
+   * Reprojection threshold of the metric pose fit against a keyframe's 3D points,
+   * pixels.
    * Range: finite, > 0.
    * Default: 5.
    */
   double pose_reprojection_px;
   /**
    * How much farther than the odometry translation bound an odometry candidate may lie,
-   * metres (>= 0).
+   * metres.
    * Range: finite, >= 0.
    * Default: 2.
    */
@@ -1090,7 +1090,7 @@ typedef struct topoloc_loop_options {
   /**
    * Candidates proposed by the odometry besides appearance's: the keyframes nearest the new
    * one's odometry pose that could pass the odometry gate (this session's; needs poses and
-   * `odometry_gate`), 0..=64; 0 = none.
+   * `odometry_gate`); 0 = none.
    * Range: 0..=64.
    * Default: 1.
    */
@@ -1259,7 +1259,7 @@ typedef struct topoloc_trajectory_options {
    */
   topoloc_alignment alignment;
   /**
-   * Largest timestamp difference of an associated pair, seconds (>= 0).
+   * Largest timestamp difference of an associated pair, seconds.
    * Range: finite, >= 0.
    * Default: 0.01.
    */
@@ -1271,7 +1271,7 @@ typedef struct topoloc_trajectory_options {
    */
   double offset_s;
   /**
-   * The RPE's step in associated poses (>= 1).
+   * The RPE's step in associated poses.
    * Range: >= 1.
    * Default: 1.
    */

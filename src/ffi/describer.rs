@@ -9,6 +9,7 @@ use super::images::{backend_family, backend_kind, image_view, topoloc_backend, t
 use super::map::{new_on_map, topoloc_map};
 use super::topoloc_status;
 use super::versioned::{init_versioned, versioned};
+use crate::describe::onnx::OnnxOptions;
 use crate::describe::{Describer, DescriberOptions};
 use crate::localize::LocalizeError;
 use std::ffi::c_char;
@@ -42,7 +43,7 @@ pub struct topoloc_describer_options {
     pub onnx_model_path: *const c_char,
     /// ONNX Runtime library; NULL or "" = `TOPOLOC_ORT_LIBRARY`, `ORT_DYLIB_PATH`, the cache.
     pub onnx_runtime_path: *const c_char,
-    /// ONNX Runtime intra-op threads, 1..=64.
+    /// ONNX Runtime intra-op threads.
     pub threads: u32,
 }
 
@@ -101,12 +102,9 @@ pub extern "C" fn topoloc_describer_new(
                 "a describer needs a backend: TOPOLOC_BACKEND_NONE describes nothing",
             ));
         }
-        if !(1..=64).contains(&o.threads) {
-            return Err(FfiError::invalid_option(format!(
-                "threads {} must lie in 1..=64",
-                o.threads
-            )));
-        }
+        OnnxOptions::THREADS_RANGE
+            .check("threads", o.threads)
+            .map_err(FfiError::invalid_option)?;
         let model = map.describer().cloned().ok_or_else(|| {
             LocalizeError::NoDescriber(format!(
                 "the map ({}) stores no describer; it was built from descriptors, not images",

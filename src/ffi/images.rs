@@ -165,7 +165,7 @@ pub struct topoloc_image_map_options {
     /// Without poses: consecutive images per place (1, or 4 for yaw views); with poses: most
     /// views per place.
     pub views_per_place: u32,
-    /// Describing threads; 0 = one per core, at most 256 (more: `TOPOLOC_ERR_INVALID_ARGUMENT`).
+    /// Describing threads; 0 = one per core (beyond the range: `TOPOLOC_ERR_INVALID_ARGUMENT`).
     /// They are joined before the build returns.
     pub threads: u32,
     /// ONNX model file; NULL or "" = the cache's default (scripts/setup-models.sh).

@@ -54,7 +54,7 @@ pub struct topoloc_localizer_options {
     /// `TOPOLOC_MODE_FILTER`, `TOPOLOC_MODE_SINGLE_FRAME` or (ABI 1.3) `TOPOLOC_MODE_METRIC`
     /// (on a map without positions or view poses: `_INVALID_OPTION`).
     pub mode: topoloc_mode,
-    /// Softmax temperature of the observation likelihood (> 0).
+    /// Softmax temperature of the observation likelihood.
     pub temperature: f32,
     /// Probability that the off-map state persists from one frame to the next.
     pub stay_probability: f32,
@@ -65,9 +65,9 @@ pub struct topoloc_localizer_options {
     /// Absolute floor of the off-map hypothesis' score (cosine similarity).
     pub off_map_similarity: f32,
     /// Standard deviations above the expected best background score a place must reach to
-    /// beat the off-map hypothesis (finite; may be negative).
+    /// beat the off-map hypothesis (may be negative).
     pub off_map_margin: f32,
-    /// Candidates reported per frame (>= 1).
+    /// Candidates reported per frame.
     pub top_k: u32,
     /// Refuse maps built with another descriptor kind; NULL or "" = any.
     pub expected_descriptor_kind: *const c_char,
@@ -83,21 +83,21 @@ pub struct topoloc_localizer_options {
     /// ONNX Runtime library; NULL or "" = `TOPOLOC_ORT_LIBRARY`, `ORT_DYLIB_PATH`, the cache.
     pub onnx_runtime_path: *const c_char,
     // ABI 1.2 (topoloc 0.1): geometric verification.
-    /// Most probable places verified geometrically per frame against the frame's image, 0..=64
+    /// Most probable places verified geometrically per frame against the frame's image
     /// (matches of the local features the map stores, ORB, XFeat or dense cells, and a RANSAC
     /// geometric model; the result's `verified` / `inliers`). 0 = off (default). Needs a
     /// map storing keypoints (maps built from images do; else `_INVALID_OPTION`) and frames
     /// with images (else `_INVALID_IMAGE`). Costs a pair check per view checked (BENCHMARKS.md).
     pub verify_candidates: u32,
-    /// Views checked per candidate place, those most similar to the frame, 1..=64.
+    /// Views checked per candidate place, those most similar to the frame.
     pub verify_views_per_candidate: u32,
     /// Log-likelihood of one inlier: a checked place's belief is multiplied by
-    /// `exp(verify_inlier_weight * inliers)` (finite, >= 0).
+    /// `exp(verify_inlier_weight * inliers)`.
     pub verify_inlier_weight: f32,
     // ABI 1.3 (topoloc 0.1): metric mode.
-    /// Particles of `TOPOLOC_MODE_METRIC`, 1..=1,000,000.
+    /// Particles of `TOPOLOC_MODE_METRIC`.
     pub metric_particles: u32,
-    /// Temperature of a particle's appearance likelihood in metric mode (> 0).
+    /// Temperature of a particle's appearance likelihood in metric mode.
     pub metric_temperature: f32,
     /// Seed of metric mode's random generator (results are deterministic).
     pub metric_seed: u64,
@@ -114,7 +114,7 @@ pub struct topoloc_localizer_options {
     pub camera_cx: f64,
     /// Principal point y, pixels.
     pub camera_cy: f64,
-    /// Fewest PnP RANSAC inliers for a pose fix (>= 6).
+    /// Fewest PnP RANSAC inliers for a pose fix.
     pub pose_min_inliers: u32,
     // ABI 1.9 (topoloc 0.1): off-map evidence from verification.
     /// With verification on: the most inliers among the checked places at which a frame is as
@@ -123,7 +123,7 @@ pub struct topoloc_localizer_options {
     /// verify_off_map_inlier_scale)`). Negative: the map's feature kind's default (XFeat and
     /// cells 26, ORB 0), the default -1; 0: appearance decides; NaN: `_INVALID_OPTION`.
     pub verify_off_map_inliers: f64,
-    /// Inliers per e-fold of that likelihood ratio (finite, > 0).
+    /// Inliers per e-fold of that likelihood ratio.
     pub verify_off_map_inlier_scale: f64,
 }
 

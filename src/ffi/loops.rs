@@ -53,24 +53,24 @@ pub const TOPOLOC_GATE_ODOMETRY: topoloc_gate = 5;
 pub struct topoloc_loop_options {
     /// `sizeof(topoloc_loop_options)`, set by the `_default` function.
     pub struct_size: usize,
-    /// Loop candidates verified per keyframe, 1..=64.
+    /// Loop candidates verified per keyframe.
     pub candidates: u32,
     /// Keyframes with an id within this many of the new one's are never candidates (DBoW2's
     /// `max_id`; an earlier session's keyframes always may be).
     pub exclude_recent_ids: u64,
     /// Keyframes less than this many seconds older than the new one are never candidates.
     pub exclude_recent_s: f64,
-    /// Fewest fundamental-matrix inliers of an accepted hint, 8..=10000.
+    /// Fewest fundamental-matrix inliers of an accepted hint.
     pub min_inliers: u32,
-    /// Consecutive keyframes whose best candidates must agree on the place, 1..=100.
+    /// Consecutive keyframes whose best candidates must agree on the place.
     pub consistent_keyframes: u32,
     /// Check hints with a pose against the host's odometry when both keyframes have poses.
     /// Default true.
     pub odometry_gate: bool,
-    /// Largest rotation difference to the odometry, degrees (> 0).
+    /// Largest rotation difference to the odometry, degrees.
     pub odometry_max_rotation_deg: f64,
-    /// Largest translation difference to the odometry, metres (> 0; an unscaled hint's
-    /// direction is scaled by the odometry's baseline), plus
+    /// Largest translation difference to the odometry, metres (an unscaled hint's direction
+    /// is scaled by the odometry's baseline), plus
     /// `odometry_max_translation_per_m` per metre travelled (ABI 1.7).
     pub odometry_max_translation_m: f64,
     /// Pinhole intrinsics of the camera (undistorted images, pixels); `fx == 0` = none: hints
@@ -95,18 +95,18 @@ pub struct topoloc_loop_options {
     pub candidate_id_gap: u64,
     // ABI 1.7 (topoloc 0.1): metric hints.
     /// The odometry translation bound grows by this much per metre the odometry travelled
-    /// between the two keyframes (its drift rate, >= 0; 0: a fixed bound).
+    /// between the two keyframes (its drift rate; 0: a fixed bound).
     pub odometry_max_translation_per_m: f64,
-    /// Reprojection threshold of the metric pose fit against a keyframe's 3D points, pixels
-    /// (> 0).
+    /// Reprojection threshold of the metric pose fit against a keyframe's 3D points,
+    /// pixels.
     pub pose_reprojection_px: f64,
     // ABI 1.8 (topoloc 0.1): candidates from the odometry.
     /// How much farther than the odometry translation bound an odometry candidate may lie,
-    /// metres (>= 0).
+    /// metres.
     pub odometry_search_m: f64,
     /// Candidates proposed by the odometry besides appearance's: the keyframes nearest the new
     /// one's odometry pose that could pass the odometry gate (this session's; needs poses and
-    /// `odometry_gate`), 0..=64; 0 = none.
+    /// `odometry_gate`); 0 = none.
     pub odometry_candidates: u32,
 }
 

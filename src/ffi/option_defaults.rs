@@ -250,6 +250,164 @@ pub fn option_ranges() -> Vec<OptionRange> {
 mod tests {
     use super::*;
 
+    /// `(struct, field, doc)` of every documented field of the header's structs, the doc's lines
+    /// without their ` * ` prefixes.
+    fn field_docs(header: &str) -> Vec<(String, String, String)> {
+        let mut docs = Vec::new();
+        for block in header.split("typedef struct ").skip(1) {
+            let Some((name, body)) = block.split_once(" {") else {
+                continue;
+            };
+            let body = body.split("\n} ").next().unwrap_or("");
+            for doc_and_decl in body.split("/**").skip(1) {
+                let Some((doc, decl)) = doc_and_decl.split_once("*/") else {
+                    continue;
+                };
+                let decl = decl.split(';').next().unwrap_or("");
+                let field = decl.split_whitespace().last().unwrap_or("");
+                let doc = doc
+                    .lines()
+                    .map(|l| l.trim().trim_start_matches('*').trim())
+                    .filter(|l| !l.is_empty())
+                    .collect::<Vec<_>>()
+                    .join("\n");
+                docs.push((name.into(), field.trim_start_matches('*').into(), doc));
+            }
+        }
+        docs
+    }
+
+    /// What a range written by hand looks like: "1..=64", "(>= 0)", "> 0", "in [0, 1]".
+    fn states_a_range(text: &str) -> bool {
+        ["..=", ">= ", "> 0", "(0, ", "[0, ", "[-1, "]
+            .iter()
+            .any(|token| text.contains(token))
+    }
+
+    #[test]
+    fn every_range_in_the_header_is_generated_from_the_rust_bounds() {
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/include/topoloc.h");
+        let docs = field_docs(&std::fs::read_to_string(path).unwrap());
+        let ranges = option_ranges();
+        let mut wrong = Vec::new();
+        for (name, field, doc) in &docs {
+            let range = ranges
+                .iter()
+                .find(|r| r.struct_name == name && r.field == field);
+            let generated = range.map(|r| format!("Range: {}.", r.bounds));
+            let prose: Vec<&str> = doc
+                .lines()
+                .filter(|l| Some(*l) != generated.as_deref())
+                .collect();
+            if range.is_some() && prose.iter().any(|l| states_a_range(l)) {
+                wrong.push(format!("{name}.{field}: a range written by hand: {doc:?}"));
+            }
+            if let Some(generated) = &generated {
+                if doc.lines().filter(|l| l == generated).count() != 1 {
+                    wrong.push(format!("{name}.{field}: no generated {generated:?}"));
+                }
+            }
+        }
+        assert!(wrong.is_empty(), "{wrong:#?}");
+        let documented = ranges
+            .iter()
+            .filter(|r| {
+                docs.iter()
+                    .any(|(n, f, _)| n == r.struct_name && f == r.field)
+            })
+            .count();
+        assert_eq!(
+            documented,
+            ranges.len(),
+            "a ranged field is not in the header"
+        );
+    }
+
+    /// `(struct, field, generated, value)` of every numeric default stated in the docs of the
+    /// header's struct fields: "Default: 0.2." as gen-header writes it (generated), or
+    /// "Default 0.2." by hand.
+    fn defaults_stated_in(
+        docs: &[(String, String, String)],
+    ) -> Vec<(String, String, bool, String)> {
+        let mut stated = Vec::new();
+        for (name, field, doc) in docs {
+            for sentence in doc.split("Default").skip(1) {
+                let generated = sentence.starts_with(": ");
+                let rest = sentence.strip_prefix(": ").unwrap_or(sentence).trim_start();
+                let value = rest.split_whitespace().next().unwrap_or("");
+                let value = value.trim_end_matches(['.', ',', ';']);
+                if value.starts_with(|c: char| c.is_ascii_digit() || c == '-') {
+                    stated.push((name.clone(), field.clone(), generated, value.into()));
+                }
+            }
+        }
+        stated
+    }
+
+    #[test]
+    fn every_default_in_the_header_is_generated_from_what_init_writes() {
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/include/topoloc.h");
+        let stated = defaults_stated_in(&field_docs(&std::fs::read_to_string(path).unwrap()));
+        let generated = option_defaults();
+        assert!(generated.len() >= 40, "too few defaults: {generated:?}");
+        let mut wrong = Vec::new();
+        for (name, field, was_generated, value) in &stated {
+            let found = generated
+                .iter()
+                .any(|d| d.struct_name == name && d.field == field && d.value == *value);
+            if !was_generated || !found {
+                wrong.push(format!(
+                    "{name}.{field}: {value} (generated: {was_generated})"
+                ));
+            }
+        }
+        assert!(
+            wrong.is_empty(),
+            "defaults written by hand or stale: {wrong:#?}"
+        );
+        assert_eq!(
+            stated.len(),
+            generated.len(),
+            "a generated default is missing"
+        );
+    }
+
+    #[test]
+    fn a_hand_written_default_is_told_from_a_generated_one() {
+        let header = "typedef struct topoloc_x {\n  /**\n   * Scale. Default 0.5.\n   */\n  \
+                      float scale;\n  /**\n   * Count.\n   * Default: 3.\n   */\n  uint32_t *count;\n} \
+                      topoloc_x;\n";
+        let stated = defaults_stated_in(&field_docs(header));
+        assert_eq!(
+            stated,
+            [
+                ("topoloc_x".into(), "scale".into(), false, "0.5".into()),
+                ("topoloc_x".into(), "count".into(), true, "3".into()),
+            ]
+        );
+    }
+
+    #[test]
+    fn a_hand_written_range_is_told_from_a_generated_one() {
+        assert!(states_a_range(
+            "Loop candidates verified per keyframe, 1..=64."
+        ));
+        assert!(states_a_range("Largest rotation difference (> 0)."));
+        assert!(states_a_range("Free voxels closer than this (>= 0)."));
+        assert!(!states_a_range("Descriptor dimension D; 0 = none."));
+        let header =
+            "typedef struct topoloc_x {\n  /**\n   * Scale.\n   * Range: finite, > 0.\n   \
+                      */\n  float scale;\n} topoloc_x;\n";
+        assert_eq!(
+            field_docs(header),
+            [(
+                "topoloc_x".to_string(),
+                "scale".to_string(),
+                "Scale.\nRange: finite, > 0.".to_string()
+            )]
+        );
+    }
+
     #[test]
     fn every_documented_default_lies_in_its_documented_range() {
         let defaults = option_defaults();

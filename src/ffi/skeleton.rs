@@ -35,19 +35,19 @@ pub struct topoloc_skeleton_options {
     pub use_z_band: bool,
     /// Lower bound of the height band.
     pub z_min_m: f64,
-    /// Upper bound of the height band (>= z_min_m).
+    /// Upper bound of the height band (not below `z_min_m`).
     pub z_max_m: f64,
-    /// Free voxels closer than this to an obstacle count as occupied (>= 0).
+    /// Free voxels closer than this to an obstacle count as occupied.
     pub min_clearance_m: f64,
-    /// Nodes closer than this along the skeleton become one place (>= 0).
+    /// Nodes closer than this along the skeleton become one place.
     pub merge_radius_m: f64,
     /// Longest edge (at least two voxels); longer paths get intermediate places.
     pub max_edge_m: f64,
-    /// Smallest bend (degrees, in (0, 180)) that makes a corner.
+    /// Smallest bend, degrees, that makes a corner.
     pub corner_angle_deg: f64,
-    /// Distance along the skeleton over which bends are measured (> 0).
+    /// Distance along the skeleton over which bends are measured.
     pub corner_scale_m: f64,
-    /// Dead-end branches shorter than this are removed (>= 0).
+    /// Dead-end branches shorter than this are removed.
     pub min_spur_m: f64,
 }
 

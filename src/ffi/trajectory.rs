@@ -45,11 +45,11 @@ pub struct topoloc_trajectory_options {
     pub struct_size: usize,
     /// `TOPOLOC_ALIGN_*`. Default `TOPOLOC_ALIGN_SIM3`.
     pub alignment: topoloc_alignment,
-    /// Largest timestamp difference of an associated pair, seconds (>= 0).
+    /// Largest timestamp difference of an associated pair, seconds.
     pub max_diff_s: f64,
     /// Added to the estimate's timestamps before associating, seconds.
     pub offset_s: f64,
-    /// The RPE's step in associated poses (>= 1).
+    /// The RPE's step in associated poses.
     pub rpe_delta: u32,
 }
 
