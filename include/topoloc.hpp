@@ -19,9 +19,11 @@
  *   topoloc/geometry.hpp    `Position`, `Pose`
  *   topoloc/image.hpp       `Image`, `image_view`
  *   topoloc/progress.hpp    `Progress`, `Stage` (callbacks of map builds)
- *   topoloc/map.hpp         `Map`, `MapBuilder`, `map_from_keyframes`, their options
+ *   topoloc/options.hpp     every operation's options (`LoadOptions`, `LocalizerOptions`, ...)
+ *                           and their `default_*_options()`
+ *   topoloc/map.hpp         `Map`, `MapBuilder`, `map_from_keyframes`
  *   topoloc/graph.hpp       `Graph` (skeleton graph of an occupancy grid)
- *   topoloc/localizer.hpp   `Localizer`, `Frame`, `Result`, `LocalizerOptions`
+ *   topoloc/localizer.hpp   `Localizer`, `Frame`, `Result`
  *   topoloc/describer.hpp   `Describer`
  *   topoloc/loops.hpp       `LoopDetector`, `LoopKeyframe`, `LoopHint`, `Gate`
  *   topoloc/trajectory.hpp  `evaluate_trajectory`, `evaluate_trajectory_files`
@@ -103,6 +105,7 @@
 #include "topoloc/geometry.hpp"
 #include "topoloc/image.hpp"
 #include "topoloc/progress.hpp"
+#include "topoloc/options.hpp"
 #include "topoloc/map.hpp"
 #include "topoloc/graph.hpp"
 #include "topoloc/localizer.hpp"

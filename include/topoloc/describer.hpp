@@ -1,6 +1,7 @@
 /*
  * topoloc/describer.hpp: `Describer`, a map's describer on its own, which turns images into
- * global descriptors (ABI 1.12; part of topoloc.hpp, which has the overview), and its options.
+ * global descriptors (ABI 1.12; part of topoloc.hpp, which has the overview; its options are in
+ * options.hpp).
  */
 
 #ifndef TOPOLOC_DESCRIBER_HPP
@@ -9,6 +10,7 @@
 #include "../topoloc.h"
 #include "detail.hpp"
 #include "error.hpp"
+#include "options.hpp"
 #include "image.hpp"
 #include "map.hpp"
 
@@ -16,17 +18,6 @@
 #include <vector>
 
 namespace topoloc {
-
-/// Where a `Describer` finds its runtime files (the C struct, ABI 1.12). Start from
-/// `default_describer_options()`; see `topoloc_describer_options` in topoloc.h for each field.
-/// The string fields are borrowed only during the constructor.
-using DescriberOptions = topoloc_describer_options;
-
-/// Default describer options (`topoloc_describer_options_default`; see `detail::filled`).
-[[nodiscard]] inline DescriberOptions default_describer_options()
-{
-    return detail::filled(&topoloc_describer_options_init);
-}
 
 /// Owner of a describer (`topoloc_describer*`, ABI 1.12): a map's describer on its own, which
 /// turns images into global descriptors exactly as the map's views were described, e.g. for

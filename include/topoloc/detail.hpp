@@ -84,6 +84,18 @@ protected:
         return value;
     }
 
+    /// Edge `index` of a graph (a map's, a skeleton's) through its C getter
+    /// `call(handle, index, &a, &b, &value)`: an `Edge` with members `a`, `b` and `value`.
+    template <typename Edge, typename Value>
+    [[nodiscard]] Edge read_edge(topoloc_status (*call)(const Handle *, std::size_t, uint32_t *,
+                                                        uint32_t *, Value *),
+                                 std::size_t index, Value Edge::*value) const
+    {
+        Edge edge;
+        check(call(handle_, index, &edge.a, &edge.b, &(edge.*value)));
+        return edge;
+    }
+
 private:
     Handle *handle_ = nullptr;
 };

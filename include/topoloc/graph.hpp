@@ -1,6 +1,7 @@
 /*
  * topoloc/graph.hpp: `Graph`, the topological graph of the free space of an occupancy voxel grid
- * (skeleton map building; part of topoloc.hpp, which has the overview), and its options.
+ * (skeleton map building; part of topoloc.hpp, which has the overview; its options are in
+ * options.hpp).
  */
 
 #ifndef TOPOLOC_GRAPH_HPP
@@ -9,6 +10,7 @@
 #include "../topoloc.h"
 #include "detail.hpp"
 #include "error.hpp"
+#include "options.hpp"
 #include "geometry.hpp"
 
 #include <array>
@@ -17,16 +19,6 @@
 #include <vector>
 
 namespace topoloc {
-
-/// Parameters of `Graph::from_occupancy` (the C struct). Start from
-/// `default_skeleton_options()`; see `topoloc_skeleton_options` in topoloc.h for each field.
-using SkeletonOptions = topoloc_skeleton_options;
-
-/// Default skeleton options (`topoloc_skeleton_options_default`; see `detail::filled`).
-[[nodiscard]] inline SkeletonOptions default_skeleton_options()
-{
-    return detail::filled(&topoloc_skeleton_options_init);
-}
 
 /// One place of a skeleton graph: its position in metres and its `TOPOLOC_NODE_*` kind.
 struct GraphPlace {
@@ -109,9 +101,7 @@ public:
     /// (`TOPOLOC_ERR_INVALID_ARGUMENT` when out of range).
     [[nodiscard]] GraphEdge edge(std::size_t index) const
     {
-        GraphEdge e;
-        check(topoloc_graph_edge(get(), index, &e.a, &e.b, &e.length_m));
-        return e;
+        return read_edge(&topoloc_graph_edge, index, &GraphEdge::length_m);
     }
 
     /// All edges, sorted by (a, b).

@@ -1,6 +1,7 @@
 /*
  * topoloc/localizer.hpp: `Localizer`, which follows one camera through a map frame by frame
- * (part of topoloc.hpp, which has the overview), with its options, frames and results.
+ * (part of topoloc.hpp, which has the overview), with its frames and results (its options are
+ * in options.hpp).
  */
 
 #ifndef TOPOLOC_LOCALIZER_HPP
@@ -9,6 +10,7 @@
 #include "../topoloc.h"
 #include "detail.hpp"
 #include "error.hpp"
+#include "options.hpp"
 #include "geometry.hpp"
 #include "image.hpp"
 #include "map.hpp"
@@ -21,20 +23,6 @@
 #include <vector>
 
 namespace topoloc {
-
-/// Localizer parameters (the C struct). Start from `default_localizer_options()`; see
-/// `topoloc_localizer_options` in topoloc.h for each field, its default and its range: e.g.
-/// `top_k`, `verify_candidates` (geometric verification against the local features the map
-/// stores), the camera intrinsics `camera_fx` .. `camera_cy` and `pose_min_inliers` of pose
-/// fixes (ABI 1.6), `verify_off_map_inliers` (ABI 1.9). The string fields are borrowed only
-/// during the `Localizer` constructor.
-using LocalizerOptions = topoloc_localizer_options;
-
-/// Default localizer options (`topoloc_localizer_options_default`; see `detail::filled`).
-[[nodiscard]] inline LocalizerOptions default_localizer_options()
-{
-    return detail::filled(&topoloc_localizer_options_init);
-}
 
 /// One ranked hypothesis of a frame (the C struct: place, view, probability, similarity).
 using Candidate = topoloc_candidate;

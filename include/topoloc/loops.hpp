@@ -10,6 +10,7 @@
 #include "../topoloc.h"
 #include "detail.hpp"
 #include "error.hpp"
+#include "options.hpp"
 #include "geometry.hpp"
 #include "map.hpp"
 
@@ -23,18 +24,6 @@
 #include <vector>
 
 namespace topoloc {
-
-/// Loop detector parameters (the C struct). Start from `default_loop_options()`; see
-/// `topoloc_loop_options` in topoloc.h for each field, its default and its range (set the
-/// intrinsics `fx`, `fy`, `cx`, `cy` for hints with a relative pose). Read only by
-/// `LoopDetector::create` / `LoopDetector::from_map`.
-using LoopOptions = topoloc_loop_options;
-
-/// Default loop detector options (`topoloc_loop_options_default`; see `detail::filled`).
-[[nodiscard]] inline LoopOptions default_loop_options()
-{
-    return detail::filled(&topoloc_loop_options_init);
-}
 
 /// The gate that decided a loop hint (`LoopHint::gate`; the C `TOPOLOC_GATE_*` values). A
 /// library newer than this header may report a value not listed here; treat it as a refusal.

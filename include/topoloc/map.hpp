@@ -1,7 +1,8 @@
 /*
  * topoloc/map.hpp: maps (part of topoloc.hpp, which has the overview): `Map`, the immutable
  * place graph with its views, loaded, saved, inspected and built from images, image files or
- * keyframes; `MapBuilder`, which assembles one from descriptors; and their options.
+ * keyframes; `MapBuilder`, which assembles one from descriptors (their options are in
+ * options.hpp).
  */
 
 #ifndef TOPOLOC_MAP_HPP
@@ -10,6 +11,7 @@
 #include "../topoloc.h"
 #include "detail.hpp"
 #include "error.hpp"
+#include "options.hpp"
 #include "geometry.hpp"
 #include "image.hpp"
 #include "progress.hpp"
@@ -22,42 +24,6 @@
 #include <vector>
 
 namespace topoloc {
-
-// ---------------------------------------------------------------------------------------------
-// Options: the C structs themselves, filled by the library (`detail::filled`)
-// ---------------------------------------------------------------------------------------------
-
-/// Options of `Map::load` / `Map::from_memory` (the C struct). Start from
-/// `default_load_options()`; a value-initialised struct has `struct_size == 0` and is refused
-/// with `TOPOLOC_ERR_STRUCT_SIZE`. The string fields are borrowed for the duration of the call.
-using LoadOptions = topoloc_map_load_options;
-
-/// Parameters of `map_from_keyframes` (the C struct). Start from `default_keyframe_options()`;
-/// see `topoloc_keyframe_options` in topoloc.h for each field.
-using KeyframeOptions = topoloc_keyframe_options;
-
-/// How `Map::build_from_images` / `build_from_image_files` build a map (the C struct). Start
-/// from `default_image_map_options()`; see `topoloc_image_map_options` in topoloc.h for each
-/// field (e.g. `backend`, `dim`). The string fields are borrowed for the duration of the call.
-using ImageMapOptions = topoloc_image_map_options;
-
-/// Load options that accept any map (`topoloc_map_load_options_default`; see `detail::filled`).
-[[nodiscard]] inline LoadOptions default_load_options()
-{
-    return detail::filled(&topoloc_map_load_options_init);
-}
-
-/// Default keyframe options (`topoloc_keyframe_options_default`; see `detail::filled`).
-[[nodiscard]] inline KeyframeOptions default_keyframe_options()
-{
-    return detail::filled(&topoloc_keyframe_options_init);
-}
-
-/// Default image map options (`topoloc_image_map_options_default`; see `detail::filled`).
-[[nodiscard]] inline ImageMapOptions default_image_map_options()
-{
-    return detail::filled(&topoloc_image_map_options_init);
-}
 
 // ---------------------------------------------------------------------------------------------
 // Plain values
@@ -258,9 +224,7 @@ public:
     /// (`TOPOLOC_ERR_INVALID_ARGUMENT` when out of range).
     [[nodiscard]] Edge edge(std::size_t index) const
     {
-        Edge e;
-        check(topoloc_map_edge(get(), index, &e.a, &e.b, &e.weight));
-        return e;
+        return read_edge(&topoloc_map_edge, index, &Edge::weight);
     }
 
     /// All edges, sorted by (a, b).

@@ -9,6 +9,7 @@
 #include "../topoloc.h"
 #include "detail.hpp"
 #include "error.hpp"
+#include "options.hpp"
 
 #include <array>
 #include <string>
@@ -16,21 +17,10 @@
 
 namespace topoloc {
 
-/// How trajectories are associated and aligned (the C struct). Start from
-/// `default_trajectory_options()`; see `topoloc_trajectory_options` in topoloc.h for each field
-/// and its default.
-using TrajectoryOptions = topoloc_trajectory_options;
-
 /// What `evaluate_trajectory` measured (the C struct: `pairs`, `scale`, `alignment`, `ate_m`,
 /// `are_deg`, `rpe_m`, `rpe_deg` with rmse/mean/median/std/min/max, path lengths and
 /// `length_ratio`, R_traj).
 using TrajectoryReport = topoloc_trajectory_report;
-
-/// The default trajectory options (`topoloc_trajectory_options_default`; see `detail::filled`).
-[[nodiscard]] inline TrajectoryOptions default_trajectory_options()
-{
-    return detail::filled(&topoloc_trajectory_options_init);
-}
 
 /// One pose of a trajectory in TUM's layout: seconds, then `world_T_body` as
 /// `tx ty tz qx qy qz qw` (unit quaternion, w last).
