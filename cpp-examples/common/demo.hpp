@@ -300,6 +300,33 @@ void solve_dropping(ceres::Problem &problem, std::vector<L> &loops, double chi2)
     }
 }
 
+/// Builds and solves a demo's pose graph over `odometry` and `loops`; returns the corrected
+/// poses. `Graph(odometry)` holds the unknowns, started at the odometry;
+/// `g.add_odometry(problem, i, j, relative, sigma_t, sigma_rot)` adds each edge of
+/// `for_each_odometry_edge`, `g.add_loop(problem, loop)` each loop's edge (with a robust loss)
+/// and returns its block, and `g.fix_gauge(problem)` holds the first pose (and sets any
+/// manifold). `solve_dropping` with `chi2` then drops the loop edges inconsistent with the rest,
+/// and `g.pose(i)` reads each keyframe's pose back.
+template <typename Graph, typename L>
+std::vector<sim::Pose> solve_pose_graph(const std::vector<sim::Pose> &odometry,
+                                        std::vector<L> &loops, double chi2)
+{
+    Graph g(odometry);
+    ceres::Problem problem;
+    for_each_odometry_edge(odometry, [&](std::size_t i, std::size_t j, const sim::Pose &relative,
+                                         double sigma_t, double sigma_rot) {
+        g.add_odometry(problem, i, j, relative, sigma_t, sigma_rot);
+    });
+    for (L &loop : loops)
+        loop.block = g.add_loop(problem, loop);
+    g.fix_gauge(problem);
+    solve_dropping(problem, loops, chi2);
+    std::vector<sim::Pose> corrected;
+    for (std::size_t i = 0; i < odometry.size(); ++i)
+        corrected.push_back(g.pose(i));
+    return corrected;
+}
+
 /// The adjoint of `T` on se(3) tangents ordered rotation then translation: `[R 0; [t]x R R]`.
 /// A right perturbation `xi` of a pose in frame a is one of `Ad(b_T_a) xi` in frame b.
 inline Eigen::Matrix<double, 6, 6> adjoint(const sim::Pose &T)

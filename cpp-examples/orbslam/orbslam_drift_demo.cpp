@@ -221,6 +221,34 @@ struct Graph {
                                         t[j].data());
     }
 
+    /// The odometry edge i -> j (see demo::solve_pose_graph).
+    void add_odometry(ceres::Problem &problem, std::size_t i, std::size_t j,
+                      const sim::Pose &relative, double sigma_t, double sigma_rot)
+    {
+        Eigen::Matrix<double, 6, 1> inverse_sigma;
+        inverse_sigma << Eigen::Vector3d::Constant(1 / sigma_rot),
+            Eigen::Vector3d::Constant(1 / sigma_t);
+        add(problem,
+            Se3Edge::create(relative, Eigen::Matrix<double, 6, 6>(inverse_sigma.asDiagonal())),
+            nullptr, i, j);
+    }
+
+    /// The edge of `loop`, with a Huber loss; returns its block.
+    ceres::ResidualBlockId add_loop(ceres::Problem &problem, const Loop &loop)
+    {
+        return add(problem, Se3Edge::create(loop.relative, loop_sqrt_information(loop.covariance)),
+                   new ceres::HuberLoss(1.0), loop.old_index, loop.cur_index);
+    }
+
+    /// Unit quaternions; the first pose fixed.
+    void fix_gauge(ceres::Problem &problem)
+    {
+        for (std::array<double, 4> &r : q)
+            problem.SetManifold(r.data(), new ceres::EigenQuaternionManifold);
+        problem.SetParameterBlockConstant(q[0].data());
+        problem.SetParameterBlockConstant(t[0].data());
+    }
+
     /// Keyframe `i`'s pose as the graph has it.
     sim::Pose pose(std::size_t i) const
     {
@@ -233,39 +261,11 @@ struct Graph {
 };
 
 /// Builds and solves the SE3 graph (odometry edges, loop edges with a Huber loss, the first
-/// pose fixed); drops loop edges inconsistent with the rest (chi-square of 6 degrees of
-/// freedom) and solves again until none is dropped (demo::solve_dropping), so that no edge
-/// reported as dropped is in the solution. Returns the
-/// corrected poses.
+/// pose fixed) with demo::solve_pose_graph, dropping loop edges inconsistent with the rest
+/// (chi-square of 6 degrees of freedom). Returns the corrected poses.
 std::vector<sim::Pose> optimise(const std::vector<sim::Pose> &odometry, std::vector<Loop> &loops)
 {
-    Graph g(odometry);
-    ceres::Problem problem;
-    demo::for_each_odometry_edge(odometry, [&](std::size_t i, std::size_t j,
-                                               const sim::Pose &relative, double sigma_t,
-                                               double sigma_rot) {
-        Eigen::Matrix<double, 6, 1> inverse_sigma;
-        inverse_sigma << Eigen::Vector3d::Constant(1 / sigma_rot),
-            Eigen::Vector3d::Constant(1 / sigma_t);
-        g.add(problem,
-              Se3Edge::create(relative, Eigen::Matrix<double, 6, 6>(inverse_sigma.asDiagonal())),
-              nullptr, i, j);
-    });
-    for (Loop &loop : loops) {
-        loop.block =
-            g.add(problem, Se3Edge::create(loop.relative, loop_sqrt_information(loop.covariance)),
-                  new ceres::HuberLoss(1.0), loop.old_index, loop.cur_index);
-    }
-    for (std::size_t i = 0; i < odometry.size(); ++i) {
-        problem.SetManifold(g.q[i].data(), new ceres::EigenQuaternionManifold);
-    }
-    problem.SetParameterBlockConstant(g.q[0].data());
-    problem.SetParameterBlockConstant(g.t[0].data());
-    demo::solve_dropping(problem, loops, demo::kChi2Dof6);
-    std::vector<sim::Pose> corrected;
-    for (std::size_t i = 0; i < odometry.size(); ++i)
-        corrected.push_back(g.pose(i));
-    return corrected;
+    return demo::solve_pose_graph<Graph>(odometry, loops, demo::kChi2Dof6);
 }
 
 /// The stand-in ORB-SLAM's keyframes and map points (stable addresses, as ORB-SLAM's

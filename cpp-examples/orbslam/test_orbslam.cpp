@@ -408,17 +408,33 @@ void add_scene_and_others(Db &db, W &world, std::vector<KeyFrame *> &kfs, Map *m
         db.add(kf);
 }
 
+// The usual start of an ORB-SLAM2 test: a database whose settings log to `log` (at most
+// `relocalization` relocalization candidates), holding the scene keyframe and four others
+// (`kfs`, ids 1..5; see add_scene_and_others) of `world`. Tests bind the parts by name:
+//   Orb2Scene scene;
+//   auto &[log, db, world, kfs] = scene;
+struct Orb2Scene {
+    Log log;
+    Db2 db;
+    World2 world;
+    std::vector<orb2::KeyFrame *> kfs;
+
+    explicit Orb2Scene(const topoloc::LoopOptions &options = test_options(),
+                       std::size_t relocalization = 5)
+        : db(image_map(), kIntrinsics, options, settings_with(log, relocalization))
+    {
+        add_scene_and_others(db, world, kfs);
+    }
+};
+
 // ---------------------------------------------------------------------------------------------
 // Tests
 // ---------------------------------------------------------------------------------------------
 
 TEST(orbslam2_detect_then_add_closes_the_loop)
 {
-    Log log;
-    Db2 db(image_map(), kIntrinsics, test_options(), settings_with(log));
-    World2 world;
-    std::vector<orb2::KeyFrame *> kfs;
-    add_scene_and_others(db, world, kfs);
+    Orb2Scene scene;
+    auto &[log, db, world, kfs] = scene;
     CHECK_EQ(db.size(), std::size_t{5});
     CHECK(db.last_error().empty());
     CHECK(!db.GetHint(kfs[0]).has_value()); // the first keyframe had nothing to match
@@ -444,10 +460,8 @@ TEST(orbslam2_detect_then_add_closes_the_loop)
 
 TEST(orbslam2_add_without_detect_keeps_the_hint)
 {
-    Db2 db(image_map(), kIntrinsics, test_options());
-    World2 world;
-    std::vector<orb2::KeyFrame *> kfs;
-    add_scene_and_others(db, world, kfs);
+    Orb2Scene scene;
+    auto &[log, db, world, kfs] = scene;
     orb2::KeyFrame *revisit = world.make(scene_shot(10, 10.0, true));
     db.add(revisit); // DetectLoop's early return: add only
     CHECK_EQ(db.size(), std::size_t{6});
@@ -514,11 +528,8 @@ TEST(orbslam3_relocalization_keeps_the_map)
 
 TEST(relocalization_ranks_the_right_keyframe_first_and_erase_removes)
 {
-    Log log;
-    Db2 db(image_map(), kIntrinsics, test_options(), settings_with(log, 3));
-    World2 world;
-    std::vector<orb2::KeyFrame *> kfs;
-    add_scene_and_others(db, world, kfs);
+    Orb2Scene scene(test_options(), 3);
+    auto &[log, db, world, kfs] = scene;
     for (uint32_t place = 0; place <= 4; ++place) {
         Frame f = frame_of(place);
         const std::vector<orb2::KeyFrame *> found = db.DetectRelocalizationCandidates(&f);
@@ -582,11 +593,8 @@ struct BadCase {
 
 TEST(bad_inputs_are_reported_and_change_nothing)
 {
-    Log log;
-    Db2 db(image_map(), kIntrinsics, test_options(), settings_with(log));
-    World2 world;
-    std::vector<orb2::KeyFrame *> kfs;
-    add_scene_and_others(db, world, kfs); // ids 1..5
+    Orb2Scene scene;
+    auto &[log, db, world, kfs] = scene;
     BadCase bad{db, log};
 
     bad.expect_loop("null keyframe", nullptr, "null keyframe");
@@ -698,11 +706,8 @@ TEST(bad_inputs_are_reported_and_change_nothing)
 
 TEST(clear_starts_afresh_and_refuses_earlier_keyframes)
 {
-    Log log;
-    Db2 db(image_map(), kIntrinsics, test_options(), settings_with(log));
-    World2 world;
-    std::vector<orb2::KeyFrame *> kfs;
-    add_scene_and_others(db, world, kfs);
+    Orb2Scene scene;
+    auto &[log, db, world, kfs] = scene;
     orb2::KeyFrame *revisit = world.make(scene_shot(10, 10.0, true));
     CHECK_EQ(db.DetectLoopCandidates(revisit, 0.f).size(), std::size_t{1});
 
@@ -744,10 +749,8 @@ TEST(clear_starts_afresh_and_refuses_earlier_keyframes)
 
 TEST(a_completed_streak_confirms_earlier_keyframes_once)
 {
-    Db2 db(image_map(), kIntrinsics, test_options(3));
-    World2 world;
-    std::vector<orb2::KeyFrame *> kfs;
-    add_scene_and_others(db, world, kfs);
+    Orb2Scene scene(test_options(3));
+    auto &[log, db, world, kfs] = scene;
     std::vector<orb2::KeyFrame *> streak;
     for (unsigned long id : {10ul, 11ul, 12ul})
         streak.push_back(world.make(scene_shot(id, double(id), true)));

@@ -73,28 +73,21 @@ struct Settings {
     topoloc_adapter::Logger logger;
 };
 
-/// topoloc's verdict on one keyframe, with the keyframes resolved to the host's pointers.
-/// A plain value: it does not own the keyframes, which ORB-SLAM may delete later.
-template <typename KeyFrame> struct LoopMatch {
+/// topoloc's verdict on one keyframe: its `topoloc::LoopHint` (`accepted`: every topoloc gate
+/// passed, a loop or merge closure; `gate`, `inliers`, `confidence`, `has_pose`, `scale_known`:
+/// the translation is in the map's units, the matched keyframe had map points, else a unit
+/// direction; `matched_T_query`: the query camera in the matched camera's frame, `Tmq = Tmw *
+/// Twq` in ORB-SLAM notation, `X_matched = Tmq * X_query`; `covariance` of `matched_T_query`,
+/// rotation then translation as g2o's SE3 tangent), with the keyframes resolved to the host's
+/// pointers and the inverse pose. A plain value: it does not own the keyframes, which ORB-SLAM
+/// may delete later.
+template <typename KeyFrame> struct LoopMatch : topoloc::LoopHint {
     KeyFrame *query = nullptr;   ///< The keyframe the hint is about.
     KeyFrame *matched = nullptr; ///< The keyframe it matched; null once that one is erased or bad.
-    bool accepted = false;       ///< Every topoloc gate passed: a loop (or merge) closure.
-    topoloc::Gate gate = topoloc::Gate::NoCandidate; ///< The gate that decided (for logs).
-    uint32_t inliers = 0;   ///< Keypoint inliers between the two keyframes.
-    float confidence = 0.f; ///< The match's share of the inliers of all verified ones.
-    bool has_pose = false;  ///< The two poses below and `covariance` are set.
-    /// The translation is in the map's units (the matched keyframe had map points); else it is
-    /// a unit direction.
-    bool scale_known = false;
-    /// The query camera in the matched camera's frame: `Tmq = Tmw * Twq` in ORB-SLAM notation
-    /// (`X_matched = Tmq * X_query`), topoloc's `matched_T_query`.
-    Pose matched_T_query{1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1};
-    /// Its inverse `Tqm`, current-from-candidate: what ORB-SLAM's `Sim3Solver` estimates as
-    /// `gScm` (with scale 1) and `ComputeSim3` composes with the candidate's `Tcw`.
+    /// The inverse of `matched_T_query`, `Tqm`, current-from-candidate: what ORB-SLAM's
+    /// `Sim3Solver` estimates as `gScm` (with scale 1) and `ComputeSim3` composes with the
+    /// candidate's `Tcw`.
     Pose query_T_matched{1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1};
-    /// Covariance of `matched_T_query` for a right perturbation, 6x6 row-major, rotation (rad)
-    /// x y z then translation x y z (g2o's SE3 tangent order); zero unless `has_pose`.
-    std::array<double, 36> covariance{};
 };
 
 // ---------------------------------------------------------------------------------------------
@@ -780,17 +773,10 @@ private:
     Match to_match(const topoloc::LoopHint &hint, KeyFrame *query) const
     {
         Match m;
+        static_cast<topoloc::LoopHint &>(m) = hint;
         m.query = query;
         m.matched = hint.has_match ? usable(hint.matched_id) : nullptr;
-        m.accepted = hint.accepted;
-        m.gate = hint.gate;
-        m.inliers = hint.inliers;
-        m.confidence = hint.confidence;
-        m.has_pose = hint.has_pose;
-        m.scale_known = hint.scale_known;
-        m.matched_T_query = hint.matched_T_query;
         m.query_T_matched = inverse_rigid(hint.matched_T_query);
-        m.covariance = hint.covariance;
         return m;
     }
 

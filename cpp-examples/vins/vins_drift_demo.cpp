@@ -70,6 +70,20 @@ struct FourDofEdge {
     }
 };
 
+/// A loop found by the adapter, with VINS's record of it.
+struct Loop : demo::Loop {
+    topoloc_vins::LoopInfo info;
+
+    /// The loop of `loop_info`.
+    explicit Loop(const topoloc_vins::LoopInfo &loop_info) : info(loop_info)
+    {
+        old_index = std::size_t(info.old_index);
+        cur_index = std::size_t(info.cur_index);
+        relative.t = info.relative_t;
+        relative.R = info.relative_q.toRotationMatrix();
+    }
+};
+
 /// The pose graph's unknowns: position and yaw per keyframe; pitch and roll stay the odometry's.
 struct Graph {
     std::vector<std::array<double, 3>> t;
@@ -94,6 +108,48 @@ struct Graph {
         return {relative.t, relative_yaw, pitch[i], roll[i], sigma_t, sigma_yaw};
     }
 
+    /// Adds `edge` between keyframes i and j to `problem`; returns its block.
+    ceres::ResidualBlockId add(ceres::Problem &problem, const FourDofEdge &edge,
+                               ceres::LossFunction *loss, std::size_t i, std::size_t j)
+    {
+        return problem.AddResidualBlock(FourDofEdge::create(edge), loss, t[i].data(), &yaw[i],
+                                        t[j].data(), &yaw[j]);
+    }
+
+    /// The odometry edge i -> j (see demo::solve_pose_graph).
+    void add_odometry(ceres::Problem &problem, std::size_t i, std::size_t j,
+                      const sim::Pose &relative, double sigma_t, double sigma_rot)
+    {
+        const double relative_yaw = yaw[j] - yaw[i]; // the odometry's, as the graph starts there
+        add(problem, edge(i, relative, relative_yaw, Eigen::Vector3d::Constant(sigma_t), sigma_rot),
+            nullptr, i, j);
+    }
+
+    /// The 4-DoF edge of `loop`, with a Huber loss: its relative translation and yaw, sigmas
+    /// from the hint covariance (body frames) with the floors of demo.hpp. Returns its block.
+    ceres::ResidualBlockId add_loop(ceres::Problem &problem, const Loop &loop)
+    {
+        const Eigen::Matrix<double, 6, 6> &c = loop.info.covariance;
+        Eigen::Vector3d sigma_t;
+        for (int k = 0; k < 3; ++k)
+            sigma_t[k] = std::max(std::sqrt(std::max(c(3 + k, 3 + k), 0.0)), demo::kLoopSigmaMinM);
+        const double sigma_yaw =
+            std::max(std::sqrt(std::max(c(2, 2), 0.0)), demo::kLoopSigmaMinRotDeg * M_PI / 180);
+        sim::Pose relative;
+        relative.t = loop.info.relative_t;
+        return add(
+            problem,
+            edge(loop.old_index, relative, loop.info.relative_yaw * M_PI / 180, sigma_t, sigma_yaw),
+            new ceres::HuberLoss(1.0), loop.old_index, loop.cur_index);
+    }
+
+    /// The first pose fixed.
+    void fix_gauge(ceres::Problem &problem)
+    {
+        problem.SetParameterBlockConstant(t[0].data());
+        problem.SetParameterBlockConstant(&yaw[0]);
+    }
+
     /// Keyframe `i`'s pose as the graph has it.
     sim::Pose pose(std::size_t i) const
     {
@@ -104,65 +160,11 @@ struct Graph {
     }
 };
 
-/// A loop found by the adapter, with VINS's record of it.
-struct Loop : demo::Loop {
-    topoloc_vins::LoopInfo info;
-
-    /// The loop of `loop_info`.
-    explicit Loop(const topoloc_vins::LoopInfo &loop_info) : info(loop_info)
-    {
-        old_index = std::size_t(info.old_index);
-        cur_index = std::size_t(info.cur_index);
-        relative.t = info.relative_t;
-        relative.R = info.relative_q.toRotationMatrix();
-    }
-};
-
-/// The 4-DoF edge of a loop: its relative translation and yaw, sigmas from the hint covariance
-/// (body frames) with the floors of demo.hpp.
-FourDofEdge loop_edge(const Graph &g, const topoloc_vins::LoopInfo &info)
-{
-    const Eigen::Matrix<double, 6, 6> &c = info.covariance;
-    Eigen::Vector3d sigma_t;
-    for (int k = 0; k < 3; ++k)
-        sigma_t[k] = std::max(std::sqrt(std::max(c(3 + k, 3 + k), 0.0)), demo::kLoopSigmaMinM);
-    const double sigma_yaw =
-        std::max(std::sqrt(std::max(c(2, 2), 0.0)), demo::kLoopSigmaMinRotDeg * M_PI / 180);
-    sim::Pose relative;
-    relative.t = info.relative_t;
-    return g.edge(std::size_t(info.old_index), relative, info.relative_yaw * M_PI / 180, sigma_t,
-                  sigma_yaw);
-}
-
-/// Builds and solves the 4-DoF graph; drops loop edges inconsistent with the rest and solves
-/// again until none is dropped (demo::solve_dropping), so that no edge reported as dropped is
-/// in the solution. Returns the corrected poses.
+/// Builds and solves the 4-DoF graph with demo::solve_pose_graph, dropping loop edges
+/// inconsistent with the rest (chi-square of 4 degrees of freedom). Returns the corrected poses.
 std::vector<sim::Pose> optimise(const std::vector<sim::Pose> &odometry, std::vector<Loop> &loops)
 {
-    Graph g(odometry);
-    ceres::Problem problem;
-    demo::for_each_odometry_edge(odometry, [&](std::size_t i, std::size_t j,
-                                               const sim::Pose &relative, double sigma_t,
-                                               double sigma_rot) {
-        const double yaw = ypr(odometry[j].R)[0] - ypr(odometry[i].R)[0];
-        problem.AddResidualBlock(
-            FourDofEdge::create(
-                g.edge(i, relative, yaw, Eigen::Vector3d::Constant(sigma_t), sigma_rot)),
-            nullptr, g.t[i].data(), &g.yaw[i], g.t[j].data(), &g.yaw[j]);
-    });
-    for (Loop &loop : loops) {
-        const std::size_t i = loop.old_index, j = loop.cur_index;
-        loop.block = problem.AddResidualBlock(FourDofEdge::create(loop_edge(g, loop.info)),
-                                              new ceres::HuberLoss(1.0), g.t[i].data(), &g.yaw[i],
-                                              g.t[j].data(), &g.yaw[j]);
-    }
-    problem.SetParameterBlockConstant(g.t[0].data());
-    problem.SetParameterBlockConstant(&g.yaw[0]);
-    demo::solve_dropping(problem, loops, demo::kChi2Dof4);
-    std::vector<sim::Pose> corrected;
-    for (std::size_t i = 0; i < odometry.size(); ++i)
-        corrected.push_back(g.pose(i));
-    return corrected;
+    return demo::solve_pose_graph<Graph>(odometry, loops, demo::kChi2Dof4);
 }
 
 /// The experiment: every frame a VINS keyframe through the adapter, then the pose graph and
