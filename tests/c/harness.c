@@ -510,13 +510,11 @@ void init_image_world(void)
 
 topoloc_image gray_image(const uint8_t *px)
 {
-    topoloc_image image;
-    memset(&image, 0, sizeof image);
-    image.data = px;
-    image.data_len = IMG_PIXELS;
-    image.width = IMG_W;
-    image.height = IMG_H;
-    image.stride = IMG_W;
-    image.format = TOPOLOC_PIXEL_GRAY8;
+    const topoloc_image image = {.data = px,
+                                 .data_len = IMG_PIXELS,
+                                 .width = IMG_W,
+                                 .height = IMG_H,
+                                 .stride = IMG_W,
+                                 .format = TOPOLOC_PIXEL_GRAY8};
     return image;
 }

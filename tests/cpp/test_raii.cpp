@@ -11,6 +11,9 @@
 
 #include "harness.hpp"
 
+#include <typeindex>
+#include <typeinfo>
+
 namespace {
 
 // ---------------------------------------------------------------------------------------------
@@ -474,28 +477,22 @@ TEST(threads_share_one_map)
 
 TEST(error_subclasses_for_image_statuses)
 {
-    const std::pair<topoloc_status, const char *> cases[] = {
-        {TOPOLOC_ERR_INVALID_IMAGE, "invalid"},  {TOPOLOC_ERR_UNINFORMATIVE_IMAGE, "uninf"},
-        {TOPOLOC_ERR_BACKEND_UNAVAILABLE, "be"}, {TOPOLOC_ERR_MODEL, "model"},
-        {TOPOLOC_ERR_NO_DESCRIBER, "nodesc"},    {TOPOLOC_ERR_CANCELLED, "cancel"},
+    const std::tuple<topoloc_status, const char *, std::type_index> cases[] = {
+        {TOPOLOC_ERR_INVALID_IMAGE, "invalid", typeid(topoloc::InvalidImageError)},
+        {TOPOLOC_ERR_UNINFORMATIVE_IMAGE, "uninf", typeid(topoloc::UninformativeImageError)},
+        {TOPOLOC_ERR_BACKEND_UNAVAILABLE, "be", typeid(topoloc::BackendUnavailableError)},
+        {TOPOLOC_ERR_MODEL, "model", typeid(topoloc::ModelError)},
+        {TOPOLOC_ERR_NO_DESCRIBER, "nodesc", typeid(topoloc::NoDescriberError)},
+        {TOPOLOC_ERR_CANCELLED, "cancel", typeid(topoloc::CancelledError)},
     };
-    for (const auto &c : cases) {
+    for (const auto &[status, message, type] : cases) {
         try {
-            topoloc::throw_error(c.first, c.second);
-        } catch (const topoloc::InvalidImageError &e) {
-            CHECK(c.first == TOPOLOC_ERR_INVALID_IMAGE && e.message() == c.second);
-        } catch (const topoloc::UninformativeImageError &e) {
-            CHECK(c.first == TOPOLOC_ERR_UNINFORMATIVE_IMAGE && e.message() == c.second);
-        } catch (const topoloc::BackendUnavailableError &e) {
-            CHECK(c.first == TOPOLOC_ERR_BACKEND_UNAVAILABLE && e.message() == c.second);
-        } catch (const topoloc::ModelError &e) {
-            CHECK(c.first == TOPOLOC_ERR_MODEL && e.message() == c.second);
-        } catch (const topoloc::NoDescriberError &e) {
-            CHECK(c.first == TOPOLOC_ERR_NO_DESCRIBER && e.message() == c.second);
-        } catch (const topoloc::CancelledError &e) {
-            CHECK(c.first == TOPOLOC_ERR_CANCELLED && e.message() == c.second);
+            topoloc::throw_error(status, message);
         } catch (const topoloc::Error &e) {
-            report_failure(__FILE__, __LINE__, std::string("base Error for ") + e.what());
+            if (std::type_index(typeid(e)) != type || e.message() != message) {
+                report_failure(__FILE__, __LINE__,
+                               std::string("wrong exception class or message: ") + e.what());
+            }
         }
     }
     // Every subclass is an Error with the status; other statuses stay plain Errors.
@@ -544,6 +541,22 @@ TEST(image_view_helper)
     CHECK(frame.image.format == TOPOLOC_PIXEL_NONE && frame.image.data == nullptr);
 }
 
+// Builds a map of `images` whose progress callback counts its calls and answers `go_on`,
+// expecting the build to fail with `status`: the error's message and the callback's calls.
+std::pair<std::string, int> failed_counted_build(const std::vector<topoloc::Image> &images,
+                                                 bool go_on, topoloc_status status)
+{
+    int calls = 0;
+    const std::string message = CHECK_THROWS_STATUS(
+        topoloc::Map::build_from_images(images, vlad_options(kImgPlaces),
+                                        [&](topoloc::Stage, std::size_t, std::size_t) {
+                                            ++calls;
+                                            return go_on;
+                                        }),
+        status);
+    return {message, calls};
+}
+
 TEST(image_map_progress_and_cancel)
 {
     const std::vector<topoloc::Image> images = place_images();
@@ -573,14 +586,7 @@ TEST(image_map_progress_and_cancel)
     CHECK(map.view_info(3).keyframe_id == std::optional<uint64_t>(3));
 
     // Returning false cancels.
-    int calls = 0;
-    const std::string message = CHECK_THROWS_STATUS(
-        topoloc::Map::build_from_images(images, vlad_options(kImgPlaces),
-                                        [&](topoloc::Stage, std::size_t, std::size_t) {
-                                            ++calls;
-                                            return false;
-                                        }),
-        TOPOLOC_ERR_CANCELLED);
+    const auto [message, calls] = failed_counted_build(images, false, TOPOLOC_ERR_CANCELLED);
     CHECK(!message.empty());
     CHECK(calls >= 1);
     try {
@@ -631,14 +637,8 @@ TEST(image_map_progress_and_cancel)
     // Bad input: typed errors, the callback never called.
     std::vector<topoloc::Image> bad = images;
     bad[2].stride = 5;
-    int bad_calls = 0;
-    const std::string bad_message = CHECK_THROWS_STATUS(
-        topoloc::Map::build_from_images(bad, vlad_options(kImgPlaces),
-                                        [&](topoloc::Stage, std::size_t, std::size_t) {
-                                            ++bad_calls;
-                                            return true;
-                                        }),
-        TOPOLOC_ERR_INVALID_IMAGE);
+    const auto [bad_message, bad_calls] =
+        failed_counted_build(bad, true, TOPOLOC_ERR_INVALID_IMAGE);
     CHECK(bad_message.find("images[2]") != std::string::npos);
     CHECK_EQ(bad_calls, 0);
     CHECK_THROWS_STATUS(

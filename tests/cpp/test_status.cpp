@@ -11,6 +11,9 @@
 
 #include "harness.hpp"
 
+#include <typeindex>
+#include <typeinfo>
+
 namespace {
 
 using topoloc::detail::ErrorClass;
@@ -19,26 +22,29 @@ using topoloc::detail::ErrorClass;
 // sweep goes far beyond, so that a code out of those groups is seen too.
 constexpr uint32_t kSweep = 1u << 16;
 
+// The exception class of each `ErrorClass` that is thrown (by its exact type).
+const std::pair<ErrorClass, std::type_index> kThrownAs[] = {
+    {ErrorClass::Error, typeid(topoloc::Error)},
+    {ErrorClass::InvalidImage, typeid(topoloc::InvalidImageError)},
+    {ErrorClass::UninformativeImage, typeid(topoloc::UninformativeImageError)},
+    {ErrorClass::BackendUnavailable, typeid(topoloc::BackendUnavailableError)},
+    {ErrorClass::Model, typeid(topoloc::ModelError)},
+    {ErrorClass::NoDescriber, typeid(topoloc::NoDescriberError)},
+    {ErrorClass::Cancelled, typeid(topoloc::CancelledError)},
+};
+
 // The class of the exception `topoloc::throw_error(status, message)` throws (`Unmapped` for
-// none at all, which would be a bug).
+// none at all, or one of another type, which would be a bug).
 ErrorClass thrown_class(topoloc_status status, const std::string &message)
 {
     try {
         topoloc::throw_error(status, message);
-    } catch (const topoloc::InvalidImageError &) {
-        return ErrorClass::InvalidImage;
-    } catch (const topoloc::UninformativeImageError &) {
-        return ErrorClass::UninformativeImage;
-    } catch (const topoloc::BackendUnavailableError &) {
-        return ErrorClass::BackendUnavailable;
-    } catch (const topoloc::ModelError &) {
-        return ErrorClass::Model;
-    } catch (const topoloc::NoDescriberError &) {
-        return ErrorClass::NoDescriber;
-    } catch (const topoloc::CancelledError &) {
-        return ErrorClass::Cancelled;
-    } catch (const topoloc::Error &) {
-        return ErrorClass::Error;
+    } catch (const topoloc::Error &e) {
+        for (const auto &[error_class, type] : kThrownAs) {
+            if (std::type_index(typeid(e)) == type) {
+                return error_class;
+            }
+        }
     } catch (...) {
     }
     return ErrorClass::Unmapped;
