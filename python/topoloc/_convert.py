@@ -13,7 +13,8 @@ import ctypes
 import operator
 import os
 from ctypes import POINTER, byref, c_double, c_float, c_size_t, c_uint8, c_uint32
-from typing import Any, Callable, Mapping, Optional, Tuple, Type, Union
+from dataclasses import fields
+from typing import TYPE_CHECKING, Any, Callable, Mapping, Optional, Tuple, Type, TypeVar, Union
 
 import numpy as np
 from numpy.typing import NDArray
@@ -32,6 +33,14 @@ from ._errors import (
 PathLike = Union[str, bytes, "os.PathLike[str]", "os.PathLike[bytes]"]
 #: A C function that the bindings call (its status or value).
 CFunction = Callable[..., Any]
+
+if TYPE_CHECKING:
+    from _ctypes import _CData
+
+    from _typeshed import DataclassInstance
+
+_C = TypeVar("_C", bound="_CData")
+_D = TypeVar("_D", bound="DataclassInstance")
 
 _U32_MAX = 0xFFFFFFFF
 _U64_MAX = 0xFFFFFFFFFFFFFFFF
@@ -292,6 +301,21 @@ def _image(
 # ---------------------------------------------------------------------------------------------
 # Reading what the library writes into caller buffers
 # ---------------------------------------------------------------------------------------------
+
+
+def _out_call(out_type: Type[_C], fn: CFunction, *args: Any) -> _C:
+    """Calls ``fn(*args, &out)`` with a new ``out_type`` (a ctypes value or pointer type), raises
+    the exception for a failing status, and returns ``out``."""
+    out = out_type()
+    check(fn(*args, byref(out)))
+    return out
+
+
+def _from_struct(cls: Type[_D], struct: Any, **computed: Any) -> _D:
+    """A ``cls`` (a dataclass of the package) whose fields are ``computed`` or else the C
+    ``struct``'s fields of the same names (ctypes reads them as ``int``, ``float`` or ``bool``)."""
+    names = [f.name for f in fields(cls)]
+    return cls(**{n: computed[n] if n in computed else getattr(struct, n) for n in names})
 
 
 def _read_string(fn: CFunction, *args: Any) -> str:

@@ -11,11 +11,11 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from . import _lib
-from ._convert import _IMAGE_BACKENDS, PathLike, _f32_ptr, _image
-from ._errors import InvalidOptionError, check
+from ._convert import _IMAGE_BACKENDS, PathLike, _f32_ptr, _image, _out_call
+from ._errors import InvalidOptionError
 from ._handles import _SingleThreaded
 from ._lib import lib
-from ._map import Map
+from ._map import Map, _map_handle
 from ._options import OptionTable, choice, file_path, unsigned
 
 __all__ = ["Describer"]
@@ -68,17 +68,11 @@ class Describer(_SingleThreaded):
         threads: Optional[int] = None,
     ) -> None:
         given = DESCRIBER_OPTIONS.pick(locals())
-        self._init_guard()
-        self._free = lib.topoloc_describer_free
-        if not isinstance(map, Map):
-            raise TypeError(f"map must be a topoloc.Map, got {type(map).__name__}")
+        handle = _map_handle(map)
         options = DESCRIBER_OPTIONS.fill(given)
-        out = _lib.DescriberPtr()
-        check(lib.topoloc_describer_new(map._h, byref(options), byref(out)))
-        self._ptr = out
-        dim = c_size_t(0)
-        check(lib.topoloc_describer_dim(out, byref(dim)))
-        self._dim = int(dim.value)
+        free, new = lib.topoloc_describer_free, lib.topoloc_describer_new
+        h = self._open(free, _lib.DescriberPtr, new, handle, byref(options))
+        self._dim = int(_out_call(c_size_t, lib.topoloc_describer_dim, h).value)
 
     @property
     def dim(self) -> int:
@@ -92,12 +86,9 @@ class Describer(_SingleThreaded):
         :class:`UninformativeImageError` (blank or featureless), :class:`ModelError`."""
         img, pixels = _image(image, pixel_format, "image")
         out = np.empty(self._dim, dtype=np.float32)
-        h = self._enter("describe")
-        try:
-            check(lib.topoloc_describer_describe(h, byref(img), _f32_ptr(out), out.size, None))
-        finally:
-            self._leave()
-            del pixels
+        describe = lib.topoloc_describer_describe
+        self._call("describe", describe, byref(img), _f32_ptr(out), out.size, None)
+        del pixels  # kept alive until here: img points into it
         return out
 
     def __repr__(self) -> str:

@@ -4,12 +4,12 @@ single-threaded variant that refuses concurrent use.
 
 from __future__ import annotations
 
+import contextlib
 import threading
-from typing import Any, Callable, TypeVar
+from typing import Any, Callable, Iterator, TypeVar
 
-from ._errors import (
-    ConcurrentUseError,
-)
+from ._convert import _out_call
+from ._errors import ConcurrentUseError, check
 
 _H = TypeVar("_H", bound="_Handle")
 
@@ -60,6 +60,16 @@ class _SingleThreaded(_Handle):
     def _init_guard(self) -> None:
         self._busy = threading.Lock()
 
+    def _open(
+        self, free: Callable[[Any], Any], ptr_type: Any, new: Callable[..., int], *args: Any
+    ) -> Any:
+        """Creates the handle with ``new(*args, &handle)``, to be released with ``free``; the
+        first call of ``__init__`` (``close`` works even when ``new`` fails)."""
+        self._init_guard()
+        self._free = free
+        self._ptr = _out_call(ptr_type, new, *args)
+        return self._ptr
+
     def _enter(self, what: str) -> Any:
         if not self._busy.acquire(blocking=False):
             raise ConcurrentUseError(
@@ -72,6 +82,21 @@ class _SingleThreaded(_Handle):
 
     def _leave(self) -> None:
         self._busy.release()
+
+    @contextlib.contextmanager
+    def _using(self, what: str) -> Iterator[Any]:
+        """``with self._using("method") as h``: the handle, held by this thread until the block
+        ends (:meth:`_enter` and :meth:`_leave`)."""
+        h = self._enter(what)
+        try:
+            yield h
+        finally:
+            self._leave()
+
+    def _call(self, what: str, fn: Callable[..., int], *args: Any) -> None:
+        """Calls ``fn(handle, *args)`` for method ``what`` and checks its status."""
+        with self._using(what) as h:
+            check(fn(h, *args))
 
     def close(self) -> None:
         """Releases the C handle (idempotent)."""

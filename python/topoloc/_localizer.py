@@ -19,6 +19,7 @@ from ._convert import (
     _descriptor,
     _f32_ptr,
     _f64_ptr,
+    _from_struct,
     _image,
     _matrix,
     _pose,
@@ -26,7 +27,7 @@ from ._convert import (
 from ._errors import InvalidOptionError, check
 from ._handles import _SingleThreaded
 from ._lib import lib
-from ._map import Map
+from ._map import Map, _map_handle
 from ._options import OptionTable, choice, defaults, file_path, real, text, unsigned, unsigned64
 
 __all__ = ["Candidate", "Localizer", "PoseFix", "Result", "localizer_options_default"]
@@ -253,14 +254,10 @@ class Localizer(_SingleThreaded):
         verify_off_map_inlier_scale: Optional[float] = None,
     ) -> None:
         given = LOCALIZER_OPTIONS.pick(locals())
-        self._init_guard()
-        self._free = lib.topoloc_localizer_free
-        if not isinstance(map, Map):
-            raise TypeError(f"map must be a topoloc.Map, got {type(map).__name__}")
+        handle = _map_handle(map)
         options = LOCALIZER_OPTIONS.fill(given)
-        out = _lib.LocalizerPtr()
-        check(lib.topoloc_localizer_new(map._h, byref(options), byref(out)))
-        self._ptr = out
+        free, new = lib.topoloc_localizer_free, lib.topoloc_localizer_new
+        self._open(free, _lib.LocalizerPtr, new, handle, byref(options))
         self._options = LOCALIZER_OPTIONS.read(options)
         self._map = map
 
@@ -321,16 +318,16 @@ class Localizer(_SingleThreaded):
             if pixel_format is not None:
                 raise TypeError("pixel_format is only meaningful with an image")
             q = _descriptor(descriptor)
-            img, pixels = None, None
+            img, _pixels = None, None
         else:
             if descriptor is not None:
                 raise TypeError("give process() either a descriptor or an image, not both")
             q = None
-            img, pixels = _image(image, pixel_format, "image")
+            img, _pixels = _image(image, pixel_format, "image")
         odo = None if odometry is None else _pose(odometry, "odometry")
         ts = float(timestamp)
-        h = self._enter("process")
-        try:
+        # q, odo and _pixels (locals, alive until the call returns) hold what the frame points to.
+        with self._using("process") as h:
             frame, result = self._frame, self._result
             frame.struct_size = ctypes.sizeof(_lib.topoloc_frame)
             frame.timestamp = ts
@@ -351,35 +348,13 @@ class Localizer(_SingleThreaded):
                 frame.odometry = None
                 frame.image = _lib.topoloc_image()
             n = min(int(result.candidates_len), len(self._candidates))
-            candidates = [
-                Candidate(int(c.place), int(c.view), float(c.probability), float(c.similarity))
-                for c in self._candidates[:n]
-            ]
-            return Result(
-                frame_index=int(result.frame_index),
-                place=int(result.place),
-                view=int(result.view),
-                confidence=float(result.confidence),
-                similarity=float(result.similarity),
-                off_map=bool(result.off_map),
-                off_map_probability=float(result.off_map_probability),
-                candidates=candidates,
-                verified=bool(result.verified),
-                inliers=int(result.inliers),
-                pose_fix=_pose_fix(result),
-            )
-        finally:
-            self._leave()
-            del q, odo, pixels
+            candidates = [_from_struct(Candidate, c) for c in self._candidates[:n]]
+            return _from_struct(Result, result, candidates=candidates, pose_fix=_pose_fix(result))
 
     def reset(self) -> None:
         """Forgets all history: the next frame is treated as the first (frame_index 0, any
         timestamp accepted)."""
-        h = self._enter("reset")
-        try:
-            check(lib.topoloc_localizer_reset(h))
-        finally:
-            self._leave()
+        self._call("reset", lib.topoloc_localizer_reset)
 
 
 def _pose_fix(result: _lib.topoloc_result) -> Optional[PoseFix]:

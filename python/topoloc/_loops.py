@@ -8,7 +8,7 @@ import ctypes
 import enum
 from ctypes import byref, c_size_t
 from dataclasses import dataclass
-from typing import Any, Dict, List, Optional, Union
+from typing import Any, Callable, Dict, List, Optional, Union
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -19,8 +19,10 @@ from ._convert import (
     _descriptor,
     _f32_ptr,
     _f64_ptr,
+    _from_struct,
     _keypoint_array,
     _matrix,
+    _out_call,
     _path,
     _pose,
     _text,
@@ -31,7 +33,7 @@ from ._convert import (
 from ._errors import InvalidArgumentError, InvalidOptionError, check
 from ._handles import _SingleThreaded
 from ._lib import lib
-from ._map import Map
+from ._map import Map, _map_handle
 from ._options import OptionTable, defaults, flag, real, unsigned, unsigned64
 
 __all__ = ["Gate", "LoopCandidate", "LoopDetector", "LoopHint", "loop_options_default"]
@@ -203,20 +205,10 @@ class LoopDetector(_SingleThreaded):
     """
 
     def __init__(self, kind: str, model: str, dim: int, **options: Any) -> None:
-        self._init_guard()
-        self._free = lib.topoloc_loop_detector_free
         opts = LOOP_OPTIONS.fill(options)
-        out = _lib.LoopDetectorPtr()
-        check(
-            lib.topoloc_loop_detector_new(
-                _text(kind, "kind"),
-                _text(model, "model"),
-                _u32(dim, "dim"),
-                byref(opts),
-                byref(out),
-            )
-        )
-        self._finish_init(out, opts, int(dim))
+        names = _text(kind, "kind"), _text(model, "model")
+        d = _u32(dim, "dim")
+        self._open_with(opts, d, lib.topoloc_loop_detector_new, *names, d)
 
     @classmethod
     def from_map(cls, map: Map, **options: Any) -> LoopDetector:
@@ -225,19 +217,18 @@ class LoopDetector(_SingleThreaded):
         :meth:`Map.load`): new keyframes, with ids above the map's, close loops against it.
         Options as for the constructor. Raises :class:`InvalidOptionError` (also a view
         without keyframe id), :class:`InvalidArgumentError` (keyframe ids not increasing)."""
-        if not isinstance(map, Map):
-            raise TypeError(f"map must be a topoloc.Map, got {type(map).__name__}")
+        handle = _map_handle(map)
         self = cls.__new__(cls)
-        self._init_guard()
-        self._free = lib.topoloc_loop_detector_free
         opts = LOOP_OPTIONS.fill(options)
-        out = _lib.LoopDetectorPtr()
-        check(lib.topoloc_loop_detector_from_map(map._h, byref(opts), byref(out)))
-        self._finish_init(out, opts, map.dim)
+        self._open_with(opts, map.dim, lib.topoloc_loop_detector_from_map, handle)
         return self
 
-    def _finish_init(self, ptr: Any, options: _lib.topoloc_loop_options, dim: int) -> None:
-        self._ptr = ptr
+    def _open_with(
+        self, options: _lib.topoloc_loop_options, dim: int, new: Callable[..., int], *args: Any
+    ) -> None:
+        """Creates the detector with ``new(*args, &options, &detector)``."""
+        free = lib.topoloc_loop_detector_free
+        self._open(free, _lib.LoopDetectorPtr, new, *args, byref(options))
         self._options = LOOP_OPTIONS.read(options)
         self._dim = dim
         # Reused per keyframe.
@@ -256,13 +247,8 @@ class LoopDetector(_SingleThreaded):
 
     def __len__(self) -> int:
         """Number of keyframes held."""
-        out = c_size_t(0)
-        h = self._enter("__len__")
-        try:
-            check(lib.topoloc_loop_detector_len(h, byref(out)))
-        finally:
-            self._leave()
-        return int(out.value)
+        with self._using("__len__") as h:
+            return int(_out_call(c_size_t, lib.topoloc_loop_detector_len, h).value)
 
     def __repr__(self) -> str:
         if self.closed:
@@ -321,8 +307,8 @@ class LoopDetector(_SingleThreaded):
         body = None if world_T_body is None else _pose(world_T_body, "world_T_body")
         camera = None if body_T_camera is None else _pose(body_T_camera, "body_T_camera")
 
-        h = self._enter("add")
-        try:
+        # The arrays (locals, alive until the call returns) hold what the keyframe points to.
+        with self._using("add") as h:
             kf, hint = self._keyframe, self._hint
             kf.struct_size = ctypes.sizeof(_lib.topoloc_loop_keyframe)
             kf.id = kid
@@ -345,9 +331,6 @@ class LoopDetector(_SingleThreaded):
                 kf.keypoint_count = 0
                 kf.keypoints = kf.keypoint_descriptors = kf.camera_points = None
             return _loop_hint(hint)
-        finally:
-            self._leave()
-            del q, points, descriptors, scene, body, camera
 
     def confirmed(self) -> List[LoopHint]:
         """The hints of earlier keyframes that the last :meth:`add` confirmed (ABI 1.10),
@@ -357,18 +340,14 @@ class LoopDetector(_SingleThreaded):
         ``query_id``; at most one accepted hint per keyframe in all). Empty after an
         :meth:`add` whose hint was not accepted; replaced by the next :meth:`add`, kept by a
         failed one and by :meth:`erase`."""
-        h = self._enter("confirmed")
-        try:
-            count = c_size_t(0)
-            check(lib.topoloc_loop_detector_confirmed_count(h, byref(count)))
+        with self._using("confirmed") as h:
+            count = _out_call(c_size_t, lib.topoloc_loop_detector_confirmed_count, h)
             hints = []
             for i in range(int(count.value)):
                 raw = defaults(_lib.topoloc_loop_hint, lib.topoloc_loop_hint_init)
                 check(lib.topoloc_loop_detector_confirmed(h, i, byref(raw)))
                 hints.append(_loop_hint(raw))
             return hints
-        finally:
-            self._leave()
 
     def query(self, descriptor: ArrayLike, max_results: int) -> List[LoopCandidate]:
         """Relocalization: the (at most ``max_results``) keyframes most similar to
@@ -378,57 +357,32 @@ class LoopDetector(_SingleThreaded):
         q = _descriptor(descriptor)
         capacity = _u32(max_results, "max_results")
         found = (_lib.topoloc_loop_candidate * max(capacity, 1))()
-        count = c_size_t(0)
-        h = self._enter("query")
-        try:
-            check(
-                lib.topoloc_loop_detector_query(
-                    h, _f32_ptr(q), q.size, found, capacity, byref(count)
-                )
-            )
-        finally:
-            self._leave()
+        with self._using("query") as h:
+            query = lib.topoloc_loop_detector_query
+            count = _out_call(c_size_t, query, h, _f32_ptr(q), q.size, found, capacity)
         n = min(int(count.value), capacity)
-        return [
-            LoopCandidate(int(c.keyframe_id), int(c.place), float(c.similarity)) for c in found[:n]
-        ]
+        return [_from_struct(LoopCandidate, c) for c in found[:n]]
 
     def erase(self, id: int) -> None:
         """Removes keyframe ``id`` and its features (e.g. when SLAM culls it).
         Raises :class:`InvalidArgumentError` (no keyframe with that id)."""
         kid = _u64(id, "id")
-        h = self._enter("erase")
-        try:
-            check(lib.topoloc_loop_detector_erase(h, kid))
-        finally:
-            self._leave()
+        self._call("erase", lib.topoloc_loop_detector_erase, kid)
 
     def save(self, path: PathLike) -> None:
         """Saves the keyframes and their place graph as a topoloc map file (a view per
         keyframe, keyframe ids kept), atomically, for a later session: :meth:`Map.load`, then
         :meth:`from_map`. Raises :class:`MapIOError`, :class:`EmptyMapError`."""
         encoded = _path(path)
-        h = self._enter("save")
-        try:
-            check(lib.topoloc_loop_detector_save(h, encoded))
-        finally:
-            self._leave()
+        self._call("save", lib.topoloc_loop_detector_save, encoded)
 
 
 def _loop_hint(hint: Any) -> LoopHint:
     """The :class:`LoopHint` of a C ``topoloc_loop_hint``."""
-    return LoopHint(
-        query_id=int(hint.query_id),
-        query_place=int(hint.query_place),
-        has_match=bool(hint.has_match),
-        accepted=bool(hint.accepted),
+    return _from_struct(
+        LoopHint,
+        hint,
         gate=_gate(int(hint.gate)),
-        matched_id=int(hint.matched_id),
-        place=int(hint.place),
-        inliers=int(hint.inliers),
-        confidence=float(hint.confidence),
-        has_pose=bool(hint.has_pose),
-        scale_known=bool(hint.scale_known),
         matched_T_query=_matrix(hint.matched_T_query, 4),
         covariance=_matrix(hint.covariance, 6),
     )

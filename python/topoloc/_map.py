@@ -24,6 +24,7 @@ from ._convert import (
     _image,
     _keypoint_array,
     _matrix,
+    _out_call,
     _path,
     _pose,
     _read_array,
@@ -210,6 +211,13 @@ def _image_files(paths: Union[PathLike, Sequence[PathLike]]) -> List[bytes]:
     return [_path(p, f"paths[{i}]") for i, p in enumerate(paths)]
 
 
+def _map_handle(map: Any) -> Any:
+    """The C handle of ``map``, an argument that must be an open :class:`Map`."""
+    if not isinstance(map, Map):
+        raise TypeError(f"map must be a topoloc.Map, got {type(map).__name__}")
+    return map._h
+
+
 class Map(_Handle):
     """An immutable topological map: places (graph nodes) holding views (descriptors with
     optional keyframe id, pose and image reference), joined by weighted undirected edges.
@@ -243,6 +251,11 @@ class Map(_Handle):
         self._free = lib.topoloc_map_free  # kept so that __del__ works during interpreter exit
         return self
 
+    @classmethod
+    def _made_by(cls, fn: Callable[..., int], *args: Any) -> Map:
+        """The map that ``fn(*args, &map)`` creates."""
+        return cls._adopt(_out_call(_lib.MapPtr, fn, *args))
+
     # -- creation ------------------------------------------------------------------------------
 
     @classmethod
@@ -267,9 +280,7 @@ class Map(_Handle):
         :class:`DescriptorMismatchError`, :class:`InvalidUTF8Error`.
         """
         options = LOAD_OPTIONS.fill(LOAD_OPTIONS.pick(locals()))
-        out = _lib.MapPtr()
-        check(lib.topoloc_map_load(_path(path), byref(options), byref(out)))
-        return cls._adopt(out)
+        return cls._made_by(lib.topoloc_map_load, _path(path), byref(options))
 
     @classmethod
     def from_bytes(
@@ -284,9 +295,8 @@ class Map(_Handle):
         ``data`` may be released afterwards). Same options and errors as :meth:`load`."""
         options = LOAD_OPTIONS.fill(LOAD_OPTIONS.pick(locals()))
         buf = np.frombuffer(data, dtype=np.uint8)
-        out = _lib.MapPtr()
-        check(lib.topoloc_map_load_from_memory(_u8_ptr(buf), buf.size, byref(options), byref(out)))
-        return cls._adopt(out)
+        load = lib.topoloc_map_load_from_memory
+        return cls._made_by(load, _u8_ptr(buf), buf.size, byref(options))
 
     @classmethod
     def build_from_images(
@@ -433,9 +443,7 @@ class Map(_Handle):
         check(lib.topoloc_map_save(self._h, _path(path)))
 
     def _size(self, fn: Callable[..., int]) -> int:
-        out = c_size_t(0)
-        check(fn(self._h, byref(out)))
-        return int(out.value)
+        return int(_out_call(c_size_t, fn, self._h).value)
 
     @property
     def place_count(self) -> int:
@@ -455,9 +463,7 @@ class Map(_Handle):
     @property
     def dim(self) -> int:
         """Descriptor dimension D."""
-        out = c_uint32(0)
-        check(lib.topoloc_map_descriptor_dim(self._h, byref(out)))
-        return int(out.value)
+        return int(_out_call(c_uint32, lib.topoloc_map_descriptor_dim, self._h).value)
 
     @property
     def descriptor_kind(self) -> str:
@@ -581,11 +587,8 @@ class Map(_Handle):
         keypoints, the wrong number of rows, or a row neither finite nor all NaN.
         """
         points = _keypoint_array(xyz, "xyz", 3, None)
-        out = _lib.MapPtr()
-        check(
-            lib.topoloc_map_with_keypoint_points(self._h, _f32_ptr(points), points.size, byref(out))
-        )
-        return Map._adopt(out)
+        copy = lib.topoloc_map_with_keypoint_points
+        return Map._made_by(copy, self._h, _f32_ptr(points), points.size)
 
 
 class MapBuilder(_SingleThreaded):
@@ -601,15 +604,14 @@ class MapBuilder(_SingleThreaded):
     """
 
     def __init__(self, kind: str, model: Optional[str], dim: int) -> None:
-        self._init_guard()
-        self._free = lib.topoloc_map_builder_free
-        out = _lib.BuilderPtr()
-        check(
-            lib.topoloc_map_builder_new(
-                _text(kind, "kind"), _text(model, "model"), _u32(dim, "dim"), byref(out)
-            )
+        self._open(
+            lib.topoloc_map_builder_free,
+            _lib.BuilderPtr,
+            lib.topoloc_map_builder_new,
+            _text(kind, "kind"),
+            _text(model, "model"),
+            _u32(dim, "dim"),
         )
-        self._ptr = out
 
     def add_place(self, position: Optional[ArrayLike] = None) -> int:
         """Adds a place, optionally at ``position`` (3 floats, metres); returns its id."""
@@ -618,16 +620,9 @@ class MapBuilder(_SingleThreaded):
             pos = np.ascontiguousarray(np.asarray(position, dtype=np.float64))
             if pos.shape != (3,):
                 raise InvalidArgumentError(f"position must have 3 values, got shape {pos.shape}")
-        out = c_uint32(0)
-        h = self._enter("add_place")
-        try:
-            check(
-                lib.topoloc_map_builder_add_place(
-                    h, None if pos is None else _f64_ptr(pos), byref(out)
-                )
-            )
-        finally:
-            self._leave()
+        with self._using("add_place") as h:
+            add = lib.topoloc_map_builder_add_place
+            out = _out_call(c_uint32, add, h, None if pos is None else _f64_ptr(pos))
         return int(out.value)
 
     def add_view(
@@ -661,21 +656,10 @@ class MapBuilder(_SingleThreaded):
                 attrs.world_T_camera = _f64_ptr(pose)
             if image is not None:
                 attrs.image = _text(os.fspath(image), "image")
-        out = c_uint32(0)
-        h = self._enter("add_view")
-        try:
-            check(
-                lib.topoloc_map_builder_add_view(
-                    h,
-                    place,
-                    _f32_ptr(q),
-                    q.size,
-                    None if attrs is None else byref(attrs),
-                    byref(out),
-                )
-            )
-        finally:
-            self._leave()
+        with self._using("add_view") as h:
+            add = lib.topoloc_map_builder_add_view
+            by_attrs = None if attrs is None else byref(attrs)
+            out = _out_call(c_uint32, add, h, place, _f32_ptr(q), q.size, by_attrs)
         del pose  # kept alive until here: attrs.world_T_camera points into it
         return int(out.value)
 
@@ -684,23 +668,14 @@ class MapBuilder(_SingleThreaded):
         ``weight`` > 0. Raises :class:`UnknownPlaceError`, :class:`InvalidArgumentError`."""
         a = _u32(a, "a", UnknownPlaceError)
         b = _u32(b, "b", UnknownPlaceError)
-        h = self._enter("add_edge")
-        try:
-            check(lib.topoloc_map_builder_add_edge(h, a, b, float(weight)))
-        finally:
-            self._leave()
+        self._call("add_edge", lib.topoloc_map_builder_add_edge, a, b, float(weight))
 
     def build(self) -> Map:
         """Validates what was added and returns a new :class:`Map` (the builder stays usable).
         Raises :class:`EmptyMapError` (no places), :class:`InvalidMapError` (e.g. a place
         without views)."""
-        out = _lib.MapPtr()
-        h = self._enter("build")
-        try:
-            check(lib.topoloc_map_builder_build(h, byref(out)))
-        finally:
-            self._leave()
-        return Map._adopt(out)
+        with self._using("build") as h:
+            return Map._made_by(lib.topoloc_map_builder_build, h)
 
 
 def keyframe_options_default() -> Dict[str, Any]:
@@ -780,17 +755,14 @@ def map_from_keyframes(
         if pose_arr is not None:
             kf.world_T_camera = ctypes.cast(pose_base + i * 16 * 8, POINTER(c_double))
 
-    out = _lib.MapPtr()
-    check(
-        lib.topoloc_map_from_keyframes(
-            _text(kind, "kind"),
-            _text(model, "model"),
-            _u32(dim, "dim"),
-            keyframes,
-            k,
-            byref(options),
-            byref(out),
-        )
+    out = Map._made_by(
+        lib.topoloc_map_from_keyframes,
+        _text(kind, "kind"),
+        _text(model, "model"),
+        _u32(dim, "dim"),
+        keyframes,
+        k,
+        byref(options),
     )
     del desc, pose_arr  # the keyframe array pointed into these until the call returned
-    return Map._adopt(out)
+    return out

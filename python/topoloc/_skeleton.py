@@ -12,7 +12,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from . import _lib
-from ._convert import _f64_ptr, _int_in_range, _read_array, _real, _u8_ptr
+from ._convert import _f64_ptr, _int_in_range, _out_call, _read_array, _real, _u8_ptr
 from ._errors import InvalidArgumentError, TopolocError, UnknownPlaceError, check
 from ._lib import lib
 from ._options import Option, OptionTable, real
@@ -185,17 +185,15 @@ def skeleton_graph(
     if org.shape != (3,):
         raise InvalidArgumentError(f"origin must have 3 values (x, y, z), got shape {org.shape}")
     options = SKELETON_OPTIONS.fill(given)
-    out = _lib.GraphPtr()
-    check(
-        lib.topoloc_graph_from_occupancy(
-            (c_size_t * 3)(*dims),
-            float(voxel_size),
-            _f64_ptr(org),
-            _u8_ptr(cells),
-            cells.size,
-            byref(options),
-            byref(out),
-        )
+    out = _out_call(
+        _lib.GraphPtr,
+        lib.topoloc_graph_from_occupancy,
+        (c_size_t * 3)(*dims),
+        float(voxel_size),
+        _f64_ptr(org),
+        _u8_ptr(cells),
+        cells.size,
+        byref(options),
     )
     try:
         return _read_graph(out)
@@ -205,9 +203,8 @@ def skeleton_graph(
 
 def _read_graph(h: Any) -> Graph:
     """Copies a ``topoloc_graph`` into a :class:`Graph`."""
-    places, edges = c_size_t(0), c_size_t(0)
-    check(lib.topoloc_graph_place_count(h, byref(places)))
-    check(lib.topoloc_graph_edge_count(h, byref(edges)))
+    places = _out_call(c_size_t, lib.topoloc_graph_place_count, h)
+    edges = _out_call(c_size_t, lib.topoloc_graph_edge_count, h)
     positions = np.empty((places.value, 3), dtype=np.float64)
     kinds = np.empty(places.value, dtype=np.uint32)
     kind = c_uint32(0)

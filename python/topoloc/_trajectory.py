@@ -12,7 +12,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from . import _lib
-from ._convert import PathLike, _f64_ptr, _matrix, _path
+from ._convert import PathLike, _f64_ptr, _from_struct, _matrix, _path
 from ._errors import InvalidArgumentError, InvalidOptionError, check
 from ._lib import lib
 from ._options import OptionTable, choice, defaults, real, unsigned
@@ -83,23 +83,10 @@ class TrajectoryReport:
     length_ratio: float
 
 
-def _error_stats(s: Any) -> ErrorStats:
-    return ErrorStats(s.rmse, s.mean, s.median, s.std, s.min, s.max)
-
-
 def _trajectory_report(r: Any) -> TrajectoryReport:
-    return TrajectoryReport(
-        pairs=int(r.pairs),
-        scale=float(r.scale),
-        alignment=_matrix(r.alignment, 4),
-        ate_m=_error_stats(r.ate_m),
-        are_deg=_error_stats(r.are_deg),
-        rpe_m=_error_stats(r.rpe_m),
-        rpe_deg=_error_stats(r.rpe_deg),
-        estimate_length_m=float(r.estimate_length_m),
-        reference_length_m=float(r.reference_length_m),
-        length_ratio=float(r.length_ratio),
-    )
+    errors = ("ate_m", "are_deg", "rpe_m", "rpe_deg")
+    stats = {name: _from_struct(ErrorStats, getattr(r, name)) for name in errors}
+    return _from_struct(TrajectoryReport, r, alignment=_matrix(r.alignment, 4), **stats)
 
 
 def _tum_rows(values: Any, name: str) -> NDArray[np.float64]:
