@@ -200,23 +200,30 @@ def test_builder_creation_and_build_errors():
             b.build()
 
 
-def test_unknown_place_and_view_on_a_map(corridor):
-    m = corridor.map
-    for fn in (m.neighbours, m.place_views, m.place_position):
-        with pytest.raises(topoloc.UnknownPlaceError, match="12"):
-            fn(12)
-        with pytest.raises(topoloc.UnknownPlaceError):
+#: The map's methods taking a place id, then those taking a view id: the error for an unknown id
+#: and the first id the corridor map (12 places, 24 views) lacks.
+ID_METHODS = [
+    (("neighbours", "place_views", "place_position"), topoloc.UnknownPlaceError, 12),
+    (("view_info", "view_descriptor", "view_image"), topoloc.UnknownViewError, 24),
+]
+
+
+@pytest.mark.parametrize("methods, error, first_unknown", ID_METHODS, ids=["place", "view"])
+def test_unknown_place_and_view_on_a_map(corridor, methods, error, first_unknown):
+    for method in methods:
+        fn = getattr(corridor.map, method)
+        with pytest.raises(error, match=str(first_unknown)):
+            fn(first_unknown)
+        with pytest.raises(error):
             fn(-1)
         with pytest.raises(IndexError):
             fn(2**32 - 1)
-    for fn in (m.view_info, m.view_descriptor, m.view_image):
-        with pytest.raises(topoloc.UnknownViewError, match="24"):
-            fn(24)
-        with pytest.raises(topoloc.UnknownViewError):
-            fn(-1)
+
+
+def test_ids_are_integers(corridor):
     with pytest.raises(TypeError):
-        m.neighbours(1.5)
-    assert m.neighbours(np.uint32(1)).tolist() == [0, 2]
+        corridor.map.neighbours(1.5)
+    assert corridor.map.neighbours(np.uint32(1)).tolist() == [0, 2]
 
 
 def test_map_constructor_is_private():

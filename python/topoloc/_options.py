@@ -119,34 +119,30 @@ def _path_field(value: Any, name: str, error: Type[TopolocError]) -> bytes:
     return _path(value, name)
 
 
-def unsigned(field: str, name: Optional[str] = None) -> Field:
-    """A ``uint32_t`` option."""
-    return Field(field, _u32, int, name)
+class FieldKind:
+    """Makes the :class:`Field` of an option of one C type: ``kind(field, name=None)``, its
+    Python ``name`` the field's unless given."""
+
+    def __init__(self, convert: Convert, read: Callable[[Any], Any]) -> None:
+        self._convert = convert
+        self._read = read
+
+    def __call__(self, field: str, name: Optional[str] = None) -> Field:
+        return Field(field, self._convert, self._read, name)
 
 
-def unsigned64(field: str, name: Optional[str] = None) -> Field:
-    """A ``uint64_t`` option."""
-    return Field(field, _u64, int, name)
-
-
-def real(field: str, name: Optional[str] = None) -> Field:
-    """A ``float`` or ``double`` option (the library checks NaN, infinities and the range)."""
-    return Field(field, _real, float, name)
-
-
-def flag(field: str, name: Optional[str] = None) -> Field:
-    """A ``bool`` option (any value, by its truth)."""
-    return Field(field, _flag, bool, name)
-
-
-def text(field: str, name: Optional[str] = None) -> Field:
-    """A C string option (``str`` or UTF-8 ``bytes``; read back ``None`` for NULL or "")."""
-    return Field(field, _text_field, _text_value, name)
-
-
-def file_path(field: str, name: Optional[str] = None) -> Field:
-    """A file path option (``str``, ``bytes`` or ``os.PathLike``; read back as ``str``)."""
-    return Field(field, _path_field, _path_value, name)
+#: A ``uint32_t`` option.
+unsigned = FieldKind(_u32, int)
+#: A ``uint64_t`` option.
+unsigned64 = FieldKind(_u64, int)
+#: A ``float`` or ``double`` option (the library checks NaN, infinities and the range).
+real = FieldKind(_real, float)
+#: A ``bool`` option (any value, by its truth).
+flag = FieldKind(_flag, bool)
+#: A C string option (``str`` or UTF-8 ``bytes``; read back ``None`` for NULL or "").
+text = FieldKind(_text_field, _text_value)
+#: A file path option (``str``, ``bytes`` or ``os.PathLike``; read back as ``str``).
+file_path = FieldKind(_path_field, _path_value)
 
 
 def choice(field: str, codes: Mapping[str, int], name: Optional[str] = None) -> Field:
