@@ -20,6 +20,22 @@ fn pose(x: f64, yaw: f64) -> Option<Isometry3<f64>> {
     ))
 }
 
+/// Keyframe `i` of `descriptors`, with id `i` and the pose `pose_of(i)`.
+fn keyframes<'a>(
+    descriptors: &'a [Vec<f32>],
+    pose_of: impl Fn(usize) -> Option<Isometry3<f64>>,
+) -> Vec<Keyframe<'a>> {
+    descriptors
+        .iter()
+        .enumerate()
+        .map(|(i, d)| Keyframe {
+            id: i as u64,
+            descriptor: d,
+            world_t_camera: pose_of(i),
+        })
+        .collect()
+}
+
 #[test]
 fn poses_space_places_and_revisits_merge() {
     // Forward along x from 0 to 9.5 m every 0.5 m, then back to 0: appearance changes with x.
@@ -31,16 +47,7 @@ fn poses_space_places_and_revisits_merge() {
         .iter()
         .map(|&x| unit_vector(1 + (x / 2.0) as u64, DIM))
         .collect();
-    let keyframes: Vec<Keyframe> = xs
-        .iter()
-        .zip(&descriptors)
-        .enumerate()
-        .map(|(i, (&x, d))| Keyframe {
-            id: i as u64,
-            descriptor: d,
-            world_t_camera: pose(x, 0.0),
-        })
-        .collect();
+    let keyframes = keyframes(&descriptors, |i| pose(xs[i], 0.0));
     let map = from_keyframes(identity(), &keyframes, &KeyframeOptions::default()).unwrap();
     // Places start every time the robot is more than 2 m from every existing place: 0, 2.5, 5, 7.5 m.
     assert_eq!(map.place_count(), 4, "{map:?}");
@@ -59,15 +66,7 @@ fn poses_space_places_and_revisits_merge() {
 fn turning_on_the_spot_adds_views_up_to_the_limit() {
     // Six keyframes at the same spot, each looking another way (distinct appearance).
     let descriptors: Vec<Vec<f32>> = (0..6).map(|i| unit_vector(100 + i, DIM)).collect();
-    let keyframes: Vec<Keyframe> = descriptors
-        .iter()
-        .enumerate()
-        .map(|(i, d)| Keyframe {
-            id: i as u64,
-            descriptor: d,
-            world_t_camera: pose(0.0, i as f64),
-        })
-        .collect();
+    let keyframes = keyframes(&descriptors, |i| pose(0.0, i as f64));
     let map = from_keyframes(identity(), &keyframes, &KeyframeOptions::default()).unwrap();
     assert_eq!((map.place_count(), map.view_count()), (1, 4));
     let options = KeyframeOptions {
@@ -96,15 +95,7 @@ fn without_poses_novelty_decides() {
             })
         })
         .collect();
-    let keyframes: Vec<Keyframe> = descriptors
-        .iter()
-        .enumerate()
-        .map(|(i, d)| Keyframe {
-            id: i as u64,
-            descriptor: d,
-            world_t_camera: None,
-        })
-        .collect();
+    let keyframes = keyframes(&descriptors, |_| None);
     let map = from_keyframes(identity(), &keyframes, &KeyframeOptions::default()).unwrap();
     assert_eq!(map.place_count(), 3);
     assert_eq!(map.edge_count(), 2);
