@@ -1846,7 +1846,7 @@ topoloc_status topoloc_localizer_process(struct topoloc_localizer *localizer, co
 /**
  * Starts a map whose vectors come from descriptor `kind` / `model` with dimension `dim`
  * (`model` may be NULL). On success `*out` owns a new builder.
- * Errors: `_INVALID_ARGUMENT` (empty kind, dim 0).
+ * Errors: `_INVALID_ARGUMENT` (empty kind, dim 0 or above 65,536).
  */
 topoloc_status topoloc_map_builder_new(const char *kind, const char *model, uint32_t dim, struct topoloc_map_builder **out);
 
@@ -2040,7 +2040,8 @@ topoloc_status topoloc_loop_options_init(struct topoloc_loop_options *options, s
  * Creates an empty loop detector for descriptors of `descriptor_kind` (a non-empty string),
  * `descriptor_model` (may be empty) and dimension `dim`: the place graph grows from nothing.
  * `options` may be NULL for defaults. On success `*out` owns the detector.
- * Errors: `_INVALID_OPTION`, `_INVALID_ARGUMENT` (empty kind, dim 0).
+ * Errors: `_INVALID_OPTION`, `_INVALID_ARGUMENT` (empty kind, dim 0 or above 65,536, refused
+ * before anything is allocated).
  */
 topoloc_status topoloc_loop_detector_new(const char *descriptor_kind, const char *descriptor_model, uint32_t dim, const struct topoloc_loop_options *options, struct topoloc_loop_detector **out);
 

@@ -2,11 +2,19 @@
 //! ([`DescriptorIdentity`], what a caller expects: [`ExpectedDescriptor`]) and the checks every
 //! descriptor vector passes ([`normalize_descriptor_into`], [`DescriptorError`]).
 //!
-//! A leaf of the layer order (see the crate documentation): it imports nothing of the crate.
+//! Near the bottom of the layer order (see the crate documentation): it imports only
+//! [`crate::bounds`].
 
+use crate::bounds::Bounds;
 use faer::linalg::matmul::matmul;
 use faer::{Accum, MatMut, MatRef, Par};
 use serde::{Deserialize, Serialize};
+
+/// Largest descriptor dimension D a map or a loop detector may have (built or loaded): 65,536
+/// floats are 256 KB per view, 128 times the default describer's 512 and far above any global
+/// descriptor in use (NetVLAD 4096; MLF before PCA, 27,648, is not stored), so a larger one is
+/// a mistake or a corrupt file.
+pub const MAX_DESCRIPTOR_DIM: u32 = 1 << 16;
 
 /// Tolerance on `| ||x|| - 1 |` for a stored descriptor to count as L2-normalised.
 pub const NORM_TOLERANCE: f32 = 1e-3;
@@ -24,7 +32,7 @@ pub struct DescriptorIdentity {
 }
 
 impl DescriptorIdentity {
-    /// Creates an identity; `kind` must be non-empty and `dim` positive.
+    /// Creates an identity; `kind` must be non-empty and `dim` in [`Self::DIM_RANGE`].
     pub fn new(
         kind: impl Into<String>,
         model: impl Into<String>,
@@ -39,18 +47,18 @@ impl DescriptorIdentity {
         Ok(identity)
     }
 
+    /// Accepted values of [`Self::dim`].
+    pub const DIM_RANGE: Bounds = Bounds::whole(1, MAX_DESCRIPTOR_DIM as u64);
+
     pub(crate) fn validate(&self) -> Result<(), IdentityError> {
         if self.kind.is_empty() {
             return Err(IdentityError::Invalid(
                 "descriptor kind must not be empty".into(),
             ));
         }
-        if self.dim == 0 {
-            return Err(IdentityError::Invalid(
-                "descriptor dimension must be positive".into(),
-            ));
-        }
-        Ok(())
+        Self::DIM_RANGE
+            .check("descriptor dimension", self.dim)
+            .map_err(IdentityError::Invalid)
     }
 
     /// Checks that a query described by `expected` may be compared with this map's vectors.
@@ -195,4 +203,20 @@ pub(crate) fn row_similarities(rows: &[f32], dim: usize, query: &[f32], out: &mu
     let rhs = MatRef::from_column_major_slice(query, dim, 1);
     let dst = MatMut::from_column_major_slice_mut(out, n, 1);
     matmul(dst, Accum::Replace, lhs, rhs, 1.0f32, Par::Seq);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn an_identity_needs_a_kind_and_a_dimension_up_to_the_bound() {
+        assert!(DescriptorIdentity::new("k", "m", 1).is_ok());
+        assert!(DescriptorIdentity::new("k", "m", MAX_DESCRIPTOR_DIM).is_ok());
+        for dim in [0, MAX_DESCRIPTOR_DIM + 1, 1 << 30, u32::MAX] {
+            let err = DescriptorIdentity::new("k", "m", dim).unwrap_err();
+            assert!(err.to_string().contains("dimension"), "{err}");
+        }
+        assert!(DescriptorIdentity::new("", "m", 4).is_err());
+    }
 }

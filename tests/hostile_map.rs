@@ -341,6 +341,9 @@ fn pca_rows_are_exactly_one_form_with_sound_scales() {
     expect_corrupt(&scales(vec![-0.01; d]), "scales must not be negative");
     expect_corrupt(&scales(vec![f32::NAN; d]), "NaN or infinite");
     expect_corrupt(&scales(vec![f32::INFINITY; d]), "NaN or infinite");
+    // Finite but unusable: every frame would fail with NON_FINITE or ZERO_DESCRIPTOR.
+    expect_corrupt(&scales(vec![3e38; d]), "must be in [0, 1000000000]");
+    expect_corrupt(&scales(vec![0.0; d]), "all 0");
     let without_scales = edited(bytes, |_, t| {
         t.remove("describer_pca_scales");
     });
@@ -546,8 +549,13 @@ fn nul_bytes_in_strings_are_refused() {
     let mut creator = MapBuilder::new(identity("a", "b"));
     creator.set_creator("me\0");
     assert!(invalid(one_view(creator, None)));
-    let huge = MapBuilder::new(DescriptorIdentity::new("a", "", MAX_DESCRIPTOR_DIM + 1).unwrap());
-    let mut huge = huge;
+    assert!(DescriptorIdentity::new("a", "", MAX_DESCRIPTOR_DIM + 1).is_err());
+    // An identity written field by field skips that check; the builder refuses it still.
+    let mut huge = MapBuilder::new(DescriptorIdentity {
+        kind: "a".into(),
+        model: String::new(),
+        dim: MAX_DESCRIPTOR_DIM + 1,
+    });
     huge.add_place(None).unwrap();
     assert!(matches!(huge.build(), Err(MapError::InvalidArgument(_))));
 }

@@ -127,6 +127,9 @@ def test_invalid_options():
         topoloc.LoopDetector("test", "loops", DIM, min_inlier=30)
     with pytest.raises(topoloc.InvalidArgumentError):
         topoloc.LoopDetector("", "loops", DIM)
+    for dim in (65537, 2**30, 2**32 - 1):
+        with pytest.raises(topoloc.InvalidArgumentError, match="dimension"):
+            topoloc.LoopDetector("test", "loops", dim)
     with pytest.raises(topoloc.InvalidArgumentError):
         topoloc.LoopDetector("test", "loops", 0)
 
@@ -190,6 +193,10 @@ def test_query_candidates(detector, views):
     assert [c.similarity for c in found] == sorted((c.similarity for c in found), reverse=True)
     assert len(detector.query(descriptor(1), 1)) == 1
     assert detector.query(descriptor(1), 0) == []
+    # Room is made for what can be found, not for what is asked.
+    assert len(detector.query(descriptor(1), 2**32 - 1)) == 2
+    with pytest.raises(topoloc.InvalidArgumentError, match="max_results"):
+        detector.query(descriptor(1), 2**32)
     with pytest.raises(topoloc.DimensionMismatchError):
         detector.query(np.ones(DIM + 1), 4)
 

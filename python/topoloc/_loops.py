@@ -355,9 +355,12 @@ class LoopDetector(_SingleThreaded):
         first. Raises :class:`DimensionMismatchError`, :class:`NonFiniteError`,
         :class:`ZeroDescriptorError`."""
         q = _descriptor(descriptor)
-        capacity = _u32(max_results, "max_results")
-        found = (_lib.topoloc_loop_candidate * max(capacity, 1))()
+        wanted = _u32(max_results, "max_results")
         with self._using("query") as h:
+            # Room for what can be found, not for what is asked: 2**32 - 1 must not allocate.
+            held = int(_out_call(c_size_t, lib.topoloc_loop_detector_len, h).value)
+            capacity = min(wanted, held)
+            found = (_lib.topoloc_loop_candidate * max(capacity, 1))()
             query = lib.topoloc_loop_detector_query
             count = _out_call(c_size_t, query, h, _f32_ptr(q), q.size, found, capacity)
         n = min(int(count.value), capacity)

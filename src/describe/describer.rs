@@ -227,6 +227,18 @@ impl DescriberModel {
                 if scales.iter().any(|&s| s < 0.0) {
                     return bad("PCA row scales must not be negative".into());
                 }
+                if let Some(&s) = scales
+                    .iter()
+                    .find(|&&s| s.is_finite() && !limits::PCA_ROW_SCALE_RANGE.contains(s.into()))
+                {
+                    return bad(format!(
+                        "a PCA row scale is {s}, must be in {}",
+                        limits::PCA_ROW_SCALE_RANGE
+                    ));
+                }
+                if scales.iter().all(|&s| s == 0.0) {
+                    return bad("PCA row scales are all 0: every descriptor would be zero".into());
+                }
                 pca.mean.iter().chain(scales).all(|x| x.is_finite())
             }
         };

@@ -19,6 +19,11 @@ pub const MAX_TAP_NAME_BYTES: usize = 256;
 /// 1280 channels that is 5 MB, where the probe's 100,000 x 100,000 grid aborted the host.
 pub const MAX_POOL_GRID: usize = 32;
 
+/// Accepted scales of a stored i8 PCA row (0: an all-zero row). A fitted row's scale is its
+/// largest value over 127: at most 1/127 for unit rows, more when whitened; a file's scale
+/// beyond this bound would overflow the projection to infinity on ordinary inputs.
+pub const PCA_ROW_SCALE_RANGE: Bounds = Bounds::closed(0.0, 1e9);
+
 /// Accepted rows or columns of an ONNX pooling grid.
 pub const POOL_GRID_RANGE: Bounds = Bounds::whole(1, MAX_POOL_GRID as u64);
 

@@ -23,7 +23,7 @@ castable!(topoloc_map_builder: OwnedExclusive => MapBuilder);
 
 /// Starts a map whose vectors come from descriptor `kind` / `model` with dimension `dim`
 /// (`model` may be NULL). On success `*out` owns a new builder.
-/// Errors: `_INVALID_ARGUMENT` (empty kind, dim 0).
+/// Errors: `_INVALID_ARGUMENT` (empty kind, dim 0 or above 65,536).
 #[no_mangle]
 pub extern "C" fn topoloc_map_builder_new(
     kind: *const c_char,

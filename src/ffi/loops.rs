@@ -193,7 +193,8 @@ fn loop_options(
 /// Creates an empty loop detector for descriptors of `descriptor_kind` (a non-empty string),
 /// `descriptor_model` (may be empty) and dimension `dim`: the place graph grows from nothing.
 /// `options` may be NULL for defaults. On success `*out` owns the detector.
-/// Errors: `_INVALID_OPTION`, `_INVALID_ARGUMENT` (empty kind, dim 0).
+/// Errors: `_INVALID_OPTION`, `_INVALID_ARGUMENT` (empty kind, dim 0 or above 65,536, refused
+/// before anything is allocated).
 #[no_mangle]
 pub extern "C" fn topoloc_loop_detector_new(
     descriptor_kind: *const c_char,

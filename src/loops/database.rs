@@ -395,7 +395,7 @@ impl KeyframeDatabase {
         };
         if query.min_id_gap > 0 {
             found.sort_unstable_by(order);
-            let mut kept: Vec<Match> = Vec::with_capacity(query.max_results);
+            let mut kept: Vec<Match> = Vec::with_capacity(query.max_results.min(found.len()));
             for m in found {
                 if kept.len() == query.max_results {
                     break;

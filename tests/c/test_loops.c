@@ -132,16 +132,26 @@ static void loop_options_have_defaults_and_older_callers_get_the_newer_fields_de
     check_loop_fields_beyond(&old, offsetof(topoloc_loop_options, odometry_search_m));
 }
 
-static void
-a_loop_detector_needs_an_out_pointer_a_kind_and_candidates(topoloc_loop_options *options)
+static void a_loop_detector_needs_an_out_pointer_a_kind_a_bounded_dim_and_candidates(
+    topoloc_loop_options *options)
 {
     topoloc_loop_detector *det = NULL;
+    const uint32_t too_large[] = {65537u, 1u << 30, UINT32_MAX};
 
     SECTION();
     CHECK_NULL(new_detector(options, NULL), "out");
     CHECK_STATUS(topoloc_loop_detector_new("", "loops", LOOP_DIM, options, &det),
                  TOPOLOC_ERR_INVALID_ARGUMENT);
     CHECK(det == NULL);
+    /* Refused before anything is allocated for them (2^30 once aborted the host). */
+    for (size_t i = 0; i < sizeof too_large / sizeof too_large[0]; i++) {
+        CHECK_STATUS(topoloc_loop_detector_new("test", "loops", too_large[i], options, &det),
+                     TOPOLOC_ERR_INVALID_ARGUMENT);
+        CHECK(det == NULL);
+    }
+    CHECK_STATUS(topoloc_loop_detector_new("test", "loops", 65536u, options, &det), TOPOLOC_OK);
+    topoloc_loop_detector_free(det);
+    det = NULL;
     options->candidates = 0;
     CHECK_STATUS(new_detector(options, &det), TOPOLOC_ERR_INVALID_OPTION);
     options->candidates = 5;
@@ -255,7 +265,7 @@ static void loop_closure(void)
     options.exclude_recent_ids = 5;
     options.exclude_recent_s = 0.0;
     options.consistent_keyframes = 1;
-    a_loop_detector_needs_an_out_pointer_a_kind_and_candidates(&options);
+    a_loop_detector_needs_an_out_pointer_a_kind_a_bounded_dim_and_candidates(&options);
     CHECK_STATUS(new_detector(&options, &det), TOPOLOC_OK);
     if (det == NULL)
         return;

@@ -77,10 +77,7 @@ pub const FORMAT_VERSION_MAJOR: u32 = 1;
 /// Minor format version written by this build.
 pub const FORMAT_VERSION_MINOR: u32 = 5;
 
-/// Largest descriptor dimension D a map may have (built or loaded): 65,536 floats are 256 KB
-/// per view, 128 times the default describer's 512 and far above any global descriptor in use
-/// (NetVLAD 4096, MLF before PCA 27,648 is not stored), so a file declaring more is corrupt.
-pub const MAX_DESCRIPTOR_DIM: u32 = 1 << 16;
+pub use crate::descriptor::MAX_DESCRIPTOR_DIM;
 
 /// Options for [`Map::load`].
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
