@@ -2120,8 +2120,10 @@ topoloc_status topoloc_loop_detector_erase(struct topoloc_loop_detector *detecto
 
 /**
  * Saves the keyframes and their place graph as a topoloc map file (a view per keyframe,
- * keyframe ids kept), for a later session: `topoloc_map_load`, then
- * `topoloc_loop_detector_from_map`. Atomic (a temporary file renamed over `path`).
+ * keyframe ids kept, with the keyframes' keypoints and, where a keyframe had an odometry pose
+ * and scene points, those points), for a later session: `topoloc_map_load`, then
+ * `topoloc_loop_detector_from_map`, which verifies against them. Atomic (a temporary file
+ * renamed over `path`).
  * Errors: `_IO`, `_EMPTY_MAP`.
  */
 topoloc_status topoloc_loop_detector_save(const struct topoloc_loop_detector *detector, const char *path);

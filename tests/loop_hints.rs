@@ -15,6 +15,7 @@ use topoloc::loops::{
     DatabaseOptions, Gate, HintOptions, KeyframeDatabase, KeyframeEntry, KeyframeFeatures,
     LoopDetector, LoopsError, OdometryGate,
 };
+use topoloc::map::{LoadOptions, Map};
 use topoloc::verify::{
     CellDescriptor, Descriptors, FeatureKind, FundamentalEstimator, KeypointDetector, Keypoints,
     PairOptions, PinholeCamera, PoseRefusal,
@@ -612,5 +613,63 @@ fn a_look_alike_refused_by_odometry_gives_way_to_the_true_keyframe() {
         (hint.gate, hint.matched_id),
         (Gate::Accepted, 0),
         "{hint:?}"
+    );
+}
+
+/// The detector saved and loaded as a map file (bytes), then reopened for a second session.
+fn reloaded(detector: &LoopDetector, options: HintOptions) -> LoopDetector {
+    let bytes = detector.to_map().unwrap().to_bytes().unwrap();
+    let map = Map::from_bytes(&bytes, &LoadOptions::default()).unwrap();
+    LoopDetector::from_map(&map, DatabaseOptions::default(), options).unwrap()
+}
+
+#[test]
+fn a_saved_detector_verifies_the_next_session_against_its_keypoints() {
+    let mut first = detector(options());
+    first_pass(&mut first);
+    let map = first.to_map().unwrap();
+    let stored = map.keypoints().expect("the keyframes' keypoints are saved");
+    assert_eq!(stored.view_count(), PLACES as usize);
+    assert!(stored.total() > 100 * PLACES as usize, "{}", stored.total());
+    // The second session's revisits verify against the first session's keyframes, as a live
+    // detector's do (they got NO_CANDIDATE when the save dropped the keypoints).
+    let mut second = reloaded(&first, options());
+    for p in 0..PLACES {
+        let hint = revisit_keyframe(&mut second, p)
+            .hint
+            .expect("a verified candidate");
+        assert_eq!(hint.matched_id, p, "revisit of place {p}");
+        assert!(hint.inliers >= 30, "{hint:?}");
+    }
+}
+
+#[test]
+fn a_saved_detector_keeps_its_scene_points_for_metric_hints() {
+    let metric = HintOptions {
+        camera: Some(CAMERA),
+        consistent_keyframes: 1,
+        ..options()
+    };
+    let (first, q, d) = with_metric_keyframe(metric.clone());
+    let live = {
+        let (mut live, _, _) = with_metric_keyframe(metric.clone());
+        live.process(&posed(10, &d, truth()), point_features(&q, None))
+            .unwrap()
+            .hint
+            .expect("keyframe 0 is the candidate")
+    };
+    let mut second = reloaded(&first, metric);
+    let hint = second
+        .process(&posed(10, &d, truth()), point_features(&q, None))
+        .unwrap()
+        .hint
+        .expect("keyframe 0 is the candidate");
+    assert_eq!(hint.gate, Gate::Accepted, "{hint:?}");
+    let (pose, live_pose) = (hint.pose.expect("metric"), live.pose.expect("metric"));
+    assert!(
+        (pose.matched_t_query.translation.vector - live_pose.matched_t_query.translation.vector)
+            .norm()
+            < 1e-3,
+        "{pose:?} vs {live_pose:?}"
     );
 }

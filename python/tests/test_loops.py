@@ -303,6 +303,7 @@ def test_save_load_and_second_session(tmp_path, detector, views):
     ) as m:
         assert m.view_count == 2
         assert sorted(m.view_info(v).keyframe_id for v in range(m.view_count)) == [0, 10]
+        assert m.keypoint_total == 2 * len(first)  # the keyframes' keypoints are saved
         again = topoloc.LoopDetector.from_map(m, **OPTIONS)
     # The map handle is not kept.
     with again:
@@ -312,9 +313,9 @@ def test_save_load_and_second_session(tmp_path, detector, views):
             and again.options == dict(topoloc.loop_options_default(), **OPTIONS)
         )
         hint = again.add(20, 20.0, descriptor(1), first, descriptors)
-        assert (
-            hint.query_id == 20 and hint.gate == topoloc.Gate.NO_CANDIDATE
-        )  # saved without features
+        # Verified against the saved keypoints, as live.
+        assert hint.query_id == 20 and hint.has_match and hint.inliers >= 30
+        assert hint.gate == topoloc.Gate.ACCEPTED and hint.matched_id in (0, 10)
         assert len(again) == 3
         assert {c.keyframe_id for c in again.query(descriptor(1), 8)} == {0, 10, 20}
     with pytest.raises(TypeError):

@@ -373,9 +373,10 @@ class LoopDetector(_SingleThreaded):
         self._call("erase", lib.topoloc_loop_detector_erase, kid)
 
     def save(self, path: PathLike) -> None:
-        """Saves the keyframes and their place graph as a topoloc map file (a view per
-        keyframe, keyframe ids kept), atomically, for a later session: :meth:`Map.load`, then
-        :meth:`from_map`. Raises :class:`MapIOError`, :class:`EmptyMapError`."""
+        """Saves the keyframes, their place graph and their keypoints as a topoloc map file
+        (see the C ``topoloc_loop_detector_save``), atomically, for a later session:
+        :meth:`Map.load`, then :meth:`from_map`. Raises :class:`MapIOError`,
+        :class:`EmptyMapError`."""
         encoded = _path(path)
         self._call("save", lib.topoloc_loop_detector_save, encoded)
 

@@ -589,8 +589,10 @@ pub extern "C" fn topoloc_loop_detector_erase(
 }
 
 /// Saves the keyframes and their place graph as a topoloc map file (a view per keyframe,
-/// keyframe ids kept), for a later session: `topoloc_map_load`, then
-/// `topoloc_loop_detector_from_map`. Atomic (a temporary file renamed over `path`).
+/// keyframe ids kept, with the keyframes' keypoints and, where a keyframe had an odometry pose
+/// and scene points, those points), for a later session: `topoloc_map_load`, then
+/// `topoloc_loop_detector_from_map`, which verifies against them. Atomic (a temporary file
+/// renamed over `path`).
 /// Errors: `_IO`, `_EMPTY_MAP`.
 #[no_mangle]
 pub extern "C" fn topoloc_loop_detector_save(
@@ -598,7 +600,7 @@ pub extern "C" fn topoloc_loop_detector_save(
     path: *const c_char,
 ) -> topoloc_status {
     run_on(detector, "detector", |detector| {
-        detector.database().save(string(path, "path")?)?;
+        detector.save(string(path, "path")?)?;
         Ok(())
     })
 }

@@ -230,24 +230,28 @@ static void a_detector_saves_as_a_map_and_erases_keyframes_by_id(topoloc_loop_de
     CHECK(len == 1);
 }
 
-/* A second session from the map saved at `path` has both keyframes, without their features: a
- * revisit finds no candidate to verify. */
-static void a_second_session_from_the_saved_map_has_the_keyframes_without_features(
+/* A second session from the map saved at `path` has both keyframes with their keypoints: a
+ * revisit verifies against them as the first session did (the first keyframe of a streak). */
+static void a_second_session_from_the_saved_map_verifies_against_its_keypoints(
     const char *path, topoloc_loop_keyframe *kf, topoloc_loop_hint *hint)
 {
     topoloc_map *saved = NULL;
     topoloc_loop_detector *again = NULL;
-    size_t len = 0;
+    size_t len = 0, keypoints = 0;
 
     SECTION();
     CHECK_STATUS(topoloc_map_load(path, NULL, &saved), TOPOLOC_OK);
+    CHECK_STATUS(topoloc_map_keypoint_total(saved, &keypoints), TOPOLOC_OK);
+    CHECK(keypoints == 2 * LOOP_POINTS);
     CHECK_STATUS(topoloc_loop_detector_from_map(saved, NULL, &again), TOPOLOC_OK);
     CHECK_STATUS(topoloc_loop_detector_len(again, &len), TOPOLOC_OK);
     CHECK(len == 2);
     kf->id = 20;
     kf->timestamp = 20.0;
     CHECK_STATUS(topoloc_loop_detector_add(again, kf, hint), TOPOLOC_OK);
-    CHECK(hint->query_id == 20 && hint->gate == TOPOLOC_GATE_NO_CANDIDATE);
+    CHECK(hint->query_id == 20 && hint->has_match && hint->inliers >= 30);
+    CHECK(hint->matched_id == 0 || hint->matched_id == 10);
+    CHECK(hint->gate == TOPOLOC_GATE_INCONSISTENT);
     topoloc_loop_detector_free(again);
     topoloc_map_free(saved);
 }
@@ -276,7 +280,7 @@ static void loop_closure(void)
     a_detector_saves_as_a_map_and_erases_keyframes_by_id(det, path);
     topoloc_loop_detector_free(det);
     topoloc_loop_detector_free(NULL);
-    a_second_session_from_the_saved_map_has_the_keyframes_without_features(path, &kf, &hint);
+    a_second_session_from_the_saved_map_verifies_against_its_keypoints(path, &kf, &hint);
     CHECK(remove(path) == 0);
 }
 

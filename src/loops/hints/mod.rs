@@ -39,7 +39,7 @@ mod streak;
 use super::database::{Added, DatabaseOptions, KeyframeDatabase, KeyframeEntry};
 use super::error::LoopsError;
 use crate::map::{Map, PlaceId};
-use crate::verify::{FeatureKind, Keypoints, RelativePose};
+use crate::verify::{Descriptors, FeatureKind, Keypoints, RelativePose, ViewKeypoints};
 use nalgebra::Point3;
 use std::collections::HashMap;
 
@@ -204,6 +204,63 @@ impl LoopDetector {
             detector.features.insert(id, features);
         }
         Ok(detector)
+    }
+
+    /// The detector as a topoloc map: the database's map ([`KeyframeDatabase::to_map`]) with
+    /// every keyframe's local features as its view's keypoints and, where a keyframe has both
+    /// an odometry pose and scene points, those points in the map frame (NaN where unknown), so
+    /// that [`LoopDetector::from_map`] verifies against them in a later session. Keyframes
+    /// without features get views without keypoints. Fails on an empty detector.
+    pub fn to_map(&self) -> Result<Map, LoopsError> {
+        let map = self.database.to_map()?;
+        let Some(kind) = self.kind else {
+            return Ok(map);
+        };
+        let none = Keypoints {
+            points: Vec::new(),
+            descriptors: Descriptors::empty(kind),
+        };
+        let features: Vec<Option<&KeyframeFeatures>> = map
+            .views()
+            .iter()
+            .map(|view| view.keyframe_id.and_then(|id| self.features.get(&id)))
+            .collect();
+        let stored = ViewKeypoints::from_views(
+            kind,
+            features.iter().map(|f| f.map_or(&none, |f| &f.keypoints)),
+        )
+        .map_err(|e| LoopsError::InvalidOption(format!("keypoints to save: {e}")))?;
+        let map = map.with_keypoints(stored)?;
+        let unknown = [f32::NAN; 3];
+        let mut any_point = false;
+        let mut world_points = Vec::with_capacity(map.keypoints().map_or(0, |k| k.total()));
+        for (view, features) in map.views().iter().zip(&features) {
+            let Some(features) = features else { continue };
+            match (view.world_t_camera, &features.camera_points) {
+                (Some(world_t_camera), Some(points)) => {
+                    any_point = true;
+                    world_points.extend(points.iter().map(|p| {
+                        let w = world_t_camera.transform_point(&Point3::new(
+                            f64::from(p[0]),
+                            f64::from(p[1]),
+                            f64::from(p[2]),
+                        ));
+                        [w.x as f32, w.y as f32, w.z as f32]
+                    }));
+                }
+                _ => world_points.extend(std::iter::repeat_n(unknown, features.keypoints.len())),
+            }
+        }
+        if !any_point {
+            return Ok(map);
+        }
+        Ok(map.with_keypoint_world_points(world_points)?)
+    }
+
+    /// Saves [`LoopDetector::to_map`] as a topoloc map file (atomic, see [`Map::save`]); reload
+    /// it with [`Map::load`] and [`LoopDetector::from_map`].
+    pub fn save(&self, path: impl AsRef<std::path::Path>) -> Result<(), LoopsError> {
+        Ok(self.to_map()?.save(path)?)
     }
 
     /// The keyframe database.
