@@ -1,10 +1,12 @@
 //! `topoloc loops`: loop-closure hints over an image sequence, as a SLAM host would get them.
 //!
 //! ```text
-//! topoloc loops --images DIR [--poses TUM.txt] [--intrinsics FILE] [--map MAP] --out HINTS.csv [--json]
+//! topoloc loops --images DIR [--every N] [--keyframe-rate HZ] [--poses TUM.txt] [--intrinsics FILE] [--map MAP] --out HINTS.csv [--json]
 //! ```
-//! Images are keyframes in file-name order (index = position in that list; timestamps from
-//! `--poses`, else the index in seconds). Without `--map` the graph grows from nothing: the
+//! `--images` is a folder of images in file-name order, or a KITTI, TUM RGB-D or EuRoC
+//! sequence folder ([`crate::sequence`]); `--every N` / `--keyframe-rate HZ` thin its frames to
+//! keyframes (index = position among the keyframes; timestamps from `--poses`, else from the
+//! layout, else the frame index in seconds). Without `--map` the graph grows from nothing: the
 //! describer (PCA) is fitted on the sequence's own images first, as `build-map` does, then the
 //! sequence is replayed online. With `--map` (a map built from images with keypoints) the
 //! map's views are the first session's keyframes and the hints name their keyframe ids.
@@ -20,10 +22,9 @@
 //! each keyframe's own gate and of the confirmed hints; with `--aligned-tolerance T` (a
 //! frame-aligned second session, such as Gardens Point) also precision and recall.
 
-use crate::backend_args::{
-    image_files, poses_for_images, progress_bar, BackendArgs, LocalFeatures,
-};
+use crate::backend_args::{poses_for_images, progress_bar, BackendArgs, LocalFeatures};
 use crate::process::median_and_p90;
+use crate::sequence::{self, Frame};
 use anyhow::{bail, Context, Result};
 use clap::{Args, ValueEnum};
 use nalgebra::{Isometry3, Matrix3, Translation3, UnitQuaternion};
@@ -32,7 +33,9 @@ use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
-use topoloc::build::{build_from_images, BuildStage, ImageLayout, ImageMapOptions, ImageSource};
+use topoloc::build::{
+    build_from_images, BuildStage, ImageLayout, ImageMapOptions, ImageSource, TimedPose,
+};
 use topoloc::describe::Describer;
 use topoloc::image::{read_rgb, read_u16, ImageView, PixelFormat};
 use topoloc::loops::{
@@ -48,9 +51,18 @@ use topoloc::{LoadOptions, Map};
 /// Options of `loops`.
 #[derive(Args, Clone, Debug)]
 pub struct LoopsArgs {
-    /// Keyframe images, in file-name order.
+    /// Keyframe images: a folder of images in file-name order (timestamped by index), or a
+    /// KITTI, TUM RGB-D or EuRoC sequence folder (timestamped as the layout says; TUM's
+    /// associations give depth).
     #[arg(long)]
     pub images: PathBuf,
+    /// Keep every Nth frame as a keyframe.
+    #[arg(long, default_value_t = 1)]
+    pub every: usize,
+    /// Keep at most this many keyframes per second (by the frames' timestamps), as a SLAM
+    /// front end does.
+    #[arg(long)]
+    pub keyframe_rate: Option<f64>,
     /// TUM trajectory, one pose per image: odometry (world_T_camera) and timestamps.
     #[arg(long)]
     pub poses: Option<PathBuf>,
@@ -218,12 +230,17 @@ impl CameraFrame {
 
 /// Runs the command.
 pub fn run(args: &LoopsArgs) -> Result<()> {
-    let files = image_files(&args.images)?;
-    let poses = args
-        .poses
-        .as_deref()
-        .map(|path| poses_for_images(path, &files, &args.images))
-        .transpose()?;
+    let sequence = sequence::open(&args.images)?;
+    let kept = sequence::keyframes(&sequence.frames, args.every, args.keyframe_rate)?;
+    let frames: Vec<&Frame> = kept.iter().map(|&i| &sequence.frames[i]).collect();
+    let files: Vec<PathBuf> = frames.iter().map(|f| f.image.clone()).collect();
+    // Pose files hold one pose per frame of the whole sequence; the keyframes take theirs.
+    let per_keyframe = |path: &Path| -> Result<Vec<TimedPose>> {
+        let all: Vec<PathBuf> = sequence.frames.iter().map(|f| f.image.clone()).collect();
+        let poses = poses_for_images(path, &all, &args.images)?;
+        Ok(kept.iter().map(|&i| poses[i]).collect())
+    };
+    let poses = args.poses.as_deref().map(per_keyframe).transpose()?;
     let camera = args
         .intrinsics
         .as_deref()
@@ -232,7 +249,7 @@ pub fn run(args: &LoopsArgs) -> Result<()> {
     let truth: Option<Vec<Isometry3<f64>>> = args
         .truth
         .as_deref()
-        .map(|path| poses_for_images(path, &files, &args.images))
+        .map(per_keyframe)
         .transpose()?
         .map(|poses| {
             let to_optical = args.camera_frame.to_optical();
@@ -316,14 +333,20 @@ pub fn run(args: &LoopsArgs) -> Result<()> {
         describe_times.push(start.elapsed().as_secs_f64() * 1e3);
         let entry = KeyframeEntry {
             id: first_id + index as u64,
-            timestamp: poses.as_ref().map_or(index as f64, |p| p[index].timestamp),
+            timestamp: poses
+                .as_ref()
+                .map_or(frames[index].timestamp, |p| p[index].timestamp),
             descriptor: &descriptor,
             world_t_body: poses.as_ref().map(|p| p[index].world_t_camera),
             body_t_camera: Some(args.camera_frame.to_optical()),
         };
-        let camera_points = match (&args.depth, &camera) {
-            (Some(dir), Some(camera)) => {
-                Some(depth_points(dir, path, (w, h), &keypoints, camera, args)?)
+        let depth = match &args.depth {
+            Some(dir) => Some(dir.join(path.file_name().context("image path without file name")?)),
+            None => frames[index].depth.clone(),
+        };
+        let camera_points = match (depth, &camera) {
+            (Some(depth), Some(camera)) => {
+                Some(depth_points(&depth, (w, h), &keypoints, camera, args)?)
             }
             _ => None,
         };
@@ -364,6 +387,11 @@ pub fn run(args: &LoopsArgs) -> Result<()> {
         first_id,
     );
     out["confirmed"] = json!(confirmed);
+    out["sequence"] = json!({
+        "layout": format!("{:?}", sequence.layout),
+        "frames": sequence.frames.len(),
+        "keyframes": kept.len(),
+    });
     if let Some(truth) = &truth {
         add_truth(&mut out, args, &hints, truth, first_id);
     }
@@ -514,18 +542,16 @@ fn fit_describer(args: &LoopsArgs, files: &[PathBuf]) -> Result<Map> {
     Ok(map)
 }
 
-/// The keypoints' 3D points from the depth image of `image` (of `size` pixels) in `dir` (same
-/// file name).
+/// The keypoints' 3D points from the depth image at `path` (registered to an image of `size`
+/// pixels).
 fn depth_points(
-    dir: &Path,
-    image: &Path,
+    path: &Path,
     size: (u32, u32),
     keypoints: &Keypoints,
     camera: &PinholeCamera,
     args: &LoopsArgs,
 ) -> Result<Vec<[f32; 3]>> {
-    let path = dir.join(image.file_name().context("image path without file name")?);
-    let (width, height, values) = read_u16(&path)?;
+    let (width, height, values) = read_u16(path)?;
     if (width, height) != size {
         bail!(
             "--depth {}: {width}x{height}, the image is {}x{}",

@@ -17,6 +17,7 @@ mod process;
 mod progress;
 mod scaling;
 mod scenario_args;
+mod sequence;
 mod simulate;
 mod suite;
 mod sweep;

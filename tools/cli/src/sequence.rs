@@ -1,0 +1,355 @@
+//! Image sequences as SLAM hosts have them, each frame with its timestamp in seconds:
+//!
+//! - a KITTI odometry sequence: `image_0/` (or `image_2/`) with `times.txt` beside it (the
+//!   sequence folder or its image folder may be given);
+//! - a TUM RGB-D sequence: `rgb.txt` (`timestamp file` lines), with `associations.txt`
+//!   (`rgb_time rgb_file depth_time depth_file ...`, as TUM's `associate.py` writes) giving
+//!   each frame its registered depth image; frames without an association are left out;
+//! - an EuRoC MAV sequence: `mav0/cam0/data.csv` (`timestamp_ns,filename`) and `data/`
+//!   (the `mav0` or `cam0` folder may be given too);
+//! - else a folder of images in file-name order, timestamped by their index (0, 1, 2 ... s).
+//!
+//! [`keyframes`] thins a sequence to keyframes as a SLAM front end does: every Nth frame, or
+//! at most one per `1/rate` seconds.
+
+use crate::backend_args::image_files;
+use anyhow::{bail, Context, Result};
+use std::path::{Path, PathBuf};
+
+/// Where a sequence's frames and timestamps come from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Layout {
+    /// A folder of images; timestamps are the frame indices.
+    Folder,
+    /// KITTI odometry: an image folder and `times.txt`.
+    Kitti,
+    /// TUM RGB-D: `rgb.txt`, optionally `associations.txt`.
+    TumRgbd,
+    /// EuRoC MAV: `cam0/data.csv` and `cam0/data/`.
+    Euroc,
+}
+
+/// One frame of a sequence.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Frame {
+    /// The image file.
+    pub image: PathBuf,
+    /// Seconds (KITTI: from the sequence start; TUM: Unix time; EuRoC: nanoseconds / 1e9).
+    pub timestamp: f64,
+    /// The registered depth image, where the layout has one (TUM with associations).
+    pub depth: Option<PathBuf>,
+}
+
+/// The frames of a sequence, in time order.
+#[derive(Clone, Debug)]
+pub struct Sequence {
+    /// How the folder was read.
+    pub layout: Layout,
+    /// Its frames, timestamps strictly increasing.
+    pub frames: Vec<Frame>,
+}
+
+/// Reads the sequence at `path` (see the module documentation for the layouts recognised).
+pub fn open(path: &Path) -> Result<Sequence> {
+    let (layout, frames) = if let Some((images, times)) = kitti_files(path) {
+        (Layout::Kitti, kitti(&images, &times)?)
+    } else if path.join("rgb.txt").is_file() {
+        (Layout::TumRgbd, tum(path)?)
+    } else if let Some(cam) = euroc_camera(path) {
+        (Layout::Euroc, euroc(&cam)?)
+    } else {
+        let frames = image_files(path)?
+            .into_iter()
+            .enumerate()
+            .map(|(i, image)| Frame {
+                image,
+                timestamp: i as f64,
+                depth: None,
+            })
+            .collect();
+        (Layout::Folder, frames)
+    };
+    if frames.is_empty() {
+        bail!("{}: the sequence has no frames", path.display());
+    }
+    if let Some(i) = frames
+        .windows(2)
+        .position(|w| w[1].timestamp <= w[0].timestamp)
+    {
+        bail!(
+            "{}: frame {} ({}) is not later than frame {i} ({}): timestamps must increase",
+            path.display(),
+            i + 1,
+            frames[i + 1].timestamp,
+            frames[i].timestamp
+        );
+    }
+    Ok(Sequence { layout, frames })
+}
+
+/// The indices of the keyframes among `frames`: every `every`th frame (1: all), and with
+/// `rate_hz` at most one per `1 / rate_hz` seconds (the first frame always).
+pub fn keyframes(frames: &[Frame], every: usize, rate_hz: Option<f64>) -> Result<Vec<usize>> {
+    if every == 0 {
+        bail!("--every must be at least 1");
+    }
+    if let Some(rate) = rate_hz.filter(|r| !(r.is_finite() && *r > 0.0)) {
+        bail!("--keyframe-rate is {rate}, must be finite and > 0");
+    }
+    let mut kept = Vec::new();
+    let mut last: Option<f64> = None;
+    for (i, frame) in frames.iter().enumerate().step_by(every) {
+        let due = match (last, rate_hz) {
+            (Some(t), Some(rate)) => frame.timestamp - t >= 1.0 / rate - 1e-9,
+            _ => true,
+        };
+        if due {
+            kept.push(i);
+            last = Some(frame.timestamp);
+        }
+    }
+    Ok(kept)
+}
+
+/// KITTI's image folder and `times.txt`, from the sequence folder or its image folder.
+fn kitti_files(path: &Path) -> Option<(PathBuf, PathBuf)> {
+    let in_sequence = ["image_0", "image_2"]
+        .iter()
+        .map(|name| path.join(name))
+        .find(|dir| dir.is_dir())
+        .map(|dir| (dir, path.join("times.txt")));
+    let in_images = path
+        .file_name()
+        .and_then(|n| n.to_str())
+        .filter(|n| n.starts_with("image_"))
+        .and_then(|_| path.parent())
+        .map(|parent| (path.to_path_buf(), parent.join("times.txt")));
+    in_sequence
+        .into_iter()
+        .chain(in_images)
+        .find(|(_, times)| times.is_file())
+}
+
+/// The non-empty, non-comment lines of `path`, with their 1-based line numbers.
+fn data_lines(path: &Path) -> Result<Vec<(usize, String)>> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    Ok(text
+        .lines()
+        .enumerate()
+        .map(|(i, l)| (i + 1, l.trim().to_string()))
+        .filter(|(_, l)| !l.is_empty() && !l.starts_with('#'))
+        .collect())
+}
+
+/// The number in `field` of line `line` of `path`.
+fn number(path: &Path, line: usize, field: Option<&str>, what: &str) -> Result<f64> {
+    let field = field.with_context(|| format!("{} line {line}: no {what}", path.display()))?;
+    field
+        .parse::<f64>()
+        .ok()
+        .filter(|v| v.is_finite())
+        .with_context(|| {
+            format!(
+                "{} line {line}: {what} {field:?} is not a number",
+                path.display()
+            )
+        })
+}
+
+fn kitti(images: &Path, times_path: &Path) -> Result<Vec<Frame>> {
+    let files = image_files(images)?;
+    let times = data_lines(times_path)?;
+    if times.len() != files.len() {
+        bail!(
+            "{} has {} timestamps for {} images in {}: give one per image",
+            times_path.display(),
+            times.len(),
+            files.len(),
+            images.display()
+        );
+    }
+    files
+        .into_iter()
+        .zip(times)
+        .map(|(image, (line, text))| {
+            Ok(Frame {
+                image,
+                timestamp: number(times_path, line, Some(&text), "timestamp")?,
+                depth: None,
+            })
+        })
+        .collect()
+}
+
+fn tum(dir: &Path) -> Result<Vec<Frame>> {
+    let associations = dir.join("associations.txt");
+    let (path, with_depth) = match associations.is_file() {
+        true => (associations, true),
+        false => (dir.join("rgb.txt"), false),
+    };
+    data_lines(&path)?
+        .into_iter()
+        .map(|(line, text)| {
+            let fields: Vec<&str> = text.split_whitespace().collect();
+            let file = |at: usize, what: &str| -> Result<PathBuf> {
+                let name = fields
+                    .get(at)
+                    .with_context(|| format!("{} line {line}: no {what}", path.display()))?;
+                Ok(dir.join(name))
+            };
+            Ok(Frame {
+                timestamp: number(&path, line, fields.first().copied(), "timestamp")?,
+                image: file(1, "image file")?,
+                depth: with_depth.then(|| file(3, "depth file")).transpose()?,
+            })
+        })
+        .collect()
+}
+
+/// EuRoC's `cam0` folder, from the sequence, `mav0` or `cam0` folder.
+fn euroc_camera(path: &Path) -> Option<PathBuf> {
+    [
+        path.join("mav0/cam0"),
+        path.join("cam0"),
+        path.to_path_buf(),
+    ]
+    .into_iter()
+    .find(|cam| cam.join("data.csv").is_file() && cam.join("data").is_dir())
+}
+
+fn euroc(cam: &Path) -> Result<Vec<Frame>> {
+    let path = cam.join("data.csv");
+    data_lines(&path)?
+        .into_iter()
+        .map(|(line, text)| {
+            let mut fields = text.split(',').map(str::trim);
+            let nanoseconds = number(&path, line, fields.next(), "timestamp")?;
+            let name = fields
+                .next()
+                .with_context(|| format!("{} line {line}: no file name", path.display()))?;
+            Ok(Frame {
+                image: cam.join("data").join(name),
+                timestamp: nanoseconds * 1e-9,
+                depth: None,
+            })
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn write(path: &Path, text: &str) {
+        std::fs::create_dir_all(path.parent().unwrap()).unwrap();
+        std::fs::write(path, text).unwrap();
+    }
+
+    /// Empty image files named `names` in `dir` (only their names are read here).
+    fn images(dir: &Path, names: &[&str]) {
+        for name in names {
+            write(&dir.join(name), "");
+        }
+    }
+
+    #[test]
+    fn a_kitti_sequence_is_read_from_its_folder_or_its_image_folder() {
+        let dir = tempfile::tempdir().unwrap();
+        images(&dir.path().join("image_0"), &["000000.png", "000001.png"]);
+        write(
+            &dir.path().join("times.txt"),
+            "0.000000e+00\n1.037359e-01\n",
+        );
+        for path in [dir.path().to_path_buf(), dir.path().join("image_0")] {
+            let s = open(&path).unwrap();
+            assert_eq!(s.layout, Layout::Kitti);
+            assert_eq!(s.frames.len(), 2);
+            assert!((s.frames[1].timestamp - 0.1037359).abs() < 1e-12);
+            assert!(s.frames[1].image.ends_with("image_0/000001.png"));
+        }
+        write(&dir.path().join("times.txt"), "0\n");
+        let err = open(dir.path()).unwrap_err().to_string();
+        assert!(err.contains("1 timestamps for 2 images"), "{err}");
+        write(&dir.path().join("times.txt"), "0\nsoon\n");
+        let err = open(dir.path()).unwrap_err().to_string();
+        assert!(
+            err.contains("times.txt line 2") && err.contains("soon"),
+            "{err}"
+        );
+        write(&dir.path().join("times.txt"), "0.2\n0.1\n");
+        let err = open(dir.path()).unwrap_err().to_string();
+        assert!(err.contains("must increase"), "{err}");
+    }
+
+    #[test]
+    fn a_tum_sequence_takes_its_depth_from_the_associations() {
+        let dir = tempfile::tempdir().unwrap();
+        write(
+            &dir.path().join("rgb.txt"),
+            "# color images\n# timestamp filename\n1305031102.175304 rgb/a.png\n1305031102.211214 rgb/b.png\n",
+        );
+        let s = open(dir.path()).unwrap();
+        assert_eq!(s.layout, Layout::TumRgbd);
+        assert_eq!(s.frames.len(), 2);
+        assert_eq!(s.frames[0].depth, None);
+        assert!((s.frames[1].timestamp - 1305031102.211214).abs() < 1e-6);
+        write(
+            &dir.path().join("associations.txt"),
+            "1305031102.211214 rgb/b.png 1305031102.226738 depth/d.png 1305031102.2159\n",
+        );
+        let s = open(dir.path()).unwrap();
+        assert_eq!(s.frames.len(), 1, "frames without depth are left out");
+        assert_eq!(s.frames[0].image, dir.path().join("rgb/b.png"));
+        assert_eq!(s.frames[0].depth, Some(dir.path().join("depth/d.png")));
+        write(
+            &dir.path().join("associations.txt"),
+            "1305031102.2 rgb/b.png\n",
+        );
+        let err = open(dir.path()).unwrap_err().to_string();
+        assert!(
+            err.contains("associations.txt line 1: no depth file"),
+            "{err}"
+        );
+    }
+
+    #[test]
+    fn an_euroc_sequence_is_timed_in_nanoseconds() {
+        let dir = tempfile::tempdir().unwrap();
+        let cam = dir.path().join("mav0/cam0");
+        write(
+            &cam.join("data.csv"),
+            "#timestamp [ns],filename\n1403715273262142976,1403715273262142976.png\n1403715273312143104,1403715273312143104.png\n",
+        );
+        std::fs::create_dir_all(cam.join("data")).unwrap();
+        for path in [
+            dir.path().to_path_buf(),
+            dir.path().join("mav0"),
+            cam.clone(),
+        ] {
+            let s = open(&path).unwrap();
+            assert_eq!(s.layout, Layout::Euroc);
+            assert!((s.frames[1].timestamp - s.frames[0].timestamp - 0.05).abs() < 1e-6);
+            assert_eq!(s.frames[0].image, cam.join("data/1403715273262142976.png"));
+        }
+    }
+
+    #[test]
+    fn a_plain_folder_is_timed_by_index_and_thinned_to_keyframes() {
+        let dir = tempfile::tempdir().unwrap();
+        let names: Vec<String> = (0..10).map(|i| format!("{i:02}.png")).collect();
+        images(
+            dir.path(),
+            &names.iter().map(String::as_str).collect::<Vec<_>>(),
+        );
+        let s = open(dir.path()).unwrap();
+        assert_eq!(s.layout, Layout::Folder);
+        assert_eq!(s.frames[9].timestamp, 9.0);
+        assert_eq!(keyframes(&s.frames, 1, None).unwrap().len(), 10);
+        assert_eq!(keyframes(&s.frames, 3, None).unwrap(), [0, 3, 6, 9]);
+        assert_eq!(keyframes(&s.frames, 1, Some(0.5)).unwrap(), [0, 2, 4, 6, 8]);
+        assert_eq!(keyframes(&s.frames, 3, Some(0.25)).unwrap(), [0, 6]);
+        assert!(keyframes(&s.frames, 0, None).is_err());
+        assert!(keyframes(&s.frames, 1, Some(0.0)).is_err());
+    }
+}
