@@ -683,6 +683,45 @@ fn loops_follows_the_contract_online_and_against_a_map() {
         );
     }
     assert_eq!(report["precision"], 1.0, "{report}");
+    // The same queries as a KITTI sequence (image_0/ and times.txt at 10 Hz), every second
+    // frame a keyframe: timestamps from the layout, hints name the map's keyframe ids.
+    let kitti = dir.path().join("kitti");
+    std::fs::create_dir_all(kitti.join("image_0")).unwrap();
+    let mut times = String::new();
+    for i in 0..places {
+        let name = format!("{i:03}.pgm");
+        std::fs::copy(query_dir.join(&name), kitti.join("image_0").join(name)).unwrap();
+        times.push_str(&format!("{:e}\n", i as f64 * 0.1));
+    }
+    std::fs::write(kitti.join("times.txt"), times).unwrap();
+    let (report, rows) = loops_report(
+        dir.path(),
+        &["--images", &s(&kitti), "--map", &s(&map), "--every", "2"],
+    );
+    assert_eq!(report["sequence"]["layout"], "Kitti", "{report}");
+    assert_eq!(report["sequence"]["keyframes"], places / 2, "{report}");
+    for row in &rows[1..] {
+        let (q, m): (u32, u32) = (row[0].parse().unwrap(), row[1].parse().unwrap());
+        assert_eq!(2 * q, m, "keyframe {q} is query image {}: {row:?}", 2 * q);
+    }
+    let times: Vec<String> = (0..places)
+        .map(|i| match i {
+            1 => "later".to_string(),
+            _ => format!("{i}"),
+        })
+        .collect();
+    std::fs::write(kitti.join("times.txt"), times.join("\n")).unwrap();
+    let csv_path = s(&dir.path().join("k.csv"));
+    let args = [
+        "loops",
+        "--images",
+        &s(&kitti),
+        "--map",
+        &s(&map),
+        "--out",
+        &csv_path,
+    ];
+    fails_with(&topoloc(&args), &["times.txt line 2", "later"]);
     // Online, no map: the second half of the folder revisits the first.
     let (report, rows) = loops_report(
         dir.path(),
