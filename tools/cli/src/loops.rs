@@ -399,7 +399,8 @@ pub fn run(args: &LoopsArgs) -> Result<()> {
     Ok(())
 }
 
-/// Precision and recall against ground-truth camera poses, and the hints' pose errors.
+/// Precision and recall against ground-truth camera poses, the hints per kilometre driven where
+/// no loop could be closed ([`without_revisit`]), and the hints' pose errors.
 /// A keyframe could have closed a loop when an earlier keyframe outside the exclusion window
 /// lies within the radius and the angle; a hint is correct when its matched keyframe does.
 /// The pose errors' medians are over the correct hints; `pose_precision` is the share of
@@ -419,9 +420,12 @@ fn add_truth(
             && truth[a].rotation.angle_to(&truth[b].rotation) <= max_angle
     };
     let window = args.exclude_ids.max(1) as usize;
-    let possible = (0..truth.len())
-        .filter(|&q| (0..q.saturating_sub(window - 1)).any(|m| near(q, m) && m + window <= q))
-        .count();
+    let revisits: Vec<bool> = (0..truth.len())
+        .map(|q| (0..q.saturating_sub(window - 1)).any(|m| near(q, m) && m + window <= q))
+        .collect();
+    let possible = revisits.iter().filter(|&&r| r).count();
+    let queries: Vec<usize> = hints.iter().map(|(q, _)| *q).collect();
+    let (no_revisit_km, no_revisit_hints) = without_revisit(truth, &revisits, &queries);
     let mut correct = 0;
     // Right by place, or by a relative pose a pose graph can take (whatever the distance).
     let mut right_constraints = 0;
@@ -473,7 +477,27 @@ fn add_truth(
         "posed_hints": posed,
         "pose_correct": pose_correct,
         "pose_precision": pose_correct as f64 / posed.max(1) as f64,
+        "no_revisit_km": no_revisit_km,
+        "no_revisit_hints": no_revisit_hints,
+        "hints_per_km_without_revisit": (no_revisit_km > 0.0)
+            .then(|| no_revisit_hints as f64 / no_revisit_km),
     });
+}
+
+/// The length (km) of the stretches where no keyframe could close a loop (`revisits[q]`
+/// false: no earlier keyframe near it outside the window), the way into each such keyframe
+/// counted, and how many hints (`queries`: the hints' keyframe indices) were given there: every
+/// one of them false.
+fn without_revisit(truth: &[Isometry3<f64>], revisits: &[bool], queries: &[usize]) -> (f64, usize) {
+    let metres: f64 = (1..truth.len())
+        .filter(|&q| !revisits[q])
+        .map(|q| (truth[q].translation.vector - truth[q - 1].translation.vector).norm())
+        .sum();
+    let hints = queries
+        .iter()
+        .filter(|&&q| q < revisits.len() && !revisits[q])
+        .count();
+    (metres / 1000.0, hints)
 }
 
 /// How far a hint's relative pose is from the true one.
@@ -735,4 +759,23 @@ fn print_report(args: &LoopsArgs, out: &serde_json::Value) {
         )),
         args.out.display()
     );
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn hints_on_stretches_without_a_revisit_are_counted_per_kilometre_driven() {
+        // 0..5 drive 100 m each along x; 5 and 6 come back near 0 (revisits).
+        let x = [0.0, 100.0, 200.0, 300.0, 400.0, 5.0, 0.0];
+        let truth: Vec<Isometry3<f64>> = x
+            .iter()
+            .map(|&x| Isometry3::translation(x, 0.0, 0.0))
+            .collect();
+        let revisits = [false, false, false, false, false, true, true];
+        let (km, hints) = without_revisit(&truth, &revisits, &[2, 3, 5, 6, 99]);
+        assert!((km - 0.4).abs() < 1e-12, "{km}");
+        assert_eq!(hints, 2, "the hints of keyframes 2 and 3");
+    }
 }

@@ -540,6 +540,13 @@ fn loops_with_depth_images_give_metric_hints() {
     };
     let (metric, rows) = run(Some(&traj.join("depth")));
     let truth = &metric["truth"];
+    for key in [
+        "no_revisit_km",
+        "no_revisit_hints",
+        "hints_per_km_without_revisit",
+    ] {
+        assert!(truth.get(key).is_some(), "missing '{key}' in {metric}");
+    }
     assert!(
         rows.len() > frames / 2,
         "most keyframes match a neighbour: {metric}"
