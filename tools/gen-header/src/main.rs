@@ -201,9 +201,10 @@ fn generate(root: &Path) -> Result<Vec<u8>, String> {
     let versions = format!(
         "\n#define TOPOLOC_VERSION_MAJOR {major}\n#define TOPOLOC_VERSION_MINOR {minor}\n#define TOPOLOC_VERSION_PATCH {patch}\n#define TOPOLOC_VERSION_STRING \"{major}.{minor}.{patch}\"\n"
     );
-    // The `_default` macros name the `_init` functions, which only the generated header lists.
-    let functions = cbindgen_header(root, versions.clone())?;
-    let text = cbindgen_header(root, versions + &default_macros(&functions))?;
+    let text = cbindgen_header(root, versions.clone())?;
+    // The `_default` macros name the `_init` functions, which only the generated header lists:
+    // they go after the version macros once cbindgen has written it.
+    let text = text.replacen(&versions, &(versions.clone() + &default_macros(&text)), 1);
     let ranges = topoloc::ffi::option_ranges()
         .into_iter()
         .map(|r| (r.struct_name, r.field, format!("Range: {}.", r.bounds)));
