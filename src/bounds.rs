@@ -113,10 +113,10 @@ impl Bounds {
 
     /// The rule as an error message says it: "in 1..=64", "finite and > 0", "in [0, 1]".
     fn rule(&self) -> String {
-        match self {
+        match (self, self.one_sided()) {
             _ if self.is_interval() => format!("in {self}"),
-            Self::Real { .. } => format!("finite{}", self.real_suffix()),
-            Self::Whole { .. } => self.to_string(),
+            (Self::Real { .. }, Some(side)) => format!("finite and {side}"),
+            _ => self.to_string(),
         }
     }
 
@@ -128,8 +128,8 @@ impl Bounds {
         }
     }
 
-    /// " and >= 0" for a one-sided real bound, "" for any finite real.
-    fn real_suffix(&self) -> String {
+    /// The one bound of a real with a single finite end: ">= 0", "> 0", "< 90".
+    fn one_sided(&self) -> Option<String> {
         match *self {
             Self::Real {
                 min,
@@ -137,14 +137,14 @@ impl Bounds {
                 max,
                 ..
             } if min.is_finite() && !max.is_finite() => {
-                format!(" and {} {min}", if min_included { ">=" } else { ">" })
+                Some(format!("{} {min}", if min_included { ">=" } else { ">" }))
             }
             Self::Real {
                 max, max_included, ..
             } if max.is_finite() => {
-                format!(" and {} {max}", if max_included { "<=" } else { "<" })
+                Some(format!("{} {max}", if max_included { "<=" } else { "<" }))
             }
-            _ => String::new(),
+            _ => None,
         }
     }
 }
@@ -186,13 +186,10 @@ impl fmt::Display for Bounds {
                 if min_included { '[' } else { '(' },
                 if max_included { ']' } else { ')' }
             ),
-            Self::Real { .. } => {
-                let suffix = self.real_suffix();
-                match suffix.strip_prefix(" and ") {
-                    Some(rule) => write!(f, "finite, {rule}"),
-                    None => f.write_str("finite"),
-                }
-            }
+            Self::Real { .. } => match self.one_sided() {
+                Some(side) => write!(f, "finite, {side}"),
+                None => f.write_str("finite"),
+            },
         }
     }
 }
