@@ -1,7 +1,8 @@
 //! Relative poses for loop-closure hints on generated correspondences with pixel noise and
 //! outliers: metric with the matched keyframe's scene points, rotation and direction without;
 //! a 6x6 covariance in GTSAM Pose3 order that is symmetric, positive definite and grows as the
-//! inliers fall; pure rotation and too few matches are refused with the reason; a pose from
+//! inliers fall; a pure rotation gives the rotation with zero translation; unrelated pixels and
+//! too few matches are refused with the reason; a pose from
 //! a pair check's fit samples that fit's inliers only.
 
 mod common;
@@ -100,16 +101,44 @@ fn covariance_grows_as_inliers_fall() {
 }
 
 #[test]
-fn pure_rotation_and_too_few_matches_are_refused() {
+fn a_pure_rotation_gives_the_rotation_and_no_translation() {
     let turn = Isometry3::from_parts(
         Translation3::identity(),
         UnitQuaternion::from_scaled_axis(Vector3::y() * 8f64.to_radians()),
     );
-    let (q, m, _) = scene(120, 0, &turn, 4);
+    let (q, m, _) = scene(120, 30, &turn, 4);
+    let pose = essential_pose(&q, &m, &CAMERA, &RelativePoseOptions::default())
+        .unwrap()
+        .expect("the rotation explains the rays");
+    assert!(!pose.scale_known);
+    assert_eq!(pose.matched_t_query.translation.vector, Vector3::zeros());
+    assert!(
+        rotation_error_deg(&pose.matched_t_query, &turn) < 0.2,
+        "{pose:?}"
+    );
+    assert!(
+        (85..=95).contains(&pose.inliers),
+        "{} inliers of 90 true",
+        pose.inliers
+    );
+    let c = pose.covariance;
+    assert!(c.cholesky().is_some(), "{c}");
+    for axis in 3..6 {
+        assert!(
+            (c[(axis, axis)] - 1.0).abs() < 1e-6,
+            "translation prior {c}"
+        );
+    }
+    assert!(c[(1, 1)] < 1e-4, "the rotation is observed: {c}");
+}
+
+#[test]
+fn pairs_no_rotation_or_baseline_explains_and_too_few_matches_are_refused() {
+    let (q, _, _) = scene(120, 0, &truth(), 4);
+    let (_, m, _) = scene(120, 0, &truth(), 9);
     match essential_pose(&q, &m, &CAMERA, &RelativePoseOptions::default()).unwrap() {
-        Err(PoseRefusal::TooLittleParallax { degrees }) => assert!(degrees < 1.0, "{degrees}"),
-        Err(PoseRefusal::NoConsensus { .. }) => {}
-        other => panic!("a pure rotation must not give a direction: {other:?}"),
+        Err(PoseRefusal::NoConsensus { .. } | PoseRefusal::TooLittleParallax { .. }) => {}
+        other => panic!("unrelated pixels must give no pose: {other:?}"),
     }
     let (q, m, _) = scene(20, 0, &truth(), 5);
     assert_eq!(

@@ -5,6 +5,9 @@
 //! perspective-n-point fit (the pose-fix solver of [`super::locate`]) with `scale_known`. Without
 //! them it comes from an essential matrix (OpenCV's RANSAC five-point solver and its cheirality
 //! check, `recoverPose`): rotation and a unit translation direction, `scale_known == false`.
+//! When the views differ by a rotation only (too little parallax, or an essential matrix
+//! without consensus, as at a revisit in the same lane), a rotation that explains the rays is
+//! the model: the pose has that rotation and a zero translation.
 //!
 //! The covariance is `sigma^2 (J^T J)^-1` at the solution, `J` the Jacobian of the inliers'
 //! residuals (reprojection error with points, Sampson distance without, both in pixels) with
@@ -29,6 +32,8 @@ use nalgebra::{
 use opencv::calib3d;
 use opencv::core::{Mat, Point2d, Point2f, Point3f, Vector};
 use opencv::prelude::*;
+use rand::rngs::SmallRng;
+use rand::{Rng, SeedableRng};
 
 /// Options of [`relative_pose`].
 #[derive(Clone, Debug, PartialEq)]
@@ -45,8 +50,9 @@ pub struct RelativePoseOptions {
     /// RANSAC iterations at most. Default 1000.
     pub max_iterations: u32,
     /// Without points: the smallest median angle between an inlier's two rays once the
-    /// rotation is removed; below it the views differ by a rotation only and the translation
-    /// direction is noise. Default 1 degree.
+    /// rotation is removed; below it the views differ by a rotation only, the translation
+    /// direction is noise, and the pose is the rotation that brings the most rays within this
+    /// angle of each other (zero translation). Default 1 degree.
     pub min_parallax_deg: f64,
 }
 
@@ -80,7 +86,9 @@ impl RelativePoseOptions {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct RelativePose {
     /// The query camera in the matched camera's frame (optical frames: z forward, x right,
-    /// y down). Without scale its translation has unit length.
+    /// y down). Without scale its translation has unit length, or is zero when the views
+    /// differ by a rotation only (the cameras are at about the same place, relative to the
+    /// scene's depth; the covariance then gives each translation axis a variance of 1 m^2).
     pub matched_t_query: Isometry3<f64>,
     /// True when the translation is metric (the matched keyframe's scene points were used).
     pub scale_known: bool,
@@ -105,7 +113,8 @@ pub enum PoseRefusal {
         /// Inliers of the best fit.
         inliers: u32,
     },
-    /// The two views differ by a rotation only (no points): the direction is unobservable.
+    /// The two views differ by a rotation only (no points), so the direction is unobservable,
+    /// and no rotation brings `min_inliers` rays within `min_parallax_deg`.
     TooLittleParallax {
         /// Median parallax of the inliers, degrees.
         degrees: f64,
@@ -266,7 +275,7 @@ fn metric_pose(
         &pose,
         &inliers,
         |p, pair| residual(p, pair).map_or(vec![1e3, 1e3], |r| vec![r.x, r.y]),
-        None,
+        &[],
     );
     Ok(Ok(RelativePose {
         matched_t_query: pose,
@@ -305,6 +314,15 @@ pub fn essential_pose(
     if n < options.min_inliers as usize {
         return Ok(Err(PoseRefusal::TooFewMatches { found: n as u32 }));
     }
+    // Views a rotation apart (a revisit in the same lane) degenerate the essential matrix: the
+    // rotation alone is then the model.
+    let pairs: Vec<([f32; 2], [f32; 2])> = query_px[..n]
+        .iter()
+        .copied()
+        .zip(matched_px[..n].iter().copied())
+        .collect();
+    let or_rotation_only =
+        |refusal: PoseRefusal| Ok(rotation_only_pose(camera, &pairs, options).map_err(|_| refusal));
     let cv = |p: &[f32; 2]| Point2d::new(f64::from(p[0]), f64::from(p[1]));
     let from: Vector<Point2d> = matched_px[..n].iter().map(cv).collect();
     let to: Vector<Point2d> = query_px[..n].iter().map(cv).collect();
@@ -326,14 +344,14 @@ pub fn essential_pose(
     )?;
     if e.rows() != 3 || e.cols() != 3 {
         // OpenCV stacks several solutions or none for degenerate input.
-        return Ok(Err(PoseRefusal::NoConsensus { inliers: 0 }));
+        return or_rotation_only(PoseRefusal::NoConsensus { inliers: 0 });
     }
     let (mut r, mut t) = (Mat::default(), Mat::default());
     let good = calib3d::recover_pose_estimated(&e, &from, &to, &k, &mut r, &mut t, &mut mask)?;
     if good < options.min_inliers as i32 {
-        return Ok(Err(PoseRefusal::NoConsensus {
+        return or_rotation_only(PoseRefusal::NoConsensus {
             inliers: good.max(0) as u32,
-        }));
+        });
     }
     let rotation = matrix3(&r)?;
     let direction = Vector3::new(
@@ -354,7 +372,7 @@ pub fn essential_pose(
         .collect();
     let parallax = median_parallax(camera, &pose, &inliers);
     if parallax < options.min_parallax_deg {
-        return Ok(Err(PoseRefusal::TooLittleParallax { degrees: parallax }));
+        return or_rotation_only(PoseRefusal::TooLittleParallax { degrees: parallax });
     }
     let refs: Vec<&([f32; 2], [f32; 2])> = inliers.iter().collect();
     let along = pose.rotation.inverse() * pose.translation.vector;
@@ -362,7 +380,7 @@ pub fn essential_pose(
         &pose,
         &refs,
         |p, (q, m)| vec![sampson_px(camera, p, q, m)],
-        Some(along.normalize()),
+        &[along.normalize()],
     );
     Ok(Ok(RelativePose {
         matched_t_query: pose,
@@ -371,6 +389,110 @@ pub fn essential_pose(
         rms_px: rms,
         covariance,
     }))
+}
+
+/// The views of `pairs` (query pixel, matched pixel) differ by a rotation only: the rotation
+/// that best aligns the most rays within `min_parallax_deg` (RANSAC over two-ray rotations,
+/// then a least-squares refit on the rays it explains), with zero translation, when it
+/// explains at least `min_inliers` of them; otherwise [`PoseRefusal::NoConsensus`]. Its
+/// covariance carries a unit-variance prior (1 m^2) on each translation axis: the rays say the
+/// cameras are at about the same place, relative to the scene's depth, not how far apart.
+fn rotation_only_pose(
+    camera: &PinholeCamera,
+    pairs: &[([f32; 2], [f32; 2])],
+    options: &RelativePoseOptions,
+) -> Result<RelativePose, PoseRefusal> {
+    let rays: Vec<(Vector3<f64>, Vector3<f64>)> = pairs
+        .iter()
+        .map(|(q, m)| (bearing(camera, q), bearing(camera, m)))
+        .collect();
+    let max_angle = options.min_parallax_deg.to_radians();
+    let explained = |rotation: &Rotation3<f64>| -> Vec<usize> {
+        (0..rays.len())
+            .filter(|&i| angle(&(rotation * rays[i].0), &rays[i].1) <= max_angle)
+            .collect()
+    };
+    let mut rng = SmallRng::seed_from_u64(ROTATION_RANSAC_SEED);
+    let mut best: Vec<usize> = Vec::new();
+    if rays.len() >= 2 {
+        for _ in 0..options.max_iterations {
+            let i = rng.random_range(0..rays.len());
+            let j = rng.random_range(0..rays.len());
+            if i == j {
+                continue;
+            }
+            let Some(rotation) = aligning_rotation([i, j].iter().map(|&k| &rays[k])) else {
+                continue;
+            };
+            let inliers = explained(&rotation);
+            if inliers.len() > best.len() {
+                best = inliers;
+            }
+        }
+    }
+    let mut rotation = None;
+    for _ in 0..2 {
+        let Some(refit) = aligning_rotation(best.iter().map(|&k| &rays[k])) else {
+            break;
+        };
+        best = explained(&refit);
+        rotation = Some(refit);
+    }
+    let Some(rotation) = rotation.filter(|_| best.len() >= options.min_inliers as usize) else {
+        return Err(PoseRefusal::NoConsensus {
+            inliers: best.len() as u32,
+        });
+    };
+    let pose = Isometry3::from_parts(
+        Translation3::identity(),
+        UnitQuaternion::from_rotation_matrix(&rotation),
+    );
+    let inliers: Vec<&([f32; 2], [f32; 2])> = best.iter().map(|&k| &pairs[k]).collect();
+    let residual = |p: &Isometry3<f64>, (q, m): &([f32; 2], [f32; 2])| {
+        let seen = Vector2::new(f64::from(m[0]), f64::from(m[1]));
+        camera
+            .project(&(p.rotation * bearing(camera, q)))
+            .map_or(vec![1e3, 1e3], |px| {
+                let r = px - seen;
+                vec![r.x, r.y]
+            })
+    };
+    let axes = [Vector3::x(), Vector3::y(), Vector3::z()];
+    let (covariance, rms) = covariance(&pose, &inliers, residual, &axes);
+    Ok(RelativePose {
+        matched_t_query: pose,
+        scale_known: false,
+        inliers: inliers.len() as u32,
+        rms_px: rms,
+        covariance,
+    })
+}
+
+/// Seed of the rotation-only RANSAC: the same pairs always give the same pose.
+const ROTATION_RANSAC_SEED: u64 = 0x7090_10c0;
+
+/// The rotation taking each pair's first ray (query frame) closest to its second (matched
+/// frame), least squares (Kabsch); `None` without two rays that span a plane.
+fn aligning_rotation<'a>(
+    rays: impl Iterator<Item = &'a (Vector3<f64>, Vector3<f64>)>,
+) -> Option<Rotation3<f64>> {
+    let mut correlation = Matrix3::<f64>::zeros();
+    for (q, m) in rays {
+        correlation += m * q.transpose();
+    }
+    let svd = correlation.svd(true, true);
+    if svd.singular_values[1] < 1e-9 {
+        return None;
+    }
+    let (u, v_t) = (svd.u?, svd.v_t?);
+    let mut fix = Matrix3::identity();
+    fix[(2, 2)] = (u * v_t).determinant().signum();
+    Some(Rotation3::from_matrix_unchecked(u * fix * v_t))
+}
+
+/// Angle (radians) between two unit rays.
+fn angle(a: &Vector3<f64>, b: &Vector3<f64>) -> f64 {
+    a.dot(b).clamp(-1.0, 1.0).acos()
 }
 
 fn matrix3(m: &Mat) -> Result<Matrix3<f64>, VisionError> {
@@ -403,12 +525,11 @@ fn median_parallax(
     let mut angles: Vec<f64> = inliers
         .iter()
         .map(|(q, m)| {
-            let rotated = matched_t_query.rotation * bearing(camera, q);
-            rotated
-                .dot(&bearing(camera, m))
-                .clamp(-1.0, 1.0)
-                .acos()
-                .to_degrees()
+            angle(
+                &(matched_t_query.rotation * bearing(camera, q)),
+                &bearing(camera, m),
+            )
+            .to_degrees()
         })
         .collect();
     if angles.is_empty() {
@@ -452,14 +573,14 @@ fn sampson_px(
 }
 
 /// `sigma^2 (J^T J)^-1` and the RMS residual, `J` by central differences of `residuals` under
-/// right perturbations of `pose`; with `prior_along`, a unit-information prior on the
-/// translation along that (unit, query-frame) direction. Singular information gives an
-/// infinite covariance.
+/// right perturbations of `pose`, plus a unit-information prior on the translation along each
+/// (unit, query-frame) direction of `priors`. Singular information gives an infinite
+/// covariance.
 fn covariance<T>(
     pose: &Isometry3<f64>,
     items: &[&T],
     residuals: impl Fn(&Isometry3<f64>, &T) -> Vec<f64>,
-    prior_along: Option<Vector3<f64>>,
+    priors: &[Vector3<f64>],
 ) -> (Matrix6<f64>, f64) {
     const STEP: f64 = 1e-6;
     let perturbed = |xi: &Vector6<f64>| {
@@ -496,9 +617,9 @@ fn covariance<T>(
         1.0
     };
     let mut scaled = information / variance;
-    if let Some(d) = prior_along {
+    for d in priors {
         let mut v = Vector6::zeros();
-        v.fixed_rows_mut::<3>(3).copy_from(&d);
+        v.fixed_rows_mut::<3>(3).copy_from(d);
         scaled += v * v.transpose();
     }
     let covariance = scaled
