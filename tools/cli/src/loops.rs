@@ -22,7 +22,8 @@
 //! each keyframe's own gate and of the confirmed hints; with `--aligned-tolerance T` (a
 //! frame-aligned second session, such as Gardens Point) also precision and recall.
 
-use crate::backend_args::{poses_for_images, progress_bar, BackendArgs, LocalFeatures};
+use crate::backend_args::{progress_bar, BackendArgs, LocalFeatures};
+use crate::plot::{write_precision_recall_png, Series};
 use crate::process::median_and_p90;
 use crate::sequence::{self, Frame};
 use anyhow::{bail, Context, Result};
@@ -34,7 +35,7 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 use topoloc::build::{
-    build_from_images, BuildStage, ImageLayout, ImageMapOptions, ImageSource, TimedPose,
+    build_from_images, read_tum, BuildStage, ImageLayout, ImageMapOptions, ImageSource, TimedPose,
 };
 use topoloc::describe::Describer;
 use topoloc::image::{read_rgb, read_u16, ImageView, PixelFormat};
@@ -110,6 +111,11 @@ pub struct LoopsArgs {
     /// agreeing streak, the pose refusal, or the odometry differences `deg/m`): what a host logs.
     #[arg(long)]
     pub decisions: Option<PathBuf>,
+    /// With `--truth`: also draw the accepted hints' precision against recall as their
+    /// confidence threshold falls (PNG); the report gives the points and the recall at
+    /// precision 1.
+    #[arg(long)]
+    pub pr_curve: Option<PathBuf>,
     /// Keyframes this many ids before the query or closer are never loop candidates.
     #[arg(long, default_value_t = HintOptions::default().exclude_recent_ids)]
     pub exclude_ids: u64,
@@ -236,8 +242,7 @@ pub fn run(args: &LoopsArgs) -> Result<()> {
     let files: Vec<PathBuf> = frames.iter().map(|f| f.image.clone()).collect();
     // Pose files hold one pose per frame of the whole sequence; the keyframes take theirs.
     let per_keyframe = |path: &Path| -> Result<Vec<TimedPose>> {
-        let all: Vec<PathBuf> = sequence.frames.iter().map(|f| f.image.clone()).collect();
-        let poses = poses_for_images(path, &all, &args.images)?;
+        let poses = sequence::poses_at_frames(&sequence, read_tum(path)?, path)?;
         Ok(kept.iter().map(|&i| poses[i]).collect())
     };
     let poses = args.poses.as_deref().map(per_keyframe).transpose()?;
@@ -316,6 +321,13 @@ pub fn run(args: &LoopsArgs) -> Result<()> {
     let runtime = &args.backend.runtime;
     let describer = Describer::new(model, &runtime.describer_options(None))?;
     let mut describer = KeyframeDescriber::new(describer, kind, &runtime.xfeat_options())?;
+    let timestamps: Vec<f64> = (0..frames.len())
+        .map(|i| {
+            poses
+                .as_ref()
+                .map_or(frames[i].timestamp, |p| p[i].timestamp)
+        })
+        .collect();
     let bar = progress_bar(files.len(), "keyframes");
     let (mut hints, mut gates, mut times) = (Vec::new(), BTreeMap::new(), Vec::new());
     let mut describe_times = Vec::new();
@@ -333,9 +345,7 @@ pub fn run(args: &LoopsArgs) -> Result<()> {
         describe_times.push(start.elapsed().as_secs_f64() * 1e3);
         let entry = KeyframeEntry {
             id: first_id + index as u64,
-            timestamp: poses
-                .as_ref()
-                .map_or(frames[index].timestamp, |p| p[index].timestamp),
+            timestamp: timestamps[index],
             descriptor: &descriptor,
             world_t_body: poses.as_ref().map(|p| p[index].world_t_camera),
             body_t_camera: Some(args.camera_frame.to_optical()),
@@ -393,7 +403,7 @@ pub fn run(args: &LoopsArgs) -> Result<()> {
         "keyframes": kept.len(),
     });
     if let Some(truth) = &truth {
-        add_truth(&mut out, args, &hints, truth, first_id);
+        add_truth(&mut out, args, &hints, truth, &timestamps, first_id)?;
     }
     print_report(args, &out);
     Ok(())
@@ -402,7 +412,10 @@ pub fn run(args: &LoopsArgs) -> Result<()> {
 /// Precision and recall against ground-truth camera poses, the hints per kilometre driven where
 /// no loop could be closed ([`without_revisit`]), and the hints' pose errors.
 /// A keyframe could have closed a loop when an earlier keyframe outside the exclusion window
+/// (the detector's: `--exclude-ids` and `--exclude-seconds` by the keyframes' `timestamps`)
 /// lies within the radius and the angle; a hint is correct when its matched keyframe does.
+/// The precision-recall points sweep the hints' confidence from the highest down
+/// ([`precision_recall`]); `--pr-curve` draws them.
 /// The pose errors' medians are over the correct hints; `pose_precision` is the share of
 /// posed hints whose relative pose is right ([`PoseError::is_small`]), wherever they match;
 /// `precision_place_or_pose` counts a hint right when it is correct by place or its pose is
@@ -412,24 +425,29 @@ fn add_truth(
     args: &LoopsArgs,
     hints: &[(usize, LoopHint)],
     truth: &[Isometry3<f64>],
+    timestamps: &[f64],
     first_id: u64,
-) {
+) -> Result<()> {
     let max_angle = args.truth_max_angle_deg.to_radians();
     let near = |a: usize, b: usize| {
         (truth[a].translation.vector - truth[b].translation.vector).norm() <= args.truth_radius_m
             && truth[a].rotation.angle_to(&truth[b].rotation) <= max_angle
     };
     let window = args.exclude_ids.max(1) as usize;
+    let outside_window = |q: usize, m: usize| {
+        m + window <= q && timestamps[q] - timestamps[m] >= args.exclude_seconds
+    };
     let revisits: Vec<bool> = (0..truth.len())
-        .map(|q| (0..q.saturating_sub(window - 1)).any(|m| near(q, m) && m + window <= q))
+        .map(|q| (0..q).any(|m| outside_window(q, m) && near(q, m)))
         .collect();
     let possible = revisits.iter().filter(|&&r| r).count();
     let queries: Vec<usize> = hints.iter().map(|(q, _)| *q).collect();
     let (no_revisit_km, no_revisit_hints) = without_revisit(truth, &revisits, &queries);
     let mut correct = 0;
+    let mut judged = Vec::with_capacity(hints.len());
     // Right by place, or by a relative pose a pose graph can take (whatever the distance).
     let mut right_constraints = 0;
-    let (mut posed, mut pose_correct) = (0, 0);
+    let (mut posed, mut pose_correct, mut rotation_only) = (0, 0, 0);
     let (mut rotation, mut translation, mut direction) = (vec![], vec![], vec![]);
     for (q, hint) in hints {
         let m = matched_index(hint, first_id) as usize;
@@ -438,12 +456,15 @@ fn add_truth(
         }
         let loop_correct = near(*q, m);
         correct += usize::from(loop_correct);
+        judged.push((hint.confidence, loop_correct));
         let Some(pose) = &hint.pose else {
             right_constraints += usize::from(loop_correct);
             continue;
         };
         let error = PoseError::of(pose, &(truth[m].inverse() * truth[*q]));
         posed += 1;
+        rotation_only +=
+            usize::from(!pose.scale_known && pose.matched_t_query.translation.vector.norm() == 0.0);
         pose_correct += usize::from(error.is_small());
         right_constraints += usize::from(loop_correct || error.is_small());
         if !loop_correct {
@@ -475,6 +496,7 @@ fn add_truth(
         "translation_error_m_median": median(&translation),
         "direction_error_deg_median": median(&direction),
         "posed_hints": posed,
+        "rotation_only_hints": rotation_only,
         "pose_correct": pose_correct,
         "pose_precision": pose_correct as f64 / posed.max(1) as f64,
         "no_revisit_km": no_revisit_km,
@@ -482,6 +504,63 @@ fn add_truth(
         "hints_per_km_without_revisit": (no_revisit_km > 0.0)
             .then(|| no_revisit_hints as f64 / no_revisit_km),
     });
+    let curve = precision_recall(&mut judged, possible);
+    out["truth"]["recall_at_full_precision"] = json!(recall_at_full_precision(&curve));
+    out["truth"]["precision_recall"] = json!(curve
+        .iter()
+        .map(|p| json!({"confidence": p.confidence, "recall": p.recall, "precision": p.precision}))
+        .collect::<Vec<_>>());
+    if let Some(path) = &args.pr_curve {
+        let points: Vec<(f64, f64)> = curve.iter().map(|p| (p.recall, p.precision)).collect();
+        let title = format!("loop hints: {}", args.images.display());
+        let series = Series {
+            name: "hints by confidence",
+            predicted: &[],
+            precision_recall: &points,
+        };
+        write_precision_recall_png(path, &title, &[series])?;
+    }
+    Ok(())
+}
+
+/// One point of a precision-recall curve over the hints' confidence.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct PrPoint {
+    /// The threshold: hints at least this confident are kept.
+    confidence: f32,
+    recall: f64,
+    precision: f64,
+}
+
+/// The curve of the hints kept as the confidence threshold falls: `judged` holds each hint's
+/// confidence and whether it is correct (sorted here, most confident first); one point per
+/// distinct confidence; recall is over the `possible` keyframes.
+fn precision_recall(judged: &mut [(f32, bool)], possible: usize) -> Vec<PrPoint> {
+    judged.sort_by(|a, b| b.0.total_cmp(&a.0));
+    let mut curve: Vec<PrPoint> = Vec::new();
+    let mut correct = 0usize;
+    for (k, &(confidence, right)) in judged.iter().enumerate() {
+        correct += usize::from(right);
+        let point = PrPoint {
+            confidence,
+            recall: correct as f64 / possible.max(1) as f64,
+            precision: correct as f64 / (k + 1) as f64,
+        };
+        match curve.last_mut() {
+            Some(last) if last.confidence == confidence => *last = point,
+            _ => curve.push(point),
+        }
+    }
+    curve
+}
+
+/// The largest recall of a curve's points at precision 1 (0 when none).
+fn recall_at_full_precision(curve: &[PrPoint]) -> f64 {
+    curve
+        .iter()
+        .filter(|p| p.precision >= 1.0)
+        .map(|p| p.recall)
+        .fold(0.0, f64::max)
 }
 
 /// The length (km) of the stretches where no keyframe could close a loop (`revisits[q]`
@@ -512,7 +591,8 @@ enum Translation {
     Metres(f64),
     /// Unscaled hints: the angle between the directions, degrees.
     DirectionDeg(f64),
-    /// Unscaled, and the cameras are within 0.2 m: the direction means nothing.
+    /// Unscaled, and the cameras are within 0.2 m (the direction means nothing), or the hint
+    /// is a rotation only (zero translation: the views showed no baseline).
     NoBaseline,
 }
 
@@ -525,7 +605,7 @@ impl PoseError {
         );
         let translation = match pose.scale_known {
             true => Translation::Metres((t - t_true).norm()),
-            false if t_true.norm() < 0.2 => Translation::NoBaseline,
+            false if t_true.norm() < 0.2 || t.norm() == 0.0 => Translation::NoBaseline,
             false => Translation::DirectionDeg(t.angle(&t_true).to_degrees()),
         };
         Self {
@@ -764,6 +844,35 @@ fn print_report(args: &LoopsArgs, out: &serde_json::Value) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_curve_sweeps_the_confidence_down_and_ties_make_one_point() {
+        // Confidences 0.9 (right), 0.8 (wrong), 0.5 twice (both right), 0.2 (wrong); 4 possible.
+        let mut judged = [
+            (0.5, true),
+            (0.9, true),
+            (0.2, false),
+            (0.8, false),
+            (0.5, true),
+        ];
+        let curve = precision_recall(&mut judged, 4);
+        let points: Vec<(f32, f64, f64)> = curve
+            .iter()
+            .map(|p| (p.confidence, p.recall, p.precision))
+            .collect();
+        assert_eq!(
+            points,
+            [
+                (0.9, 0.25, 1.0),
+                (0.8, 0.25, 0.5),
+                (0.5, 0.75, 0.75),
+                (0.2, 0.75, 0.6)
+            ]
+        );
+        assert_eq!(recall_at_full_precision(&curve), 0.25);
+        assert_eq!(recall_at_full_precision(&curve[1..]), 0.0);
+        assert!(precision_recall(&mut [], 3).is_empty());
+    }
 
     #[test]
     fn hints_on_stretches_without_a_revisit_are_counted_per_kilometre_driven() {

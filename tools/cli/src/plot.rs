@@ -104,6 +104,28 @@ pub fn write_evaluation_png(
     Ok(())
 }
 
+/// Writes one PNG with the precision-recall curves of `series` alone (their `predicted` is not
+/// drawn): what `topoloc loops --pr-curve` plots over the hints' confidence. `path` must end in
+/// `.png` and each point lie in `[0, 1]`; fails like [`write_evaluation_png`].
+pub fn write_precision_recall_png(path: &Path, title: &str, series: &[Series<'_>]) -> Result<()> {
+    check_png_path(path)?;
+    check_precision_recall(series)?;
+    ensure_font()?;
+    let root = BitMapBackend::new(path, PR_IMAGE_SIZE).into_drawing_area();
+    let drawn = root
+        .fill(&WHITE)
+        .map_err(|e| anyhow!("{e}"))
+        .and_then(|()| root.titled(title, font(24)).map_err(|e| anyhow!("{e}")))
+        .and_then(|body| draw_precision_recall(&body, series).map_err(|e| anyhow!("{e}")));
+    drawn.with_context(|| format!("drawing precision-recall plot {}", path.display()))?;
+    root.present()
+        .map_err(|e| anyhow!("writing precision-recall plot {}: {e}", path.display()))?;
+    Ok(())
+}
+
+/// Width and height of [`write_precision_recall_png`]'s PNG, in pixels.
+const PR_IMAGE_SIZE: (u32, u32) = (800, 760);
+
 /// What [`write_evaluation_png`] draws (its arguments but the path and title).
 #[derive(Clone, Copy)]
 struct Figure<'a> {
@@ -117,13 +139,7 @@ struct Figure<'a> {
 /// Checks the inputs of [`write_evaluation_png`].
 fn validate(path: &Path, figure: &Figure<'_>) -> Result<()> {
     let (n_queries, n_map) = (figure.n_queries, figure.n_map);
-    let is_png = path
-        .extension()
-        .and_then(|e| e.to_str())
-        .is_some_and(|e| e.eq_ignore_ascii_case("png"));
-    if !is_png {
-        bail!("evaluation plot path {} must end in .png", path.display());
-    }
+    check_png_path(path)?;
     if n_queries == 0 || n_map == 0 {
         bail!("similarity matrix is empty ({n_queries} queries x {n_map} map frames)");
     }
@@ -147,6 +163,25 @@ fn validate(path: &Path, figure: &Figure<'_>) -> Result<()> {
             n_map,
             true,
         )?;
+    }
+    check_precision_recall(figure.series)
+}
+
+/// A plot is written as PNG: `path` must end in `.png`.
+fn check_png_path(path: &Path) -> Result<()> {
+    let is_png = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .is_some_and(|e| e.eq_ignore_ascii_case("png"));
+    if !is_png {
+        bail!("plot path {} must end in .png", path.display());
+    }
+    Ok(())
+}
+
+/// Every series' precision-recall points lie in `[0, 1]`.
+fn check_precision_recall(series: &[Series<'_>]) -> Result<()> {
+    for s in series {
         for (k, &(recall, precision)) in s.precision_recall.iter().enumerate() {
             let ok = |v: f64| (0.0..=1.0).contains(&v);
             if !ok(recall) || !ok(precision) {

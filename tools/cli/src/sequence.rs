@@ -15,6 +15,7 @@
 use crate::backend_args::image_files;
 use anyhow::{bail, Context, Result};
 use std::path::{Path, PathBuf};
+use topoloc::build::TimedPose;
 
 /// Where a sequence's frames and timestamps come from.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -85,6 +86,67 @@ pub fn open(path: &Path) -> Result<Sequence> {
         );
     }
     Ok(Sequence { layout, frames })
+}
+
+/// Largest gap between a frame's timestamp and the pose given to it by [`poses_at_frames`],
+/// seconds: TUM's `associate.py` default.
+pub const POSE_MAX_GAP_S: f64 = 0.02;
+
+/// One pose per frame from a trajectory file's `poses` (time order): with as many poses as
+/// frames, in order; otherwise, for a layout with timestamps, the pose nearest each frame in
+/// time (a ground truth at 100 Hz for a camera at 30 Hz), which must lie within
+/// [`POSE_MAX_GAP_S`]. `what` names the file in errors: the frame without a pose is named.
+pub fn poses_at_frames(
+    sequence: &Sequence,
+    poses: Vec<TimedPose>,
+    what: &Path,
+) -> Result<Vec<TimedPose>> {
+    let frames = &sequence.frames;
+    if poses.len() == frames.len() {
+        return Ok(poses);
+    }
+    if sequence.layout == Layout::Folder {
+        bail!(
+            "{} has {} poses for {} images: give one pose per image, in file-name order",
+            what.display(),
+            poses.len(),
+            frames.len()
+        );
+    }
+    if let Some(i) = poses
+        .windows(2)
+        .position(|w| w[1].timestamp < w[0].timestamp)
+    {
+        bail!(
+            "{}: pose {} ({} s) is earlier than pose {i}: timestamps must not decrease",
+            what.display(),
+            i + 1,
+            poses[i + 1].timestamp
+        );
+    }
+    frames
+        .iter()
+        .map(|frame| {
+            let after = poses.partition_point(|p| p.timestamp < frame.timestamp);
+            let nearest = [after.checked_sub(1), Some(after)]
+                .into_iter()
+                .flatten()
+                .filter_map(|k| poses.get(k))
+                .min_by(|a, b| {
+                    let gap = |p: &TimedPose| (p.timestamp - frame.timestamp).abs();
+                    gap(a).total_cmp(&gap(b))
+                });
+            match nearest {
+                Some(p) if (p.timestamp - frame.timestamp).abs() <= POSE_MAX_GAP_S => Ok(*p),
+                _ => bail!(
+                    "{} has no pose within {POSE_MAX_GAP_S} s of frame {} ({} s)",
+                    what.display(),
+                    frame.image.display(),
+                    frame.timestamp
+                ),
+            }
+        })
+        .collect()
 }
 
 /// The indices of the keyframes among `frames`: every `every`th frame (1: all), and with
@@ -251,6 +313,61 @@ mod tests {
         for name in names {
             write(&dir.join(name), "");
         }
+    }
+
+    #[test]
+    fn poses_go_to_frames_in_order_or_by_the_nearest_timestamp() {
+        let sequence = |layout, times: &[f64]| Sequence {
+            layout,
+            frames: times
+                .iter()
+                .enumerate()
+                .map(|(i, &timestamp)| Frame {
+                    image: PathBuf::from(format!("{i}.png")),
+                    timestamp,
+                    depth: None,
+                })
+                .collect(),
+        };
+        let poses = |times: &[f64]| -> Vec<TimedPose> {
+            times
+                .iter()
+                .map(|&timestamp| TimedPose {
+                    timestamp,
+                    world_t_camera: nalgebra::Isometry3::translation(timestamp, 0.0, 0.0),
+                })
+                .collect()
+        };
+        let gt = Path::new("groundtruth.txt");
+        // As many as frames: in order, whatever their times.
+        let same = poses_at_frames(
+            &sequence(Layout::Folder, &[0.0, 1.0]),
+            poses(&[5.0, 6.0]),
+            gt,
+        );
+        assert_eq!(same.unwrap()[1].timestamp, 6.0);
+        // A 100 Hz ground truth for frames at 10.004 and 10.031 s: the nearest rows.
+        let tum = sequence(Layout::TumRgbd, &[10.004, 10.031]);
+        let fast: Vec<f64> = (0..10).map(|k| 10.0 + 0.01 * k as f64).collect();
+        let near = poses_at_frames(&tum, poses(&fast), gt).unwrap();
+        let picked: Vec<f64> = near.iter().map(|p| p.timestamp).collect();
+        assert_eq!(picked, [10.0, 10.03]);
+        // A frame farther than 20 ms from every row is named.
+        let err = poses_at_frames(&tum, poses(&[9.0, 9.5, 10.0]), gt).unwrap_err();
+        assert!(
+            err.to_string()
+                .contains("no pose within 0.02 s of frame 1.png"),
+            "{err}"
+        );
+        // Rows out of time order, or a plain folder with another count, are refused.
+        let err = poses_at_frames(&tum, poses(&[10.03, 10.0, 10.01]), gt).unwrap_err();
+        assert!(
+            err.to_string().contains("pose 1 (10 s) is earlier"),
+            "{err}"
+        );
+        let folder = sequence(Layout::Folder, &[0.0, 1.0]);
+        let err = poses_at_frames(&folder, poses(&[0.0, 1.0, 2.0]), gt).unwrap_err();
+        assert!(err.to_string().contains("3 poses for 2 images"), "{err}");
     }
 
     #[test]
