@@ -7,7 +7,7 @@
 mod common;
 
 use common::chain_map;
-use common::images::{gray, place_image, revisit};
+use common::images::{gray, place_image, revisit, H, W};
 use topoloc::errors::VisionError;
 use topoloc::image::{ImageView, PixelFormat};
 use topoloc::verify::xfeat::DEFAULT_XFEAT_MODEL_FILE;
@@ -75,6 +75,50 @@ fn a_revisit_matches_its_place_and_not_another() {
     assert!(
         same_spatial.score > 2.0 * other_spatial.score,
         "{same_spatial:?} vs {other_spatial:?}"
+    );
+}
+
+#[test]
+fn a_large_image_is_scaled_to_the_budget_and_its_keypoints_back_to_its_pixels() {
+    let Some(mut xfeat) = detector(256) else {
+        return;
+    };
+    // The place at 3x (960 x 720: 691,200 pixels, over the default budget of 160,000).
+    const K: usize = 3;
+    let small = place_image(2);
+    let (w, h) = (W * K, H * K);
+    let large: Vec<u8> = (0..w * h)
+        .map(|i| small[(i / w / K) * W + (i % w) / K])
+        .collect();
+    let view = ImageView::packed(w as u32, h as u32, PixelFormat::Gray8, &large);
+    let found = xfeat.detect(&view).unwrap();
+    let xs = found.points.iter().map(|p| p[0]);
+    let widest = xs.fold(0f32, f32::max);
+    assert!(
+        widest > 0.8 * w as f32 && widest < w as f32,
+        "keypoints reach x = {widest} of {w}"
+    );
+    // The same scene: scaled down by 3, the keypoints match the place's own.
+    let points = found
+        .points
+        .iter()
+        .map(|p| [p[0] / K as f32, p[1] / K as f32]);
+    let scaled = Keypoints {
+        points: points.collect(),
+        descriptors: found.descriptors.clone(),
+    };
+    let own = xfeat.detect(&gray(&small)).unwrap();
+    let pair = check_pair(scaled.as_ref(), own.as_ref(), &PairOptions::default()).unwrap();
+    assert!(pair.inliers >= 60, "{pair:?}");
+    let full = XFeatOptions {
+        max_pixels: 0,
+        ..XFeatOptions::default()
+    };
+    let mut unscaled = XFeatDetector::new(&full, 256).unwrap();
+    assert_ne!(
+        unscaled.detect(&view).unwrap(),
+        found,
+        "0 runs the full size"
     );
 }
 

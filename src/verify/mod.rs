@@ -43,7 +43,7 @@ pub use relative::{
     essential_pose, relative_pose, relative_pose_from_fit, PoseRefusal, RelativePose,
     RelativePoseOptions,
 };
-pub use xfeat::{XFeatDetector, XFeatOptions, DEFAULT_XFEAT_KEYPOINTS};
+pub use xfeat::{XFeatDetector, XFeatOptions, DEFAULT_XFEAT_KEYPOINTS, DEFAULT_XFEAT_MAX_PIXELS};
 
 /// Keypoints per view a map built from images stores by default, and a query detects.
 pub const DEFAULT_KEYPOINTS: usize = 500;

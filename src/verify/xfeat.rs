@@ -35,7 +35,15 @@ pub struct XFeatOptions {
     pub model: Option<PathBuf>,
     /// ONNX Runtime intra-op threads.
     pub threads: usize,
+    /// Largest network input, pixels: a larger image is scaled down (aspect kept) before the
+    /// network, and its keypoints scaled back to the image's pixels; 0 = the image's own size.
+    /// The network's time grows with its input. Default [`DEFAULT_XFEAT_MAX_PIXELS`].
+    pub max_pixels: u32,
 }
+
+/// The default [`XFeatOptions::max_pixels`]: 160,000 (KITTI's 1241x376 runs at 704x192, in a
+/// quarter of the full size's time), chosen on Gardens Point at 960x540 (BENCHMARKS.md).
+pub const DEFAULT_XFEAT_MAX_PIXELS: u32 = 160_000;
 
 impl Default for XFeatOptions {
     fn default() -> Self {
@@ -43,6 +51,7 @@ impl Default for XFeatOptions {
             runtime: None,
             model: None,
             threads: 1,
+            max_pixels: DEFAULT_XFEAT_MAX_PIXELS,
         }
     }
 }
@@ -51,6 +60,7 @@ impl Default for XFeatOptions {
 pub struct XFeatDetector {
     session: Session,
     max_keypoints: usize,
+    max_pixels: u32,
     input: Vec<f32>,
 }
 
@@ -85,6 +95,7 @@ impl XFeatDetector {
         Ok(Self {
             session,
             max_keypoints,
+            max_pixels: options.max_pixels,
             input: Vec::new(),
         })
     }
@@ -95,14 +106,12 @@ impl XFeatDetector {
     }
 
     /// Detects and describes keypoints (positions in the image as given). The image is
-    /// resized to the nearest multiples of 32 below its sides; images under 32 pixels on a side
-    /// are [`VisionError::InvalidImage`]. A featureless image gives no keypoints.
+    /// scaled to at most [`XFeatOptions::max_pixels`], then resized to the nearest multiples of
+    /// 32 below its sides; images under 32 pixels on a side are [`VisionError::InvalidImage`].
+    /// A featureless image gives no keypoints.
     pub fn detect(&mut self, image: &ImageView<'_>) -> Result<Keypoints, VisionError> {
         image.validate()?;
-        let (w, h) = (
-            image.width / SIDE_MULTIPLE * SIDE_MULTIPLE,
-            image.height / SIDE_MULTIPLE * SIDE_MULTIPLE,
-        );
+        let (w, h) = network_input(image.width, image.height, self.max_pixels);
         if w == 0 || h == 0 {
             return Err(VisionError::InvalidImage(format!(
                 "image is {}x{}: XFeat needs at least {SIDE_MULTIPLE} pixels on a side",
@@ -171,6 +180,19 @@ impl XFeatDetector {
     }
 }
 
+/// The network's input size for a `width` x `height` image: scaled down (aspect kept) to at
+/// most `max_pixels` (0: no limit), then each side cut to a multiple of [`SIDE_MULTIPLE`]
+/// (0 when the side is shorter).
+fn network_input(width: u32, height: u32, max_pixels: u32) -> (u32, u32) {
+    let pixels = f64::from(width) * f64::from(height);
+    let scale = match max_pixels {
+        0 => 1.0,
+        limit => (f64::from(limit) / pixels).sqrt().min(1.0),
+    };
+    let side = |v: u32| ((f64::from(v) * scale) as u32) / SIDE_MULTIPLE * SIDE_MULTIPLE;
+    (side(width), side(height))
+}
+
 /// Pixel positions `(x, y)` of the `k` best non-zero scores of a row-major map `width` wide,
 /// best first (ties by position, so the order is deterministic).
 fn best_keypoints(scores: &[f32], width: usize, k: usize) -> Vec<(usize, usize)> {
@@ -230,6 +252,16 @@ fn quantise(d: &[f32; XFEAT_DIM]) -> XFeatDescriptor {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_input_is_scaled_to_the_pixel_budget_in_multiples_of_32() {
+        assert_eq!(network_input(1241, 376, 0), (1216, 352));
+        assert_eq!(network_input(640, 480, 640 * 480), (640, 480));
+        // KITTI to 200k pixels: scale 0.6547, 812.5 x 246.2 -> 800 x 224.
+        assert_eq!(network_input(1241, 376, 200_000), (800, 224));
+        assert_eq!(network_input(320, 240, 1_000_000), (320, 224));
+        assert_eq!(network_input(40, 40, 100), (0, 0));
+    }
 
     #[test]
     fn best_keypoints_keeps_the_highest_scores_in_order() {

@@ -74,6 +74,10 @@ pub struct RuntimeArgs {
     /// ONNX Runtime library (default: TOPOLOC_ORT_LIBRARY, ORT_DYLIB_PATH, then the cache).
     #[arg(long)]
     pub onnx_runtime: Option<PathBuf>,
+    /// XFeat: largest network input in pixels; larger images are scaled down first (0: the
+    /// image's own size).
+    #[arg(long, default_value_t = topoloc::verify::DEFAULT_XFEAT_MAX_PIXELS)]
+    pub xfeat_max_pixels: u32,
 }
 
 impl RuntimeArgs {
@@ -81,6 +85,7 @@ impl RuntimeArgs {
     pub fn xfeat_options(&self) -> topoloc::verify::XFeatOptions {
         topoloc::verify::XFeatOptions {
             runtime: self.onnx_runtime.clone(),
+            max_pixels: self.xfeat_max_pixels,
             ..Default::default()
         }
     }

@@ -84,8 +84,10 @@ pub struct LoopsArgs {
     /// Where the accepted hints are written (CSV).
     #[arg(long)]
     pub out: PathBuf,
-    /// Local features without `--map` (with one, the map's kind).
-    #[arg(long, value_enum, default_value_t = LocalFeatures::Cells)]
+    /// Local features without `--map` (with one, the map's kind). XFeat by default: its hints
+    /// carry a pose where intrinsics are given, which dense cells cannot (BENCHMARKS.md says
+    /// which data chose it).
+    #[arg(long, value_enum, default_value_t = LocalFeatures::Xfeat)]
     pub local_features: LocalFeatures,
     /// Descriptor backend without `--map`.
     #[command(flatten)]

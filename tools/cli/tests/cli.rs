@@ -534,6 +534,7 @@ fn loops_with_depth_images_give_metric_hints() {
         ];
         if let Some(depth) = depth {
             args.extend(["--depth".to_string(), s(depth)]);
+            args.extend(["--pr-curve".to_string(), s(&dir.path().join("pr.png"))]);
         }
         let refs: Vec<&str> = args.iter().map(String::as_str).collect();
         loops_report(dir.path(), &refs)
@@ -547,6 +548,21 @@ fn loops_with_depth_images_give_metric_hints() {
     ] {
         assert!(truth.get(key).is_some(), "missing '{key}' in {metric}");
     }
+    // The PR curve over the hints' confidence: falling thresholds, the PNG drawn.
+    let curve = truth["precision_recall"].as_array().unwrap();
+    assert!(!curve.is_empty(), "{metric}");
+    let thresholds: Vec<f64> = curve
+        .iter()
+        .map(|p| p["confidence"].as_f64().unwrap())
+        .collect();
+    assert!(thresholds.windows(2).all(|w| w[1] < w[0]), "{thresholds:?}");
+    let last = curve.last().unwrap();
+    assert_eq!(last["recall"], truth["recall"], "{metric}");
+    assert_eq!(last["precision"], truth["precision"], "{metric}");
+    let r100 = truth["recall_at_full_precision"].as_f64().unwrap();
+    assert!((0.0..=1.0).contains(&r100), "{metric}");
+    let png = std::fs::read(dir.path().join("pr.png")).unwrap();
+    assert!(png.starts_with(b"\x89PNG"), "a PNG");
     assert!(
         rows.len() > frames / 2,
         "most keyframes match a neighbour: {metric}"
