@@ -54,6 +54,7 @@
 #define topoloc_loop_options_default(p) topoloc_loop_options_init((p), sizeof *(p))
 #define topoloc_loop_keyframe_default(p) topoloc_loop_keyframe_init((p), sizeof *(p))
 #define topoloc_loop_hint_default(p) topoloc_loop_hint_init((p), sizeof *(p))
+#define topoloc_keyframe_describer_options_default(p) topoloc_keyframe_describer_options_init((p), sizeof *(p))
 #define topoloc_trajectory_options_default(p) topoloc_trajectory_options_init((p), sizeof *(p))
 #define topoloc_trajectory_report_default(p) topoloc_trajectory_report_init((p), sizeof *(p))
 
@@ -78,9 +79,12 @@
  * trajectory metrics (`topoloc_trajectory_evaluate`, `_evaluate_files`); 1.12: describers
  * (`topoloc_describer_*`: images to a map's global descriptors); 1.13: host logging
  * (`topoloc_set_log_callback`) and `TOPOLOC_ERR_CONCURRENT_USE` for a handle used by two calls
- * at once; 1.14: `pca_precision` in the image map options (`TOPOLOC_PCA_I8`, `_F32`).
+ * at once; 1.14: `pca_precision` in the image map options (`TOPOLOC_PCA_I8`, `_F32`); 1.15:
+ * image keyframes (`topoloc_keyframe_describer_*`, `topoloc_loop_detector_add_image`), ranked
+ * candidates (`topoloc_loop_detector_candidates`), local features of image maps
+ * (`verification_keypoints`, `local_features`).
  */
-#define TOPOLOC_ABI_VERSION_MINOR 14
+#define TOPOLOC_ABI_VERSION_MINOR 15
 
 /**
  * Result of every fallible C function. Values are grouped in ranges and never renumbered;
@@ -232,6 +236,15 @@ typedef struct topoloc_describer topoloc_describer;
  * `const topoloc_graph*` may be used from many threads at once.
  */
 typedef struct topoloc_graph topoloc_graph;
+
+/**
+ * Describes keyframe images for a loop detector: a map's describer (the global descriptor)
+ * and local features of one kind. Created by `topoloc_keyframe_describer_new`, released by
+ * `topoloc_keyframe_describer_free`; it does not keep the map alive. Single-threaded state:
+ * one thread at a time (it may move between threads); a call made while another uses it fails
+ * with `TOPOLOC_ERR_CONCURRENT_USE` and changes nothing.
+ */
+typedef struct topoloc_keyframe_describer topoloc_keyframe_describer;
 
 /**
  * Follows one camera through a map. Created by `topoloc_localizer_new`, released by
@@ -769,6 +782,11 @@ typedef struct topoloc_keyframe {
 typedef uint32_t topoloc_pca_precision;
 
 /**
+ * Local features: which keypoints a map stores or a keyframe describer extracts.
+ */
+typedef uint32_t topoloc_local_features;
+
+/**
  * How `topoloc_map_build_from_image_files` / `_from_images` build a map. Initialise with
  * `topoloc_image_map_options_default`.
  */
@@ -850,6 +868,16 @@ typedef struct topoloc_image_map_options {
    * which readers before it refuse) or `TOPOLOC_PCA_F32` (exact, four times larger).
    */
   topoloc_pca_precision pca_precision;
+  /**
+   * Keypoints stored per view for geometric verification and loop hints (0: none).
+   * Range: 0..=5000.
+   * Default: 500.
+   */
+  uint32_t verification_keypoints;
+  /**
+   * Which local features those keypoints are: a `TOPOLOC_LOCAL_FEATURES_*` value.
+   */
+  topoloc_local_features local_features;
 } topoloc_image_map_options;
 
 /**
@@ -1241,6 +1269,99 @@ typedef struct topoloc_loop_candidate {
 } topoloc_loop_candidate;
 
 /**
+ * How a keyframe describer is made. Initialise with
+ * `topoloc_keyframe_describer_options_default`.
+ */
+typedef struct topoloc_keyframe_describer_options {
+  /**
+   * `sizeof(topoloc_keyframe_describer_options)`, set by the `_default` function.
+   */
+  size_t struct_size;
+  /**
+   * Local features: `TOPOLOC_LOCAL_FEATURES_XFEAT` (default: its hints carry a pose where
+   * intrinsics are given; BENCHMARKS.md says which data chose it), `_ORB`, or `_CELLS`
+   * (the describer's own CNN pass; no pose). A detector reloaded from a map takes the map's
+   * kind: give the same here.
+   */
+  topoloc_local_features local_features;
+  /**
+   * `TOPOLOC_BACKEND_AUTO` (default) accepts the map's backend; `_ONNX` or `_VLAD_*`
+   * require it (else `_DESCRIPTOR_MISMATCH`); `_NONE` is `_INVALID_OPTION`.
+   */
+  topoloc_backend backend;
+  /**
+   * ONNX model file; NULL or "" = the cache's default. Must be the map's model (by hash).
+   */
+  const char *onnx_model_path;
+  /**
+   * ONNX Runtime library; NULL or "" = `TOPOLOC_ORT_LIBRARY`, `ORT_DYLIB_PATH`, the cache.
+   */
+  const char *onnx_runtime_path;
+  /**
+   * XFeat model file; NULL or "" = the cache's export (scripts/setup-models.sh).
+   */
+  const char *xfeat_model_path;
+  /**
+   * XFeat: largest network input in pixels; larger images are scaled down first (0: the
+   * image's own size).
+   * Default: 160000.
+   */
+  uint32_t xfeat_max_pixels;
+  /**
+   * ONNX Runtime intra-op threads of each network.
+   * Range: 1..=64.
+   * Default: 1.
+   */
+  uint32_t threads;
+} topoloc_keyframe_describer_options;
+
+/**
+ * A keyframe's depth image, registered to its image (same size): `width * height` row-major
+ * values, `units_per_metre` of them per metre (1000 for millimetres, 5000 for TUM RGB-D), 0 =
+ * no depth. Plain data, read only during the call it is passed to.
+ */
+typedef struct topoloc_depth_image {
+  /**
+   * First value of the first row (NULL = no depth).
+   */
+  const uint16_t *values;
+  /**
+   * Values at `values`: `width * height` of the image.
+   */
+  size_t values_len;
+  /**
+   * Depth units per metre (> 0).
+   */
+  double units_per_metre;
+} topoloc_depth_image;
+
+/**
+ * One verified loop candidate of a keyframe. Array element: its layout never changes.
+ */
+typedef struct topoloc_loop_candidate_check {
+  /**
+   * The candidate keyframe's id.
+   */
+  uint64_t keyframe_id;
+  /**
+   * Its place.
+   */
+  uint32_t place;
+  /**
+   * Cosine similarity of the keyframe's global descriptor to the candidate's.
+   */
+  float similarity;
+  /**
+   * Fundamental-matrix inliers of the pair check.
+   */
+  uint32_t inliers;
+  /**
+   * Its share of the inliers of every verified candidate of the keyframe (0..=1).
+   */
+  float confidence;
+} topoloc_loop_candidate_check;
+
+/**
  * An alignment of `topoloc_trajectory_options`: one of the `TOPOLOC_ALIGN_*` values.
  */
 typedef uint32_t topoloc_alignment;
@@ -1489,6 +1610,21 @@ typedef uint32_t topoloc_trajectory_format;
  * Build stage reported to the progress callback: fitting PCA/codebook and assembling (0 or 1 of 1).
  */
 #define TOPOLOC_STAGE_FITTING 1
+
+/**
+ * ORB (OpenCV), 32-byte binary descriptors.
+ */
+#define TOPOLOC_LOCAL_FEATURES_ORB 1
+
+/**
+ * XFeat (ONNX Runtime, the cache's export), 64-byte learned descriptors.
+ */
+#define TOPOLOC_LOCAL_FEATURES_XFEAT 2
+
+/**
+ * Dense cells of the describer's CNN, from the same forward pass (ONNX backend).
+ */
+#define TOPOLOC_LOCAL_FEATURES_CELLS 3
 
 /**
  * Place kind: a dead end of the skeleton.
@@ -2026,9 +2162,9 @@ topoloc_status topoloc_graph_edge(const struct topoloc_graph *graph, size_t inde
  */
 topoloc_status topoloc_graph_skeleton(const struct topoloc_graph *graph, uint32_t *xyz, size_t len, size_t *count);
 
-/* ======================================================================================
- * Loop closure: keyframes in, gated hints with relative poses out (one thread at a time)
- * ====================================================================================== */
+/* =============================================================================================================================
+ * Loop closure: keyframes (descriptors and keypoints, or images) in, gated hints with relative poses out (one thread at a time)
+ * ============================================================================================================================= */
 
 /**
  * Fills the first `size` bytes of `*options` with defaults and sets `struct_size`; call it
@@ -2132,6 +2268,61 @@ topoloc_status topoloc_loop_detector_save(const struct topoloc_loop_detector *de
  * Number of keyframes held (`*out`).
  */
 topoloc_status topoloc_loop_detector_len(const struct topoloc_loop_detector *detector, size_t *out);
+
+/**
+ * Fills the first `size` bytes of `*options` with defaults and sets `struct_size`; call it
+ * through the header macro `topoloc_keyframe_describer_options_default(options)`, which
+ * passes `sizeof *(options)`.
+ */
+topoloc_status topoloc_keyframe_describer_options_init(struct topoloc_keyframe_describer_options *options, size_t size);
+
+/**
+ * Loads the describer `map` stores and the local features `options` name (for XFeat: its
+ * network). `options` may be NULL for defaults. On success `*out` owns a new keyframe
+ * describer.
+ * Errors: `_NO_DESCRIBER` (the map was built from descriptors), `_BACKEND_UNAVAILABLE` (a
+ * missing runtime or model: the message names the paths tried and what to install),
+ * `_DESCRIPTOR_MISMATCH`, `_MODEL` (a file that is not the expected network),
+ * `_INVALID_OPTION` (an unknown local-features or backend value, threads out of range, cells
+ * on a VLAD map).
+ */
+topoloc_status topoloc_keyframe_describer_new(const struct topoloc_map *map, const struct topoloc_keyframe_describer_options *options, struct topoloc_keyframe_describer **out);
+
+/**
+ * Releases a keyframe describer; NULL is a no-op.
+ */
+void topoloc_keyframe_describer_free(struct topoloc_keyframe_describer *describer);
+
+/**
+ * The local features a keyframe describer extracts (`*out`, a `TOPOLOC_LOCAL_FEATURES_*`
+ * value).
+ */
+topoloc_status topoloc_keyframe_describer_local_features(const struct topoloc_keyframe_describer *describer, topoloc_local_features *out);
+
+/**
+ * Adds a keyframe given as an image: `describer` gives its global descriptor and local
+ * features in one pass, then it is verified and gated as `topoloc_loop_detector_add` does.
+ * `keyframe` gives the id, timestamp and poses; its descriptor and keypoint fields must be
+ * empty (NULL, 0). `depth` may be NULL; with one, the detector's options must have
+ * intrinsics, and each keypoint gets its scene point (later hints matched to this keyframe
+ * are metric). `*hint` receives the best verified candidate (as `_add`). On any error the
+ * detector, the describer's state and `*hint` are unchanged.
+ * Errors: those of `topoloc_loop_detector_add`; `_INVALID_IMAGE` (a bad image buffer);
+ * `_INVALID_ARGUMENT` (descriptor or keypoints given, a depth image of another size than the
+ * image, local features of another kind than earlier keyframes'); `_INVALID_OPTION` (depth
+ * without intrinsics); `_DIMENSION_MISMATCH` (a describer of another map than the detector's
+ * descriptors).
+ */
+topoloc_status topoloc_loop_detector_add_image(struct topoloc_loop_detector *detector, struct topoloc_keyframe_describer *describer, const struct topoloc_loop_keyframe *keyframe, const struct topoloc_image *image, const struct topoloc_depth_image *depth, struct topoloc_loop_hint *hint);
+
+/**
+ * The loop candidates the last successful `topoloc_loop_detector_add` or `_add_image`
+ * verified, most inliers first (accepted or not; keyframes erased since are left out), into
+ * the caller's array `(out, capacity)`; `*count` receives how many were written (at most
+ * `capacity`). For hosts that run their own check on several candidates (ORB-SLAM3 takes 3
+ * loop and 3 merge candidates).
+ */
+topoloc_status topoloc_loop_detector_candidates(const struct topoloc_loop_detector *detector, struct topoloc_loop_candidate_check *out, size_t capacity, size_t *count);
 
 /* ===============================================================================
  * Trajectory metrics: ATE, ARE, RPE and R_traj against ground truth (thread-safe)

@@ -12,6 +12,7 @@ use super::versioned::{init_versioned, versioned};
 use crate::describe::onnx::OnnxOptions;
 use crate::describe::{Describer, DescriberOptions};
 use crate::localize::LocalizeError;
+use crate::map::Map;
 use std::ffi::c_char;
 
 /// Describes images as a map's views were described. Created by `topoloc_describer_new`,
@@ -76,6 +77,38 @@ pub(crate) fn describer_options(
     })
 }
 
+/// The describer `map` stores, loaded with the options' backend, paths and threads (shared
+/// with the keyframe describer), and the describer options used.
+pub(crate) fn map_describer(
+    map: &Map,
+    backend: topoloc_backend,
+    onnx_model_path: *const c_char,
+    onnx_runtime_path: *const c_char,
+    threads: u32,
+) -> Result<(Describer, DescriberOptions), FfiError> {
+    if backend == super::images::TOPOLOC_BACKEND_NONE {
+        return Err(FfiError::invalid_option(
+            "a describer needs a backend: TOPOLOC_BACKEND_NONE describes nothing",
+        ));
+    }
+    OnnxOptions::THREADS_RANGE
+        .check("threads", threads)
+        .map_err(FfiError::invalid_option)?;
+    let model = map.describer().cloned().ok_or_else(|| {
+        LocalizeError::NoDescriber(format!(
+            "the map ({}) stores no describer; it was built from descriptors, not images",
+            map.descriptor()
+        ))
+    })?;
+    let options = describer_options(
+        backend,
+        onnx_model_path,
+        onnx_runtime_path,
+        threads as usize,
+    )?;
+    Ok((Describer::new(model, &options)?, options))
+}
+
 /// Fills `*options` with the defaults. Call through the header macro
 /// `topoloc_describer_options_default(options)`, which passes `sizeof *(options)`.
 #[no_mangle]
@@ -97,27 +130,13 @@ pub extern "C" fn topoloc_describer_new(
     out: *mut *mut topoloc_describer,
 ) -> topoloc_status {
     new_on_map(map, options, out, |map, o: topoloc_describer_options| {
-        if o.backend == super::images::TOPOLOC_BACKEND_NONE {
-            return Err(FfiError::invalid_option(
-                "a describer needs a backend: TOPOLOC_BACKEND_NONE describes nothing",
-            ));
-        }
-        OnnxOptions::THREADS_RANGE
-            .check("threads", o.threads)
-            .map_err(FfiError::invalid_option)?;
-        let model = map.describer().cloned().ok_or_else(|| {
-            LocalizeError::NoDescriber(format!(
-                "the map ({}) stores no describer; it was built from descriptors, not images",
-                map.descriptor()
-            ))
-        })?;
-        let options = describer_options(
+        let (describer, _) = map_describer(
+            &map,
             o.backend,
             o.onnx_model_path,
             o.onnx_runtime_path,
-            o.threads as usize,
+            o.threads,
         )?;
-        let describer = Describer::new(model, &options)?;
         Ok(new_exclusive::<topoloc_describer>(DescriberState {
             describer,
             scratch: Vec::new(),

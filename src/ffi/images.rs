@@ -13,6 +13,7 @@ use crate::describe::onnx::OnnxOptions;
 use crate::describe::vlad::{LocalFeature, VladOptions};
 use crate::describe::{BackendConfig, BackendKind, FitOptions, PcaPrecision};
 use crate::image::{ImageView, PixelFormat};
+use crate::verify::FeatureKind;
 use std::ffi::{c_char, c_void};
 use std::path::Path;
 
@@ -189,11 +190,49 @@ pub struct topoloc_image_map_options {
     /// (ABI 1.14) How the map stores its PCA rows: `TOPOLOC_PCA_I8` (default; map format 1.5,
     /// which readers before it refuse) or `TOPOLOC_PCA_F32` (exact, four times larger).
     pub pca_precision: topoloc_pca_precision,
+    // ABI 1.15 (topoloc 0.1): local features.
+    /// Keypoints stored per view for geometric verification and loop hints (0: none).
+    pub verification_keypoints: u32,
+    /// Which local features those keypoints are: a `TOPOLOC_LOCAL_FEATURES_*` value.
+    pub local_features: topoloc_local_features,
 }
 
-// ABI 1.0 to 1.13 ended before `pca_precision`.
+/// Local features: which keypoints a map stores or a keyframe describer extracts.
+pub type topoloc_local_features = u32;
+/// ORB (OpenCV), 32-byte binary descriptors.
+pub const TOPOLOC_LOCAL_FEATURES_ORB: topoloc_local_features = 1;
+/// XFeat (ONNX Runtime, the cache's export), 64-byte learned descriptors.
+pub const TOPOLOC_LOCAL_FEATURES_XFEAT: topoloc_local_features = 2;
+/// Dense cells of the describer's CNN, from the same forward pass (ONNX backend).
+pub const TOPOLOC_LOCAL_FEATURES_CELLS: topoloc_local_features = 3;
+
+/// The feature kind a C code names.
+pub(crate) fn feature_kind(
+    code: topoloc_local_features,
+    field: &str,
+) -> Result<FeatureKind, FfiError> {
+    match code {
+        TOPOLOC_LOCAL_FEATURES_ORB => Ok(FeatureKind::Orb),
+        TOPOLOC_LOCAL_FEATURES_XFEAT => Ok(FeatureKind::XFeat),
+        TOPOLOC_LOCAL_FEATURES_CELLS => Ok(FeatureKind::Cells),
+        other => Err(FfiError::invalid_option(format!(
+            "{field} is {other}, not a TOPOLOC_LOCAL_FEATURES_* value"
+        ))),
+    }
+}
+
+/// The C code of a feature kind.
+pub(crate) fn feature_code(kind: FeatureKind) -> topoloc_local_features {
+    match kind {
+        FeatureKind::Orb => TOPOLOC_LOCAL_FEATURES_ORB,
+        FeatureKind::XFeat => TOPOLOC_LOCAL_FEATURES_XFEAT,
+        FeatureKind::Cells => TOPOLOC_LOCAL_FEATURES_CELLS,
+    }
+}
+
+// ABI 1.0 to 1.13 ended before `pca_precision`, ABI 1.14 before `verification_keypoints`.
 versioned! {
-    topoloc_image_map_options [pca_precision] {
+    topoloc_image_map_options [pca_precision, verification_keypoints] {
         let onnx = OnnxOptions::default();
         Self {
             backend: TOPOLOC_BACKEND_AUTO,
@@ -210,6 +249,8 @@ versioned! {
             poses_tum_path: std::ptr::null(),
             place_spacing_m: 2.0,
             pca_precision: TOPOLOC_PCA_I8,
+            verification_keypoints: ImageMapOptions::default().keypoints as u32,
+            local_features: feature_code(ImageMapOptions::default().features),
         }
     }
 }
@@ -303,6 +344,8 @@ fn image_map_options(
         },
         views_per_place: o.views_per_place as usize,
         threads: o.threads as usize,
+        keypoints: o.verification_keypoints as usize,
+        features: feature_kind(o.local_features, "options.local_features")?,
         ..ImageMapOptions::default()
     };
     built.keyframes.place_spacing_m = o.place_spacing_m;

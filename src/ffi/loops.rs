@@ -418,7 +418,11 @@ fn keyframe_features(k: &topoloc_loop_keyframe) -> Result<KeyframeFeatures, FfiE
 }
 
 /// The C hint of a processed keyframe: its best candidate, or none (`has_match` 0).
-fn c_hint_of(query_id: u64, query_place: u32, hint: Option<&LoopHint>) -> topoloc_loop_hint {
+pub(super) fn c_hint_of(
+    query_id: u64,
+    query_place: u32,
+    hint: Option<&LoopHint>,
+) -> topoloc_loop_hint {
     match hint {
         Some(h) => c_hint(h),
         None => topoloc_loop_hint {

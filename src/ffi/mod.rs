@@ -30,7 +30,7 @@ mod versioned;
 
 // The entry points, declared in the order include/topoloc.h presents them (cbindgen follows
 // this order): versions and errors, host logging, maps, map keypoints, the localizer, builders, describers, skeleton graphs, loop
-// closure, trajectory metrics.
+// closure and its image keyframes, trajectory metrics.
 mod version;
 
 mod logging;
@@ -51,6 +51,8 @@ mod skeleton;
 
 mod loops;
 
+mod loop_images;
+
 mod trajectory;
 
 mod option_defaults;
@@ -60,6 +62,7 @@ pub use describer::*;
 pub use images::*;
 pub use localizer::*;
 pub use logging::*;
+pub use loop_images::*;
 pub use loops::*;
 pub use map::*;
 pub use map_keypoints::*;

@@ -87,13 +87,19 @@ pub fn option_defaults() -> Vec<OptionDefault> {
                 threads,
                 grid_rows,
                 vlad_clusters,
-                place_spacing_m
+                place_spacing_m,
+                verification_keypoints
             ]
         ),
         defaults_of!(
             topoloc_describer_options,
             topoloc_describer_options_init,
             [threads]
+        ),
+        defaults_of!(
+            topoloc_keyframe_describer_options,
+            topoloc_keyframe_describer_options_init,
+            [xfeat_max_pixels, threads]
         ),
         defaults_of!(
             topoloc_skeleton_options,
@@ -200,9 +206,14 @@ pub fn option_ranges() -> Vec<OptionRange> {
                 grid_cols: POOL_GRID_RANGE,
                 vlad_clusters: VladOptions::CLUSTERS_RANGE,
                 place_spacing_m: KeyframeOptions::PLACE_SPACING_M_RANGE,
+                verification_keypoints: ImageMapOptions::KEYPOINTS_RANGE,
             ]
         ),
         ranges_of!(topoloc_describer_options, [threads: OnnxOptions::THREADS_RANGE]),
+        ranges_of!(
+            topoloc_keyframe_describer_options,
+            [threads: OnnxOptions::THREADS_RANGE]
+        ),
         ranges_of!(
             topoloc_skeleton_options,
             [

@@ -21,8 +21,11 @@ pub const TOPOLOC_ABI_VERSION: u32 = 1;
 /// trajectory metrics (`topoloc_trajectory_evaluate`, `_evaluate_files`); 1.12: describers
 /// (`topoloc_describer_*`: images to a map's global descriptors); 1.13: host logging
 /// (`topoloc_set_log_callback`) and `TOPOLOC_ERR_CONCURRENT_USE` for a handle used by two calls
-/// at once; 1.14: `pca_precision` in the image map options (`TOPOLOC_PCA_I8`, `_F32`).
-pub const TOPOLOC_ABI_VERSION_MINOR: u32 = 14;
+/// at once; 1.14: `pca_precision` in the image map options (`TOPOLOC_PCA_I8`, `_F32`); 1.15:
+/// image keyframes (`topoloc_keyframe_describer_*`, `topoloc_loop_detector_add_image`), ranked
+/// candidates (`topoloc_loop_detector_candidates`), local features of image maps
+/// (`verification_keypoints`, `local_features`).
+pub const TOPOLOC_ABI_VERSION_MINOR: u32 = 15;
 
 static VERSION: &CStr =
     match CStr::from_bytes_with_nul(concat!(env!("CARGO_PKG_VERSION"), "\0").as_bytes()) {

@@ -19,5 +19,6 @@ pub use database::{Added, DatabaseOptions, KeyframeDatabase, KeyframeEntry, Loop
 pub use describe::KeyframeDescriber;
 pub use error::LoopsError;
 pub use hints::{
-    Gate, HintOptions, KeyframeFeatures, LoopDetector, LoopHint, OdometryGate, Processed, Work,
+    Gate, HintOptions, KeyframeFeatures, LoopDetector, LoopHint, OdometryGate, Processed,
+    VerifiedCandidate, Work,
 };

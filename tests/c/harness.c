@@ -7,6 +7,8 @@
 
 #include <errno.h>
 #include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
 
 /* ------------------------------------------------------------------------------------------ */
 /* Checks                                                                                      */
@@ -517,4 +519,33 @@ topoloc_image gray_image(const uint8_t *px)
                                  .stride = IMG_W,
                                  .format = TOPOLOC_PIXEL_GRAY8};
     return image;
+}
+
+bool under_valgrind(void)
+{
+    const char *preload = getenv("LD_PRELOAD");
+    return preload != NULL && strstr(preload, "vgpreload") != NULL;
+}
+
+bool models_ready(const char *file, char *path, size_t len, const char *checks)
+{
+    const char *cache = getenv("TOPOLOC_CACHE");
+    const char *home = getenv("HOME");
+    const char *ci = getenv("CI");
+    if (cache != NULL && cache[0] != '\0') {
+        snprintf(path, len, "%s/%s", cache, file);
+    } else {
+        snprintf(path, len, "%s/.cache/topoloc/%s", home != NULL ? home : "", file);
+    }
+    if (access(path, R_OK) != 0) {
+        CHECK(ci == NULL || strcmp(ci, "true") != 0);
+        printf("   %s checks skipped: no model at %s (run scripts/setup-models.sh)\n", checks,
+               path);
+        return false;
+    }
+    if (under_valgrind()) {
+        printf("   %s checks skipped under valgrind (ONNX Runtime is not ours to check)\n", checks);
+        return false;
+    }
+    return true;
 }

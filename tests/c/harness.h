@@ -140,6 +140,17 @@ extern char g_tmpdir[4096];
 bool make_tmpdir(void);
 void tmp_path(char *out, size_t len, const char *name);
 bool write_file(const char *path, const unsigned char *data, size_t len);
+/* The cache's model files (scripts/setup-models.sh), relative to $TOPOLOC_CACHE or
+ * ~/.cache/topoloc. */
+#define ONNX_MODEL_FILE "models/mobilenetv2-mlf.onnx"
+#define XFEAT_MODEL_FILE "models/xfeat.onnx"
+/* True when the cache's `file` exists (its path into `path`) and the run is not under valgrind
+ * (ONNX Runtime takes minutes there, and its code is not ours to check); otherwise says which
+ * `checks` are skipped and returns false. In CI (CI=true) the set-up installs the models: a
+ * missing one fails the run. */
+bool models_ready(const char *file, char *path, size_t len, const char *checks);
+/* True under valgrind (its preload libraries are in LD_PRELOAD). */
+bool under_valgrind(void);
 /* Reads a whole file into a malloc'd buffer (NULL when it cannot). */
 unsigned char *read_file(const char *path, size_t *len);
 /* True when the n bytes at p all equal `value` (what a library must not have written). */
@@ -210,5 +221,7 @@ void run_logging_tests(const topoloc_map *world);
 topoloc_map *run_image_tests(const topoloc_map *world);
 /* test_describer.c: `image_map` is run_image_tests' map. */
 void run_describer_tests(const topoloc_map *image_map, const topoloc_map *world);
+/* test_loop_images.c: `image_map` is run_image_tests' map. */
+void run_loop_image_tests(const topoloc_map *image_map, const topoloc_map *world);
 
 #endif

@@ -45,6 +45,7 @@ int main(void)
         image_map = run_image_tests(world);
         if (image_map != NULL) {
             run_describer_tests(image_map, world);
+            run_loop_image_tests(image_map, world);
         }
         topoloc_map_free(image_map);
     }

@@ -17,13 +17,6 @@
 #define IMG_CLUSTERS 16u
 #define IMG_FILES 4u
 
-/* True under valgrind (its preload libraries are in LD_PRELOAD). */
-static bool under_valgrind(void)
-{
-    const char *preload = getenv("LD_PRELOAD");
-    return preload != NULL && strstr(preload, "vgpreload") != NULL;
-}
-
 /* A grey image repacked as `channels` channels (alpha 255) in rows of `stride` bytes (padding
  * filled with 0xAB); malloc'd into *buffer. */
 static topoloc_image repack(const uint8_t *px, uint32_t format, uint32_t channels, size_t stride,
@@ -1222,20 +1215,6 @@ static void image_files(void)
 /* ONNX                                                                                        */
 /* ------------------------------------------------------------------------------------------ */
 
-/* The default ONNX model file (scripts/setup-models.sh): $TOPOLOC_CACHE or ~/.cache/topoloc. */
-static bool onnx_model_file(char *path, size_t len)
-{
-    const char *cache = getenv("TOPOLOC_CACHE");
-    const char *home = getenv("HOME");
-    if (cache != NULL && cache[0] != '\0') {
-        snprintf(path, len, "%s/models/mobilenetv2-mlf.onnx", cache);
-    } else {
-        snprintf(path, len, "%s/.cache/topoloc/models/mobilenetv2-mlf.onnx",
-                 home != NULL ? home : "");
-    }
-    return access(path, R_OK) == 0;
-}
-
 /* A missing model is BACKEND_UNAVAILABLE naming it (for ONNX and AUTO) always; with the model
  * installed, an ONNX map localizes revisits, refuses uninformative images, accepts its own model
  * named explicitly and refuses another backend, a missing or a broken model file. */
@@ -1273,17 +1252,7 @@ static void the_onnx_backend_needs_its_model_and_with_it_localizes_revisits(void
     CHECK_MESSAGE_HAS(missing);
     CHECK(out == untouched_map());
 
-    if (!onnx_model_file(model_path, sizeof model_path)) {
-        /* In CI (CI=true) the set-up installs the model: its absence is a broken set-up. */
-        const char *ci = getenv("CI");
-        CHECK(ci == NULL || strcmp(ci, "true") != 0);
-        printf("   ONNX map checks skipped: no model at %s (run scripts/setup-models.sh)\n",
-               model_path);
-        return;
-    }
-    if (under_valgrind()) {
-        /* ONNX Runtime takes minutes there, and its own code is not ours to check. */
-        printf("   ONNX map checks skipped under valgrind (ONNX Runtime is not ours to check)\n");
+    if (!models_ready(ONNX_MODEL_FILE, model_path, sizeof model_path, "ONNX map")) {
         return;
     }
     options.onnx_model_path = NULL; /* the cache's model */

@@ -84,7 +84,7 @@ impl LoopDetector {
         entry: &KeyframeEntry<'_>,
         features: &KeyframeFeatures,
         checks: &mut Checks,
-    ) -> Result<Vec<Verified>, LoopsError> {
+    ) -> Result<Vec<VerifiedCandidate>, LoopsError> {
         let Some(max_id) = self.max_candidate_id(entry) else {
             return Ok(Vec::new());
         };
@@ -103,14 +103,15 @@ impl LoopDetector {
                 candidates.push(nearby);
             }
         }
-        let mut verified: Vec<Verified> = Vec::new();
+        let mut verified: Vec<VerifiedCandidate> = Vec::new();
         for candidate in candidates {
             let Some(inliers) = self.inliers_with(features, candidate.keyframe_id, checks)? else {
                 continue;
             };
-            verified.push(Verified {
+            verified.push(VerifiedCandidate {
                 id: candidate.keyframe_id,
                 place: candidate.place,
+                similarity: candidate.similarity,
                 inliers,
                 confidence: 0.0,
             });
@@ -167,9 +168,9 @@ impl LoopDetector {
         &self,
         entry: &KeyframeEntry<'_>,
         features: &KeyframeFeatures,
-        verified: &[Verified],
+        verified: &[VerifiedCandidate],
         checks: &mut Checks,
-    ) -> Result<Option<(Verified, Gated)>, LoopsError> {
+    ) -> Result<Option<(VerifiedCandidate, Gated)>, LoopsError> {
         let Some(&first) = verified.first() else {
             return Ok(None);
         };
@@ -185,7 +186,7 @@ impl LoopDetector {
             return Ok(Some((first, refused(Gate::TooFewInliers, None))));
         }
         let mut first_refusal = None;
-        let mut chosen: Option<(Verified, Passed)> = None;
+        let mut chosen: Option<(VerifiedCandidate, Passed)> = None;
         let others = verified[1..]
             .iter()
             .take_while(|v| v.inliers >= self.options.min_inliers);
@@ -284,9 +285,9 @@ impl LoopDetector {
         &self,
         entry: &KeyframeEntry<'_>,
         features: &KeyframeFeatures,
-        best: Verified,
+        best: VerifiedCandidate,
         checks: &mut Checks,
-    ) -> Result<Verified, LoopsError> {
+    ) -> Result<VerifiedCandidate, LoopsError> {
         let max_id = self.max_candidate_id(entry).unwrap_or(0);
         let mut refined = best;
         // The stretch the candidate stands for (the keyframes the id gap skipped) and its
@@ -310,11 +311,13 @@ impl LoopDetector {
                 continue;
             };
             if inliers > refined.inliers {
-                refined = Verified {
+                // Internal: the refined keyframe stands in for the candidate, whose
+                // similarity and confidence it keeps.
+                refined = VerifiedCandidate {
                     id,
                     place: self.database.place_of(id)?,
                     inliers,
-                    confidence: best.confidence,
+                    ..best
                 };
             }
         }
@@ -328,7 +331,7 @@ impl LoopDetector {
         &self,
         entry: &KeyframeEntry<'_>,
         features: &KeyframeFeatures,
-        candidate: &Verified,
+        candidate: &VerifiedCandidate,
         checks: &mut Checks,
     ) -> Result<Geometry, LoopsError> {
         let stored = &self.features[&candidate.id];
@@ -438,11 +441,18 @@ pub(super) struct Checks {
     pub work: Work,
 }
 
-/// A verified candidate.
-#[derive(Clone, Copy, Debug)]
-pub(super) struct Verified {
+/// A loop candidate of a keyframe with its pair check: what a host that runs its own check
+/// ranks ([`Processed::candidates`](super::Processed::candidates)).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct VerifiedCandidate {
+    /// The candidate keyframe's id.
     pub id: u64,
+    /// Its place.
     pub place: PlaceId,
+    /// Cosine similarity of the keyframe's global descriptor to the candidate's.
+    pub similarity: f32,
+    /// Fundamental-matrix inliers of the pair check (before refinement within its group).
     pub inliers: u32,
+    /// Its share of the inliers of every verified candidate of the keyframe (0..=1).
     pub confidence: f32,
 }

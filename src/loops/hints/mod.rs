@@ -43,8 +43,8 @@ use crate::verify::{Descriptors, FeatureKind, Keypoints, RelativePose, ViewKeypo
 use nalgebra::Point3;
 use std::collections::HashMap;
 
-pub use gates::Gate;
 use gates::{Checks, Gated};
+pub use gates::{Gate, VerifiedCandidate};
 pub use options::{HintOptions, OdometryGate};
 use streak::Streak;
 
@@ -101,6 +101,10 @@ pub struct Processed {
     /// each with its own `query_id`; empty unless this keyframe's hint was accepted.
     /// Every keyframe gets at most one accepted hint, as its own or as a confirmed one.
     pub confirmed: Vec<LoopHint>,
+    /// Every loop candidate that was verified, most inliers first (ties: the more similar),
+    /// accepted or not: for hosts that run their own check on several (ORB-SLAM3 takes 3 loop
+    /// and 3 merge candidates). Empty when there was none.
+    pub candidates: Vec<VerifiedCandidate>,
     /// The geometric work it took, for hosts that budget or log the cost.
     pub work: Work,
 }
@@ -139,6 +143,8 @@ pub struct LoopDetector {
     pending: Vec<LoopHint>,
     /// What the last successful [`LoopDetector::process`] confirmed.
     confirmed: Vec<LoopHint>,
+    /// The last successful [`LoopDetector::process`]'s verified candidates.
+    candidates: Vec<VerifiedCandidate>,
     /// The largest id of a previous session's keyframes ([`LoopDetector::from_map`]): they are
     /// never inside the exclusion window, whatever this session's ids.
     reloaded_max_id: Option<u64>,
@@ -157,6 +163,7 @@ impl LoopDetector {
             streak: None,
             pending: Vec::new(),
             confirmed: Vec::new(),
+            candidates: Vec::new(),
             reloaded_max_id: None,
         })
     }
@@ -307,6 +314,7 @@ impl LoopDetector {
         self.features.insert(entry.id, features);
         self.streak = streak;
         self.confirmed = self.follow_streak(hint.as_ref())?;
+        self.candidates = verified;
         match &hint {
             Some(h) => log::debug!(
                 "keyframe {}: candidate keyframe {} (place {}), {} inliers, gate {:?}; {} confirmed",
@@ -323,6 +331,7 @@ impl LoopDetector {
             added,
             hint,
             confirmed: self.confirmed.clone(),
+            candidates: self.candidates.clone(),
             work: checks.work,
         })
     }
@@ -331,6 +340,15 @@ impl LoopDetector {
     /// ([`Processed::confirmed`]); replaced by the next one, kept by errors and erasures.
     pub fn confirmed(&self) -> &[LoopHint] {
         &self.confirmed
+    }
+
+    /// The verified candidates of the last successful [`LoopDetector::process`]
+    /// ([`Processed::candidates`]); replaced by the next one, kept by errors. A candidate
+    /// erased since is left out.
+    pub fn candidates(&self) -> impl Iterator<Item = &VerifiedCandidate> {
+        self.candidates
+            .iter()
+            .filter(|c| self.features.contains_key(&c.id))
     }
 
     /// Removes a keyframe and its features (ORB-SLAM culls keyframes); a pending hint from or

@@ -112,8 +112,8 @@ const SECTIONS: &[(&str, &[&str])] = &[
         &["topoloc_skeleton_options_", "topoloc_graph_"],
     ),
     (
-        "Loop closure: keyframes in, gated hints with relative poses out (one thread at a time)",
-        &["topoloc_loop_"],
+        "Loop closure: keyframes (descriptors and keypoints, or images) in, gated hints with relative poses out (one thread at a time)",
+        &["topoloc_loop_", "topoloc_keyframe_describer_"],
     ),
     (
         "Trajectory metrics: ATE, ARE, RPE and R_traj against ground truth (thread-safe)",
