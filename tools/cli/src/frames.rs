@@ -146,6 +146,8 @@ pub enum TimeRule {
     Names,
     /// Frame index at 1 Hz (names not numeric, no `--fps`).
     Index,
+    /// A KITTI, TUM RGB-D or EuRoC sequence folder: the timestamps its layout gives.
+    Layout,
 }
 
 /// An image folder as a frame source: files with an image extension in name order, with
@@ -161,9 +163,25 @@ pub struct ImageFolder {
     pub describe: String,
 }
 
-/// Lists `dir` and gives every image file its timestamp. Fails when the folder cannot be read,
-/// holds no image file, or numeric names decrease in name order.
+/// Lists `dir` and gives every image file its timestamp: a KITTI, TUM RGB-D or EuRoC sequence
+/// folder ([`crate::sequence`]) gives its frames with the layout's timestamps (unless `--fps`
+/// is given), any other folder its image files by `clock`. Fails when the folder cannot be
+/// read, holds no image file, numeric names decrease in name order, or a layout's files are
+/// malformed (the file and line are named).
 pub fn open_images(dir: &Path, clock: &Clock) -> Result<ImageFolder> {
+    if clock.fps.is_none() && crate::sequence::has_layout(dir) {
+        let sequence = crate::sequence::open(dir)?;
+        return Ok(ImageFolder {
+            source: FrameSource::Images {
+                files: sequence.frames.iter().map(|f| f.image.clone()).collect(),
+                times: sequence.frames.iter().map(|f| f.timestamp).collect(),
+                next: 0,
+            },
+            ignored: Vec::new(),
+            rule: TimeRule::Layout,
+            describe: format!("from the {:?} sequence's timestamps", sequence.layout),
+        });
+    }
     let mut files = Vec::new();
     let mut ignored = Vec::new();
     for entry in std::fs::read_dir(dir)

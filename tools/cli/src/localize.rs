@@ -63,7 +63,8 @@ pub struct LocalizeArgs {
     #[arg(long)]
     pub map: PathBuf,
     /// Folder of frames in file-name order: files ending .png .jpg .jpeg .bmp .pgm .ppm (any
-    /// case; other files are not frames).
+    /// case; other files are not frames); or a KITTI, TUM RGB-D or EuRoC sequence folder,
+    /// its frames timed by the layout.
     #[arg(long)]
     pub images: Option<PathBuf>,
     /// Video file, decoded with OpenCV videoio (e.g. MJPG AVI; MP4/H.264 through FFmpeg).
@@ -387,6 +388,10 @@ fn open_source(
     match folder.rule {
         TimeRule::Names if args.start_time.is_some() => bail!(
             "--start-time applies to --fps, --video and unnumbered file names; the files of {} are timed by their names",
+            dir.display()
+        ),
+        TimeRule::Layout if args.start_time.is_some() => bail!(
+            "--start-time applies to --fps, --video and unnumbered file names; {} is a sequence timed by its layout",
             dir.display()
         ),
         TimeRule::Index if odometry.is_some() => bail!(

@@ -50,6 +50,11 @@ pub struct Sequence {
     pub frames: Vec<Frame>,
 }
 
+/// True when `path` holds a KITTI, TUM RGB-D or EuRoC layout (not a plain image folder).
+pub fn has_layout(path: &Path) -> bool {
+    kitti_files(path).is_some() || path.join("rgb.txt").is_file() || euroc_camera(path).is_some()
+}
+
 /// Reads the sequence at `path` (see the module documentation for the layouts recognised).
 pub fn open(path: &Path) -> Result<Sequence> {
     let (layout, frames) = if let Some((images, times)) = kitti_files(path) {

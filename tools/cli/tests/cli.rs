@@ -727,6 +727,31 @@ fn loops_follows_the_contract_online_and_against_a_map() {
         let (q, m): (u32, u32) = (row[0].parse().unwrap(), row[1].parse().unwrap());
         assert_eq!(2 * q, m, "keyframe {q} is query image {}: {row:?}", 2 * q);
     }
+    // `localize` reads the layout too: every frame, timed by times.txt.
+    let out = topoloc(&[
+        "localize",
+        "--map",
+        &s(&map),
+        "--images",
+        &s(&kitti),
+        "--json-lines",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let frames: Vec<serde_json::Value> = String::from_utf8(out.stdout)
+        .unwrap()
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    assert_eq!(frames.len(), places as usize);
+    assert!(
+        (frames[3]["timestamp"].as_f64().unwrap() - 0.3).abs() < 1e-9,
+        "{:?}",
+        frames[3]
+    );
     let times: Vec<String> = (0..places)
         .map(|i| match i {
             1 => "later".to_string(),
