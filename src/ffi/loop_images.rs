@@ -21,7 +21,7 @@ use super::topoloc_status;
 use super::versioned::{
     check_versioned, init_versioned, read_versioned, versioned, write_versioned,
 };
-use crate::loops::{KeyframeDescriber, KeyframeEntry, LoopHint};
+use crate::loops::{KeyframeDescriber, KeyframeEntry, LoopHint, DEFAULT_LOOP_FEATURES};
 use crate::verify::{camera_points_from_depth, DepthImage, XFeatOptions, DEFAULT_XFEAT_MAX_PIXELS};
 use std::ffi::c_char;
 
@@ -65,7 +65,7 @@ pub struct topoloc_keyframe_describer_options {
 versioned! {
     topoloc_keyframe_describer_options {
         Self {
-            local_features: super::images::TOPOLOC_LOCAL_FEATURES_XFEAT,
+            local_features: feature_code(DEFAULT_LOOP_FEATURES),
             backend: TOPOLOC_BACKEND_AUTO,
             onnx_model_path: std::ptr::null(),
             onnx_runtime_path: std::ptr::null(),

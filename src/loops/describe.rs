@@ -11,6 +11,11 @@ use crate::verify::{
     DEFAULT_KEYPOINTS,
 };
 
+/// The local features a keyframe describer extracts by default, in every layer (the CLI's
+/// `loops`, the C keyframe describer's options, C++ and Python): XFeat, whose hints carry a
+/// pose where intrinsics are given (BENCHMARKS.md says which data chose it).
+pub const DEFAULT_LOOP_FEATURES: FeatureKind = FeatureKind::XFeat;
+
 /// Describes keyframe images: a map's describer (the global descriptor the database compares)
 /// and local features of one kind ([`DEFAULT_CELLS`] dense cells, or [`DEFAULT_KEYPOINTS`]
 /// keypoints). Not `Sync`: one per detector thread.

@@ -16,7 +16,7 @@ mod error;
 mod hints;
 
 pub use database::{Added, DatabaseOptions, KeyframeDatabase, KeyframeEntry, LoopQuery, Match};
-pub use describe::KeyframeDescriber;
+pub use describe::{KeyframeDescriber, DEFAULT_LOOP_FEATURES};
 pub use error::LoopsError;
 pub use hints::{
     Gate, HintOptions, KeyframeFeatures, LoopDetector, LoopHint, OdometryGate, Processed,

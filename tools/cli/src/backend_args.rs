@@ -55,6 +55,16 @@ pub enum LocalFeatures {
     Cells,
 }
 
+impl From<topoloc::verify::FeatureKind> for LocalFeatures {
+    fn from(kind: topoloc::verify::FeatureKind) -> Self {
+        match kind {
+            topoloc::verify::FeatureKind::Orb => Self::Orb,
+            topoloc::verify::FeatureKind::XFeat => Self::Xfeat,
+            topoloc::verify::FeatureKind::Cells => Self::Cells,
+        }
+    }
+}
+
 impl From<LocalFeatures> for topoloc::verify::FeatureKind {
     fn from(f: LocalFeatures) -> Self {
         match f {

@@ -87,7 +87,7 @@ pub struct LoopsArgs {
     /// Local features without `--map` (with one, the map's kind). XFeat by default: its hints
     /// carry a pose where intrinsics are given, which dense cells cannot (BENCHMARKS.md says
     /// which data chose it).
-    #[arg(long, value_enum, default_value_t = LocalFeatures::Xfeat)]
+    #[arg(long, value_enum, default_value_t = LocalFeatures::from(topoloc::loops::DEFAULT_LOOP_FEATURES))]
     pub local_features: LocalFeatures,
     /// Descriptor backend without `--map`.
     #[command(flatten)]
