@@ -1,14 +1,15 @@
 /*
  * topoloc.hpp: header-only C++17 RAII layer over the C ABI in topoloc.h.
  *
- * Every owner class (`Map`, `MapBuilder`, `Localizer`, `Graph`, `Describer`, `LoopDetector`) is
- * the one move-only owner template `detail::Owner` over one C handle: its destructor calls the
- * matching C `_free` function, `capi()` / `get()` return the raw handle for code that talks to
- * the C API directly, and `release()` gives it up. Every failing C call is turned into a
- * `topoloc::Error` exception (or a subclass) carrying the C status and the thread-local message
- * of `topoloc_last_error_message`; `throw_error` maps each status to its exception class in one
- * switch. Nothing here adds behaviour the C API does not have; the C header documents the
- * semantics of each call, and each option's meaning, default and range.
+ * Every owner class (`Map`, `MapBuilder`, `Localizer`, `Graph`, `Describer`,
+ * `KeyframeDescriber`, `LoopDetector`) is the one move-only owner template `detail::Owner` over
+ * one C handle: its destructor calls the matching C `_free` function, `capi()` / `get()` return
+ * the raw handle for code that talks to the C API directly, and `release()` gives it up. Every
+ * failing C call is turned into a `topoloc::Error` exception (or a subclass) carrying the C
+ * status and the thread-local message of `topoloc_last_error_message`; `throw_error` maps each
+ * status to its exception class in one switch. Nothing here adds behaviour the C API does not
+ * have; the C header documents the semantics of each call, and each option's meaning, default
+ * and range.
  *
  * This header includes the whole layer, one concept per file in topoloc/ (each may also be
  * included alone, e.g. `#include <topoloc/map.hpp>`):
@@ -17,15 +18,17 @@
  *   topoloc/version.hpp     `version`, `abi_version`, `abi_matches`
  *   topoloc/logging.hpp     `set_log_handler`, `LogLevel`
  *   topoloc/geometry.hpp    `Position`, `Pose`
- *   topoloc/image.hpp       `Image`, `image_view`
+ *   topoloc/image.hpp       `Image`, `image_view`, `DepthImage`, `depth_view`
  *   topoloc/progress.hpp    `Progress`, `Stage` (callbacks of map builds)
  *   topoloc/options.hpp     every operation's options (`LoadOptions`, `LocalizerOptions`, ...)
- *                           and their `default_*_options()`
+ *                           and their `default_*_options()`; `LocalFeatures`
  *   topoloc/map.hpp         `Map`, `MapBuilder`, `map_from_keyframes`
  *   topoloc/graph.hpp       `Graph` (skeleton graph of an occupancy grid)
  *   topoloc/localizer.hpp   `Localizer`, `Frame`, `Result`
  *   topoloc/describer.hpp   `Describer`
- *   topoloc/loops.hpp       `LoopDetector`, `LoopKeyframe`, `LoopHint`, `Gate`
+ *   topoloc/keyframes.hpp   `KeyframeDescriber` (keyframe images for a loop detector)
+ *   topoloc/loops.hpp       `LoopDetector`, `LoopKeyframe`, `LoopHint`, `Gate`,
+ *                           `LoopCandidateCheck`
  *   topoloc/trajectory.hpp  `evaluate_trajectory`, `evaluate_trajectory_files`
  *   topoloc/detail.hpp      internal: `detail::Owner`, filled C structs, string and array reads
  *
@@ -52,6 +55,9 @@
  *   new loop detector         topoloc_loop_detector_new           LoopDetector::create               LoopDetector(kind, ...)
  *   loop detector from a map  topoloc_loop_detector_from_map      LoopDetector::from_map             LoopDetector.from_map
  *   add a keyframe (a hint)   topoloc_loop_detector_add           LoopDetector::add                  LoopDetector.add
+ *   describe keyframe images  topoloc_keyframe_describer_new      KeyframeDescriber(map, options)    -
+ *   add a keyframe image      topoloc_loop_detector_add_image     LoopDetector::add_image            -
+ *   its verified candidates   topoloc_loop_detector_candidates    LoopDetector::candidates           -
  *   hints it confirmed        topoloc_loop_detector_confirmed     LoopDetector::confirmed            LoopDetector.confirmed
  *                             (+ _confirmed_count)
  *   relocalization            topoloc_loop_detector_query         LoopDetector::query                LoopDetector.query
@@ -64,8 +70,8 @@
  * Thread safety (the C rules, restated):
  *  - `Map`, `Graph`: immutable. A const one may be shared by many threads, its const methods
  *    called concurrently; many localizers on many threads may use one map.
- *  - `MapBuilder`, `Localizer`, `LoopDetector`: single-threaded state. Use each from one thread
- *    at a time (they may move between threads).
+ *  - `MapBuilder`, `Localizer`, `Describer`, `KeyframeDescriber`, `LoopDetector`:
+ *    single-threaded state. Use each from one thread at a time (they may move between threads).
  *  - Error messages are per thread, so an `Error` always describes the failure of the call that
  *    threw it on that thread.
  *
@@ -110,6 +116,7 @@
 #include "topoloc/graph.hpp"
 #include "topoloc/localizer.hpp"
 #include "topoloc/describer.hpp"
+#include "topoloc/keyframes.hpp"
 #include "topoloc/loops.hpp"
 #include "topoloc/trajectory.hpp"
 

@@ -20,11 +20,11 @@ namespace topoloc {
 namespace detail {
 
 /// The one move-only owner of a C handle, shared by every owner class of this layer (`Map`,
-/// `MapBuilder`, `Localizer`, `Graph`, `Describer`, `LoopDetector` derive from it): it holds a
-/// `Handle *`, calls `Free` (the handle's C `_free` function, a no-op for null) when destroyed
-/// or assigned over, hands the handle out for interop (`capi()`, `get()`) or gives it up
-/// (`release()`), and cannot be copied. Moved-from owners are empty. Not thread-safe by itself;
-/// the derived classes state their own rules.
+/// `MapBuilder`, `Localizer`, `Graph`, `Describer`, `KeyframeDescriber`, `LoopDetector` derive
+/// from it): it holds a `Handle *`, calls `Free` (the handle's C `_free` function, a no-op for
+/// null) when destroyed or assigned over, hands the handle out for interop (`capi()`, `get()`)
+/// or gives it up (`release()`), and cannot be copied. Moved-from owners are empty. Not
+/// thread-safe by itself; the derived classes state their own rules.
 template <typename Handle, void (*Free)(Handle *)> class Owner {
 public:
     /// The C handle type.

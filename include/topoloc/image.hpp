@@ -1,7 +1,7 @@
 /*
  * topoloc/image.hpp: borrowed views of camera images, for map builds, image frames and
- * describers (part of topoloc.hpp, which has the overview; `cv::Mat` views are in
- * topoloc_opencv.hpp).
+ * describers, and of registered depth images, for image keyframes (part of topoloc.hpp, which
+ * has the overview; `cv::Mat` views are in topoloc_opencv.hpp).
  */
 
 #ifndef TOPOLOC_IMAGE_HPP
@@ -14,6 +14,7 @@
 #include <cstdint>
 #include <limits>
 #include <string>
+#include <vector>
 
 namespace topoloc {
 
@@ -78,6 +79,35 @@ using Image = topoloc_image;
     }
     return image_view(data, len, width, height, format, stride);
 }
+
+/// A borrowed depth image registered to a keyframe image (the C struct, ABI 1.15), for
+/// `LoopDetector::add_image`: `values_len` = `width * height` of that image row-major 16-bit
+/// values at `values`, `units_per_metre` of them per metre (1000 for millimetres, 5000 for TUM
+/// RGB-D); a value of 0 is no depth at that pixel. Read only during the call it is passed to;
+/// `values == nullptr` means no depth image. Make one with `depth_view`.
+using DepthImage = topoloc_depth_image;
+
+/// A view of `len` depth values at `values`, `units_per_metre` per metre (checked by the library
+/// when the depth image is used: `len` must be the image's pixel count).
+[[nodiscard]] inline DepthImage depth_view(const uint16_t *values, std::size_t len,
+                                           double units_per_metre) noexcept
+{
+    DepthImage depth{};
+    depth.values = values;
+    depth.values_len = len;
+    depth.units_per_metre = units_per_metre;
+    return depth;
+}
+
+/// `depth_view` over a vector (borrowed: it must outlive the call the view is passed to).
+[[nodiscard]] inline DepthImage depth_view(const std::vector<uint16_t> &values,
+                                           double units_per_metre) noexcept
+{
+    return depth_view(values.data(), values.size(), units_per_metre);
+}
+
+/// A view of a temporary vector would dangle: keep the vector alive while its view is used.
+DepthImage depth_view(std::vector<uint16_t> &&values, double units_per_metre) = delete;
 
 } // namespace topoloc
 

@@ -1,7 +1,8 @@
 /*
  * topoloc/loops.hpp: loop closure (ABI 1.5; part of topoloc.hpp, which has the overview):
- * `LoopDetector` turns the keyframes of a SLAM run into gated loop hints with relative poses,
- * and answers relocalization queries.
+ * `LoopDetector` turns the keyframes of a SLAM run (with the host's keypoints, or as images
+ * described by a `KeyframeDescriber` of keyframes.hpp, ABI 1.15) into gated loop hints with
+ * relative poses, ranks the candidates it verified, and answers relocalization queries.
  */
 
 #ifndef TOPOLOC_LOOPS_HPP
@@ -12,6 +13,8 @@
 #include "error.hpp"
 #include "options.hpp"
 #include "geometry.hpp"
+#include "image.hpp"
+#include "keyframes.hpp"
 #include "map.hpp"
 
 #include <array>
@@ -53,9 +56,16 @@ static_assert(static_cast<topoloc_gate>(Gate::Odometry) == TOPOLOC_GATE_ODOMETRY
 /// cosine similarity).
 using LoopCandidate = topoloc_loop_candidate;
 
-/// One keyframe for `LoopDetector::add`, as the host's SLAM gives it. Owns its data. The arrays
-/// are per keypoint: keypoint `i` is at (`keypoints[2i]`, `keypoints[2i+1]`), has descriptor
-/// bytes `keypoint_descriptors[32i .. 32i+32)` and scene point `camera_points[3i .. 3i+3)`.
+/// One loop candidate that `LoopDetector::add` / `add_image` verified, of
+/// `LoopDetector::candidates` (the C struct, ABI 1.15): `keyframe_id`, `place`, the cosine
+/// `similarity` of the global descriptors, fundamental-matrix `inliers` of the pair check, and
+/// `confidence`, its share of the inliers of every verified candidate of the keyframe (0..=1).
+using LoopCandidateCheck = topoloc_loop_candidate_check;
+
+/// One keyframe for `LoopDetector::add`, as the host's SLAM gives it (for `add_image`, ABI 1.15:
+/// only its id, timestamp and poses; the arrays stay empty). Owns its data. The arrays are per
+/// keypoint: keypoint `i` is at (`keypoints[2i]`, `keypoints[2i+1]`), has descriptor bytes
+/// `keypoint_descriptors[32i .. 32i+32)` and scene point `camera_points[3i .. 3i+3)`.
 struct LoopKeyframe {
     uint64_t id = 0;                   ///< Host keyframe id; must increase from one to the next.
     double timestamp = 0.0;            ///< Seconds; must not decrease.
@@ -202,6 +212,72 @@ public:
         topoloc_loop_hint raw = detail::filled(&topoloc_loop_hint_init);
         check(topoloc_loop_detector_add(get(), &keyframe, &raw));
         return from_raw(raw);
+    }
+
+    /// Adds a keyframe given as an image (ABI 1.15): `describer` (a `KeyframeDescriber` of the
+    /// map whose descriptors this detector holds) gives its global descriptor and local features
+    /// in one pass, then it is verified and gated as `add` does; returns its hint as `add` does.
+    /// `keyframe` gives the id, timestamp and poses only: its `descriptor`, `keypoints`,
+    /// `keypoint_descriptors` and `camera_points` must be empty (the image gives them). `depth`
+    /// (optional; registered to `image`, same size) needs intrinsics in the detector's options
+    /// and gives each keypoint its scene point, so later hints matched to this keyframe are
+    /// metric. The pixels and depth values are read only during the call. On any error the
+    /// detector and the describer are unchanged. Throws the errors of `add` (but the array checks
+    /// of this layer), and `InvalidImageError` (a bad image buffer, no image),
+    /// `UninformativeImageError` (no content), `ModelError`, `Error`
+    /// (`TOPOLOC_ERR_INVALID_ARGUMENT`: a descriptor or keypoints given, a depth image of
+    /// another size than the image, local features of another kind than earlier keyframes';
+    /// `_INVALID_OPTION`: depth without intrinsics; `_DIMENSION_MISMATCH`: a describer of
+    /// another map than the detector's descriptors; `_CONCURRENT_USE`; `_NULL_ARGUMENT` for an
+    /// empty detector or describer). `[[nodiscard]]` as `add`.
+    [[nodiscard]] LoopHint add_image(KeyframeDescriber &describer, const LoopKeyframe &keyframe,
+                                     const Image &image,
+                                     const std::optional<DepthImage> &depth = std::nullopt)
+    {
+        topoloc_loop_keyframe raw = detail::filled(&topoloc_loop_keyframe_init);
+        raw.id = keyframe.id;
+        raw.timestamp = keyframe.timestamp;
+        raw.world_T_body = keyframe.world_T_body ? keyframe.world_T_body->data() : nullptr;
+        raw.body_T_camera = keyframe.body_T_camera ? keyframe.body_T_camera->data() : nullptr;
+        // Arrays a host filled anyway are passed on, so that the library refuses them with its
+        // message (an empty vector may still own storage: it passes as NULL).
+        raw.descriptor = keyframe.descriptor.empty() ? nullptr : keyframe.descriptor.data();
+        raw.descriptor_len = keyframe.descriptor.size();
+        raw.keypoint_count = keyframe.keypoints.size() / 2;
+        raw.keypoints = keyframe.keypoints.empty() ? nullptr : keyframe.keypoints.data();
+        raw.keypoint_descriptors =
+            keyframe.keypoint_descriptors.empty() ? nullptr : keyframe.keypoint_descriptors.data();
+        raw.camera_points =
+            keyframe.camera_points.empty() ? nullptr : keyframe.camera_points.data();
+        return add_image(describer, raw, image, depth);
+    }
+
+    /// `add_image` of a C keyframe record (start from `topoloc_loop_keyframe_default`; its
+    /// descriptor and keypoint fields stay NULL and 0). Same result and errors as `add_image`,
+    /// plus `_STRUCT_SIZE`.
+    [[nodiscard]] LoopHint add_image(KeyframeDescriber &describer,
+                                     const topoloc_loop_keyframe &keyframe, const Image &image,
+                                     const std::optional<DepthImage> &depth = std::nullopt)
+    {
+        topoloc_loop_hint raw = detail::filled(&topoloc_loop_hint_init);
+        check(topoloc_loop_detector_add_image(get(), describer.get(), &keyframe, &image,
+                                              depth ? &*depth : nullptr, &raw));
+        return from_raw(raw);
+    }
+
+    /// The loop candidates the last successful `add` or `add_image` verified (ABI 1.15), most
+    /// inliers first, accepted or not (keyframes erased since are left out): at most `max`. For
+    /// hosts that run their own check on several candidates (ORB-SLAM3 takes 3 loop and 3 merge
+    /// candidates). Replaced by the next `add` / `add_image`, kept by a failed one; empty before
+    /// the first. Throws `Error` (`TOPOLOC_ERR_NULL_ARGUMENT` when empty).
+    [[nodiscard]] std::vector<LoopCandidateCheck> candidates(std::size_t max = 8) const
+    {
+        const std::size_t held = size();
+        std::vector<LoopCandidateCheck> found(max < held ? max : held);
+        std::size_t count = 0;
+        check(topoloc_loop_detector_candidates(get(), found.data(), found.size(), &count));
+        found.resize(count);
+        return found;
     }
 
     /// The hints of earlier keyframes that the last `add` confirmed (ABI 1.10), oldest first:

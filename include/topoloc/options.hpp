@@ -11,7 +11,31 @@
 #include "../topoloc.h"
 #include "detail.hpp"
 
+#include <cstdint>
+#include <type_traits>
+
 namespace topoloc {
+
+/// Local features (ABI 1.15; the C `TOPOLOC_LOCAL_FEATURES_*` values of `topoloc_local_features`):
+/// which keypoints an image map stores for verification (`ImageMapOptions::local_features`) and
+/// a `KeyframeDescriber` extracts (`KeyframeDescriberOptions::local_features`). The C option
+/// fields take the C value: `to_c(LocalFeatures::XFeat)` or `TOPOLOC_LOCAL_FEATURES_XFEAT`. A
+/// library newer than this header may report a value not listed here.
+enum class LocalFeatures : uint32_t {
+    Orb = TOPOLOC_LOCAL_FEATURES_ORB,     ///< ORB (OpenCV), 32-byte binary descriptors.
+    XFeat = TOPOLOC_LOCAL_FEATURES_XFEAT, ///< XFeat (ONNX Runtime, the cache's export), 64-byte
+                                          ///< learned descriptors.
+    Cells = TOPOLOC_LOCAL_FEATURES_CELLS, ///< Dense cells of the describer's CNN, from the same
+                                          ///< forward pass (ONNX maps only).
+};
+static_assert(std::is_same_v<std::underlying_type_t<LocalFeatures>, topoloc_local_features>,
+              "LocalFeatures has the representation of topoloc_local_features");
+
+/// The C value of `features`, for the `local_features` fields of the C option structs.
+[[nodiscard]] constexpr topoloc_local_features to_c(LocalFeatures features) noexcept
+{
+    return static_cast<topoloc_local_features>(features);
+}
 
 /// Options of `Map::load` / `Map::from_memory` (the C struct). Start from
 /// `default_load_options()`; a value-initialised struct has `struct_size == 0` and is refused
@@ -24,7 +48,10 @@ using KeyframeOptions = topoloc_keyframe_options;
 
 /// How `Map::build_from_images` / `build_from_image_files` build a map (the C struct). Start
 /// from `default_image_map_options()`; see `topoloc_image_map_options` in topoloc.h for each
-/// field (e.g. `backend`, `dim`). The string fields are borrowed for the duration of the call.
+/// field (e.g. `backend`, `dim`; `pca_precision`, ABI 1.14; the keypoints stored per view for
+/// verification and loop hints, `verification_keypoints`, and their kind, `local_features` =
+/// `to_c(LocalFeatures::...)`, ABI 1.15). The string fields are borrowed for the duration of
+/// the call.
 using ImageMapOptions = topoloc_image_map_options;
 
 /// Parameters of `Graph::from_occupancy` (the C struct). Start from
@@ -43,6 +70,13 @@ using LocalizerOptions = topoloc_localizer_options;
 /// `default_describer_options()`; see `topoloc_describer_options` in topoloc.h for each field.
 /// The string fields are borrowed only during the constructor.
 using DescriberOptions = topoloc_describer_options;
+
+/// How a `KeyframeDescriber` is made (the C struct, ABI 1.15): its local features
+/// (`local_features` = `to_c(LocalFeatures::...)`, XFeat by default), the backend it accepts and
+/// where it finds its runtime files and models. Start from
+/// `default_keyframe_describer_options()`; see `topoloc_keyframe_describer_options` in topoloc.h
+/// for each field. The string fields are borrowed only during the constructor.
+using KeyframeDescriberOptions = topoloc_keyframe_describer_options;
 
 /// Loop detector parameters (the C struct). Start from `default_loop_options()`; see
 /// `topoloc_loop_options` in topoloc.h for each field, its default and its range (set the
@@ -91,6 +125,12 @@ using TrajectoryOptions = topoloc_trajectory_options;
 [[nodiscard]] inline DescriberOptions default_describer_options()
 {
     return detail::filled(&topoloc_describer_options_init);
+}
+
+/// Default keyframe describer options (`topoloc_keyframe_describer_options_default`, ABI 1.15).
+[[nodiscard]] inline KeyframeDescriberOptions default_keyframe_describer_options()
+{
+    return detail::filled(&topoloc_keyframe_describer_options_init);
 }
 
 /// Default loop detector options (`topoloc_loop_options_default`).

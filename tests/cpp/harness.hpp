@@ -1,5 +1,5 @@
 // Shared harness and fixtures of the C++ layer tests (test_raii.cpp, test_status.cpp,
-// test_loops.cpp, test_pose_fix.cpp, test_opencv.cpp): CHECK macros, a test registry, and small
+// test_loops.cpp, test_loop_images.cpp, test_pose_fix.cpp, test_opencv.cpp): CHECK macros, a test registry, and small
 // maps and images built from deterministic data. Include it after topoloc.hpp; every function is inline so that
 // each test program uses what it needs.
 #ifndef TOPOLOC_TESTS_CPP_HARNESS_HPP

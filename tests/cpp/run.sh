@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # C++ layer tests: builds tests/cpp/test_raii.cpp, test_status.cpp (the status table against the
-# library's), test_loops.cpp (loop closure), test_pose_fix.cpp (pose fixes) and
+# library's), test_loops.cpp (loop closure), test_loop_images.cpp (image keyframes; its learned
+# path needs the cache's models, required when CI is "true"), test_pose_fix.cpp (pose fixes) and
 # test_trajectory.cpp (trajectory metrics) against include/topoloc.hpp and the release library,
 # runs each normally and under ASan+UBSan (leak checking on); with OpenCV 4, builds and runs
 # tests/cpp/test_opencv.cpp against include/topoloc_opencv.hpp; checks that topoloc.hpp and
@@ -87,7 +88,7 @@ if ((${#opencv_cflags[@]})); then
 fi
 echo "ok"
 
-for test in test_raii test_status test_loops test_pose_fix test_trajectory; do
+for test in test_raii test_status test_loops test_loop_images test_pose_fix test_trajectory; do
     section "compile $test (plain)"
     "$cxx" "${cxxflags[@]}" -O1 "$here/$test.cpp" -o "$out/$test" "${ldflags[@]}"
 

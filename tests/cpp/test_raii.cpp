@@ -44,6 +44,8 @@ TEST(owners_are_move_only)
     static_assert(is_owner_v<topoloc::Localizer, topoloc_localizer, &topoloc_localizer_free>);
     static_assert(is_owner_v<topoloc::Graph, topoloc_graph, &topoloc_graph_free>);
     static_assert(is_owner_v<topoloc::Describer, topoloc_describer, &topoloc_describer_free>);
+    static_assert(is_owner_v<topoloc::KeyframeDescriber, topoloc_keyframe_describer,
+                             &topoloc_keyframe_describer_free>);
     static_assert(
         is_owner_v<topoloc::LoopDetector, topoloc_loop_detector, &topoloc_loop_detector_free>);
     // get() is capi().
