@@ -80,8 +80,7 @@ static void keyframe_describer_options_have_defaults_and_refuse_what_they_cannot
           options.xfeat_max_pixels == 160000 && options.threads == 1);
     CHECK_STATUS(topoloc_keyframe_describer_options_init(&options, 3), TOPOLOC_ERR_STRUCT_SIZE);
 
-    CHECK_ERROR(topoloc_keyframe_describer_new(world, NULL, &untouched),
-                TOPOLOC_ERR_NO_DESCRIBER);
+    CHECK_ERROR(topoloc_keyframe_describer_new(world, NULL, &untouched), TOPOLOC_ERR_NO_DESCRIBER);
     options.local_features = 99;
     CHECK_ERROR(topoloc_keyframe_describer_new(map, &options, &untouched),
                 TOPOLOC_ERR_INVALID_OPTION);
@@ -115,8 +114,8 @@ static void keyframe_describer_options_have_defaults_and_refuse_what_they_cannot
     topoloc_keyframe_describer_free(NULL);
 }
 
-static void image_keyframes_close_loops_with_ranked_candidates_and_errors_change_nothing(
-    const topoloc_map *map)
+static void
+image_keyframes_close_loops_with_ranked_candidates_and_errors_change_nothing(const topoloc_map *map)
 {
     topoloc_keyframe_describer_options options;
     topoloc_keyframe_describer *kd = NULL;
@@ -188,8 +187,7 @@ static void image_keyframes_close_loops_with_ranked_candidates_and_errors_change
     CHECK_STATUS(topoloc_loop_detector_add_image(det, kd, &k, &none, NULL, &hint),
                  TOPOLOC_ERR_INVALID_IMAGE);
     CHECK_NULL(topoloc_loop_detector_add_image(det, kd, &k, NULL, NULL, &hint), "image");
-    CHECK_NULL(topoloc_loop_detector_add_image(det, NULL, &k, &image, NULL, &hint),
-               "describer");
+    CHECK_NULL(topoloc_loop_detector_add_image(det, NULL, &k, &image, NULL, &hint), "describer");
     /* Depth needs intrinsics. */
     depth.values = depth_px;
     depth.values_len = IMG_PIXELS;
@@ -285,7 +283,8 @@ static void the_learned_path_closes_loops_with_poses_against_an_xfeat_map(void)
                  * a zero translation (rotation only) or a unit direction. */
                 const double *T = hint.matched_T_query;
                 double t = sqrt(T[3] * T[3] + T[7] * T[7] + T[11] * T[11]);
-                double turn = acos(fmin(1.0, (T[0] + T[5] + T[10] - 1.0) / 2.0)) * 57.29577951308232;
+                double turn =
+                    acos(fmin(1.0, (T[0] + T[5] + T[10] - 1.0) / 2.0)) * 57.29577951308232;
                 CHECK(!hint.scale_known && (t == 0.0 || fabs(t - 1.0) < 1e-6));
                 CHECK(turn < 2.0);
                 rotation_only += t == 0.0;
