@@ -17,7 +17,7 @@ set -euo pipefail
 
 HERE="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
 usage() {
-  sed -n '2,16p' "${BASH_SOURCE[0]}" | sed 's/^# \{0,1\}//' >&2
+  sed -n '2,15p' "${BASH_SOURCE[0]}" | sed 's/^# \{0,1\}//' >&2
   exit 2
 }
 die() { echo "run.sh: $*" >&2; exit 1; }
@@ -91,9 +91,10 @@ build_install DBoW2
 # ExternalProject download is never used) and installs the headers there.
 configure "$SRC_DIR/DLoopDetector" DLoopDetector -DCMAKE_INSTALL_PREFIX="$PREFIX" \
   -DCMAKE_PREFIX_PATH="$PREFIX" -DBUILD_DemoBRIEF=OFF
-grep -q "DLib library found" "$BUILD/DLoopDetector.cmake.log" \
-  && grep -q "DBoW2 library found" "$BUILD/DLoopDetector.cmake.log" \
-  || die "DLoopDetector's CMake did not find DLib/DBoW2 in $PREFIX (it would download them)"
+if ! grep -q "DLib library found" "$BUILD/DLoopDetector.cmake.log" ||
+  ! grep -q "DBoW2 library found" "$BUILD/DLoopDetector.cmake.log"; then
+  die "DLoopDetector's CMake did not find DLib/DBoW2 in $PREFIX (it would download them)"
+fi
 build_install DLoopDetector
 configure "$HERE" runner -DDBOW2_DEPS_PREFIX="$PREFIX"
 make -C "$BUILD/runner" -j"$JOBS" >"$BUILD/runner.make.log" 2>&1 \
