@@ -1,15 +1,23 @@
 #!/usr/bin/env python3
-"""Quick judgement of DLoopDetector's loops (run.sh output) against KITTI ground truth.
+"""Judges DLoopDetector's loops (run.sh output), and topoloc's, against KITTI ground truth.
 
     judge.py OUT_DIR SEQUENCE [--radius-m 10] [--max-angle-deg 45] [--exclude-seconds 10]
+             [--topoloc HINTS.csv --topoloc-json REPORT.json]
 
 Reads OUT_DIR/dloop.csv (and OUT_DIR/dloop-alpha-*.csv when present), SEQUENCE/times.txt and
 SEQUENCE/groundtruth_tum.txt (TUM lines `t tx ty tz qx qy qz qw`, matched to frames by
 timestamp). A detected loop (status LOOP_DETECTED) is correct when the two frames' ground-truth
 cameras are within the radius and their orientations within the angle. Recall is over the
 keyframes that could close a loop: those with an earlier keyframe at least --exclude-seconds
-older within the radius and the angle (recall_any_heading: within the radius alone). Prints JSON: hints, precision, recall, median ms, and
-over the alpha sweep each alpha's figures and the recall at 100% precision.
+older within the radius and the angle (recall_any_heading: within the radius alone). Prints JSON:
+hints, precision, recall, median ms, and over the alpha sweep each alpha's figures and the recall
+at 100% precision.
+
+With --topoloc, the hints file of `topoloc loops --out` on the same sequence at the same keyframe
+rate is judged by the same code: its keyframe indices are mapped to frames through dloop.csv
+(run.sh keyframes as topoloc does; the counts must agree), its recall at 100% precision is swept
+over the hints' confidence, and its median time per keyframe is read from --topoloc-json (the
+report of `topoloc loops --json`).
 """
 import argparse
 import csv
@@ -106,6 +114,42 @@ def judge(rows, times, pos, quat, args):
     }
 
 
+def judge_topoloc(hints_path, report_path, keyframe_rows, times, pos, quat, args):
+    """topoloc's hints judged as DLoopDetector's rows are: the hint file's keyframe indices are
+    the positions in `keyframe_rows` (dloop.csv, same keyframing)."""
+    with open(report_path) as f:
+        report = json.load(f)
+    if report["keyframes"] != len(keyframe_rows):
+        sys.exit(
+            f"judge.py: topoloc kept {report['keyframes']} keyframes, run.sh "
+            f"{len(keyframe_rows)}: run both at the same --keyframe-rate"
+        )
+    hints = {}
+    with open(hints_path) as f:
+        for r in csv.DictReader(f):
+            hints[int(r["query_index"])] = (int(r["matched_index"]), float(r["confidence"]))
+    rows = [
+        {
+            "frame": k["frame"],
+            "status": "LOOP_DETECTED" if i in hints else "NONE",
+            "matched_index": hints[i][0] if i in hints else "",
+            "ms": report["keyframe_ms_median"],
+        }
+        for i, k in enumerate(keyframe_rows)
+    ]
+    out = judge(rows, times, pos, quat, args)
+    out.pop("statuses")
+    # Recall at 100% precision over the confidence: the best recall among thresholds that keep
+    # only correct hints.
+    judged = [judge(
+        [dict(r, status="NONE") if r["status"] == "LOOP_DETECTED" and hints[i][1] < c else r
+         for i, r in enumerate(rows)], times, pos, quat, args)
+        for c in sorted({c for _, c in hints.values()})]
+    full = [j["recall"] or 0.0 for j in judged if j["hints"] and j["correct"] == j["hints"]]
+    out["recall_at_full_precision"] = max(full) if full else 0.0
+    return out
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("out_dir")
@@ -113,7 +157,11 @@ def main():
     ap.add_argument("--radius-m", type=float, default=10.0)
     ap.add_argument("--max-angle-deg", type=float, default=45.0)
     ap.add_argument("--exclude-seconds", type=float, default=10.0)
+    ap.add_argument("--topoloc", help="hints CSV of `topoloc loops --out` on the same keyframes")
+    ap.add_argument("--topoloc-json", help="report of that run (`topoloc loops --json`)")
     args = ap.parse_args()
+    if bool(args.topoloc) != bool(args.topoloc_json):
+        sys.exit("judge.py: --topoloc and --topoloc-json go together")
 
     times = read_times(os.path.join(args.sequence, "times.txt"))
     pos, quat = read_truth(os.path.join(args.sequence, "groundtruth_tum.txt"), times)
@@ -124,7 +172,14 @@ def main():
     }
     main_csv = os.path.join(args.out_dir, "dloop.csv")
     if os.path.exists(main_csv):
-        out.update(judge(read_run(main_csv), times, pos, quat, args))
+        keyframe_rows = read_run(main_csv)
+        out.update(judge(keyframe_rows, times, pos, quat, args))
+        if args.topoloc:
+            out["topoloc"] = judge_topoloc(
+                args.topoloc, args.topoloc_json, keyframe_rows, times, pos, quat, args
+            )
+    elif args.topoloc:
+        sys.exit(f"judge.py: --topoloc needs {main_csv} for the keyframes' frames")
     sweep = []
     for path in glob.glob(os.path.join(args.out_dir, "dloop-alpha-*.csv")):
         m = re.search(r"dloop-alpha-(.+)\.csv$", path)

@@ -699,7 +699,6 @@ pub(crate) fn read_intrinsics(path: &Path) -> Result<PinholeCamera> {
     Ok(camera)
 }
 
-/// The hints file: header, then one row per accepted hint.
 /// Appends keyframe `index`'s decision row (see `--decisions`).
 fn write_decision(csv: &mut String, index: usize, hint: Option<&LoopHint>, first_id: u64) {
     let Some(hint) = hint else {
@@ -725,6 +724,7 @@ fn write_decision(csv: &mut String, index: usize, hint: Option<&LoopHint>, first
     );
 }
 
+/// The hints file: header, then one row per accepted hint.
 fn write_csv(path: &Path, hints: &[(usize, LoopHint)], first_id: u64) -> Result<()> {
     let mut csv = String::from(
         "query_index,matched_index,inliers,confidence,scale_known,tx,ty,tz,qx,qy,qz,qw\n",
