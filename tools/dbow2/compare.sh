@@ -19,13 +19,10 @@ set -euo pipefail
 
 HERE="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
 ROOT="$(cd "$HERE/../.." && pwd)"
-usage() {
-  sed -n '2,18p' "${BASH_SOURCE[0]}" | sed 's/^# \{0,1\}//' >&2
-  exit 2
-}
-die() { echo "compare.sh: $*" >&2; exit 1; }
+# shellcheck source=tools/dbow2/common.sh
+source "$HERE/common.sh"
 
-[[ $# -ge 3 ]] || usage
+[[ $# -ge 3 ]] || usage 18
 SRC_DIR="$1" SEQUENCE="$2" OUT_DIR="$3"
 shift 3
 TOPOLOC="$ROOT/target/release/topoloc"
@@ -38,7 +35,7 @@ while [[ $# -gt 0 ]]; do
     --rates)
       [[ $# -ge 2 ]] || die "--rates needs a list"
       RATES="$2"; shift 2 ;;
-    -h|--help) usage ;;
+    -h|--help) usage 18 ;;
     *) die "unknown option '$1' (see --help)" ;;
   esac
 done

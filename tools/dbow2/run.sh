@@ -16,13 +16,10 @@
 set -euo pipefail
 
 HERE="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
-usage() {
-  sed -n '2,15p' "${BASH_SOURCE[0]}" | sed 's/^# \{0,1\}//' >&2
-  exit 2
-}
-die() { echo "run.sh: $*" >&2; exit 1; }
+# shellcheck source=tools/dbow2/common.sh
+source "$HERE/common.sh"
 
-[[ $# -ge 3 ]] || usage
+[[ $# -ge 3 ]] || usage 15
 SRC_DIR="$1" SEQUENCE="$2" OUT_DIR="$3"
 shift 3
 RUNNER_ARGS=()
@@ -40,7 +37,7 @@ while [[ $# -gt 0 ]]; do
     --sweep-alphas)
       [[ $# -ge 2 ]] || die "--sweep-alphas needs a comma-separated list"
       SWEEP="$2"; shift 2 ;;
-    -h|--help) usage ;;
+    -h|--help) usage 15 ;;
     *) die "unknown option '$1' (see --help)" ;;
   esac
 done
