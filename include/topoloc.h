@@ -875,9 +875,16 @@ typedef struct topoloc_image_map_options {
    */
   uint32_t verification_keypoints;
   /**
-   * Which local features those keypoints are: a `TOPOLOC_LOCAL_FEATURES_*` value.
+   * Which local features those keypoints are: a `TOPOLOC_LOCAL_FEATURES_*` value; XFeat by
+   * default (its model from `xfeat_model_path`), `_CELLS` needs the ONNX backend.
    */
   topoloc_local_features local_features;
+  /**
+   * XFeat model file, when `local_features` is XFeat; NULL or "" = the cache's export
+   * (scripts/setup-models.sh). A missing model fails the build with
+   * `TOPOLOC_ERR_BACKEND_UNAVAILABLE`.
+   */
+  const char *xfeat_model_path;
 } topoloc_image_map_options;
 
 /**

@@ -37,3 +37,23 @@ pub enum VisionError {
     #[error("OpenCV: {0}")]
     OpenCv(#[from] opencv::Error),
 }
+
+impl VisionError {
+    /// The same error again (same variant, same message): for an error that several workers
+    /// report, so that each keeps its kind (a missing model stays `BackendUnavailable`).
+    pub fn duplicate(&self) -> Self {
+        match self {
+            Self::InvalidImage(m) => Self::InvalidImage(m.clone()),
+            Self::InvalidArgument(m) => Self::InvalidArgument(m.clone()),
+            Self::BackendUnavailable { what, tried, hint } => Self::BackendUnavailable {
+                what: what.clone(),
+                tried: tried.clone(),
+                hint: hint.clone(),
+            },
+            Self::Model(m) => Self::Model(m.clone()),
+            Self::Uninformative(m) => Self::Uninformative(m.clone()),
+            Self::Mismatch(m) => Self::Mismatch(m.clone()),
+            Self::OpenCv(e) => Self::OpenCv(opencv::Error::new(e.code, e.message.clone())),
+        }
+    }
+}

@@ -10,7 +10,7 @@ use nalgebra::{Isometry3, Point3, Vector3};
 use std::sync::Arc;
 use topoloc::build::{
     build_from_images, BuildStage, ImageLayout, ImageMapError, ImageMapOptions, ImageSource,
-    PlaceLayout,
+    PlaceLayout, DEFAULT_MAP_FEATURES,
 };
 use topoloc::describe::onnx::{OnnxOptions, DEFAULT_MODEL_FILE};
 use topoloc::describe::vlad::VladOptions;
@@ -18,6 +18,7 @@ use topoloc::describe::{BackendConfig, BackendKind, BackendSpec, Describer, Desc
 use topoloc::errors::VisionError;
 use topoloc::image::{ImageView, PixelFormat};
 use topoloc::map::MapError;
+use topoloc::verify::FeatureKind;
 use topoloc::{Frame, LoadOptions, LocalizeError, Localizer, LocalizerOptions, Map, Mode};
 
 /// A bad image: its name, the view, and the error it must get.
@@ -257,6 +258,33 @@ fn a_corrupt_or_missing_model_file_is_a_typed_error() {
             Err(e) => panic!("{}: unexpected error {e}", model.display()),
             Ok(_) => panic!("{}: expected an error", model.display()),
         }
+    }
+}
+
+#[test]
+fn a_missing_xfeat_model_is_backend_unavailable_naming_its_path() {
+    // XFeat is the default local features: a build that cannot load its model says which file
+    // was tried, with the kind a host can act on (not a generic model error).
+    let model = tempfile::tempdir().unwrap().path().join("xfeat.onnx");
+    let sources: Vec<Vec<u8>> = (0..3).map(place_image).collect();
+    let sources: Vec<ImageSource> = sources
+        .iter()
+        .map(|d| ImageSource::Pixels(gray(d)))
+        .collect();
+    let mut options = ImageMapOptions {
+        backend: BackendConfig::Vlad(VladOptions::default()),
+        threads: 2,
+        ..ImageMapOptions::default()
+    };
+    assert_eq!(options.features, DEFAULT_MAP_FEATURES);
+    assert_eq!(DEFAULT_MAP_FEATURES, FeatureKind::XFeat);
+    options.xfeat.model = Some(model.clone());
+    match build_from_images(&sources, ImageLayout::Sequence, &options, &mut no_progress) {
+        Err(ImageMapError::Describe(VisionError::BackendUnavailable { tried, .. })) => {
+            assert!(tried.contains(&model), "the path tried is named: {tried:?}")
+        }
+        Err(e) => panic!("unexpected error {e}"),
+        Ok(_) => panic!("expected an error"),
     }
 }
 

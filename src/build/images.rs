@@ -44,7 +44,7 @@ pub struct ImageMapOptions {
     /// [`MAX_KEYPOINTS`]; 0 stores none. Default [`DEFAULT_KEYPOINTS`] (about 20 KB per view
     /// of ORB).
     pub keypoints: usize,
-    /// Which local features those keypoints are. Default ORB.
+    /// Which local features those keypoints are. Default [`DEFAULT_MAP_FEATURES`].
     pub features: FeatureKind,
     /// Where the XFeat network is, when `features` is XFeat.
     pub xfeat: XFeatOptions,
@@ -59,11 +59,16 @@ impl Default for ImageMapOptions {
             keyframes: KeyframeOptions::default(),
             threads: 0,
             keypoints: DEFAULT_KEYPOINTS,
-            features: FeatureKind::Orb,
+            features: DEFAULT_MAP_FEATURES,
             xfeat: XFeatOptions::default(),
         }
     }
 }
+
+/// The local features a map built from images stores by default: XFeat, the kind that verified
+/// best on Gardens Point's second session (BENCHMARKS.md says which data chose it). Its model
+/// comes from `scripts/setup-models.sh`; a build without it fails naming what to install.
+pub const DEFAULT_MAP_FEATURES: FeatureKind = FeatureKind::XFeat;
 
 /// The most describing threads a build accepts ([`ImageMapOptions::threads`]).
 pub const MAX_BUILD_THREADS: usize = 256;
@@ -408,9 +413,9 @@ fn describe_in_parallel(
                         if cancelled.load(Ordering::Relaxed) {
                             return Err(ImageMapError::Cancelled);
                         }
-                        let (extractor, detector) = workers.as_mut().map_err(|e| {
-                            ImageMapError::Describe(VisionError::Model(e.to_string()))
-                        })?;
+                        let (extractor, detector) = workers
+                            .as_mut()
+                            .map_err(|e| ImageMapError::Describe(e.duplicate()))?;
                         let result = describe_one(extractor, detector.as_mut(), cells, source)
                             .map_err(|error| ImageMapError::Image {
                                 index,

@@ -9,7 +9,7 @@ mod tum;
 
 pub use images::{
     build_from_images, BuildStage, ImageLayout, ImageMapError, ImageMapOptions, ImageMapReport,
-    ImageSource, PlaceLayout,
+    ImageSource, PlaceLayout, DEFAULT_MAP_FEATURES,
 };
 pub use keyframes::{from_keyframes, Keyframe, KeyframeOptions};
 pub use tum::{parse_tum, read_tum, TimedPose};

@@ -193,8 +193,13 @@ pub struct topoloc_image_map_options {
     // ABI 1.15 (topoloc 0.1): local features.
     /// Keypoints stored per view for geometric verification and loop hints (0: none).
     pub verification_keypoints: u32,
-    /// Which local features those keypoints are: a `TOPOLOC_LOCAL_FEATURES_*` value.
+    /// Which local features those keypoints are: a `TOPOLOC_LOCAL_FEATURES_*` value; XFeat by
+    /// default (its model from `xfeat_model_path`), `_CELLS` needs the ONNX backend.
     pub local_features: topoloc_local_features,
+    /// XFeat model file, when `local_features` is XFeat; NULL or "" = the cache's export
+    /// (scripts/setup-models.sh). A missing model fails the build with
+    /// `TOPOLOC_ERR_BACKEND_UNAVAILABLE`.
+    pub xfeat_model_path: *const c_char,
 }
 
 /// Local features: which keypoints a map stores or a keyframe describer extracts.
@@ -251,6 +256,7 @@ versioned! {
             pca_precision: TOPOLOC_PCA_I8,
             verification_keypoints: ImageMapOptions::default().keypoints as u32,
             local_features: feature_code(ImageMapOptions::default().features),
+            xfeat_model_path: std::ptr::null(),
         }
     }
 }
@@ -348,6 +354,8 @@ fn image_map_options(
         features: feature_kind(o.local_features, "options.local_features")?,
         ..ImageMapOptions::default()
     };
+    built.xfeat.model =
+        optional_string(o.xfeat_model_path, "options.xfeat_model_path")?.map(Into::into);
     built.keyframes.place_spacing_m = o.place_spacing_m;
     built.keyframes.neighbour_radius_m = 1.5 * o.place_spacing_m;
     let poses = optional_string(o.poses_tum_path, "options.poses_tum_path")?;

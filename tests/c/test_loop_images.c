@@ -251,7 +251,8 @@ static void the_learned_path_closes_loops_with_poses_against_an_xfeat_map(void)
     }
     CHECK_OK(topoloc_image_map_options_default(&options));
     CHECK(options.verification_keypoints == 500 &&
-          options.local_features == TOPOLOC_LOCAL_FEATURES_ORB);
+          options.local_features == TOPOLOC_LOCAL_FEATURES_XFEAT &&
+          options.xfeat_model_path == NULL);
     options.backend = TOPOLOC_BACKEND_ONNX;
     options.dim = XPLACES - 1;
     options.threads = 1;
@@ -260,6 +261,12 @@ static void the_learned_path_closes_loops_with_poses_against_an_xfeat_map(void)
                  TOPOLOC_ERR_INVALID_OPTION);
     options.local_features = TOPOLOC_LOCAL_FEATURES_XFEAT;
     options.verification_keypoints = 256;
+    options.xfeat_model_path = "/nonexistent/xfeat.onnx";
+    CHECK_STATUS(topoloc_map_build_from_images(images, XPLACES, &options, NULL, NULL, &map),
+                 TOPOLOC_ERR_BACKEND_UNAVAILABLE);
+    CHECK(map == NULL);
+    CHECK_MESSAGE_HAS("/nonexistent/xfeat.onnx");
+    options.xfeat_model_path = xfeat;
     CHECK_OK(topoloc_map_build_from_images(images, XPLACES, &options, NULL, NULL, &map));
     if (map == NULL) {
         return;

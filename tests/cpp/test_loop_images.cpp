@@ -116,10 +116,12 @@ TEST(local_features_and_option_defaults)
     CHECK_EQ(options.xfeat_max_pixels, uint32_t{160000});
     CHECK_EQ(options.threads, uint32_t{1});
 
-    // Image maps store 500 ORB keypoints per view unless told otherwise.
+    // Image maps store 500 XFeat keypoints per view unless told otherwise, the model from the
+    // cache.
     const topoloc::ImageMapOptions map_options = topoloc::default_image_map_options();
     CHECK_EQ(map_options.verification_keypoints, uint32_t{500});
-    CHECK(map_options.local_features == TOPOLOC_LOCAL_FEATURES_ORB);
+    CHECK(map_options.local_features == TOPOLOC_LOCAL_FEATURES_XFEAT &&
+          map_options.xfeat_model_path == nullptr);
 
     // depth_view borrows what it is given.
     const std::vector<uint16_t> values(12, 1000);

@@ -52,7 +52,7 @@ pub struct BuildMapArgs {
     #[arg(long, default_value_t = topoloc::verify::DEFAULT_KEYPOINTS)]
     pub verification_keypoints: usize,
     /// Which local features those keypoints are (xfeat runs the cache's XFeat export).
-    #[arg(long, value_enum, default_value_t = LocalFeatures::Orb)]
+    #[arg(long, value_enum, default_value_t = LocalFeatures::from(topoloc::build::DEFAULT_MAP_FEATURES))]
     pub local_features: LocalFeatures,
     /// Output map file.
     #[arg(long)]
