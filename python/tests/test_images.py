@@ -72,7 +72,9 @@ def images() -> List[np.ndarray]:
 
 @pytest.fixture(scope="module")
 def vlad_map(images):
-    m = topoloc.Map.build_from_images(images, backend="vlad-orb", threads=2)
+    # No learned weights at all: VLAD of ORB, with ORB keypoints for verification (the default
+    # local features, XFeat, need its network).
+    m = topoloc.Map.build_from_images(images, backend="vlad-orb", threads=2, local_features="orb")
     yield m
     m.close()
 

@@ -20,6 +20,7 @@ from ctypes import (
     c_float,
     c_size_t,
     c_uint8,
+    c_uint16,
     c_uint32,
     c_uint64,
     c_void_p,
@@ -90,6 +91,7 @@ CONSTANT_GROUPS = {
     ],
     "STAGE": ["STAGE_DESCRIBING", "STAGE_FITTING"],
     "NODE": ["NODE_END", "NODE_CORNER", "NODE_BRANCH", "NODE_INTERMEDIATE"],
+    "LOCAL_FEATURES": ["LOCAL_FEATURES_ORB", "LOCAL_FEATURES_XFEAT", "LOCAL_FEATURES_CELLS"],
     "GATE": [
         "GATE_ACCEPTED",
         "GATE_NO_CANDIDATE",
@@ -159,6 +161,7 @@ DEFAULT_FUNCTIONS = {
     "topoloc_image_map_options": "topoloc_image_map_options_init",
     "topoloc_skeleton_options": "topoloc_skeleton_options_init",
     "topoloc_describer_options": "topoloc_describer_options_init",
+    "topoloc_keyframe_describer_options": "topoloc_keyframe_describer_options_init",
     "topoloc_loop_options": "topoloc_loop_options_init",
     "topoloc_loop_keyframe": "topoloc_loop_keyframe_init",
     "topoloc_loop_hint": "topoloc_loop_hint_init",
@@ -173,6 +176,8 @@ NO_DEFAULT_FUNCTION = {
     "topoloc_candidate",
     "topoloc_image",
     "topoloc_loop_candidate",
+    "topoloc_loop_candidate_check",
+    "topoloc_depth_image",
     "topoloc_error_stats",
 }
 
@@ -314,6 +319,7 @@ def _ctype_for(c_type: str):
         "bool": c_bool,
         "uint64_t": c_uint64,
         "uint32_t": c_uint32,
+        "uint16_t": c_uint16,
         "uint8_t": c_uint8,
         "float": c_float,
         "double": c_double,
@@ -707,7 +713,7 @@ def test_every_library_status_has_a_class_and_every_class_a_status():
 
 
 def test_abi_minor_version():
-    assert topoloc.abi_version_minor() >= _lib.ABI_VERSION_MINOR == 14
+    assert topoloc.abi_version_minor() >= _lib.ABI_VERSION_MINOR == 15
 
 
 EXPECTED_CLASSES = {

@@ -124,7 +124,8 @@ MODULE_LAYERS = [
     {"_convert"},
     {"_options", "_handles", "_logging"},
     {"_map", "_skeleton", "_trajectory"},
-    {"_localizer", "_describer", "_loops"},
+    {"_localizer", "_describer", "_keyframes"},
+    {"_loops"},
     {"__init__"},
 ]
 

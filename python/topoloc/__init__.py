@@ -40,7 +40,10 @@ keyframe, with the relative pose when camera intrinsics are given.
 
 A :class:`Describer` (ABI 1.12) turns images into the global descriptors of a map built from
 images, for a loop detector made for that map's descriptors (``LoopDetector(m.descriptor_kind,
-m.descriptor_model, m.dim)``).
+m.descriptor_model, m.dim)``). A :class:`KeyframeDescriber` (ABI 1.15) also extracts the
+image's local features (XFeat by default, :class:`LocalFeatures`) in the same pass:
+:meth:`LoopDetector.add_image` takes keyframes as images (and depth), and
+:meth:`LoopDetector.candidates` lists the verified candidates (:class:`LoopCandidateCheck`).
 
 Trajectory metrics (ABI 1.11): :func:`evaluate_trajectory` (TUM rows) and
 :func:`evaluate_trajectory_files` (TUM, KITTI, EuRoC) give ATE, ARE, RPE and R_traj of an
@@ -93,6 +96,7 @@ from ._errors import (
     UnsupportedVersionError,
     ZeroDescriptorError,
 )
+from ._keyframes import KeyframeDescriber, LocalFeatures, LoopCandidateCheck
 from ._lib import (
     ABI_VERSION,
     MODE_FILTER,
@@ -153,6 +157,9 @@ __all__ = [
     "loop_options_default",
     "LoopHint",
     "LoopCandidate",
+    "LoopCandidateCheck",
+    "KeyframeDescriber",
+    "LocalFeatures",
     "Gate",
     # trajectory metrics (ABI 1.11)
     "evaluate_trajectory",

@@ -34,6 +34,7 @@ from ctypes import (
     c_float,
     c_size_t,
     c_uint8,
+    c_uint16,
     c_uint32,
     c_uint64,
     c_void_p,
@@ -46,7 +47,7 @@ ABI_VERSION = 1
 
 #: ABI minor version these bindings were written for (``TOPOLOC_ABI_VERSION_MINOR``): they use
 #: items up to "ABI 1.N" of the header.
-ABI_VERSION_MINOR = 14
+ABI_VERSION_MINOR = 15
 
 #: Environment variable naming the shared library to load.
 ENV_VAR = "TOPOLOC_LIBRARY"
@@ -92,6 +93,11 @@ GATE_TOO_FEW_INLIERS = 2
 GATE_INCONSISTENT = 3
 GATE_NO_POSE = 4
 GATE_ODOMETRY = 5
+
+#: ``TOPOLOC_LOCAL_FEATURES_*`` (ABI 1.15): local features of image maps and keyframe describers.
+LOCAL_FEATURES_ORB = 1
+LOCAL_FEATURES_XFEAT = 2
+LOCAL_FEATURES_CELLS = 3
 
 #: ``TOPOLOC_ALIGN_*`` (ABI 1.11): how a trajectory estimate is aligned to its reference.
 ALIGN_NONE = 0
@@ -170,6 +176,13 @@ class topoloc_describer(Structure):
 DescriberPtr = POINTER(topoloc_describer)
 
 
+class topoloc_keyframe_describer(Structure):
+    """Opaque ``topoloc_keyframe_describer`` (ABI 1.15)."""
+
+
+KeyframeDescriberPtr = POINTER(topoloc_keyframe_describer)
+
+
 class topoloc_view_attributes(Structure):
     _fields_ = [
         ("struct_size", c_size_t),
@@ -216,6 +229,9 @@ class topoloc_image_map_options(Structure):
         ("poses_tum_path", c_char_p),
         ("place_spacing_m", c_double),
         ("pca_precision", c_uint32),  # ABI 1.14
+        ("verification_keypoints", c_uint32),  # ABI 1.15
+        ("local_features", c_uint32),
+        ("xfeat_model_path", c_char_p),
     ]
 
 
@@ -419,6 +435,37 @@ class topoloc_loop_candidate(Structure):
     ]
 
 
+class topoloc_keyframe_describer_options(Structure):
+    _fields_ = [
+        ("struct_size", c_size_t),
+        ("local_features", c_uint32),
+        ("backend", c_uint32),
+        ("onnx_model_path", c_char_p),
+        ("onnx_runtime_path", c_char_p),
+        ("xfeat_model_path", c_char_p),
+        ("xfeat_max_pixels", c_uint32),
+        ("threads", c_uint32),
+    ]
+
+
+class topoloc_depth_image(Structure):
+    _fields_ = [
+        ("values", POINTER(c_uint16)),
+        ("values_len", c_size_t),
+        ("units_per_metre", c_double),
+    ]
+
+
+class topoloc_loop_candidate_check(Structure):
+    _fields_ = [
+        ("keyframe_id", c_uint64),
+        ("place", c_uint32),
+        ("similarity", c_float),
+        ("inliers", c_uint32),
+        ("confidence", c_float),
+    ]
+
+
 class topoloc_describer_options(Structure):
     _fields_ = [
         ("struct_size", c_size_t),
@@ -483,6 +530,9 @@ STRUCTS = {
         topoloc_view_info,
         topoloc_skeleton_options,
         topoloc_describer_options,
+        topoloc_keyframe_describer_options,
+        topoloc_depth_image,
+        topoloc_loop_candidate_check,
         topoloc_loop_options,
         topoloc_loop_keyframe,
         topoloc_loop_hint,
@@ -503,6 +553,7 @@ HANDLES = {
         topoloc_graph,
         topoloc_loop_detector,
         topoloc_describer,
+        topoloc_keyframe_describer,
     )
 }
 
@@ -663,6 +714,35 @@ SIGNATURES = {
     "topoloc_loop_detector_confirmed": (
         status_t,
         [LoopDetectorPtr, c_size_t, _p(topoloc_loop_hint)],
+    ),
+    # Image keyframes and ranked candidates (ABI 1.15)
+    "topoloc_keyframe_describer_options_init": (
+        status_t,
+        [_p(topoloc_keyframe_describer_options), c_size_t],
+    ),
+    "topoloc_keyframe_describer_new": (
+        status_t,
+        [MapPtr, _p(topoloc_keyframe_describer_options), _p(KeyframeDescriberPtr)],
+    ),
+    "topoloc_keyframe_describer_free": (None, [KeyframeDescriberPtr]),
+    "topoloc_keyframe_describer_local_features": (
+        status_t,
+        [KeyframeDescriberPtr, _p(c_uint32)],
+    ),
+    "topoloc_loop_detector_add_image": (
+        status_t,
+        [
+            LoopDetectorPtr,
+            KeyframeDescriberPtr,
+            _p(topoloc_loop_keyframe),
+            _p(topoloc_image),
+            _p(topoloc_depth_image),
+            _p(topoloc_loop_hint),
+        ],
+    ),
+    "topoloc_loop_detector_candidates": (
+        status_t,
+        [LoopDetectorPtr, _p(topoloc_loop_candidate_check), c_size_t, _p(c_size_t)],
     ),
     # Trajectory metrics (ABI 1.11)
     "topoloc_trajectory_options_init": (status_t, [_p(topoloc_trajectory_options), c_size_t]),

@@ -1,5 +1,5 @@
-"""Loop closure (ABI 1.5; mirrors ``src/ffi/loops.rs``): :class:`LoopDetector`, its options,
-:class:`LoopHint`, :class:`LoopCandidate` and :class:`Gate`.
+"""Loop closure (ABI 1.5; mirrors ``src/ffi/loops.rs``, image keyframes ``src/ffi/loop_images.rs``):
+:class:`LoopDetector`, its options, :class:`LoopHint`, :class:`LoopCandidate` and :class:`Gate`.
 """
 
 from __future__ import annotations
@@ -20,6 +20,7 @@ from ._convert import (
     _f32_ptr,
     _f64_ptr,
     _from_struct,
+    _image,
     _keypoint_array,
     _matrix,
     _out_call,
@@ -32,6 +33,7 @@ from ._convert import (
 )
 from ._errors import InvalidArgumentError, InvalidOptionError, check
 from ._handles import _SingleThreaded
+from ._keyframes import KeyframeDescriber, LoopCandidateCheck, _depth_image, _describer_handle
 from ._lib import lib
 from ._map import Map, _map_handle
 from ._options import OptionTable, defaults, flag, real, unsigned, unsigned64
@@ -308,29 +310,111 @@ class LoopDetector(_SingleThreaded):
         camera = None if body_T_camera is None else _pose(body_T_camera, "body_T_camera")
 
         # The arrays (locals, alive until the call returns) hold what the keyframe points to.
+        fields = {
+            "id": kid,
+            "timestamp": ts,
+            "descriptor": _f32_ptr(q),
+            "descriptor_len": q.size,
+            "world_T_body": None if body is None else _f64_ptr(body),
+            "body_T_camera": None if camera is None else _f64_ptr(camera),
+            "keypoint_count": n,
+            "keypoints": None if points is None else _f32_ptr(points),
+            "keypoint_descriptors": None if descriptors is None else _u8_ptr(descriptors),
+            "camera_points": None if scene is None else _f32_ptr(scene),
+        }
         with self._using("add") as h:
-            kf, hint = self._keyframe, self._hint
-            kf.struct_size = ctypes.sizeof(_lib.topoloc_loop_keyframe)
-            kf.id = kid
-            kf.timestamp = ts
-            kf.descriptor = _f32_ptr(q)
-            kf.descriptor_len = q.size
-            kf.world_T_body = None if body is None else _f64_ptr(body)
-            kf.body_T_camera = None if camera is None else _f64_ptr(camera)
-            kf.keypoint_count = n
-            kf.keypoints = None if points is None else _f32_ptr(points)
-            kf.keypoint_descriptors = None if descriptors is None else _u8_ptr(descriptors)
-            kf.camera_points = None if scene is None else _f32_ptr(scene)
-            hint.struct_size = ctypes.sizeof(_lib.topoloc_loop_hint)
-            try:
-                check(lib.topoloc_loop_detector_add(h, byref(kf), byref(hint)))
-            finally:
-                kf.descriptor = None
-                kf.descriptor_len = 0
-                kf.world_T_body = kf.body_T_camera = None
-                kf.keypoint_count = 0
-                kf.keypoints = kf.keypoint_descriptors = kf.camera_points = None
-            return _loop_hint(hint)
+            return self._submit(fields, lambda kf, hint: lib.topoloc_loop_detector_add(h, kf, hint))
+
+    def add_image(
+        self,
+        describer: KeyframeDescriber,
+        id: int,
+        timestamp: float,
+        image: ArrayLike,
+        *,
+        pixel_format: Optional[str] = None,
+        depth: Optional[ArrayLike] = None,
+        depth_units_per_metre: Optional[float] = None,
+        world_T_body: Optional[ArrayLike] = None,
+        body_T_camera: Optional[ArrayLike] = None,
+    ) -> LoopHint:
+        """Adds keyframe ``id`` given as a camera image (ABI 1.15) and returns its
+        :class:`LoopHint`, as :meth:`add` does: ``describer`` (a :class:`KeyframeDescriber` of
+        this detector's map or descriptors) gives its global descriptor and local features in
+        one pass.
+
+        ``image``: a uint8 array, (H, W) grey or (H, W, 3) / (H, W, 4) colour
+        (``pixel_format`` as for :meth:`Describer.describe`). ``depth``: an optional (H, W)
+        uint16 depth image registered to it, ``depth_units_per_metre`` values per metre (1000
+        for millimetres, 5000 for TUM RGB-D), 0 where unknown; it needs the detector's
+        intrinsics (``fx`` ...), and makes later hints matched to this keyframe metric.
+        ``id``, ``timestamp``, ``world_T_body`` and ``body_T_camera`` as for :meth:`add`.
+
+        On any error the detector and the describer are unchanged. Raises ``TypeError`` (not
+        uint8 / uint16, not a :class:`KeyframeDescriber`), :class:`InvalidImageError`,
+        :class:`InvalidArgumentError` (a depth image of another size, local features of another
+        kind than earlier keyframes', and the errors of :meth:`add`), :class:`InvalidOptionError`
+        (depth without intrinsics), :class:`DimensionMismatchError` (a describer of another
+        map), :class:`UninformativeImageError`, :class:`ModelError`.
+        """
+        keyframes = _describer_handle(describer)
+        kid = _u64(id, "id")
+        ts = float(timestamp)
+        img, pixels = _image(image, pixel_format, "image")
+        depth_struct = None
+        if depth is not None:
+            depth_struct, depth_values = _depth_image(depth, depth_units_per_metre, pixels.shape)
+        body = None if world_T_body is None else _pose(world_T_body, "world_T_body")
+        camera = None if body_T_camera is None else _pose(body_T_camera, "body_T_camera")
+        fields = {
+            "id": kid,
+            "timestamp": ts,
+            "world_T_body": None if body is None else _f64_ptr(body),
+            "body_T_camera": None if camera is None else _f64_ptr(camera),
+        }
+        depth_ref = None if depth_struct is None else byref(depth_struct)
+        add = lib.topoloc_loop_detector_add_image
+        with self._using("add_image") as h, keyframes._using("add_image") as d:
+            hint = self._submit(fields, lambda kf, out: add(h, d, kf, byref(img), depth_ref, out))
+        del pixels  # the image (and depth) arrays are kept alive until here
+        if depth_struct is not None:
+            del depth_values
+        return hint
+
+    def _submit(self, fields: Dict[str, Any], call: Callable[[Any, Any], int]) -> LoopHint:
+        """Fills the reused keyframe struct with ``fields`` (the rest stays empty), runs
+        ``call(keyframe, hint)`` (by reference), then clears the pointers it borrowed; the
+        hint of a failed call is not read."""
+        kf, hint = self._keyframe, self._hint
+        kf.struct_size = ctypes.sizeof(_lib.topoloc_loop_keyframe)
+        for name, value in fields.items():
+            setattr(kf, name, value)
+        hint.struct_size = ctypes.sizeof(_lib.topoloc_loop_hint)
+        try:
+            check(call(byref(kf), byref(hint)))
+        finally:
+            kf.descriptor = None
+            kf.descriptor_len = 0
+            kf.world_T_body = kf.body_T_camera = None
+            kf.keypoint_count = 0
+            kf.keypoints = kf.keypoint_descriptors = kf.camera_points = None
+        return _loop_hint(hint)
+
+    def candidates(self, max_results: Optional[int] = None) -> List[LoopCandidateCheck]:
+        """The loop candidates the last successful :meth:`add` or :meth:`add_image` verified
+        (ABI 1.15), most inliers first, accepted or not (keyframes erased since are left out),
+        at most ``max_results`` (``None``: all): for hosts that run their own check on several
+        candidates, as ORB-SLAM3 takes 3 loop and 3 merge candidates."""
+        with self._using("candidates") as h:
+            # Never more than the keyframes held: a large max_results must not allocate.
+            capacity = int(_out_call(c_size_t, lib.topoloc_loop_detector_len, h).value)
+            if max_results is not None:
+                capacity = min(capacity, _u32(max_results, "max_results"))
+            found = (_lib.topoloc_loop_candidate_check * max(capacity, 1))()
+            read = lib.topoloc_loop_detector_candidates
+            count = _out_call(c_size_t, read, h, found, capacity)
+        n = min(int(count.value), capacity)
+        return [_from_struct(LoopCandidateCheck, c) for c in found[:n]]
 
     def confirmed(self) -> List[LoopHint]:
         """The hints of earlier keyframes that the last :meth:`add` confirmed (ABI 1.10),

@@ -98,6 +98,12 @@ _BUILD_BACKENDS = {
 }
 #: ``pca_precision`` names -> ``TOPOLOC_PCA_*`` (ABI 1.14).
 _PCA_PRECISIONS = {"i8": _lib.PCA_I8, "f32": _lib.PCA_F32}
+#: ``local_features`` names -> ``TOPOLOC_LOCAL_FEATURES_*`` (ABI 1.15).
+_LOCAL_FEATURES = {
+    "orb": _lib.LOCAL_FEATURES_ORB,
+    "xfeat": _lib.LOCAL_FEATURES_XFEAT,
+    "cells": _lib.LOCAL_FEATURES_CELLS,
+}
 
 #: The options of :meth:`Map.build_from_images` and :meth:`Map.build_from_image_files`: the
 #: fields of ``topoloc_image_map_options``.
@@ -121,6 +127,9 @@ IMAGE_MAP_OPTIONS = OptionTable(
         file_path("poses_tum_path"),
         real("place_spacing_m"),
         choice("pca_precision", _PCA_PRECISIONS),
+        unsigned("verification_keypoints"),
+        choice("local_features", _LOCAL_FEATURES),
+        file_path("xfeat_model_path"),
     ],
 )
 
@@ -319,6 +328,9 @@ class Map(_Handle):
         poses_tum_path: Optional[PathLike] = None,
         place_spacing_m: Optional[float] = None,
         pca_precision: Optional[Union[str, int]] = None,
+        verification_keypoints: Optional[int] = None,
+        local_features: Optional[Union[str, int]] = None,
+        xfeat_model_path: Optional[PathLike] = None,
     ) -> Map:
         """Builds a map from camera images in memory (``topoloc_map_build_from_images``).
 
@@ -340,7 +352,11 @@ class Map(_Handle):
         places are chained in order; with a TUM trajectory (one pose per image, same order),
         places are made by ``place_spacing_m`` and hold at most ``views_per_place`` views. View
         ``v`` records its image index as keyframe id. ``pca_precision``: ``"i8"`` or ``"f32"``,
-        how the map stores its PCA rows.
+        how the map stores its PCA rows. Each view stores ``verification_keypoints`` local
+        features (0: none) for geometric verification and loop hints, of the kind
+        ``local_features`` (ABI 1.15): ``"xfeat"`` (its network from ``xfeat_model_path``
+        or the set-up cache), ``"orb"``, or ``"cells"`` (the ONNX
+        backend's own feature map; no pose). :class:`LocalFeatures` values work too.
 
         Options are keyword-only, named as the fields of ``topoloc_image_map_options`` in
         ``topoloc.h``, which documents each one's default and range; left out or ``None``: the
@@ -383,6 +399,9 @@ class Map(_Handle):
         poses_tum_path: Optional[PathLike] = None,
         place_spacing_m: Optional[float] = None,
         pca_precision: Optional[Union[str, int]] = None,
+        verification_keypoints: Optional[int] = None,
+        local_features: Optional[Union[str, int]] = None,
+        xfeat_model_path: Optional[PathLike] = None,
     ) -> Map:
         """Builds a map from image files (``topoloc_map_build_from_image_files``): any format
         OpenCV decodes, read and described in parallel.
