@@ -132,14 +132,123 @@ def test_bad_image_keyframes_change_nothing(orb_map, places):
         with pytest.raises(topoloc.InvalidArgumentError, match="register it"):
             det.add_image(kd, 1, 1.0, places[0], depth=depth[1:], depth_units_per_metre=1000.0)
         with pytest.raises(TypeError, match="uint16"):
-            det.add_image(
-                kd, 1, 1.0, places[0], depth=depth.astype(np.float32), depth_units_per_metre=1e3
-            )
+            det.add_image(kd, 1, 1.0, places[0], depth=depth.astype(np.int32))
         with pytest.raises(topoloc.InvalidArgumentError, match="> 0"):
             det.add_image(kd, 1, 1.0, places[0], depth=depth, depth_units_per_metre=0.0)
         assert len(det) == 0
         det.add_image(kd, 1, 1.0, places[0], depth=depth, depth_units_per_metre=1000.0)
         assert len(det) == 1
+
+
+def test_a_describer_of_another_map_changes_nothing(orb_map, places):
+    # A map of the same images whose PCA keeps 4 dimensions: descriptors of another length.
+    with topoloc.Map.build_from_images(
+        places[:6], backend="vlad-orb", threads=2, local_features="orb", dim=4
+    ) as other:
+        assert other.dim == 4 != orb_map.dim
+        foreign = topoloc.KeyframeDescriber(other, local_features="orb")
+    kd = topoloc.KeyframeDescriber(orb_map, local_features="orb")
+    det = detector_for(orb_map, min_inliers=12, **LOOP_OPTIONS)
+    with foreign, kd, det:
+        det.add_image(kd, 0, 0.0, places[0])
+        det.add_image(kd, 1, 1.0, revisit(places[0], 7))
+        before = det.candidates()
+        assert [c.keyframe_id for c in before] == [0]
+        with pytest.raises(topoloc.DimensionMismatchError, match=f"D={orb_map.dim}"):
+            det.add_image(foreign, 2, 2.0, places[1])
+        assert len(det) == 2 and det.candidates() == before
+        # The detector goes on with its own describer, and id 2 is still free.
+        hint = det.add_image(kd, 2, 2.0, revisit(places[0], 8))
+        assert hint.accepted and hint.matched_id in (0, 1) and len(det) == 3
+
+
+def depth_plane() -> np.ndarray:
+    """A wall 2 m in front of the camera, leaning away to the right (2.0 .. 2.32 m)."""
+    return np.tile(2.0 + 0.001 * np.arange(W), (H, 1))
+
+
+def revisit_hints(m: topoloc.Map, depth_of, units) -> List[topoloc.LoopHint]:
+    """The hints of the revisits of 4 places whose first visits had ``depth_of(place)``."""
+    kd = topoloc.KeyframeDescriber(m, local_features="orb")
+    det = detector_for(m, min_inliers=12, **LOOP_OPTIONS, **CAMERA)
+    with kd, det:
+        for p in range(4):
+            depth = depth_of(p)
+            img = place_image(2000 + p)
+            det.add_image(kd, p, float(p), img, depth=depth, depth_units_per_metre=units)
+        return [
+            det.add_image(kd, 100 + p, 100.0 + p, revisit(place_image(2000 + p), 300 + p))
+            for p in range(4)
+        ]
+
+
+def same_hints(a: List[topoloc.LoopHint], b: List[topoloc.LoopHint]) -> bool:
+    return all(
+        (x.matched_id, x.inliers, x.accepted, x.scale_known)
+        == (y.matched_id, y.inliers, y.accepted, y.scale_known)
+        and np.array_equal(x.matched_T_query, y.matched_T_query)
+        for x, y in zip(a, b)
+    ) and len(a) == len(b)
+
+
+def test_depth_makes_later_hints_metric(orb_map):
+    unscaled = revisit_hints(orb_map, lambda p: None, None)
+    millimetres = revisit_hints(
+        orb_map, lambda p: np.rint(depth_plane() * 1000).astype(np.uint16), 1000.0
+    )
+    metres = revisit_hints(orb_map, lambda p: depth_plane().astype(np.float32), None)
+    for p, (plain, metric) in enumerate(zip(unscaled, millimetres)):
+        assert plain.accepted and metric.accepted and plain.matched_id == metric.matched_id == p
+        assert plain.has_pose and not plain.scale_known
+        t = np.linalg.norm(plain.matched_T_query[:3, 3])
+        assert t == 0.0 or abs(t - 1.0) < 1e-6  # a direction at most
+        # The revisit is shifted 3 pixels: at fx 300 and about 2 m, about 2 cm of translation.
+        assert metric.has_pose and metric.scale_known
+        t = np.linalg.norm(metric.matched_T_query[:3, 3])
+        assert 0.005 < t < 0.06, (p, t)
+    # Depth in metres (float32) is passed as millimetres: the very same hints.
+    assert same_hints(metres, millimetres)
+
+
+def test_float_depth_without_a_measurement_is_zero(orb_map):
+    from topoloc._keyframes import DEPTH_UNITS_FOR_METRES, _depth_image
+
+    metres = np.array([[2.0, np.nan, -1.0], [70.0, 0.0004, np.inf]], np.float64)
+    depth, values = _depth_image(metres, None, (2, 3))
+    assert DEPTH_UNITS_FOR_METRES == depth.units_per_metre == 1000.0
+    assert values.dtype == np.uint16 and values.tolist() == [[2000, 0, 0], [0, 0, 0]]
+    assert depth.values_len == 6
+    # Coarser units reach further: 70 m in centimetres fits.
+    depth, values = _depth_image(metres, 100.0, (2, 3))
+    assert depth.units_per_metre == 100.0 and values.tolist() == [[200, 0, 0], [7000, 0, 0]]
+    # End to end: NaN, negative and out-of-range metres give what uint16 zeros there give.
+    holes = depth_plane()
+    holes[:, : W // 2] = np.nan
+    holes[: H // 3, W // 2 :] = -1.0
+    holes[H // 3 : H // 2, W // 2 :] = 80.0
+    zeros = np.rint(np.nan_to_num(holes, nan=0.0) * 1000)
+    zeros = np.where((zeros > 0) & (zeros <= 65535), zeros, 0).astype(np.uint16)
+    assert (zeros == 0).mean() > 0.6
+    floats = revisit_hints(orb_map, lambda p: holes.astype(np.float32), None)
+    assert same_hints(floats, revisit_hints(orb_map, lambda p: zeros, 1000.0))
+    assert sum(h.accepted and h.scale_known for h in floats) >= 3
+
+
+def test_colour_keyframes_match_their_grey(orb_map, places):
+    kd = topoloc.KeyframeDescriber(orb_map, local_features="orb")
+    grey = detector_for(orb_map, min_inliers=12, **LOOP_OPTIONS)
+    rgb = detector_for(orb_map, min_inliers=12, **LOOP_OPTIONS)
+    with kd, grey, rgb:
+        for p, img in enumerate(places[:4]):
+            grey.add_image(kd, p, float(p), img)
+            rgb.add_image(kd, p, float(p), np.repeat(img[:, :, None], 3, axis=2))
+        for p, img in enumerate(places[:4]):
+            again = revisit(img, 300 + p)
+            a = grey.add_image(kd, 100 + p, 100.0 + p, again)
+            bgr = np.ascontiguousarray(np.repeat(again[:, :, None], 3, axis=2))
+            b = rgb.add_image(kd, 100 + p, 100.0 + p, bgr, pixel_format="bgr")
+            assert a.accepted and a.matched_id == p and same_hints([a], [b])
+            assert grey.candidates() == rgb.candidates()
 
 
 def test_maps_choose_their_local_features(places, tmp_path):

@@ -132,26 +132,45 @@ class KeyframeDescriber(_SingleThreaded):
         return f"<topoloc.KeyframeDescriber {state}>"
 
 
+#: Depth units per metre a depth image given in metres (floats) is passed with by default:
+#: millimetres, as ``topoloc_depth_image`` holds uint16 values.
+DEPTH_UNITS_FOR_METRES = 1000.0
+
+
 def _depth_image(
     depth: ArrayLike, units_per_metre: Optional[float], image_shape: Tuple[int, ...]
 ) -> Tuple[_lib.topoloc_depth_image, NDArray[np.uint16]]:
-    """A ``topoloc_depth_image`` borrowing ``depth`` (an (H, W) uint16 array of the image's
-    size) and the array it points into (keep it alive for the call)."""
-    if units_per_metre is None:
-        raise InvalidArgumentError(
-            "depth needs depth_units_per_metre (1000 for millimetres, 5000 for TUM RGB-D)"
+    """A ``topoloc_depth_image`` of ``depth`` (an (H, W) array of the image's size) and the
+    uint16 array it points into (keep it alive for the call).
+
+    uint16 ``depth`` is borrowed as it is and needs ``units_per_metre``. Float ``depth`` is in
+    metres: it is rounded to ``units_per_metre`` (default :data:`DEPTH_UNITS_FOR_METRES`) into
+    a new uint16 array, in which a value that is not finite, not above 0 or beyond 65535 units
+    (65.535 m in millimetres) is 0, no measurement."""
+    values = np.asarray(depth)
+    metres = np.issubdtype(values.dtype, np.floating)
+    if values.dtype != np.uint16 and not metres:
+        raise TypeError(
+            f"depth must be a uint16 array (with depth_units_per_metre) or a float array in "
+            f"metres, got dtype {values.dtype}"
         )
-    units = float(units_per_metre)
+    if units_per_metre is None and not metres:
+        raise InvalidArgumentError(
+            "uint16 depth needs depth_units_per_metre (1000 for millimetres, 5000 for TUM RGB-D)"
+        )
+    units = DEPTH_UNITS_FOR_METRES if units_per_metre is None else float(units_per_metre)
     if not np.isfinite(units) or units <= 0:
         raise InvalidArgumentError(f"depth_units_per_metre must be finite and > 0, got {units}")
-    values = np.asarray(depth)
-    if values.dtype != np.uint16:
-        raise TypeError(f"depth must be a uint16 array, got dtype {values.dtype}")
     if values.shape != tuple(image_shape[:2]):
         raise InvalidArgumentError(
             f"depth is {values.shape}, the image is {tuple(image_shape[:2])}: "
             "register it to the image (same height and width)"
         )
+    if metres:
+        with np.errstate(invalid="ignore", over="ignore"):
+            scaled = np.rint(values.astype(np.float64) * units)
+            known = np.isfinite(scaled) & (scaled > 0) & (scaled <= np.iinfo(np.uint16).max)
+        values = np.where(known, scaled, 0).astype(np.uint16)
     values = np.ascontiguousarray(values)
     out = _lib.topoloc_depth_image()
     out.values = values.ctypes.data_as(POINTER(c_uint16))

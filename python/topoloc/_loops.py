@@ -345,15 +345,19 @@ class LoopDetector(_SingleThreaded):
 
         ``image``: a uint8 array, (H, W) grey or (H, W, 3) / (H, W, 4) colour
         (``pixel_format`` as for :meth:`Describer.describe`). ``depth``: an optional (H, W)
-        uint16 depth image registered to it, ``depth_units_per_metre`` values per metre (1000
-        for millimetres, 5000 for TUM RGB-D), 0 where unknown; it needs the detector's
-        intrinsics (``fx`` ...), and makes later hints matched to this keyframe metric.
-        ``id``, ``timestamp``, ``world_T_body`` and ``body_T_camera`` as for :meth:`add`.
+        depth image registered to it, either uint16 with ``depth_units_per_metre`` values per
+        metre (1000 for millimetres, 5000 for TUM RGB-D; required), 0 where unknown, or floats
+        in metres, passed as uint16 at ``depth_units_per_metre`` (default 1000: millimetres)
+        with values not finite, not above 0 or beyond 65535 units taken as unknown. It needs
+        the detector's intrinsics (``fx`` ...), and makes later hints matched to this keyframe
+        metric (``scale_known``). ``id``, ``timestamp``, ``world_T_body`` and
+        ``body_T_camera`` as for :meth:`add`.
 
-        On any error the detector and the describer are unchanged. Raises ``TypeError`` (not
-        uint8 / uint16, not a :class:`KeyframeDescriber`), :class:`InvalidImageError`,
-        :class:`InvalidArgumentError` (a depth image of another size, local features of another
-        kind than earlier keyframes', and the errors of :meth:`add`), :class:`InvalidOptionError`
+        On any error the detector and the describer are unchanged. Raises ``TypeError`` (an
+        image not uint8, depth neither uint16 nor float, not a :class:`KeyframeDescriber`),
+        :class:`InvalidImageError`, :class:`InvalidArgumentError` (a depth image of another
+        size, uint16 depth without ``depth_units_per_metre``, local features of another kind
+        than earlier keyframes', and the errors of :meth:`add`), :class:`InvalidOptionError`
         (depth without intrinsics), :class:`DimensionMismatchError` (a describer of another
         map), :class:`UninformativeImageError`, :class:`ModelError`.
         """
