@@ -86,6 +86,40 @@ fn direction_and_rotation_without_scene_points() {
 }
 
 #[test]
+fn scene_points_without_depth_give_the_two_view_pose() {
+    // A keyframe whose depth image had nothing where its keypoints are (every scene point
+    // unknown, or too few known for PnP): the pose is the two-view one, not a refusal.
+    let truth = truth();
+    let (q, m, s) = scene(150, 30, &truth, 2);
+    let (query, matched) = (keypoints(&q), keypoints(&m));
+    for known in [0, 20] {
+        let points: Vec<[f32; 3]> = s
+            .iter()
+            .enumerate()
+            .map(|(i, p)| if i < known { *p } else { [f32::NAN; 3] })
+            .collect();
+        let pose = relative_pose(
+            query.as_ref(),
+            matched.as_ref(),
+            Some(&points),
+            &CAMERA,
+            64,
+            &RelativePoseOptions::default(),
+        )
+        .unwrap()
+        .expect("the two-view pose");
+        assert!(!pose.scale_known, "{known} known points");
+        assert!(
+            rotation_error_deg(&pose.matched_t_query, &truth) < 1.5,
+            "{pose:?}"
+        );
+        assert!((pose.matched_t_query.translation.vector.norm() - 1.0).abs() < 1e-9);
+    }
+    // With enough known points it stays metric.
+    assert!(metric(150, 30, 2).expect("a pose").scale_known);
+}
+
+#[test]
 fn covariance_grows_as_inliers_fall() {
     let trace = |n: usize| {
         let pose = metric(n, 0, 3).expect("a pose");

@@ -123,7 +123,8 @@ pub enum PoseRefusal {
 
 /// Matches `query` to `matched` (mutual nearest neighbours; ORB within `max_hamming` bits) and
 /// finds the relative pose, metric when `matched_points` gives each matched keypoint's scene
-/// point in the matched camera's frame (NaN when unknown). Camera and options are assumed
+/// point in the matched camera's frame (NaN when unknown; with too few known, the pose is the
+/// two-view one, without scale). Camera and options are assumed
 /// valid; `matched_points` of another length than the keypoints is an invalid argument.
 pub fn relative_pose(
     query: KeypointsRef<'_>,
@@ -194,7 +195,12 @@ fn pose_of_matches(
     options: &RelativePoseOptions,
 ) -> Result<Result<RelativePose, PoseRefusal>, VisionError> {
     if let Some(points) = matched_points {
-        return metric_pose(query, matched, points, matches, seed, camera, options);
+        match metric_pose(query, matched, points, matches, seed, camera, options)? {
+            // Too few matches carry a scene point (depth missing where they are: sky, glass,
+            // out of range): the views still give the two-view pose, without scale.
+            Err(PoseRefusal::TooFewMatches { .. }) => {}
+            metric => return Ok(metric),
+        }
     }
     let query_px: Vec<[f32; 2]> = matches
         .iter()

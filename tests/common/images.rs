@@ -77,6 +77,8 @@ pub fn vlad_image_map_with(
             ..FitOptions::default()
         },
         threads: 2,
+        // No learned weights at all: ORB keypoints (the default, XFeat, needs its network).
+        features: topoloc::verify::FeatureKind::Orb,
         ..ImageMapOptions::default()
     };
     build_from_images(&sources, ImageLayout::Sequence, &options, &mut |_, _, _| {
