@@ -6,7 +6,7 @@ use topoloc::build::ImageMapOptions;
 use topoloc::describe::vlad::VladOptions;
 use topoloc::describe::{BackendConfig, FitOptions};
 use topoloc::skeleton::{skeleton_graph, SkeletonOptions};
-use topoloc::verify::{locate, KeypointDetector, LocateOptions};
+use topoloc::verify::{locate, FeatureKind, KeypointDetector, LocateOptions};
 use topoloc::{Frame, Localizer, LocalizerOptions, Mode};
 use topoloc_sim::capture::{
     build_map, capture, image_view, with_scene_points, CaptureError, CaptureOptions,
@@ -54,6 +54,8 @@ fn captured_views_build_a_map_on_the_skeleton_graph_that_finds_them_again() {
             ..FitOptions::default()
         },
         threads: 2,
+        // The test places dim views with ORB keypoints: the map stores ORB too.
+        features: FeatureKind::Orb,
         ..ImageMapOptions::default()
     };
     let (map, _) = build_map(&captured, &map_options, &mut |_, _, _| true).unwrap();
