@@ -45,8 +45,8 @@ static topoloc_image repack(const uint8_t *px, uint32_t format, uint32_t channel
     return image;
 }
 
-/* Image map options for `images` images: VLAD-ORB, dim images - 1, one thread, a small
- * codebook (one check). */
+/* Image map options for `images` images: VLAD-ORB with ORB keypoints (no learned weights, so
+ * no ONNX Runtime under valgrind), dim images - 1, one thread, a small codebook (one check). */
 static void vlad_options(topoloc_image_map_options *options, uint32_t images)
 {
     CHECK_OK(topoloc_image_map_options_default(options));
@@ -54,6 +54,7 @@ static void vlad_options(topoloc_image_map_options *options, uint32_t images)
     options->dim = images - 1;
     options->threads = 1;
     options->vlad_clusters = IMG_CLUSTERS;
+    options->local_features = TOPOLOC_LOCAL_FEATURES_ORB;
 }
 
 /* What a progress callback saw. */
