@@ -1130,6 +1130,20 @@ typedef struct topoloc_loop_options {
    * Default: 1.
    */
   uint32_t odometry_candidates;
+  /**
+   * Consecutive keyframes agree only when their candidates' timestamps differ by at most
+   * this many times the keyframes' own time step plus `match_pace_slack_s`, unless their
+   * poses lie within `neighbour_radius_m` of each other; 0 = off.
+   * Range: finite, >= 0.
+   * Default: 3.
+   */
+  double max_match_pace;
+  /**
+   * The pace rule's slack, seconds.
+   * Range: finite, >= 0.
+   * Default: 0.5.
+   */
+  double match_pace_slack_s;
 } topoloc_loop_options;
 
 /**

@@ -96,11 +96,25 @@ fn first_pass(detector: &mut LoopDetector) {
 
 /// Keyframe `SECOND + p` revisits place p (shifted image, another exposure, noisy descriptor).
 fn revisit_keyframe(detector: &mut LoopDetector, p: u64) -> topoloc::loops::Processed {
+    revisit_at(detector, p, SECOND + p, (SECOND + p) as f64, None)
+}
+
+/// Keyframe `id`, taken at `timestamp` (at the body pose, if any), revisits place p.
+fn revisit_at(
+    detector: &mut LoopDetector,
+    p: u64,
+    id: u64,
+    timestamp: f64,
+    world_t_body: Option<Isometry3<f64>>,
+) -> topoloc::loops::Processed {
     let d = mix(&unit_vector(p, DIM), &unit_vector(p + 1000, DIM), 0.2);
     let image = revisit(&place_image(p), p + 50);
-    detector
-        .process(&entry(SECOND + p, &d), features(&image))
-        .unwrap()
+    let keyframe = KeyframeEntry {
+        timestamp,
+        world_t_body,
+        ..entry(id, &d)
+    };
+    detector.process(&keyframe, features(&image)).unwrap()
 }
 
 #[test]
@@ -209,6 +223,72 @@ fn a_look_alike_is_refused_for_its_inliers_and_breaks_the_streak() {
 }
 
 #[test]
+fn a_match_that_outruns_the_keyframes_breaks_the_streak() {
+    // Revisit keyframes 0.2 s apart match first-pass keyframes 1 s apart: places 0, 1, 2
+    // keep the pace (1 s <= 3 x 0.2 s + 0.5 s); a jump from place 2 to place 4 (2 s) does
+    // not, though their groups overlap (2-3-4 in the place graph), unless the odometry put
+    // keyframes 2 and 4 beside each other.
+    let path = [0, 1, 2, 4, 5, 6];
+    // Posed: keyframes 2.5 m apart along x (a place each), keyframe 4 2.5 m beside keyframe
+    // 2; a revisit keyframe stands where the keyframe it revisits stood.
+    let at = |p: u64| match p {
+        4 => Isometry3::translation(5.0, 2.5, 0.0),
+        _ => Isometry3::translation(2.5 * p as f64, 0.0, 0.0),
+    };
+    let run = |options: HintOptions, four_beside_two: bool| -> Vec<Gate> {
+        let mut detector = detector(options);
+        match four_beside_two {
+            false => first_pass(&mut detector),
+            true => {
+                for p in 0..PLACES {
+                    let d = unit_vector(p, DIM);
+                    detector
+                        .process(&posed(p, &d, at(p)), features(&place_image(p)))
+                        .unwrap();
+                }
+            }
+        }
+        path.iter()
+            .enumerate()
+            .map(|(k, &p)| {
+                let t = SECOND as f64 + 0.2 * k as f64;
+                let pose = four_beside_two.then(|| at(p));
+                let done = revisit_at(&mut detector, p, SECOND + k as u64, t, pose);
+                let hint = done.hint.expect("a verified candidate");
+                assert_eq!(hint.matched_id, p, "keyframe {k}");
+                hint.gate
+            })
+            .collect()
+    };
+    let paced = run(options(), false);
+    let consistent = |agreeing| Gate::Inconsistent { agreeing };
+    assert_eq!(
+        paced,
+        [
+            consistent(1),
+            consistent(2),
+            Gate::Accepted,
+            consistent(1),
+            consistent(2),
+            Gate::Accepted
+        ]
+    );
+    let unpaced = run(
+        HintOptions {
+            max_match_pace: 0.0,
+            ..options()
+        },
+        false,
+    );
+    assert_eq!(&unpaced[..3], &paced[..3]);
+    assert!(
+        unpaced[3..].iter().all(|g| *g == Gate::Accepted),
+        "{unpaced:?}"
+    );
+    assert_eq!(run(options(), true), unpaced, "one spot, passed twice");
+}
+
+#[test]
 fn a_revisit_without_parallax_gets_the_rotation_and_no_translation() {
     let mut detector = detector(HintOptions {
         camera: Some(PinholeCamera {
@@ -282,6 +362,17 @@ fn fits_are_chosen_per_feature_kind_and_refinement_is_bounded() {
         too_many.validate(),
         Err(LoopsError::InvalidOption(m)) if m.contains("refine_keyframes")
     ));
+    for (pace, slack) in [(-1.0, 0.5), (f64::NAN, 0.5), (3.0, -1.0)] {
+        let bad_pace = HintOptions {
+            max_match_pace: pace,
+            match_pace_slack_s: slack,
+            ..HintOptions::default()
+        };
+        assert!(matches!(
+            bad_pace.validate(),
+            Err(LoopsError::InvalidOption(m)) if m.contains("match_pace")
+        ));
+    }
     let bad_cells_fit = HintOptions {
         cells_pair: PairOptions {
             max_iterations: 0,

@@ -110,6 +110,7 @@ def test_options_defaults():
     assert d["candidate_id_gap"] == 10
     assert d["odometry_max_translation_per_m"] == 0.02 and d["pose_reprojection_px"] == 5.0
     assert d["odometry_candidates"] == 1 and d["odometry_search_m"] == 2.0
+    assert d["max_match_pace"] == 3.0 and d["match_pace_slack_s"] == 0.5
     with topoloc.LoopDetector("test", "loops", DIM) as det:
         assert det.options == d and det.dim == DIM
     with topoloc.LoopDetector(

@@ -389,6 +389,9 @@ class topoloc_loop_options(Structure):
         # ABI 1.8
         ("odometry_search_m", c_double),
         ("odometry_candidates", c_uint32),
+        # ABI 1.15
+        ("max_match_pace", c_double),
+        ("match_pace_slack_s", c_double),
     ]
 
 

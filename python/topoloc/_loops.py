@@ -138,6 +138,8 @@ LOOP_OPTIONS = OptionTable(
         real("pose_reprojection_px"),
         real("odometry_search_m"),
         unsigned("odometry_candidates"),
+        real("max_match_pace"),
+        real("match_pace_slack_s"),
     ],
 )
 
@@ -190,7 +192,8 @@ class LoopDetector(_SingleThreaded):
     library's default (:func:`loop_options_default`). They select how many candidates are
     verified per keyframe (``candidates``) outside the exclusion window (``exclude_recent_ids``,
     ``exclude_recent_s``, ``candidate_id_gap``), the gates (``min_inliers``,
-    ``consistent_keyframes``, the odometry gate ``odometry_gate``,
+    ``consistent_keyframes`` with its pace rule ``max_match_pace``, ``match_pace_slack_s``,
+    the odometry gate ``odometry_gate``,
     ``odometry_max_rotation_deg``, ``odometry_max_translation_m``,
     ``odometry_max_translation_per_m``), the camera's pinhole intrinsics for relative poses
     (``fx``, ``fy``, ``cx``, ``cy``; without them hints carry no pose;

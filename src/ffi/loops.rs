@@ -108,15 +108,23 @@ pub struct topoloc_loop_options {
     /// one's odometry pose that could pass the odometry gate (this session's; needs poses and
     /// `odometry_gate`); 0 = none.
     pub odometry_candidates: u32,
+    // ABI 1.15 (topoloc 0.1): the consistency gate's pace rule.
+    /// Consecutive keyframes agree only when their candidates' timestamps differ by at most
+    /// this many times the keyframes' own time step plus `match_pace_slack_s`, unless their
+    /// poses lie within `neighbour_radius_m` of each other; 0 = off.
+    pub max_match_pace: f64,
+    /// The pace rule's slack, seconds.
+    pub match_pace_slack_s: f64,
 }
 
 // ABI 1.5 ended before `candidate_id_gap`, ABI 1.6 before `odometry_max_translation_per_m`,
-// ABI 1.7 before `odometry_search_m`.
+// ABI 1.7 before `odometry_search_m`, ABI 1.14 before `max_match_pace`.
 versioned! {
     topoloc_loop_options [
         candidate_id_gap,
         odometry_max_translation_per_m,
         odometry_search_m,
+        max_match_pace,
     ] {
         let (h, d) = (HintOptions::default(), DatabaseOptions::default());
         let gate = h.odometry.unwrap_or_default();
@@ -141,6 +149,8 @@ versioned! {
             pose_reprojection_px: h.pose.reprojection_px,
             odometry_search_m: h.odometry_search_m,
             odometry_candidates: h.odometry_candidates as u32,
+            max_match_pace: h.max_match_pace,
+            match_pace_slack_s: h.match_pace_slack_s,
         }
     }
 }
@@ -176,6 +186,8 @@ fn loop_options(
         camera,
         odometry_candidates: o.odometry_candidates as usize,
         odometry_search_m: o.odometry_search_m,
+        max_match_pace: o.max_match_pace,
+        match_pace_slack_s: o.match_pace_slack_s,
         pose: RelativePoseOptions {
             reprojection_px: o.pose_reprojection_px,
             ..RelativePoseOptions::default()

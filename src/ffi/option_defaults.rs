@@ -134,6 +134,8 @@ pub fn option_defaults() -> Vec<OptionDefault> {
                 pose_reprojection_px,
                 odometry_search_m,
                 odometry_candidates,
+                max_match_pace,
+                match_pace_slack_s,
             ]
         ),
         defaults_of!(
@@ -243,6 +245,8 @@ pub fn option_ranges() -> Vec<OptionRange> {
                 pose_reprojection_px: RANSAC_THRESHOLD_PX_RANGE,
                 odometry_search_m: HintOptions::ODOMETRY_SEARCH_M_RANGE,
                 odometry_candidates: HintOptions::ODOMETRY_CANDIDATES_RANGE,
+                max_match_pace: HintOptions::MAX_MATCH_PACE_RANGE,
+                match_pace_slack_s: HintOptions::MATCH_PACE_SLACK_S_RANGE,
             ]
         ),
         ranges_of!(

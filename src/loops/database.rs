@@ -501,6 +501,27 @@ impl KeyframeDatabase {
         Ok(self.records[r].place)
     }
 
+    /// Whether keyframe `id` is in the database (added, not erased).
+    pub fn contains(&self, id: u64) -> bool {
+        self.index_of(id).is_some()
+    }
+
+    /// Whether keyframes `a` and `b` both have poses and their cameras lie within
+    /// [`DatabaseOptions::neighbour_radius_m`] of each other (the distance that links places).
+    pub fn are_neighbours(&self, a: u64, b: u64) -> Result<bool, LoopsError> {
+        let (a, b) = (self.world_t_camera(a)?, self.world_t_camera(b)?);
+        Ok(a.zip(b).is_some_and(|(a, b)| {
+            (a.translation.vector - b.translation.vector).norm() <= self.options.neighbour_radius_m
+        }))
+    }
+
+    /// A keyframe's timestamp, seconds; `-inf` for keyframes reloaded from a map (their
+    /// times belong to another session).
+    pub fn timestamp_of(&self, id: u64) -> Result<f64, LoopsError> {
+        let r = self.index_of(id).ok_or(LoopsError::UnknownKeyframe(id))?;
+        Ok(self.records[r].timestamp)
+    }
+
     /// The camera pose of a keyframe, `world_T_camera` (`world_T_body * body_T_camera`), when
     /// keyframes carry poses.
     pub fn world_t_camera(&self, id: u64) -> Result<Option<Isometry3<f64>>, LoopsError> {

@@ -114,6 +114,8 @@ static void loop_options_have_defaults_and_older_callers_get_the_newer_fields_de
           options->pose_reprojection_px == 5.0); /* ABI 1.7 */
     CHECK(topoloc_abi_version_minor() >= 8 && options->odometry_candidates == 1u &&
           options->odometry_search_m == 2.0); /* ABI 1.8 */
+    CHECK(topoloc_abi_version_minor() >= 15 && options->max_match_pace == 3.0 &&
+          options->match_pace_slack_s == 0.5); /* ABI 1.15 */
 
     /* A caller of ABI 1.5 gets the 1.6 fields' defaults. */
     CHECK_STATUS(topoloc_loop_options_default(&old), TOPOLOC_OK);
@@ -130,6 +132,10 @@ static void loop_options_have_defaults_and_older_callers_get_the_newer_fields_de
     CHECK_STATUS(topoloc_loop_options_default(&old), TOPOLOC_OK);
     old.odometry_candidates = 65u;
     check_loop_fields_beyond(&old, offsetof(topoloc_loop_options, odometry_search_m));
+    /* A caller of ABI 1.14 gets the pace rule's defaults; a bad pace field is refused. */
+    CHECK_STATUS(topoloc_loop_options_default(&old), TOPOLOC_OK);
+    old.match_pace_slack_s = -1.0;
+    check_loop_fields_beyond(&old, offsetof(topoloc_loop_options, max_match_pace));
 }
 
 static void a_loop_detector_needs_an_out_pointer_a_kind_a_bounded_dim_and_candidates(

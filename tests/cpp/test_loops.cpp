@@ -72,6 +72,7 @@ TEST(loop_options_and_gates)
     CHECK(options.odometry_max_translation_per_m == 0.02);
     CHECK(options.pose_reprojection_px == 5.0);
     CHECK(options.odometry_candidates == 1u && options.odometry_search_m == 2.0);
+    CHECK(options.max_match_pace == 3.0 && options.match_pace_slack_s == 0.5);
 
     static_assert(static_cast<uint32_t>(topoloc::Gate::Accepted) == TOPOLOC_GATE_ACCEPTED);
     static_assert(static_cast<uint32_t>(topoloc::Gate::NoCandidate) == TOPOLOC_GATE_NO_CANDIDATE);

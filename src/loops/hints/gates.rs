@@ -73,7 +73,7 @@ pub(super) struct Gated {
     pub gate: Gate,
     pub pose: Option<RelativePose>,
     /// The consistency streak including this keyframe.
-    pub streak: Streak,
+    pub streak: Option<Streak>,
 }
 
 impl LoopDetector {
@@ -219,10 +219,7 @@ impl LoopDetector {
         let Some((refined, passed)) = chosen else {
             return Ok(first_refusal);
         };
-        let agreeing = match self.streak {
-            Some((place, n)) if self.database.groups_overlap(place, refined.place) => n + 1,
-            _ => 1,
-        };
+        let agreeing = self.agreeing(entry, &refined)?;
         let gate = if agreeing < self.options.consistent_keyframes {
             Gate::Inconsistent { agreeing }
         } else {
@@ -231,7 +228,12 @@ impl LoopDetector {
         let gated = Gated {
             gate,
             pose: passed.pose,
-            streak: Some((refined.place, agreeing)),
+            streak: Some(Streak {
+                place: refined.place,
+                agreeing,
+                query_timestamp: entry.timestamp,
+                matched_id: refined.id,
+            }),
         };
         Ok(Some((refined, gated)))
     }

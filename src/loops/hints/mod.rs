@@ -137,7 +137,7 @@ pub struct LoopDetector {
     features: HashMap<u64, KeyframeFeatures>,
     kind: Option<FeatureKind>,
     /// The place the last keyframes' best candidates agreed on, and how many in a row.
-    streak: Streak,
+    streak: Option<Streak>,
     /// The hints of the current streak's keyframes, refused as inconsistent: confirmed when
     /// a later keyframe completes the streak, dropped when it breaks.
     pending: Vec<LoopHint>,

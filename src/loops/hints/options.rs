@@ -57,6 +57,16 @@ pub struct HintOptions {
     /// Consecutive keyframes whose best candidates must agree (their place groups overlap),
     /// the current one included. Default 3 (ORB-SLAM's).
     pub consistent_keyframes: usize,
+    /// The pace rule of the consistency gate: consecutive keyframes agree only when their
+    /// candidates' timestamps differ by at most this many times the keyframes' own time step
+    /// plus [`Self::match_pace_slack_s`], unless the odometry puts the two candidates within
+    /// [`DatabaseOptions::neighbour_radius_m`](crate::loops::DatabaseOptions::neighbour_radius_m)
+    /// of each other (one spot passed twice). A revisit runs at a vehicle's pace; a match
+    /// that slides along a look-alike stretch faster does not. 0 = off. Default 3.
+    pub max_match_pace: f64,
+    /// The pace rule's slack, seconds (keyframes of either pass taken at uneven times).
+    /// Default 0.5.
+    pub match_pace_slack_s: f64,
     /// The odometry agreement gate (applied when both keyframes have poses and the hint a pose).
     pub odometry: Option<OdometryGate>,
     /// Matching and fundamental-matrix fit for point features (XFeat, ORB): by default XFeat
@@ -95,6 +105,8 @@ impl Default for HintOptions {
             exclude_recent_s: 10.0,
             min_inliers: 30,
             consistent_keyframes: 3,
+            max_match_pace: 3.0,
+            match_pace_slack_s: 0.5,
             odometry: Some(OdometryGate::default()),
             pair: PairOptions {
                 estimator: FundamentalEstimator::Ransac,
@@ -134,6 +146,10 @@ impl HintOptions {
     pub const MIN_INLIERS_RANGE: Bounds = PAIR_MIN_INLIERS_RANGE;
     /// Accepted values of [`Self::consistent_keyframes`].
     pub const CONSISTENT_KEYFRAMES_RANGE: Bounds = Bounds::whole(1, 100);
+    /// Accepted values of [`Self::max_match_pace`] (0: off).
+    pub const MAX_MATCH_PACE_RANGE: Bounds = Bounds::at_least(0.0);
+    /// Accepted values of [`Self::match_pace_slack_s`].
+    pub const MATCH_PACE_SLACK_S_RANGE: Bounds = Bounds::at_least(0.0);
     /// Accepted values of [`Self::odometry_candidates`] (0: none).
     pub const ODOMETRY_CANDIDATES_RANGE: Bounds = Bounds::whole(0, 64);
     /// Accepted values of [`Self::odometry_search_m`].
@@ -147,6 +163,8 @@ impl HintOptions {
         Self::MIN_INLIERS_RANGE.check("min_inliers", self.min_inliers)?;
         Self::CONSISTENT_KEYFRAMES_RANGE
             .check("consistent_keyframes", self.consistent_keyframes)?;
+        Self::MAX_MATCH_PACE_RANGE.check("max_match_pace", self.max_match_pace)?;
+        Self::MATCH_PACE_SLACK_S_RANGE.check("match_pace_slack_s", self.match_pace_slack_s)?;
         if let Some(gate) = &self.odometry {
             gate.check_ranges()?;
         }

@@ -2,14 +2,81 @@
 //! hints held while the streak grows, and the route check that confirms them when a later
 //! keyframe completes it.
 
+use super::super::database::KeyframeEntry;
 use super::super::error::LoopsError;
+use super::gates::VerifiedCandidate;
 use super::{Gate, LoopDetector, LoopHint};
 use crate::map::PlaceId;
 
-/// The place consecutive keyframes' best candidates agreed on, and how many in a row.
-pub(super) type Streak = Option<(PlaceId, usize)>;
+/// The consistency streak after a keyframe whose best candidate passed the geometric gates.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Streak {
+    /// The place of that keyframe's candidate.
+    pub place: PlaceId,
+    /// Consecutive agreeing keyframes, that one included.
+    pub agreeing: usize,
+    /// That keyframe's timestamp, seconds.
+    pub query_timestamp: f64,
+    /// Its candidate keyframe.
+    pub matched_id: u64,
+}
 
 impl LoopDetector {
+    /// How many consecutive keyframes agree with the new one's candidate, counting its own:
+    /// one more than the streak's when the candidate's group overlaps the previous
+    /// candidate's and it keeps the streak's pace ([`LoopDetector::keeps_pace`]), else 1 (a
+    /// new streak).
+    pub(super) fn agreeing(
+        &self,
+        entry: &KeyframeEntry<'_>,
+        candidate: &VerifiedCandidate,
+    ) -> Result<usize, LoopsError> {
+        let Some(streak) = self.streak else {
+            return Ok(1);
+        };
+        let agrees = self.database.groups_overlap(streak.place, candidate.place)
+            && self.keeps_pace(&streak, entry, candidate)?;
+        Ok(if agrees { streak.agreeing + 1 } else { 1 })
+    }
+
+    /// Whether the new keyframe's candidate follows the streak's previous one at a pace a
+    /// vehicle keeps ([`HintOptions::max_match_pace`](super::HintOptions::max_match_pace)):
+    /// the two candidates' timestamps differ by at most `max_match_pace` times the keyframes'
+    /// own step plus `match_pace_slack_s`. A match sliding back along a look-alike stretch
+    /// while the keyframes advance breaks the streak. Always true when the odometry puts the
+    /// two candidates beside each other ([`KeyframeDatabase::are_neighbours`]: one spot
+    /// passed twice, matched on either pass), when either was reloaded from a map (its time
+    /// is another session's), when the host erased the streak's candidate, or with the rule
+    /// off.
+    ///
+    /// [`KeyframeDatabase::are_neighbours`]: super::super::KeyframeDatabase::are_neighbours
+    fn keeps_pace(
+        &self,
+        streak: &Streak,
+        entry: &KeyframeEntry<'_>,
+        candidate: &VerifiedCandidate,
+    ) -> Result<bool, LoopsError> {
+        let pace = self.options.max_match_pace;
+        if pace == 0.0 || !self.database.contains(streak.matched_id) {
+            return Ok(true);
+        }
+        if self
+            .database
+            .are_neighbours(streak.matched_id, candidate.id)?
+        {
+            return Ok(true);
+        }
+        let (before, now) = (
+            self.database.timestamp_of(streak.matched_id)?,
+            self.database.timestamp_of(candidate.id)?,
+        );
+        if !(before.is_finite() && now.is_finite()) {
+            return Ok(true);
+        }
+        let step = entry.timestamp - streak.query_timestamp;
+        Ok((now - before).abs() <= pace * step + self.options.match_pace_slack_s)
+    }
+
     /// Keeps the streak's pending hints in step with the new keyframe's: an inconsistent hint
     /// joins them (a new streak starts them afresh), an accepted one confirms and returns
     /// those that agree with it along the route ([`LoopDetector::route_agrees`]), any other

@@ -133,6 +133,13 @@ pub struct LoopsArgs {
     /// Consecutive keyframes that must agree on the place.
     #[arg(long, default_value_t = HintOptions::default().consistent_keyframes)]
     pub consistent_keyframes: usize,
+    /// The pace rule: consecutive keyframes agree only when their candidates' times differ
+    /// by at most this many times their own step plus `--match-pace-slack-s` (0 = off).
+    #[arg(long, default_value_t = HintOptions::default().max_match_pace)]
+    pub max_match_pace: f64,
+    /// The pace rule's slack, seconds.
+    #[arg(long, default_value_t = HintOptions::default().match_pace_slack_s)]
+    pub match_pace_slack_s: f64,
     /// With `--poses`: largest rotation difference between a hint and the odometry, degrees.
     #[arg(long, default_value_t = OdometryGate::default().max_rotation_deg)]
     pub odometry_max_rotation_deg: f64,
@@ -272,6 +279,8 @@ pub fn run(args: &LoopsArgs) -> Result<()> {
         candidate_id_gap: args.candidate_id_gap,
         min_inliers: args.min_inliers,
         consistent_keyframes: args.consistent_keyframes,
+        max_match_pace: args.max_match_pace,
+        match_pace_slack_s: args.match_pace_slack_s,
         odometry: Some(OdometryGate {
             max_rotation_deg: args.odometry_max_rotation_deg,
             max_translation_m: args.odometry_max_translation_m,
