@@ -23,7 +23,9 @@
 //!    (a look-alike stretch a few metres on can pass the drift bound beside the true one);
 //! 5. the candidates that passed 2-4 for the last `consistent_keyframes` keyframes agree: each
 //!    one's group (its place and the linked places) shares a place with the previous one's
-//!    ([`Gate::Inconsistent`], ORB-SLAM's consistency groups on the place graph).
+//!    ([`Gate::Inconsistent`], ORB-SLAM's consistency groups on the place graph), and the
+//!    match keeps the keyframes' pace (`max_match_pace`: a match that slides along a
+//!    look-alike stretch faster than the keyframes advance starts a new streak).
 //!
 //! At most one hint per keyframe. A refused candidate is reported with the gate that refused
 //! it, so the host can log why no loop was closed. The keyframes that began a streak were
