@@ -219,7 +219,7 @@ impl LoopDetector {
         let Some((refined, passed)) = chosen else {
             return Ok(first_refusal);
         };
-        let agreeing = self.agreeing(entry, &refined)?;
+        let agreeing = self.agreeing(entry, refined.place, refined.id)?;
         let gate = if agreeing < self.options.consistent_keyframes {
             Gate::Inconsistent { agreeing }
         } else {

@@ -4,7 +4,6 @@
 
 use super::super::database::KeyframeEntry;
 use super::super::error::LoopsError;
-use super::gates::VerifiedCandidate;
 use super::{Gate, LoopDetector, LoopHint};
 use crate::map::PlaceId;
 
@@ -22,20 +21,22 @@ pub(super) struct Streak {
 }
 
 impl LoopDetector {
-    /// How many consecutive keyframes agree with the new one's candidate, counting its own:
+    /// How many consecutive keyframes agree with the new one's candidate (keyframe
+    /// `matched_id` of `place`), counting its own:
     /// one more than the streak's when the candidate's group overlaps the previous
     /// candidate's and it keeps the streak's pace ([`LoopDetector::keeps_pace`]), else 1 (a
     /// new streak).
     pub(super) fn agreeing(
         &self,
         entry: &KeyframeEntry<'_>,
-        candidate: &VerifiedCandidate,
+        place: PlaceId,
+        matched_id: u64,
     ) -> Result<usize, LoopsError> {
         let Some(streak) = self.streak else {
             return Ok(1);
         };
-        let agrees = self.database.groups_overlap(streak.place, candidate.place)
-            && self.keeps_pace(&streak, entry, candidate)?;
+        let agrees = self.database.groups_overlap(streak.place, place)
+            && self.keeps_pace(&streak, entry, matched_id)?;
         Ok(if agrees { streak.agreeing + 1 } else { 1 })
     }
 
@@ -54,7 +55,7 @@ impl LoopDetector {
         &self,
         streak: &Streak,
         entry: &KeyframeEntry<'_>,
-        candidate: &VerifiedCandidate,
+        matched_id: u64,
     ) -> Result<bool, LoopsError> {
         let pace = self.options.max_match_pace;
         if pace == 0.0 || !self.database.contains(streak.matched_id) {
@@ -62,13 +63,13 @@ impl LoopDetector {
         }
         if self
             .database
-            .are_neighbours(streak.matched_id, candidate.id)?
+            .are_neighbours(streak.matched_id, matched_id)?
         {
             return Ok(true);
         }
         let (before, now) = (
             self.database.timestamp_of(streak.matched_id)?,
-            self.database.timestamp_of(candidate.id)?,
+            self.database.timestamp_of(matched_id)?,
         );
         if !(before.is_finite() && now.is_finite()) {
             return Ok(true);
