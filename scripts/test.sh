@@ -57,8 +57,9 @@ summary() {
     printf '%s\n' "${timings[@]}"
     printf '%5d s  total\n' "$((SECONDS - started))"
 }
-# The failing section's name is taken before `summary` clears it.
-trap 'status=$?; if ((status != 0)); then failed="${section_name:-set-up}"; summary; echo "FAILED in: $failed" >&2; fi' EXIT
+# The failing section's name is kept before `summary` clears it.
+failed_section=""
+trap 'status=$?; if ((status != 0)); then failed_section="${section_name:-set-up}"; summary; echo "FAILED in: $failed_section" >&2; fi' EXIT
 
 # A checkout without a target/ folder (a fresh clone) builds in the machine's shared build cache:
 # target/ becomes a link to it, so compiled dependencies are reused across clones (cargo rebuilds
