@@ -497,8 +497,7 @@ impl KeyframeDatabase {
 
     /// The place of a keyframe.
     pub fn place_of(&self, id: u64) -> Result<PlaceId, LoopsError> {
-        let r = self.index_of(id).ok_or(LoopsError::UnknownKeyframe(id))?;
-        Ok(self.records[r].place)
+        Ok(self.record(id)?.place)
     }
 
     /// Whether keyframe `id` is in the database (added, not erased).
@@ -518,22 +517,19 @@ impl KeyframeDatabase {
     /// A keyframe's timestamp, seconds; `-inf` for keyframes reloaded from a map (their
     /// times belong to another session).
     pub fn timestamp_of(&self, id: u64) -> Result<f64, LoopsError> {
-        let r = self.index_of(id).ok_or(LoopsError::UnknownKeyframe(id))?;
-        Ok(self.records[r].timestamp)
+        Ok(self.record(id)?.timestamp)
     }
 
     /// The camera pose of a keyframe, `world_T_camera` (`world_T_body * body_T_camera`), when
     /// keyframes carry poses.
     pub fn world_t_camera(&self, id: u64) -> Result<Option<Isometry3<f64>>, LoopsError> {
-        let r = self.index_of(id).ok_or(LoopsError::UnknownKeyframe(id))?;
-        Ok(self.records[r].world_t_camera)
+        Ok(self.record(id)?.world_t_camera)
     }
 
     /// The odometry's path length (metres) from this session's first keyframe to keyframe
     /// `id`; `None` without poses and for keyframes reloaded from a map.
     pub fn travelled_m(&self, id: u64) -> Result<Option<f64>, LoopsError> {
-        let r = self.index_of(id).ok_or(LoopsError::UnknownKeyframe(id))?;
-        Ok(self.records[r].travelled_m)
+        Ok(self.record(id)?.travelled_m)
     }
 
     /// The path length a keyframe at camera position `position` would get if added now
@@ -657,6 +653,13 @@ impl KeyframeDatabase {
     /// Index of keyframe `id` in `records` (kept in id order).
     fn index_of(&self, id: u64) -> Option<usize> {
         self.records.binary_search_by_key(&id, |r| r.id).ok()
+    }
+
+    /// The record of keyframe `id`, or [`LoopsError::UnknownKeyframe`].
+    fn record(&self, id: u64) -> Result<&Record, LoopsError> {
+        self.index_of(id)
+            .map(|r| &self.records[r])
+            .ok_or(LoopsError::UnknownKeyframe(id))
     }
 }
 

@@ -138,7 +138,8 @@ pub struct LoopDetector {
     options: HintOptions,
     features: HashMap<u64, KeyframeFeatures>,
     kind: Option<FeatureKind>,
-    /// The place the last keyframes' best candidates agreed on, and how many in a row.
+    /// The consistency streak after the last keyframe (`None`: its candidate failed a gate
+    /// before the consistency gate, or it had none).
     streak: Option<Streak>,
     /// The hints of the current streak's keyframes, refused as inconsistent: confirmed when
     /// a later keyframe completes the streak, dropped when it breaks.

@@ -22,10 +22,9 @@ pub(super) struct Streak {
 
 impl LoopDetector {
     /// How many consecutive keyframes agree with the new one's candidate (keyframe
-    /// `matched_id` of `place`), counting its own:
-    /// one more than the streak's when the candidate's group overlaps the previous
-    /// candidate's and it keeps the streak's pace ([`LoopDetector::keeps_pace`]), else 1 (a
-    /// new streak).
+    /// `matched_id` of `place`), counting its own: one more than the streak's when the
+    /// candidate's group overlaps the previous candidate's and it keeps the streak's pace
+    /// ([`LoopDetector::keeps_pace`]), else 1 (a new streak).
     pub(super) fn agreeing(
         &self,
         entry: &KeyframeEntry<'_>,
