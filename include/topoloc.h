@@ -81,7 +81,8 @@
  * (`topoloc_set_log_callback`) and `TOPOLOC_ERR_CONCURRENT_USE` for a handle used by two calls
  * at once; 1.14: `pca_precision` in the image map options (`TOPOLOC_PCA_I8`, `_F32`); 1.15:
  * image keyframes (`topoloc_keyframe_describer_*`, `topoloc_loop_detector_add_image`), ranked
- * candidates (`topoloc_loop_detector_candidates`), local features of image maps
+ * candidates (`topoloc_loop_detector_candidates`), sessions
+ * (`topoloc_loop_detector_begin_session`), local features of image maps
  * (`verification_keypoints`, `local_features`).
  */
 #define TOPOLOC_ABI_VERSION_MINOR 15
@@ -2274,6 +2275,17 @@ topoloc_status topoloc_loop_detector_query(const struct topoloc_loop_detector *d
  * Errors: `_INVALID_ARGUMENT` (no keyframe with that id).
  */
 topoloc_status topoloc_loop_detector_erase(struct topoloc_loop_detector *detector, uint64_t id);
+
+/**
+ * Starts a new session whose odometry is in a new world frame (ABI 1.15): ORB-SLAM3 starting
+ * a new map after tracking is lost, VINS-Fusion a new sequence. The keyframes held become an
+ * earlier session's, as a map's are for `topoloc_loop_detector_from_map`: never inside the
+ * exclusion window (the map just lost may be found again at once), not compared by time, and
+ * not by the odometry gate, which compares poses of one world frame only. The next keyframe's
+ * timestamp may be earlier than the last one's; ids must still increase. The consistency
+ * streak ends (hints not yet confirmed are dropped). Only the general errors.
+ */
+topoloc_status topoloc_loop_detector_begin_session(struct topoloc_loop_detector *detector);
 
 /**
  * Saves the keyframes and their place graph as a topoloc map file (a view per keyframe,

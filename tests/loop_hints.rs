@@ -769,3 +769,68 @@ fn a_saved_detector_keeps_its_scene_points_for_metric_hints() {
         "{pose:?} vs {live_pose:?}"
     );
 }
+
+/// A host whose odometry restarts in a new world frame (ORB-SLAM3's new map after tracking is
+/// lost) begins a session: the keyframe just lost is found at once (it was inside the
+/// exclusion window), the new session's clock may start earlier, and the odometry of two
+/// unrelated frames is not compared (it would refuse the true place).
+#[test]
+fn a_new_session_finds_the_map_just_lost_without_comparing_odometry() {
+    let metric = HintOptions {
+        consistent_keyframes: 1,
+        odometry: Some(OdometryGate::default()),
+        ..options()
+    };
+    // In the new map's frame the camera is back at the origin: 45 degrees and 30 m from where
+    // the lost map's frame has it.
+    let restarted = Isometry3::from_parts(
+        Translation3::new(30.0, 0.0, 0.0),
+        UnitQuaternion::from_scaled_axis(Vector3::z() * 45f64.to_radians()),
+    ) * truth();
+    let revisit = |detector: &mut LoopDetector, q: &[[f32; 2]], d: &[f32], timestamp: f64| {
+        let keyframe = KeyframeEntry {
+            timestamp,
+            ..posed(3, d, restarted)
+        };
+        detector.process(&keyframe, point_features(q, None))
+    };
+
+    let (mut same_session, q, d) = with_metric_keyframe(metric.clone());
+    let done = revisit(&mut same_session, &q, &d, 1.0).unwrap();
+    assert_eq!(
+        done.gate(),
+        Gate::NoCandidate,
+        "inside the exclusion window"
+    );
+
+    let (mut detector, q, d) = with_metric_keyframe(metric);
+    detector.begin_session();
+    assert_eq!(
+        detector.database().timestamp_of(0).unwrap(),
+        f64::NEG_INFINITY
+    );
+    let hint = revisit(&mut detector, &q, &d, -100.0)
+        .unwrap()
+        .hint
+        .expect("keyframe 0 is a candidate");
+    assert_eq!(
+        (hint.gate, hint.matched_id),
+        (Gate::Accepted, 0),
+        "{hint:?}"
+    );
+    let pose = hint.pose.expect("the fitted pose, not the odometry's");
+    let error = (pose.matched_t_query.translation.vector - truth().translation.vector).norm();
+    assert!(error < 0.05, "{error} m");
+
+    // Within the new session, time must not go back, and the refusal changes nothing.
+    let earlier = KeyframeEntry {
+        timestamp: -200.0,
+        ..posed(4, &d, restarted)
+    };
+    let refused = detector.process(&earlier, point_features(&q, None));
+    assert!(
+        matches!(refused, Err(LoopsError::OutOfOrder(_))),
+        "{refused:?}"
+    );
+    assert_eq!(detector.database().len(), 2);
+}

@@ -348,6 +348,14 @@ public:
     /// (`TOPOLOC_ERR_INVALID_ARGUMENT` when no keyframe has that id).
     void erase(uint64_t id) { check(topoloc_loop_detector_erase(get(), id)); }
 
+    /// Starts a new session whose odometry is in a new world frame (ABI 1.15): ORB-SLAM3's new
+    /// map after tracking is lost, VINS-Fusion's new sequence. The keyframes held become an
+    /// earlier session's: never inside the exclusion window, not compared by time or by the
+    /// odometry gate; the next keyframe's timestamp may be earlier than the last one's (ids
+    /// must still increase). The consistency streak ends. Throws `Error` only for a detector
+    /// used by two threads at once.
+    void begin_session() { check(topoloc_loop_detector_begin_session(get())); }
+
     /// Saves the keyframes and their place graph as a map file (a view per keyframe, keyframe
     /// ids kept) atomically, for a later session: `Map::load`, then `from_map`. Throws `Error`
     /// (`TOPOLOC_ERR_IO`, `_EMPTY_MAP`, `_INVALID_UTF8`).

@@ -293,6 +293,21 @@ def test_erase(detector, views):
     assert [c.keyframe_id for c in detector.query(descriptor(1), 4)] == [0]
 
 
+def test_a_new_session_finds_the_keyframes_just_lost(detector, views):
+    first, second, descriptors, _ = views
+    detector.add(0, 100.0, descriptor(1), first, descriptors)
+    # Inside the exclusion window (5 ids) of keyframe 0.
+    excluded = detector.add(3, 100.5, descriptor(1), second, descriptors)
+    assert excluded.gate is topoloc.Gate.NO_CANDIDATE
+    detector.begin_session()
+    # The host's new map restarted its clock: an earlier time is accepted, once.
+    hint = detector.add(4, 0.0, descriptor(1), second, descriptors)
+    assert hint.accepted and hint.matched_id in (0, 3)
+    with pytest.raises(topoloc.InvalidArgumentError):
+        detector.add(5, -1.0, descriptor(1), second, descriptors)
+    assert len(detector) == 3
+
+
 def test_save_load_and_second_session(tmp_path, detector, views):
     first, second, descriptors, _ = views
     detector.add(0, 0.0, descriptor(1), first, descriptors)

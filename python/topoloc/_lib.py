@@ -710,6 +710,7 @@ SIGNATURES = {
         ],
     ),
     "topoloc_loop_detector_erase": (status_t, [LoopDetectorPtr, c_uint64]),
+    "topoloc_loop_detector_begin_session": (status_t, [LoopDetectorPtr]),
     "topoloc_loop_detector_save": (status_t, [LoopDetectorPtr, c_char_p]),
     "topoloc_loop_detector_len": (status_t, [LoopDetectorPtr, _p(c_size_t)]),
     # Confirmed loop hints (ABI 1.10)

@@ -463,6 +463,14 @@ class LoopDetector(_SingleThreaded):
         kid = _u64(id, "id")
         self._call("erase", lib.topoloc_loop_detector_erase, kid)
 
+    def begin_session(self) -> None:
+        """Starts a new session whose odometry is in a new world frame (a SLAM system's new
+        map or sequence; see the C ``topoloc_loop_detector_begin_session``): the keyframes held
+        become an earlier session's, never inside the exclusion window and not compared by
+        time or odometry; the next timestamp may be earlier than the last (ids must still
+        increase). The consistency streak ends."""
+        self._call("begin_session", lib.topoloc_loop_detector_begin_session)
+
     def save(self, path: PathLike) -> None:
         """Saves the keyframes, their place graph and their keypoints as a topoloc map file
         (see the C ``topoloc_loop_detector_save``), atomically, for a later session:

@@ -604,6 +604,23 @@ pub extern "C" fn topoloc_loop_detector_erase(
     })
 }
 
+/// Starts a new session whose odometry is in a new world frame (ABI 1.15): ORB-SLAM3 starting
+/// a new map after tracking is lost, VINS-Fusion a new sequence. The keyframes held become an
+/// earlier session's, as a map's are for `topoloc_loop_detector_from_map`: never inside the
+/// exclusion window (the map just lost may be found again at once), not compared by time, and
+/// not by the odometry gate, which compares poses of one world frame only. The next keyframe's
+/// timestamp may be earlier than the last one's; ids must still increase. The consistency
+/// streak ends (hints not yet confirmed are dropped). Only the general errors.
+#[no_mangle]
+pub extern "C" fn topoloc_loop_detector_begin_session(
+    detector: *mut topoloc_loop_detector,
+) -> topoloc_status {
+    run_on_mut(detector, "detector", |detector| {
+        detector.begin_session();
+        Ok(())
+    })
+}
+
 /// Saves the keyframes and their place graph as a topoloc map file (a view per keyframe,
 /// keyframe ids kept, with the keyframes' keypoints and, where a keyframe had an odometry pose
 /// and scene points, those points), for a later session: `topoloc_map_load`, then

@@ -23,7 +23,8 @@ pub const TOPOLOC_ABI_VERSION: u32 = 1;
 /// (`topoloc_set_log_callback`) and `TOPOLOC_ERR_CONCURRENT_USE` for a handle used by two calls
 /// at once; 1.14: `pca_precision` in the image map options (`TOPOLOC_PCA_I8`, `_F32`); 1.15:
 /// image keyframes (`topoloc_keyframe_describer_*`, `topoloc_loop_detector_add_image`), ranked
-/// candidates (`topoloc_loop_detector_candidates`), local features of image maps
+/// candidates (`topoloc_loop_detector_candidates`), sessions
+/// (`topoloc_loop_detector_begin_session`), local features of image maps
 /// (`verification_keypoints`, `local_features`).
 pub const TOPOLOC_ABI_VERSION_MINOR: u32 = 15;
 

@@ -10,6 +10,13 @@
 //! within [`DatabaseOptions::neighbour_radius_m`]. Keyframes never merge into an old place by
 //! pose: the host's odometry drifts, and finding the old place again by appearance is what a
 //! loop query is for.
+//!
+//! Sessions: a host whose odometry restarts in a new world frame (ORB-SLAM3 starting a new map
+//! after tracking is lost, VINS-Fusion starting a new sequence) calls
+//! [`KeyframeDatabase::begin_session`]. The keyframes held then become an earlier session's,
+//! as those of [`KeyframeDatabase::from_map`] are: their times and path lengths are no longer
+//! compared with the new session's, and their poses, in another world frame, are compared only
+//! with poses of their own session. New places are then linked by pose only within the session.
 
 use super::LoopsError;
 use crate::bounds::Bounds;
@@ -144,11 +151,16 @@ struct Record {
     /// The odometry's path length from this session's first keyframe to this one (metres);
     /// `None` without poses and for reloaded keyframes (another session's odometry).
     travelled_m: Option<f64>,
+    /// The session whose world frame `world_t_camera` is in (0 for the first, and for
+    /// keyframes reloaded from a map).
+    session: u32,
 }
 
 #[derive(Clone, Debug, Default)]
 struct Place {
     position: Option<Point3<f64>>,
+    /// The session whose world frame `position` is in.
+    session: u32,
     /// Ids of its keyframes, increasing.
     members: Vec<u64>,
 }
@@ -175,6 +187,8 @@ pub struct KeyframeDatabase {
     /// This session's last added camera position and path length there (kept when that
     /// keyframe is erased).
     last_travel: Option<(Point3<f64>, f64)>,
+    /// The current session (see the module documentation), counted from 0.
+    session: u32,
     unit: Vec<f32>,
 }
 
@@ -195,6 +209,7 @@ impl KeyframeDatabase {
             last_timestamp: None,
             with_poses: None,
             last_travel: None,
+            session: 0,
         })
     }
 
@@ -223,12 +238,14 @@ impl KeyframeDatabase {
                 place: view.place,
                 world_t_camera: view.world_t_camera,
                 travelled_m: None,
+                session: 0,
             });
         }
         db.descriptors.extend_from_slice(map.descriptors());
         db.places = (0..map.place_count() as PlaceId)
             .map(|p| Place {
                 position: map.place_position(p).ok().flatten(),
+                session: 0,
                 members: Vec::new(),
             })
             .collect();
@@ -266,6 +283,7 @@ impl KeyframeDatabase {
             place: added.place,
             world_t_camera: camera,
             travelled_m,
+            session: self.session,
         });
         self.last_travel = position.zip(travelled_m);
         self.descriptors.extend_from_slice(&self.unit);
@@ -349,13 +367,15 @@ impl KeyframeDatabase {
         if let Some(p) = position {
             let radius = self.options.neighbour_radius_m;
             for (other, q) in self.places.iter().enumerate() {
-                if q.position.is_some_and(|q| (q - p).norm() <= radius) {
+                let near = q.position.is_some_and(|q| (q - p).norm() <= radius);
+                if near && q.session == self.session {
                     self.edges.insert((other as PlaceId, place));
                 }
             }
         }
         self.places.push(Place {
             position,
+            session: self.session,
             members: Vec::new(),
         });
         place
@@ -505,9 +525,47 @@ impl KeyframeDatabase {
         self.index_of(id).is_some()
     }
 
-    /// Whether keyframes `a` and `b` both have poses and their cameras lie within
+    /// Starts a new session whose odometry is in a new world frame (module documentation):
+    /// the keyframes held become an earlier session's. Their timestamps become `-inf` and
+    /// their path lengths unknown. The next keyframe starts a new place, and its timestamp may
+    /// be earlier than the last one's; ids must still increase. Whether keyframes carry
+    /// poses stays fixed. Cannot fail.
+    pub fn begin_session(&mut self) {
+        for record in &mut self.records {
+            record.timestamp = f64::NEG_INFINITY;
+            record.travelled_m = None;
+        }
+        self.last_place = None;
+        self.last_timestamp = None;
+        self.last_travel = None;
+        self.session = self.session.saturating_add(1);
+    }
+
+    /// Whether keyframes `a` and `b` have poses in one world frame: both have poses and were
+    /// added in the same session ([`KeyframeDatabase::begin_session`]).
+    pub fn share_world_frame(&self, a: u64, b: u64) -> Result<bool, LoopsError> {
+        let (a, b) = (self.record(a)?, self.record(b)?);
+        Ok(a.session == b.session && a.world_t_camera.is_some() && b.world_t_camera.is_some())
+    }
+
+    /// The largest id held (the last added, unless erased since); `None` when empty.
+    pub fn max_id(&self) -> Option<u64> {
+        self.records.last().map(|r| r.id)
+    }
+
+    /// Whether keyframe `id` was added in the current session (its pose is in the frame of
+    /// the keyframes added now).
+    pub fn in_current_session(&self, id: u64) -> Result<bool, LoopsError> {
+        Ok(self.record(id)?.session == self.session)
+    }
+
+    /// Whether keyframes `a` and `b` both have poses in one world frame
+    /// ([`KeyframeDatabase::share_world_frame`]) and their cameras lie within
     /// [`DatabaseOptions::neighbour_radius_m`] of each other (the distance that links places).
     pub fn are_neighbours(&self, a: u64, b: u64) -> Result<bool, LoopsError> {
+        if !self.share_world_frame(a, b)? {
+            return Ok(false);
+        }
         let (a, b) = (self.world_t_camera(a)?, self.world_t_camera(b)?);
         Ok(a.zip(b).is_some_and(|(a, b)| {
             (a.translation.vector - b.translation.vector).norm() <= self.options.neighbour_radius_m

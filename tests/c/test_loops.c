@@ -3,7 +3,8 @@
  * relative poses out. Two keyframes see the same 60 keypoints (the same binary descriptors), so
  * the second's candidate verifies with all of them; bad keyframes are refused with the detector
  * unchanged; a detector saves as a map and a second session starts from it; a streak of
- * consistent revisits confirms the hints it had refused as inconsistent (ABI 1.10). The options
+ * consistent revisits confirms the hints it had refused as inconsistent (ABI 1.10); a new
+ * session finds the keyframes of the one just ended (ABI 1.15). The options
  * of every ABI minor since 1.5 are checked with older callers' struct sizes.
  */
 #include "harness.h"
@@ -347,8 +348,49 @@ static void a_streak_of_three_confirms_the_revisits_it_first_refused_as_inconsis
     topoloc_loop_detector_free(det);
 }
 
+/* Sessions (ABI 1.15): at the default exclusion (30 ids, 10 s) keyframe 3 cannot match
+ * keyframe 0; after `topoloc_loop_detector_begin_session` (a host's new map, its clock
+ * restarted) keyframe 4, earlier in time, finds the keyframes of the session just ended. */
+static void a_new_session_finds_the_keyframes_just_lost_and_may_restart_its_clock(void)
+{
+    topoloc_loop_options options;
+    topoloc_loop_detector *det = NULL;
+    topoloc_loop_keyframe kf;
+    topoloc_loop_hint hint;
+    struct loop_scene scene;
+
+    SECTION();
+    CHECK_STATUS(topoloc_loop_options_default(&options), TOPOLOC_OK);
+    options.consistent_keyframes = 1;
+    CHECK_STATUS(new_detector(&options, &det), TOPOLOC_OK);
+    if (det == NULL)
+        return;
+    first_view_of_the_scene(&scene, &kf, &hint);
+    kf.timestamp = 100.0;
+    CHECK_STATUS(topoloc_loop_detector_add(det, &kf, &hint), TOPOLOC_OK);
+    kf.id = 3;
+    kf.timestamp = 100.5;
+    kf.keypoints = scene.seen_again;
+    CHECK_STATUS(topoloc_loop_detector_add(det, &kf, &hint), TOPOLOC_OK);
+    CHECK(!hint.has_match && hint.gate == TOPOLOC_GATE_NO_CANDIDATE);
+
+    CHECK_STATUS(topoloc_loop_detector_begin_session(det), TOPOLOC_OK);
+    kf.id = 4;
+    kf.timestamp = 0.0;
+    CHECK_STATUS(topoloc_loop_detector_add(det, &kf, &hint), TOPOLOC_OK);
+    CHECK(hint.query_id == 4 && hint.accepted && hint.inliers >= 30);
+    CHECK(hint.matched_id == 0 || hint.matched_id == 3);
+    /* Within the new session time must not go back. */
+    kf.id = 5;
+    kf.timestamp = -1.0;
+    CHECK_ERROR(topoloc_loop_detector_add(det, &kf, &hint), TOPOLOC_ERR_INVALID_ARGUMENT);
+    CHECK_NULL(topoloc_loop_detector_begin_session(NULL), "detector");
+    topoloc_loop_detector_free(det);
+}
+
 void run_loop_tests(void)
 {
     loop_closure();
     a_streak_of_three_confirms_the_revisits_it_first_refused_as_inconsistent();
+    a_new_session_finds_the_keyframes_just_lost_and_may_restart_its_clock();
 }

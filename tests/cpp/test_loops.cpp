@@ -435,4 +435,20 @@ TEST(a_completed_streak_confirms_its_first_keyframes)
     CHECK_THROWS_STATUS(topoloc::LoopDetector().confirmed(), TOPOLOC_ERR_NULL_ARGUMENT);
 }
 
+// A new session (ABI 1.15): keyframe 3 is inside the exclusion window of keyframe 0 (5 ids);
+// after `begin_session` (a host's new map, its clock restarted) keyframe 4, earlier in time,
+// finds the keyframes of the session just ended.
+TEST(a_new_session_finds_the_keyframes_just_lost)
+{
+    topoloc::LoopDetector detector = test_detector();
+    (void)detector.add(keyframe(0, 100.0, false));
+    CHECK(detector.add(keyframe(3, 100.5, true)).gate == topoloc::Gate::NoCandidate);
+    detector.begin_session();
+    const topoloc::LoopHint hint = detector.add(keyframe(4, 0.0, true));
+    CHECK(hint.accepted && (hint.matched_id == 0 || hint.matched_id == 3));
+    CHECK_THROWS_STATUS(detector.add(keyframe(5, -1.0, true)), TOPOLOC_ERR_INVALID_ARGUMENT);
+    CHECK_EQ(detector.size(), std::size_t{3});
+    CHECK_THROWS_STATUS(topoloc::LoopDetector().begin_session(), TOPOLOC_ERR_NULL_ARGUMENT);
+}
+
 int main() { return run_all_tests(); }

@@ -420,7 +420,8 @@ impl LoopDetector {
     }
 
     /// The odometry's `matched_T_query` between the matched keyframe and the new one, when
-    /// both have poses.
+    /// both have poses in one world frame (the matched one is of this session, or was
+    /// reloaded from a map: [`LoopDetector::from_map`] assumes the map's frame).
     fn odometry_between(
         &self,
         entry: &KeyframeEntry<'_>,
@@ -429,6 +430,9 @@ impl LoopDetector {
         let Some(query) = entry.world_t_camera() else {
             return Ok(None);
         };
+        if !self.database.in_current_session(matched)? {
+            return Ok(None);
+        }
         Ok(self
             .database
             .world_t_camera(matched)?

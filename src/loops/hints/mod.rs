@@ -354,6 +354,21 @@ impl LoopDetector {
             .filter(|c| self.features.contains_key(&c.id))
     }
 
+    /// Starts a new session whose odometry is in a new world frame
+    /// ([`KeyframeDatabase::begin_session`]): ORB-SLAM3 starting a new map, VINS-Fusion a new
+    /// sequence. The keyframes held become an earlier session's, as a map's are for
+    /// [`LoopDetector::from_map`]: never inside the exclusion window (a map just lost may be
+    /// found again at once), not compared by time or pace, and not by the odometry gate or the
+    /// route check, which compare poses of one world frame only. The consistency streak and
+    /// its pending hints end. The next keyframe's timestamp may be earlier than the last one's;
+    /// ids must still increase. Cannot fail.
+    pub fn begin_session(&mut self) {
+        self.reloaded_max_id = self.reloaded_max_id.max(self.database.max_id());
+        self.database.begin_session();
+        self.streak = None;
+        self.pending.clear();
+    }
+
     /// Removes a keyframe and its features (ORB-SLAM culls keyframes); a pending hint from or
     /// to it is dropped, so none is ever confirmed against an erased keyframe.
     pub fn erase(&mut self, id: u64) -> Result<(), LoopsError> {

@@ -119,7 +119,8 @@ impl LoopDetector {
     /// growing with the path travelled from a to c and from b to d). A look-alike that began
     /// the streak, beside the true place, fits a pose metres off and fails. The rotation is
     /// compared whenever both hints have a pose, the translation when both are metric; without
-    /// poses, the odometry gate, or a shared session for b and d, nothing is compared (true).
+    /// poses, the odometry gate, or a shared session (and world frame) for b and d and for a
+    /// and c, nothing is compared (true).
     fn route_agrees(&self, earlier: &LoopHint, accepted: &LoopHint) -> Result<bool, LoopsError> {
         let (Some(gate), Some(pose_ab), Some(pose_dc)) =
             (self.options.odometry, &earlier.pose, &accepted.pose)
@@ -128,6 +129,12 @@ impl LoopDetector {
         };
         let reloaded = |id: u64| self.reloaded_max_id.is_some_and(|max| id <= max);
         if reloaded(earlier.matched_id) != reloaded(accepted.matched_id) {
+            return Ok(true);
+        }
+        let frames = &self.database;
+        if !frames.share_world_frame(earlier.query_id, accepted.query_id)?
+            || !frames.share_world_frame(earlier.matched_id, accepted.matched_id)?
+        {
             return Ok(true);
         }
         let camera = |id: u64| self.database.world_t_camera(id);
