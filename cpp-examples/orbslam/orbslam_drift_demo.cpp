@@ -31,6 +31,7 @@
 #include <cmath>
 #include <deque>
 #include <optional>
+#include <set>
 
 namespace {
 
@@ -56,9 +57,12 @@ struct KeyFrame {
     cv::Mat mImGray;                      ///< Freed by the adapter once the keyframe is in topoloc.
     cv::Mat Tcw;                          ///< World to camera, 4x4 CV_32F.
     std::vector<MapPoint *> mvpMapPoints; ///< One per keypoint, null where none.
+    float fx = 0, fy = 0, cx = 0, cy = 0; ///< The pinhole of `mvKeysUn`.
 
     /// `Tcw`, as ORB-SLAM2 returns it (a copy).
     cv::Mat GetPose() { return Tcw.clone(); }
+    /// No covisibility graph here: nothing is connected.
+    std::set<KeyFrame *> GetConnectedKeyFrames() { return {}; }
     /// The map point of each keypoint.
     std::vector<MapPoint *> GetMapPointMatches() { return mvpMapPoints; }
     /// Never culled here (every frame is kept as a keyframe).
@@ -285,6 +289,10 @@ struct Host {
         kf.mImGray = seq.grey(i);
         const sim::Features f = front_end(seq, i, kf.mImGray);
         kf.mvKeysUn = f.keypoints; // the simulator's images have no distortion
+        kf.fx = float(seq.intrinsics.fx);
+        kf.fy = float(seq.intrinsics.fy);
+        kf.cx = float(seq.intrinsics.cx);
+        kf.cy = float(seq.intrinsics.cy);
         kf.mDescriptors = f.descriptors;
         const sim::Pose world_T_camera = compose(world_T_body, sim::body_T_camera());
         kf.Tcw = topoloc_orbslam::to_mat(to_adapter(inverse(world_T_camera)));
@@ -320,9 +328,7 @@ void run(const demo::Args &args)
     options.exclude_recent_ids = args.exclude_recent;
     // The adapter's README sets consistent_keyframes = 1 because ORB-SLAM's LoopClosing checks
     // consistency itself; this host has no such check, so topoloc's default streak stays.
-    const topoloc_orbslam::Intrinsics intrinsics{seq.intrinsics.fx, seq.intrinsics.fy,
-                                                 seq.intrinsics.cx, seq.intrinsics.cy};
-    Database db(describer_map, intrinsics, options);
+    Database db(describer_map, options); // the intrinsics come with each keyframe
 
     demo::FrontEnd front_end(args);
     const std::size_t n = demo::keyframe_count(args, seq);

@@ -67,6 +67,11 @@ struct Intrinsics {
 struct Settings {
     /// Most keyframes `DetectRelocalizationCandidates` returns, most similar first. Default 5.
     std::size_t relocalization_candidates = 5;
+    /// A monocular map: its units drift and are not metres, so topoloc's odometry gate (bounds
+    /// in metres) is turned off, and a hint's translation is in the matched keyframe's map
+    /// units. Let `Sim3Solver` estimate the scale (do not seed `ComputeSim3` with scale 1).
+    /// Default false (stereo, RGB-D, or with an IMU: metric).
+    bool monocular = false;
     /// Receives every error message (see the top of this header); empty = none. Called without
     /// the database's mutex held, possibly from the tracking and the loop closing thread at once:
     /// it must be thread-safe and must not throw (an exception it throws is swallowed).
@@ -189,8 +194,18 @@ template <typename KeyFrame, typename Frame = KeyFrame> struct DefaultAccess {
     static uint64_t id(KeyFrame &kf) { return static_cast<uint64_t>(kf.mnId); }
     /// Seconds (`mTimeStamp`); must not decrease.
     static double timestamp(KeyFrame &kf) { return kf.mTimeStamp; }
-    /// The undistorted keypoints (`mvKeysUn`), in the pixels of `Intrinsics`.
+    /// The undistorted keypoints (`mvKeysUn`), in the pixels of `intrinsics`.
     static const std::vector<cv::KeyPoint> &keypoints(KeyFrame &kf) { return kf.mvKeysUn; }
+    /// The pinhole intrinsics of `keypoints`: the keyframe's own `fx`, `fy`, `cx`, `cy`, which
+    /// ORB-SLAM3 sets after it rectifies stereo or resizes images (its settings file's
+    /// `Camera1.fx` ... are the raw camera's then).
+    static Intrinsics intrinsics(KeyFrame &kf)
+    {
+        return {double(kf.fx), double(kf.fy), double(kf.cx), double(kf.cy)};
+    }
+    /// The keyframes ORB-SLAM connects to `kf` by covisibility (`GetConnectedKeyFrames()`):
+    /// never loop candidates of `kf`, as in ORB-SLAM's own database.
+    static auto connected(KeyFrame &kf) { return kf.GetConnectedKeyFrames(); }
     /// The ORB descriptors (`mDescriptors`): N x 32 CV_8U, row i = keypoint i.
     static const cv::Mat &descriptors(KeyFrame &kf) { return kf.mDescriptors; }
     /// The keyframe's 8-bit image (grey, BGR or BGRA): the member the host adds.
@@ -212,12 +227,15 @@ template <typename KeyFrame, typename Frame = KeyFrame> struct DefaultAccess {
     }
     /// True for a culled keyframe: skipped by `add`, never returned as a candidate.
     static bool is_bad(KeyFrame &kf) { return kf.isBad(); }
-    /// Called once `kf` is in topoloc, which keeps what it needs: frees the image member the
-    /// integration added (nothing else in ORB-SLAM reads it; a VGA image is 300 KB a keyframe).
-    /// An exception it throws is ignored (the keyframe is added by then).
+    /// Called once `kf` is in topoloc, which keeps what it needs, and for a keyframe culled
+    /// before it was added: frees the image member the integration added (nothing else in
+    /// ORB-SLAM reads it; a VGA image is 300 KB a keyframe). An exception it throws is ignored.
     static void added(KeyFrame &kf) { kf.mImGray.release(); }
     /// The map (session) the keyframe belongs to now: ORB-SLAM2 has one (null for all).
     static const void *map_of(KeyFrame &) { return nullptr; }
+    /// Whether the keyframe's map was discarded (ORB-SLAM3's `GetMap()->IsBad()`): its
+    /// keyframes are never candidates. ORB-SLAM2 has none.
+    static bool map_is_bad(KeyFrame &) { return false; }
 };
 
 // ---------------------------------------------------------------------------------------------
@@ -240,14 +258,31 @@ public:
 
     /// A database for keyframes described with `map`'s describer (a map built from images, e.g.
     /// `topoloc::Map::build_from_images`; neither map nor options are kept). The intrinsics
-    /// replace `options.fx..cy`, so hints carry relative poses. Throws `topoloc::Error` (a map
-    /// without describer, invalid options or intrinsics): the one member that throws.
+    /// are read from the keyframes (`Access::intrinsics`): the first keyframe's replace
+    /// `options.fx..cy`, so hints carry relative poses, and every later keyframe must have the
+    /// same. Throws `topoloc::Error` (a map without describer, invalid options): the
+    /// constructors are the only members that throw.
+    explicit KeyFrameDatabase(const topoloc::Map &map,
+                              const topoloc::LoopOptions &options = topoloc::default_loop_options(),
+                              Settings settings = Settings())
+        : kind_(map.descriptor_kind()), model_(map.descriptor_model()), dim_(map.dim()),
+          options_(for_sensor(options, settings)), describer_(map),
+          detector_(new_detector(std::nullopt)), settings_(std::move(settings))
+    {
+        errors_.set_logger(std::move(settings_.logger));
+    }
+
+    /// As the other constructor, with the intrinsics known up front: a keyframe whose own
+    /// (`Access::intrinsics`) differ is refused, e.g. a settings file's raw `Camera1.fx` when
+    /// ORB-SLAM3 rectified or resized the images. Throws `topoloc::Error` (also for invalid
+    /// intrinsics).
     KeyFrameDatabase(const topoloc::Map &map, const Intrinsics &intrinsics,
                      const topoloc::LoopOptions &options = topoloc::default_loop_options(),
                      Settings settings = Settings())
         : kind_(map.descriptor_kind()), model_(map.descriptor_model()), dim_(map.dim()),
-          options_(with_intrinsics(options, intrinsics)), describer_(map),
-          detector_(new_detector()), settings_(std::move(settings))
+          options_(for_sensor(options, settings)), describer_(map),
+          detector_(new_detector(intrinsics)), settings_(std::move(settings)),
+          intrinsics_(intrinsics)
     {
         errors_.set_logger(std::move(settings_.logger));
     }
@@ -258,17 +293,27 @@ public:
     /// Adds `pKF` (ORB-SLAM's `add`): a no-op when it is already held (e.g. after a `Detect*`
     /// call for it) and for a culled (`isBad`) keyframe, which ORB-SLAM may still have queued for
     /// loop closing. Then calls `Access::added` (the default frees the keyframe's image).
-    /// Errors: null keyframe, id not above the last added one, duplicate id, earlier timestamp,
-    /// a keyframe held before `clear()`, unusable image, descriptors, keypoints, pose or map
-    /// points, a topoloc error.
+    ///
+    /// A keyframe of another map than the last added one (`Access::map_of`: ORB-SLAM3 started
+    /// a new map after tracking was lost, or merged maps) begins a topoloc session
+    /// (`topoloc::LoopDetector::begin_session`): the keyframes held, in another world frame,
+    /// are then merge candidates at once, whatever the exclusion window, and the odometry gate
+    /// does not compare poses across the two frames. Its timestamp may be earlier than the
+    /// last one's (a new sequence); within a map time must not go back.
+    ///
+    /// Errors: null keyframe, id not above the last added one, duplicate id, earlier timestamp
+    /// in the same map, a keyframe held before `clear()`, intrinsics other than the first
+    /// keyframe's, unusable image, descriptors, keypoints, pose or map points, a topoloc
+    /// error.
     void add(KeyFrame *pKF) noexcept
     {
         run("add", [&] { (void)ensure_added(pKF); });
     }
 
     /// Removes `pKF` (ORB-SLAM's `erase`, from `KeyFrame::SetBadFlag`). As in ORB-SLAM's own
-    /// database, a keyframe never added or already erased is a no-op. Errors: null keyframe, a
-    /// keyframe held before `clear()` (its id and timestamp are read to tell).
+    /// database, a keyframe never added is a no-op, apart from freeing its image
+    /// (`Access::added`). Errors: null keyframe, a keyframe erased already, a keyframe held
+    /// before `clear()` (its id and timestamp are read to tell).
     void erase(KeyFrame *pKF) noexcept
     {
         run("erase", [&] { erase_if_held(pKF); });
@@ -293,14 +338,14 @@ public:
     }
 
     /// ORB-SLAM2's loop query: adds `pKF` if needed and returns the keyframe of its accepted hint
-    /// (in the same map), or nothing. `minScore` is ignored: topoloc's gates replace the DBoW2
-    /// score threshold. Errors: those of `add`.
+    /// (in the same map, not connected to `pKF` by covisibility), or nothing. `minScore` is
+    /// ignored: topoloc's gates replace the DBoW2 score threshold. Errors: those of `add`.
     std::vector<KeyFrame *> DetectLoopCandidates(KeyFrame *pKF, float minScore) noexcept
     {
         static_cast<void>(minScore);
         std::vector<KeyFrame *> found;
         run("DetectLoopCandidates", [&] {
-            KeyFrame *matched = accepted_match(ensure_added(pKF));
+            KeyFrame *matched = candidate_of(pKF, ensure_added(pKF));
             if (matched != nullptr && Access::map_of(*matched) == Access::map_of(*pKF))
                 found.push_back(matched);
         });
@@ -309,14 +354,16 @@ public:
 
     /// ORB-SLAM3's loop and merge query: adds `pKF` if needed and appends the keyframe of its
     /// accepted hint to `vpLoopCand` (same map as `pKF`) or `vpMergeCand` (another map), at most
-    /// `nNumCandidates` in each (topoloc gives at most one). On error nothing is appended.
+    /// `nNumCandidates` in each (topoloc gives at most one). As upstream, a keyframe connected
+    /// to `pKF` by covisibility (`Access::connected`) or of a discarded map
+    /// (`Access::map_is_bad`) is never a candidate. On error nothing is appended.
     void DetectNBestCandidates(KeyFrame *pKF, std::vector<KeyFrame *> &vpLoopCand,
                                std::vector<KeyFrame *> &vpMergeCand, int nNumCandidates) noexcept
     {
         KeyFrame *matched = nullptr;
         bool same_map = false;
         const bool ok = run("DetectNBestCandidates", [&] {
-            matched = accepted_match(ensure_added(pKF));
+            matched = candidate_of(pKF, ensure_added(pKF));
             if (matched != nullptr)
                 same_map = Access::map_of(*matched) == Access::map_of(*pKF);
         });
@@ -327,8 +374,8 @@ public:
 
     /// ORB-SLAM2's relocalization query: the held keyframes most similar to `F`'s image (global
     /// descriptors), most similar first, at most `Settings::relocalization_candidates`; erased
-    /// and bad keyframes never. `F` is not added. Errors: null frame, unusable image or one of
-    /// another size than the keyframes', a topoloc error.
+    /// and bad keyframes never. `F` is not added. Errors: null frame, no keyframe held yet,
+    /// unusable image or one of another size than the keyframes', a topoloc error.
     std::vector<KeyFrame *> DetectRelocalizationCandidates(Frame *F) noexcept
     {
         return relocalize(F, nullptr, false);
@@ -417,18 +464,47 @@ private:
     /// address alone may be reused by a new keyframe).
     using Identity = std::tuple<const KeyFrame *, uint64_t, double>;
 
-    static topoloc::LoopOptions with_intrinsics(topoloc::LoopOptions options, const Intrinsics &k)
+    /// The options for the sensor: a monocular map has no metric odometry to gate with.
+    static topoloc::LoopOptions for_sensor(topoloc::LoopOptions options, const Settings &settings)
     {
-        options.fx = k.fx;
-        options.fy = k.fy;
-        options.cx = k.cx;
-        options.cy = k.cy;
+        if (settings.monocular)
+            options.odometry_gate = false;
         return options;
     }
 
-    topoloc::LoopDetector new_detector() const
+    /// A detector with `intrinsics` (none: without, until the first keyframe gives them).
+    topoloc::LoopDetector new_detector(const std::optional<Intrinsics> &intrinsics) const
     {
-        return topoloc::LoopDetector::create(kind_, model_, dim_, options_);
+        topoloc::LoopOptions options = options_;
+        if (intrinsics) {
+            options.fx = intrinsics->fx;
+            options.fy = intrinsics->fy;
+            options.cx = intrinsics->cx;
+            options.cy = intrinsics->cy;
+        }
+        return topoloc::LoopDetector::create(kind_, model_, dim_, options);
+    }
+
+    /// Refuses a keyframe whose intrinsics differ from the run's; before the first keyframe of
+    /// a run without intrinsics, returns the detector that takes the keyframe's.
+    std::optional<topoloc::LoopDetector> check_intrinsics(KeyFrame &kf, uint64_t id) const
+    {
+        const Intrinsics k = Access::intrinsics(kf);
+        if (!intrinsics_)
+            return new_detector(k); // throws for unusable intrinsics
+        const auto differs = [](double a, double b) {
+            return !(std::abs(a - b) <= 1e-6 * std::max(1.0, std::abs(b)));
+        };
+        const Intrinsics &run = *intrinsics_;
+        if (differs(k.fx, run.fx) || differs(k.fy, run.fy) || differs(k.cx, run.cx) ||
+            differs(k.cy, run.cy)) {
+            fail("keyframe " + std::to_string(id) + " has intrinsics fx " + std::to_string(k.fx) +
+                 " fy " + std::to_string(k.fy) + " cx " + std::to_string(k.cx) + " cy " +
+                 std::to_string(k.cy) + ", not the run's " + std::to_string(run.fx) + " " +
+                 std::to_string(run.fy) + " " + std::to_string(run.cx) + " " +
+                 std::to_string(run.cy) + " (pass the keyframes' fx..cy, not the settings file's)");
+        }
+        return std::nullopt;
     }
 
     static void fail(const std::string &message) { throw std::runtime_error(message); }
@@ -485,18 +561,37 @@ private:
         const double timestamp = Access::timestamp(*kf);
         if (retired_.count(Identity(kf, id, timestamp)) != 0)
             fail(retired_message(id));
-        if (Access::is_bad(*kf))
+        if (Access::is_bad(*kf)) {
+            release_image(*kf);
             return nullptr;
-        check_order(id, timestamp);
+        }
+        const void *map = Access::map_of(*kf);
+        const bool new_session = last_id_.has_value() && map != last_map_;
+        check_order(id, timestamp, new_session);
+        std::optional<topoloc::LoopDetector> first = check_intrinsics(*kf, id);
         topoloc::LoopKeyframe keyframe = assemble(*kf, id, timestamp);
         const cv::Size size = Access::image(*kf).size();
-        const topoloc::LoopHint hint = detector_.add(keyframe);
-        const Entry &entry = commit(kf, id, timestamp, size, hint);
-        try {
-            Access::added(*kf);
-        } catch (...) { // documented as ignored: the keyframe is in the database
+        topoloc::LoopDetector &detector = first ? *first : detector_;
+        if (new_session)
+            detector.begin_session();
+        const topoloc::LoopHint hint = detector.add(keyframe);
+        if (first) {
+            detector_ = std::move(*first);
+            intrinsics_ = Access::intrinsics(*kf);
         }
+        const Entry &entry = commit(kf, id, timestamp, size, hint);
+        last_map_ = map;
+        release_image(*kf);
         return &entry;
+    }
+
+    /// `Access::added`, whose exceptions are ignored (as documented there).
+    static void release_image(KeyFrame &kf) noexcept
+    {
+        try {
+            Access::added(kf);
+        } catch (...) {
+        }
     }
 
     static std::string retired_message(uint64_t id)
@@ -505,8 +600,9 @@ private:
                " was added before clear(): the database was reset since";
     }
 
-    /// Refuses a keyframe out of order: a held id, an id not above the last, an earlier time.
-    void check_order(uint64_t id, double timestamp) const
+    /// Refuses a keyframe out of order: a held id, an id not above the last, an earlier time
+    /// (unless it starts a new session).
+    void check_order(uint64_t id, double timestamp, bool new_session) const
     {
         const std::string name = "keyframe " + std::to_string(id);
         if (by_id_.count(id) != 0)
@@ -515,7 +611,7 @@ private:
             fail(name + " after keyframe " + std::to_string(*last_id_) + ": ids must increase");
         if (!std::isfinite(timestamp))
             fail(name + ": timestamp is not finite");
-        if (last_id_ && timestamp < last_timestamp_)
+        if (last_id_ && !new_session && timestamp < last_timestamp_)
             fail(name + ": timestamp " + std::to_string(timestamp) +
                  " is earlier than the last one");
     }
@@ -669,8 +765,13 @@ private:
             return erase_held(it->second);
         const auto retired =
             retired_.lower_bound(Identity(kf, 0, -std::numeric_limits<double>::infinity()));
-        if (retired == retired_.end() || std::get<0>(*retired) != kf)
-            return; // never added
+        if (retired == retired_.end() || std::get<0>(*retired) != kf) {
+            const uint64_t id = Access::id(*kf);
+            if (erased_.count(Identity(kf, id, Access::timestamp(*kf))) != 0)
+                fail("keyframe " + std::to_string(id) + " was erased already");
+            release_image(*kf); // never added: culled before the loop closing thread took it
+            return;
+        }
         const uint64_t id = Access::id(*kf);
         if (retired_.count(Identity(kf, id, Access::timestamp(*kf))) != 0)
             fail(retired_message(id));
@@ -689,7 +790,14 @@ private:
     /// Erases held keyframe `id` from topoloc and the index, and drops hints naming it.
     void erase_held(uint64_t id)
     {
-        detector_.erase(id); // throws (and changes nothing) if topoloc does not hold it
+        const Entry &held = by_id_.at(id);
+        erased_.insert(Identity(held.kf, id, held.timestamp)); // first: may throw, nothing done
+        try {
+            detector_.erase(id);
+        } catch (...) { // topoloc does not hold it: nothing changed
+            erased_.erase(Identity(held.kf, id, held.timestamp));
+            throw;
+        }
         KeyFrame *kf = by_id_.at(id).kf;
         by_id_.erase(id);
         by_ptr_.erase(kf);
@@ -711,16 +819,18 @@ private:
 
     void reset()
     {
-        topoloc::LoopDetector fresh = new_detector(); // may throw: nothing changed yet
+        topoloc::LoopDetector fresh = new_detector(intrinsics_); // may throw: nothing changed yet
         std::set<Identity> retired;
         for (const auto &[id, entry] : by_id_)
             retired.insert(Identity(entry.kf, id, entry.timestamp));
         detector_ = std::move(fresh);
         retired_.swap(retired);
+        erased_.clear();
         by_id_.clear();
         by_ptr_.clear();
         confirmed_.clear();
         last_id_.reset();
+        last_map_ = nullptr;
         last_timestamp_ = 0.0;
         image_size_.reset();
     }
@@ -734,10 +844,18 @@ private:
         return it->second.kf;
     }
 
-    /// The matched keyframe of an accepted hint, if still usable (null for no entry).
-    KeyFrame *accepted_match(const Entry *entry) const
+    /// The matched keyframe of an accepted hint of `query`, if still usable, of a map not
+    /// discarded and not connected to `query` by covisibility (null for no entry).
+    KeyFrame *candidate_of(KeyFrame *query, const Entry *entry) const
     {
-        return entry != nullptr && entry->hint.accepted ? usable(entry->hint.matched_id) : nullptr;
+        KeyFrame *matched =
+            entry != nullptr && entry->hint.accepted ? usable(entry->hint.matched_id) : nullptr;
+        if (matched == nullptr || Access::map_is_bad(*matched))
+            return nullptr;
+        for (KeyFrame *connected : Access::connected(*query))
+            if (connected == matched)
+                return nullptr;
+        return matched;
     }
 
     static void append(std::vector<KeyFrame *> &to, KeyFrame *kf) noexcept
@@ -754,9 +872,9 @@ private:
         const bool ok = run("DetectRelocalizationCandidates", [&] {
             if (F == nullptr)
                 fail("null frame");
-            const std::vector<float> d = describe(Access::frame_image(*F), "frame image");
             if (by_id_.empty())
-                return;
+                fail("no keyframe is held yet: nothing to relocalize against");
+            const std::vector<float> d = describe(Access::frame_image(*F), "frame image");
             for (const topoloc::LoopCandidate &c : detector_.query(d, by_id_.size())) {
                 if (found.size() >= settings_.relocalization_candidates)
                     break;
@@ -792,9 +910,12 @@ private:
     std::map<uint64_t, Entry> by_id_;
     std::unordered_map<const KeyFrame *, uint64_t> by_ptr_;
     std::set<Identity> retired_; // held at the last clear()
+    std::set<Identity> erased_;  // erased since the last clear()
     std::vector<Match> confirmed_;
+    std::optional<Intrinsics> intrinsics_; // the run's: given, or the first keyframe's
     std::optional<uint64_t> last_id_;
     double last_timestamp_ = 0.0;
+    const void *last_map_ = nullptr; // the last added keyframe's (Access::map_of)
     topoloc_adapter::ImageSize image_size_;
     topoloc_adapter::ErrorReport errors_;
 };
