@@ -889,6 +889,62 @@ TEST(orbslam3_a_new_map_finds_the_map_just_lost)
     }
 }
 
+// ORB-SLAM3 saves its atlas and loads it in a later run: `Save` writes topoloc's keyframes
+// beside it, `Load` opens them, the loaded keyframes come back without images (`Map::PostLoad`
+// adds them) and are bound by id, and the new run's first keyframe, in a new map and world
+// frame, merges with them.
+TEST(a_saved_atlas_comes_back_and_merges)
+{
+    TempDir dir;
+    const std::string path = (dir.path / "atlas.topoloc").string();
+    Map saved_map, loaded_map, new_map;
+    {
+        Db3 db(image_map(), test_options());
+        World3 world;
+        std::vector<orb3::KeyFrame *> kfs;
+        add_scene_and_others(db, world, kfs, &saved_map);
+        CHECK(db.Save(path));
+    }
+    Log log;
+    Db3 db(image_map(), test_options(), settings_with(log));
+    CHECK(!db.Load(dir.path.string() + "/missing.topoloc"));
+    CHECK(contains_text(db.last_error(), "Load: "));
+    CHECK(db.Load(path));
+    CHECK(db.last_error().empty());
+    World3 world;
+    std::vector<orb3::KeyFrame *> loaded;
+    loaded.push_back(world.make(scene_shot(1, 0.0, false), &loaded_map));
+    for (uint32_t p = 1; p <= 4; ++p)
+        loaded.push_back(world.make(other_shot(1 + p, double(p), p), &loaded_map));
+    for (orb3::KeyFrame *kf : loaded) {
+        kf->mImGray.release(); // a loaded keyframe has no image
+        db.add(kf);
+    }
+    CHECK(db.last_error().empty());
+    CHECK_EQ(db.size(), std::size_t{5});
+    CHECK(!db.Load(path)); // only into an empty database
+    CHECK(contains_text(db.last_error(), "Load needs an empty database"));
+
+    orb3::KeyFrame *revisit = world.make(in_another_frame(scene_shot(10, 0.5, true)), &new_map);
+    std::vector<orb3::KeyFrame *> loop, merge;
+    db.DetectNBestCandidates(revisit, loop, merge, 3);
+    CHECK(loop.empty() && merge == std::vector<orb3::KeyFrame *>{loaded[0]});
+    check_revisit_hint(db.GetHint(revisit), revisit, loaded[0]);
+    // A keyframe without image that was not saved is still refused.
+    orb3::KeyFrame *blank = world.make(other_shot(11, 1.0, 5), &new_map);
+    blank->mImGray.release();
+    db.add(blank);
+    CHECK(contains_text(db.last_error(), "keyframe image is empty"));
+
+    // After Shutdown every call is refused, nothing crashes.
+    db.Shutdown();
+    db.add(world.make(other_shot(12, 2.0, 6), &new_map));
+    CHECK(contains_text(db.last_error(), "add: the database was shut down"));
+    Frame f = frame_of(2);
+    CHECK(db.DetectRelocalizationCandidates(&f).empty());
+    CHECK(!db.Save(path));
+}
+
 // As upstream, a keyframe connected to the query by covisibility is never its loop candidate
 // (ORB-SLAM2 has no other guard against closing a loop with its own neighbours).
 TEST(connected_keyframes_are_no_loop_candidates)

@@ -267,7 +267,7 @@ public:
                               Settings settings = Settings())
         : kind_(map.descriptor_kind()), model_(map.descriptor_model()), dim_(map.dim()),
           options_(for_sensor(options, settings)), describer_(map),
-          detector_(new_detector(std::nullopt)), settings_(std::move(settings))
+          detector_(new_detector(nullptr, nullptr)), settings_(std::move(settings))
     {
         errors_.set_logger(std::move(settings_.logger));
     }
@@ -281,7 +281,7 @@ public:
                      Settings settings = Settings())
         : kind_(map.descriptor_kind()), model_(map.descriptor_model()), dim_(map.dim()),
           options_(for_sensor(options, settings)), describer_(map),
-          detector_(new_detector(intrinsics)), settings_(std::move(settings)),
+          detector_(new_detector(&intrinsics, nullptr)), settings_(std::move(settings)),
           intrinsics_(intrinsics)
     {
         errors_.set_logger(std::move(settings_.logger));
@@ -417,6 +417,40 @@ public:
         return out;
     }
 
+    /// Saves topoloc's keyframes (global descriptors, keypoints, scene points, poses, place
+    /// graph) as a topoloc map file, atomically, beside ORB-SLAM3's saved atlas (call it from
+    /// `System::SaveAtlas`); `Load` opens it in a later run. Returns whether it succeeded.
+    /// Errors: an empty database, an I/O error.
+    bool Save(const std::string &path) noexcept
+    {
+        return run("Save", [&] { detector_.save(path); });
+    }
+
+    /// Opens a database saved with `Save`, before any keyframe is added (call it from
+    /// `System::LoadAtlas`, before `Map::PostLoad` adds the loaded keyframes). The loaded
+    /// keyframes, which ORB-SLAM3 restores without images, are then matched by id as
+    /// `add` meets them, and are candidates again; new keyframes need larger ids (ORB-SLAM3
+    /// restores its id counter) and begin a new session. Returns whether it succeeded.
+    /// Errors: a database that holds keyframes, a file that is not a topoloc map, a map of
+    /// another describer or not saved by `Save` (views without keyframe ids), a topoloc error.
+    /// On error the database is unchanged.
+    bool Load(const std::string &path) noexcept
+    {
+        return run("Load", [&] { load(path); });
+    }
+
+    /// Frees topoloc's detector and describer (and their ONNX Runtime sessions) while the
+    /// host's libraries are still alive: call it from `System::Shutdown` once the loop closing
+    /// thread has finished. Every later call fails with "the database was shut down".
+    void Shutdown() noexcept
+    {
+        std::lock_guard<std::mutex> lock(mutex_);
+        shut_down_ = true;
+        detector_ = topoloc::LoopDetector();
+        describer_ = topoloc::Describer();
+        saved_.reset();
+    }
+
     /// Number of keyframes held.
     [[nodiscard]] std::size_t size() const noexcept
     {
@@ -472,17 +506,25 @@ private:
         return options;
     }
 
-    /// A detector with `intrinsics` (none: without, until the first keyframe gives them).
-    topoloc::LoopDetector new_detector(const std::optional<Intrinsics> &intrinsics) const
+    /// A detector with `intrinsics` (null: without, until the first keyframe gives them),
+    /// whose first session is the saved one `Load` opened, if any.
+    topoloc::LoopDetector new_detector(const Intrinsics *intrinsics) const
+    {
+        return new_detector(intrinsics, saved_ ? &*saved_ : nullptr);
+    }
+
+    topoloc::LoopDetector new_detector(const Intrinsics *intrinsics,
+                                       const topoloc::Map *saved) const
     {
         topoloc::LoopOptions options = options_;
-        if (intrinsics) {
+        if (intrinsics != nullptr) {
             options.fx = intrinsics->fx;
             options.fy = intrinsics->fy;
             options.cx = intrinsics->cx;
             options.cy = intrinsics->cy;
         }
-        return topoloc::LoopDetector::create(kind_, model_, dim_, options);
+        return saved != nullptr ? topoloc::LoopDetector::from_map(*saved, options)
+                                : topoloc::LoopDetector::create(kind_, model_, dim_, options);
     }
 
     /// Refuses a keyframe whose intrinsics differ from the run's; before the first keyframe of
@@ -491,7 +533,7 @@ private:
     {
         const Intrinsics k = Access::intrinsics(kf);
         if (!intrinsics_)
-            return new_detector(k); // throws for unusable intrinsics
+            return new_detector(&k); // throws for unusable intrinsics
         const auto differs = [](double a, double b) {
             return !(std::abs(a - b) <= 1e-6 * std::max(1.0, std::abs(b)));
         };
@@ -517,7 +559,8 @@ private:
         topoloc_adapter::Logger logger;
         {
             std::lock_guard<std::mutex> lock(mutex_);
-            error = attempt(call, body);
+            error = shut_down_ ? describe_failure(call, "the database was shut down (Shutdown)")
+                               : attempt(call, body);
             logger = errors_.record(error);
         }
         topoloc_adapter::log(logger, error);
@@ -565,6 +608,8 @@ private:
             release_image(*kf);
             return nullptr;
         }
+        if (saved_ids_.count(id) != 0)
+            return &bind_saved(kf, id, timestamp);
         const void *map = Access::map_of(*kf);
         const bool new_session = last_id_.has_value() && map != last_map_;
         check_order(id, timestamp, new_session);
@@ -583,6 +628,35 @@ private:
         last_map_ = map;
         release_image(*kf);
         return &entry;
+    }
+
+    /// Takes `kf` as the saved keyframe `id` that `Load` brought back (ORB-SLAM3's
+    /// `Map::PostLoad` adds its loaded keyframes, which have no image): topoloc holds it
+    /// already, with its features. Throws, before anything changed, for intrinsics other than
+    /// the run's.
+    const Entry &bind_saved(KeyFrame *kf, uint64_t id, double timestamp)
+    {
+        std::optional<topoloc::LoopDetector> first = check_intrinsics(*kf, id);
+        topoloc::LoopHint none;
+        none.query_id = id;
+        Entry &entry = by_id_[id];
+        entry.kf = kf;
+        entry.timestamp = timestamp;
+        entry.hint = none;
+        try {
+            by_ptr_[kf] = id;
+            saved_ids_.erase(id);
+        } catch (...) {
+            by_id_.erase(id);
+            throw;
+        }
+        if (first) {
+            detector_ = std::move(*first);
+            intrinsics_ = Access::intrinsics(*kf);
+        }
+        last_map_ = Access::map_of(*kf);
+        release_image(*kf);
+        return entry;
     }
 
     /// `Access::added`, whose exceptions are ignored (as documented there).
@@ -787,6 +861,33 @@ private:
         return it->second;
     }
 
+    /// `Load`'s body: the checks first, then everything is swapped in.
+    void load(const std::string &path)
+    {
+        if (!by_id_.empty() || last_id_)
+            fail("Load needs an empty database: call it before any keyframe is added");
+        topoloc::Map map = topoloc::Map::load(path);
+        if (map.descriptor_kind() != kind_ || map.descriptor_model() != model_ ||
+            map.dim() != dim_) {
+            fail(path + " holds " + map.descriptor_kind() + "/" + map.descriptor_model() + " " +
+                 std::to_string(map.dim()) + "-d descriptors, this database describes with " +
+                 kind_ + "/" + model_ + " " + std::to_string(dim_));
+        }
+        std::set<uint64_t> ids;
+        for (uint32_t v = 0; v < map.view_count(); ++v) {
+            const std::optional<uint64_t> id = map.view_info(v).keyframe_id;
+            if (!id)
+                fail(path + ": view " + std::to_string(v) +
+                     " has no keyframe id (not a database saved by Save)");
+            ids.insert(*id);
+        }
+        topoloc::LoopDetector fresh = new_detector(intrinsics_ ? &*intrinsics_ : nullptr, &map);
+        detector_ = std::move(fresh);
+        last_id_ = ids.empty() ? std::nullopt : std::optional<uint64_t>(*ids.rbegin());
+        saved_ids_.swap(ids);
+        saved_ = std::move(map);
+    }
+
     /// Erases held keyframe `id` from topoloc and the index, and drops hints naming it.
     void erase_held(uint64_t id)
     {
@@ -819,13 +920,16 @@ private:
 
     void reset()
     {
-        topoloc::LoopDetector fresh = new_detector(intrinsics_); // may throw: nothing changed yet
+        // May throw: nothing changed yet.
+        topoloc::LoopDetector fresh = new_detector(intrinsics_ ? &*intrinsics_ : nullptr);
         std::set<Identity> retired;
         for (const auto &[id, entry] : by_id_)
             retired.insert(Identity(entry.kf, id, entry.timestamp));
         detector_ = std::move(fresh);
         retired_.swap(retired);
         erased_.clear();
+        saved_.reset();
+        saved_ids_.clear();
         by_id_.clear();
         by_ptr_.clear();
         confirmed_.clear();
@@ -913,6 +1017,9 @@ private:
     std::set<Identity> erased_;  // erased since the last clear()
     std::vector<Match> confirmed_;
     std::optional<Intrinsics> intrinsics_; // the run's: given, or the first keyframe's
+    std::optional<topoloc::Map> saved_;    // opened by Load: the detector's first session
+    std::set<uint64_t> saved_ids_;         // its keyframes not bound to ORB-SLAM's yet
+    bool shut_down_ = false;
     std::optional<uint64_t> last_id_;
     double last_timestamp_ = 0.0;
     const void *last_map_ = nullptr; // the last added keyframe's (Access::map_of)
