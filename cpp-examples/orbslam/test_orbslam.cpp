@@ -23,6 +23,8 @@ namespace {
 
 namespace to = topoloc_orbslam;
 
+constexpr double kF = 150.0, kCx = 80.0, kCy = 60.0; // a pinhole of the 160x120 images
+
 // ---------------------------------------------------------------------------------------------
 // Stand-ins of ORB-SLAM's classes
 // ---------------------------------------------------------------------------------------------
@@ -101,6 +103,29 @@ struct MapPoint {
     bool isBad() { return bad; }
 };
 
+// ORB-SLAM3's GeometricCamera: type 0 pinhole, 1 fisheye (here equidistant: a Kannala-Brandt
+// model with k1..k4 = 0), anything else another model.
+struct Camera {
+    int type = 0;
+    int GetType() const { return type; }
+    Vector3f unprojectEig(const cv::Point2f &p) const
+    {
+        const double dx = (p.x - kCx) / kF, dy = (p.y - kCy) / kF;
+        const double theta = std::hypot(dx, dy);
+        const double s = theta > 1e-12 ? std::sin(theta) / theta : 1.0;
+        return {{float(s * dx), float(s * dy), float(std::cos(theta))}};
+    }
+};
+
+// A pinhole pixel of the test camera in the equidistant fisheye image.
+cv::Point2f fisheye_pixel(const cv::Point2f &p)
+{
+    const double dx = (p.x - kCx) / kF, dy = (p.y - kCy) / kF;
+    const double r = std::hypot(dx, dy);
+    const double scale = r > 1e-12 ? std::atan(r) / r : 1.0;
+    return {float(kCx + kF * scale * dx), float(kCy + kF * scale * dy)};
+}
+
 struct KeyFrame : KeyFrameData {
     std::vector<MapPoint *> points;
     SE3f GetPose()
@@ -111,6 +136,9 @@ struct KeyFrame : KeyFrameData {
         return T;
     }
     std::set<KeyFrame *> connected;
+    Camera camera;
+    Camera *mpCamera = &camera;
+    int NLeft = -1;
     std::vector<MapPoint *> GetMapPointMatches() { return points; }
     std::set<KeyFrame *> GetConnectedKeyFrames() { return connected; }
 };
@@ -131,6 +159,23 @@ struct Access : to::DefaultAccess<KeyFrame, Frame> {
     }
     static const void *map_of(KeyFrame &kf) { return kf.GetMap(); }
     static bool map_is_bad(KeyFrame &kf) { return kf.GetMap() != nullptr && kf.GetMap()->IsBad(); }
+    static to::CameraModel camera_model(KeyFrame &kf)
+    {
+        switch (kf.mpCamera->GetType()) {
+        case 0:
+            return to::CameraModel::Pinhole;
+        case 1:
+            return to::CameraModel::Fisheye;
+        default:
+            return to::CameraModel::Other;
+        }
+    }
+    static std::array<double, 3> bearing(KeyFrame &kf, const cv::KeyPoint &k)
+    {
+        const Vector3f r = kf.mpCamera->unprojectEig(k.pt);
+        return {r(0), r(1), r(2)};
+    }
+    static int left_count(KeyFrame &kf) { return kf.NLeft; }
 };
 
 } // namespace orb3
@@ -142,7 +187,6 @@ using Db3 = to::KeyFrameDatabase<orb3::KeyFrame, Frame, orb3::Access>;
 // A scene seen twice, and unrelated keyframes
 // ---------------------------------------------------------------------------------------------
 
-constexpr double kF = 150.0, kCx = 80.0, kCy = 60.0; // a pinhole of the 160x120 images
 constexpr std::size_t kPoints = 80;
 constexpr double kYaw = 3.0 * 3.14159265358979323846 / 180.0;
 
@@ -943,6 +987,49 @@ TEST(a_saved_atlas_comes_back_and_merges)
     Frame f = frame_of(2);
     CHECK(db.DetectRelocalizationCandidates(&f).empty());
     CHECK(!db.Save(path));
+}
+
+// ORB-SLAM3's fisheye keyframes keep raw fisheye pixels in mvKeysUn: the adapter projects
+// their bearings to a pinhole, so the revisit's pose is right. A two-fisheye rig's keyframes
+// have the second camera's descriptors and map points after the first's (NLeft rows of
+// keypoints): they are used, not refused. Another camera model is refused.
+TEST(orbslam3_fisheye_and_two_camera_keyframes)
+{
+    Map map;
+    Db3 db(image_map(), test_options());
+    World3 world;
+    const auto to_fisheye = [](orb3::KeyFrame *kf) {
+        kf->camera.type = 1;
+        for (cv::KeyPoint &k : kf->mvKeysUn)
+            k.pt = orb3::fisheye_pixel(k.pt);
+        return kf;
+    };
+    std::vector<orb3::KeyFrame *> kfs{to_fisheye(world.make(scene_shot(1, 0.0, false), &map))};
+    for (uint32_t p = 1; p <= 4; ++p)
+        kfs.push_back(to_fisheye(world.make(other_shot(1 + p, double(p), p), &map)));
+    for (orb3::KeyFrame *kf : kfs)
+        db.add(kf);
+    orb3::KeyFrame *revisit = to_fisheye(world.make(scene_shot(10, 10.0, true), &map));
+    // A second camera's 7 keypoints follow the first's in the descriptors and map points.
+    revisit->NLeft = int(kPoints);
+    cv::Mat right(7, 32, CV_8U, cv::Scalar(5));
+    cv::vconcat(revisit->mDescriptors, right, revisit->mDescriptors);
+    revisit->points.resize(kPoints + 7, nullptr);
+    std::vector<orb3::KeyFrame *> loop, merge;
+    db.DetectNBestCandidates(revisit, loop, merge, 3);
+    CHECK(db.last_error().empty());
+    CHECK(loop == std::vector<orb3::KeyFrame *>{kfs[0]});
+    check_revisit_hint(db.GetHint(revisit), revisit, kfs[0]);
+
+    orb3::KeyFrame *other = world.make(other_shot(11, 11.0, 5), &map);
+    other->camera.type = 2;
+    db.add(other);
+    CHECK(contains_text(db.last_error(), "neither pinhole nor Kannala-Brandt"));
+    orb3::KeyFrame *short_rows = world.make(other_shot(12, 12.0, 6), &map);
+    short_rows->NLeft = int(kPoints) - 1;
+    db.add(short_rows);
+    CHECK(contains_text(db.last_error(), "left_count (NLeft) is 79 for 80 keypoints"));
+    CHECK_EQ(db.size(), std::size_t{6});
 }
 
 // As upstream, a keyframe connected to the query by covisibility is never its loop candidate

@@ -54,6 +54,10 @@ namespace topoloc_orbslam {
 /// A rigid transform, 16 doubles row-major `[R t; 0 0 0 1]` (the topoloc layout).
 using Pose = topoloc::Pose;
 
+/// Fisheye keypoints whose bearing has z at most this share of its length (87 degrees or
+/// more off the axis) have no pinhole projection worth keeping.
+inline constexpr double kMinBearingZ = 0.05;
+
 /// Pinhole intrinsics of the undistorted keypoints (`mvKeysUn`), pixels: ORB-SLAM's `fx`,
 /// `fy`, `cx`, `cy` (the `Camera.fx` ... entries of its settings file).
 struct Intrinsics {
@@ -183,6 +187,20 @@ inline bool point_from_mat(const cv::Mat &mat, std::array<double, 3> &out)
 // Accessor
 // ---------------------------------------------------------------------------------------------
 
+/// The camera model of a keyframe's keypoints, as `Access::camera_model` tells it.
+enum class CameraModel {
+    /// `keypoints` are undistorted pinhole pixels of `intrinsics` (ORB-SLAM2, ORB-SLAM3's
+    /// `Pinhole`).
+    Pinhole,
+    /// `keypoints` are raw fisheye pixels (ORB-SLAM3's `KannalaBrandt8`, whose `mvKeysUn` it
+    /// does not undistort): the adapter turns each into its bearing (`Access::bearing`) and
+    /// projects it through a pinhole of `intrinsics`; keypoints 87 degrees or more off the
+    /// axis are left out.
+    Fisheye,
+    /// Anything else: the keyframe is refused with an error.
+    Other,
+};
+
 /// How the database reads ORB-SLAM's objects. The defaults target ORB-SLAM2's shapes plus one
 /// member the host adds (`cv::Mat mImGray` on `KeyFrame` and `Frame`, see README.md). For
 /// ORB-SLAM3, derive from it and hide `camera_from_world`, `world_position` and `map_of`
@@ -203,6 +221,19 @@ template <typename KeyFrame, typename Frame = KeyFrame> struct DefaultAccess {
     {
         return {double(kf.fx), double(kf.fy), double(kf.cx), double(kf.cy)};
     }
+    /// The camera model of `keypoints`: ORB-SLAM2 undistorts them to a pinhole.
+    static CameraModel camera_model(KeyFrame &) { return CameraModel::Pinhole; }
+    /// The bearing (a ray in the camera frame, any length, z forward) of a keypoint of a
+    /// `CameraModel::Fisheye` keyframe; called for no other model.
+    static std::array<double, 3> bearing(KeyFrame &, const cv::KeyPoint &k)
+    {
+        return {double(k.pt.x), double(k.pt.y), 1.0};
+    }
+    /// How many of the descriptors and map points belong to `keypoints` when the keyframe
+    /// holds a second camera's after them (ORB-SLAM3's `NLeft` of a two-fisheye rig, whose
+    /// `mvKeysUn` has `NLeft` rows and descriptors `NLeft + NRight`); -1 for one camera,
+    /// whose rows are one per keypoint. ORB-SLAM2 has one camera.
+    static int left_count(KeyFrame &) { return -1; }
     /// The keyframes ORB-SLAM connects to `kf` by covisibility (`GetConnectedKeyFrames()`):
     /// never loop candidates of `kf`, as in ORB-SLAM's own database.
     static auto connected(KeyFrame &kf) { return kf.GetConnectedKeyFrames(); }
@@ -698,42 +729,93 @@ private:
         out.id = id;
         out.timestamp = timestamp;
         const std::vector<cv::KeyPoint> &keys = Access::keypoints(kf);
-        out.keypoints = keypoint_positions(keys);
-        out.keypoint_descriptors = descriptor_bytes(Access::descriptors(kf), keys.size());
+        const Rows rows = rows_of(kf, keys.size());
+        const std::vector<std::size_t> kept = pinhole_keypoints(kf, keys, out.keypoints);
+        out.keypoint_descriptors = descriptor_bytes(Access::descriptors(kf), rows, kept);
         out.descriptor = describe(Access::image(kf), "keyframe image");
         const std::optional<Pose> Tcw = Access::camera_from_world(kf);
         if (Tcw) {
             check_pose(*Tcw);
             out.world_T_body = inverse_rigid(*Tcw); // Twc; the body is the camera
-            out.camera_points = camera_points(kf, *Tcw, keys.size());
+            out.camera_points = camera_points(kf, *Tcw, rows, kept);
         }
         return out;
     }
 
-    static std::vector<float> keypoint_positions(const std::vector<cv::KeyPoint> &keys)
-    {
-        std::vector<float> xy;
-        xy.reserve(2 * keys.size());
-        for (const cv::KeyPoint &k : keys) {
-            xy.push_back(k.pt.x);
-            xy.push_back(k.pt.y);
+    /// How many descriptor and map point rows a keyframe must have: exactly one per keypoint
+    /// (one camera), or at least one per keypoint (a second camera's rows follow).
+    struct Rows {
+        std::size_t count = 0;
+        bool more_allowed = false;
+        [[nodiscard]] bool fits(std::size_t rows) const
+        {
+            return more_allowed ? rows >= count : rows == count;
         }
-        return xy;
+        [[nodiscard]] std::string text() const
+        {
+            return (more_allowed ? "at least " : "") + std::to_string(count);
+        }
+    };
+
+    static Rows rows_of(KeyFrame &kf, std::size_t keypoints)
+    {
+        const int left = Access::left_count(kf);
+        if (left < 0)
+            return {keypoints, false};
+        if (static_cast<std::size_t>(left) != keypoints)
+            fail("left_count (NLeft) is " + std::to_string(left) + " for " +
+                 std::to_string(keypoints) + " keypoints");
+        return {keypoints, true};
     }
 
-    static std::vector<uint8_t> descriptor_bytes(const cv::Mat &d, std::size_t keypoints)
+    /// Writes the pinhole pixel positions of the usable keypoints into `xy` and returns their
+    /// indices: all of a pinhole keyframe's, a fisheye keyframe's bearings projected through
+    /// the keyframe's intrinsics. Throws for another camera model.
+    static std::vector<std::size_t> pinhole_keypoints(KeyFrame &kf,
+                                                      const std::vector<cv::KeyPoint> &keys,
+                                                      std::vector<float> &xy)
     {
-        if (keypoints == 0 && d.empty())
+        const CameraModel model = Access::camera_model(kf);
+        if (model == CameraModel::Other)
+            fail("the keyframe's camera model is neither pinhole nor Kannala-Brandt fisheye");
+        const Intrinsics k = model == CameraModel::Fisheye ? Access::intrinsics(kf) : Intrinsics{};
+        std::vector<std::size_t> kept;
+        kept.reserve(keys.size());
+        xy.reserve(2 * keys.size());
+        for (std::size_t i = 0; i < keys.size(); ++i) {
+            cv::Point2f px = keys[i].pt;
+            if (model == CameraModel::Fisheye) {
+                const std::array<double, 3> ray = Access::bearing(kf, keys[i]);
+                const double norm = std::sqrt(ray[0] * ray[0] + ray[1] * ray[1] + ray[2] * ray[2]);
+                if (!(ray[2] > kMinBearingZ * norm)) // also NaN
+                    continue;
+                px = cv::Point2f(float(k.fx * ray[0] / ray[2] + k.cx),
+                                 float(k.fy * ray[1] / ray[2] + k.cy));
+            }
+            kept.push_back(i);
+            xy.push_back(px.x);
+            xy.push_back(px.y);
+        }
+        return kept;
+    }
+
+    /// The rows `kept` of an N x 32 CV_8U descriptor matrix, whose row count must fit `rows`.
+    static std::vector<uint8_t> descriptor_bytes(const cv::Mat &d, const Rows &rows,
+                                                 const std::vector<std::size_t> &kept)
+    {
+        if (rows.count == 0 && d.empty())
             return {};
         if (d.dims != 2 || d.type() != CV_8UC1 || d.cols != 32 ||
-            static_cast<std::size_t>(d.rows) != keypoints) {
-            fail("descriptors must be " + std::to_string(keypoints) + " x 32 CV_8U (one row per " +
-                 "keypoint), got " + std::to_string(d.rows) + " x " + std::to_string(d.cols) +
+            !rows.fits(static_cast<std::size_t>(d.rows))) {
+            fail("descriptors must be " + rows.text() + " x 32 CV_8U (one row per keypoint), " +
+                 "got " + std::to_string(d.rows) + " x " + std::to_string(d.cols) +
                  " of type " + std::to_string(d.type()));
         }
-        std::vector<uint8_t> bytes(32 * keypoints);
-        for (int r = 0; r < d.rows; ++r)
-            std::copy(d.ptr<uint8_t>(r), d.ptr<uint8_t>(r) + 32, bytes.begin() + 32 * r);
+        std::vector<uint8_t> bytes(32 * kept.size());
+        for (std::size_t j = 0; j < kept.size(); ++j) {
+            const uint8_t *row = d.ptr<uint8_t>(int(kept[j]));
+            std::copy(row, row + 32, bytes.begin() + std::ptrdiff_t(32 * j));
+        }
         return bytes;
     }
 
@@ -746,21 +828,21 @@ private:
             fail("pose Tcw's last row is not 0 0 0 1");
     }
 
-    /// Each keypoint's map point in the camera frame (`Tcw * Xw`), NaN x3 where none.
-    std::vector<float> camera_points(KeyFrame &kf, const Pose &Tcw, std::size_t keypoints)
+    /// The map point of each kept keypoint in the camera frame (`Tcw * Xw`), NaN x3 where
+    /// none; the map point rows must fit `rows`.
+    std::vector<float> camera_points(KeyFrame &kf, const Pose &Tcw, const Rows &rows,
+                                     const std::vector<std::size_t> &kept)
     {
         const auto points = Access::map_points(kf);
-        if (static_cast<std::size_t>(points.size()) != keypoints)
-            fail(std::to_string(points.size()) + " map point matches for " +
-                 std::to_string(keypoints) + " keypoints");
+        if (!rows.fits(static_cast<std::size_t>(points.size())))
+            fail(std::to_string(points.size()) + " map point matches for " + rows.text() +
+                 " keypoints");
         const float nan = std::numeric_limits<float>::quiet_NaN();
-        std::vector<float> xyz(3 * keypoints, nan);
-        std::size_t i = 0;
-        for (const auto &mp : points) {
+        std::vector<float> xyz(3 * kept.size(), nan);
+        for (std::size_t j = 0; j < kept.size(); ++j) {
             std::array<double, 3> Xw{};
-            if (Access::world_position(mp, Xw))
-                write_point(transform_point(Tcw, Xw), &xyz[3 * i]);
-            ++i;
+            if (Access::world_position(points[kept[j]], Xw))
+                write_point(transform_point(Tcw, Xw), &xyz[3 * j]);
         }
         return xyz;
     }
