@@ -205,6 +205,154 @@ TEST(clear_starts_a_new_run)
     CHECK(detector.findConnection(7, 0, info));
 }
 
+// loop_fusion's pose graph as far as loops go: keyframes with has_loop / loop_index,
+// `earliest_loop_index`, the optimisation queue, and what optimize4DoF does with them (it takes
+// the last index queued, walks keyframes from `earliest_loop_index` to it, and asserts that each
+// loop's old index is at or after `earliest_loop_index`).
+struct StandInPoseGraph {
+    struct Entry {
+        bool has_loop = false;
+        int loop_index = -1;
+    };
+    std::map<int, Entry> keyframes;
+    int earliest_loop_index = -1;
+    std::vector<int> optimize_buf;
+
+    void apply(const topoloc_vins::PoseGraphUpdate &update)
+    {
+        for (const topoloc_vins::LoopInfo &loop : update.loops)
+            keyframes[loop.cur_index] = Entry{true, loop.old_index};
+        earliest_loop_index = update.earliest_loop_index;
+        if (update.optimize_index >= 0)
+            optimize_buf.push_back(update.optimize_index);
+    }
+
+    /// The loops optimize4DoF uses, and how many would fire its assert.
+    std::pair<std::vector<int>, int> optimize()
+    {
+        const int cur_index = optimize_buf.empty() ? -1 : optimize_buf.back();
+        optimize_buf.clear();
+        std::vector<int> used;
+        int violations = 0;
+        for (const auto &[index, kf] : keyframes) {
+            if (index < earliest_loop_index || index > cur_index || !kf.has_loop)
+                continue;
+            violations += kf.loop_index < earliest_loop_index ? 1 : 0;
+            used.push_back(index);
+        }
+        return {used, violations};
+    }
+};
+
+// With topoloc's streak of 3, revisits 10 and 11 wait as inconsistent and revisit 12 confirms
+// them: the update records all three loops, lowers earliest_loop_index to their old keyframe
+// (an earlier loop had set it to 5), and queues the current index once, so optimize4DoF uses
+// all three without its assert firing.
+TEST(confirmed_loops_keep_the_pose_graph_consistent)
+{
+    topoloc_vins::Config config = test_config();
+    config.options.consistent_keyframes = 3;
+    topoloc_vins::LoopDetector detector(image_map(), config);
+    StandInPoseGraph graph;
+    graph.keyframes[6] = {true, 5}; // a loop recorded before
+    graph.earliest_loop_index = 5;
+    CHECK_EQ(detector.detectLoop(keyframe(0, 0, Eigen::Isometry3d::Identity(), true, false), 0),
+             -1);
+    for (int i = 10; i <= 12; ++i) {
+        const int loop = detector.detectLoop(keyframe(i, 0, revisit_body(), true, true), i);
+        CHECK_EQ(loop, i < 12 ? -1 : 0);
+        graph.apply(detector.pose_graph_update(i, loop, graph.earliest_loop_index));
+    }
+    CHECK(detector.last_error().empty());
+    CHECK_EQ(graph.earliest_loop_index, 0);
+    const auto [used, violations] = graph.optimize();
+    CHECK(used == std::vector<int>({6, 10, 11, 12}));
+    CHECK_EQ(violations, 0);
+}
+
+// Keyframe `kf` with its points as VINS's normalized coordinates instead of pixels.
+topoloc_vins::KeyFrame normalized(topoloc_vins::KeyFrame kf)
+{
+    const topoloc_vins::Config c = test_config();
+    for (const cv::Point2f &uv : kf.point_2d_uv)
+        kf.point_2d_norm.emplace_back(float((uv.x - c.cx) / c.fx), float((uv.y - c.cy) / c.fy));
+    kf.point_2d_uv.clear();
+    return kf;
+}
+
+// A second sequence: VINS's new VIO frame (100 m away here) and restarted clock; at the
+// default exclusion (50 indices) keyframe 6 of the same sequence could not match keyframe 0.
+// The new sequence begins a topoloc session: the loop is found, with its measured pose. The
+// points are given as normalized coordinates, and keyframe 0's 3D points are in its origin
+// pose, not in its VIO pose shifted since (as VINS's are after a sequence merge).
+TEST(a_second_sequence_finds_the_first)
+{
+    for (const bool second_sequence : {false, true}) {
+        topoloc_vins::Config config = test_config();
+        config.exclude_recent = 50;
+        topoloc_vins::LoopDetector detector(image_map(), config);
+        Eigen::Isometry3d shift = Eigen::Isometry3d::Identity();
+        shift.translation() = Eigen::Vector3d(100, 0, 0);
+        topoloc_vins::KeyFrame first =
+            normalized(keyframe(0, 0, shift * Eigen::Isometry3d::Identity(), true, false));
+        first.time_stamp = 100;
+        first.origin_vio_T = Eigen::Vector3d::Zero();
+        first.origin_vio_R = Eigen::Matrix3d::Identity();
+        first.sequence = 1;
+        CHECK_EQ(detector.detectLoop(first, 0), -1);
+        topoloc_vins::KeyFrame revisit =
+            normalized(keyframe(6, 0, second_sequence ? revisit_body() : shift * revisit_body(),
+                                true, true));
+        revisit.time_stamp = second_sequence ? 0.5 : 100.5;
+        revisit.sequence = second_sequence ? 2 : 1;
+        const int loop = detector.detectLoop(revisit, 6);
+        CHECK(detector.last_error().empty());
+        CHECK_EQ(loop, second_sequence ? 0 : -1);
+        topoloc_vins::LoopInfo info;
+        if (!second_sequence || !detector.findConnection(6, 0, info)) {
+            CHECK(!second_sequence);
+            continue;
+        }
+        CHECK((info.relative_t - revisit_body().translation()).norm() < 0.03);
+        // Within a sequence time must not go back.
+        topoloc_vins::KeyFrame earlier = keyframe(7, 1, revisit_body(), false, false);
+        earlier.time_stamp = 0.0;
+        earlier.sequence = 2;
+        CHECK_EQ(detector.detectLoop(earlier, 7), -1);
+        CHECK(!detector.last_error().empty());
+        CHECK_EQ(detector.size(), std::size_t{2});
+    }
+}
+
+// VINS re-estimates the extrinsics online: each keyframe keeps the ones it was added with, and
+// a loop's relative body pose uses both keyframes'. A bad estimate is refused.
+TEST(extrinsics_follow_the_online_estimate)
+{
+    topoloc_vins::LoopDetector detector(image_map(), test_config());
+    CHECK(!detector.set_extrinsics(Eigen::Vector3d(0, 0, std::nan("")), camera_in_body()));
+    CHECK(!detector.last_error().empty());
+    CHECK(!detector.set_extrinsics(Eigen::Vector3d::Zero(), 2 * camera_in_body()));
+    // Keyframe 0 with the configured extrinsics; the revisit after an update that moved the
+    // camera 0.1 m along the body's x: the revisit's body is then 0.1 m behind its camera.
+    CHECK_EQ(detector.detectLoop(keyframe(0, 0, Eigen::Isometry3d::Identity(), true, false), 0),
+             -1);
+    const Eigen::Vector3d moved(0.1, 0, 0);
+    CHECK(detector.set_extrinsics(moved, camera_in_body()));
+    CHECK(detector.last_error().empty());
+    Eigen::Isometry3d body_T_camera = Eigen::Isometry3d::Identity();
+    body_T_camera.linear() = camera_in_body();
+    Eigen::Isometry3d moved_T_camera = body_T_camera;
+    moved_T_camera.translation() = moved;
+    // The revisit's camera is where revisit_body() put it; its body follows the new extrinsics.
+    const Eigen::Isometry3d camera = body_T_camera * second_in_first();
+    const Eigen::Isometry3d body = camera * moved_T_camera.inverse();
+    topoloc_vins::KeyFrame revisit = keyframe(7, 0, body, true, true);
+    CHECK_EQ(detector.detectLoop(revisit, 7), 0);
+    topoloc_vins::LoopInfo info;
+    CHECK(detector.findConnection(7, 0, info));
+    CHECK((info.relative_t - body.translation()).norm() < 0.03);
+}
+
 } // namespace
 
 int main() { return run_all_tests(); }

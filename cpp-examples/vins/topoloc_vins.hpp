@@ -39,25 +39,45 @@ namespace topoloc_vins {
 using Descriptor = std::array<uint8_t, 32>;
 
 /// One keyframe as loop_fusion has it. Borrowed by `LoopDetector::detectLoop` for the call.
+///
+/// Points: VINS's images are raw (distorted, or fisheye), and so are its pixel coordinates
+/// (`point_2d_uv`, `keypoints`). Give the normalized undistorted coordinates VINS computes
+/// with its camera model (`point_2d_norm`, `keypoints_norm`): the adapter projects them
+/// through the pinhole `Config::fx..cy`. Pixel arrays are used only where no normalized ones
+/// are given, and must then be undistorted pinhole pixels of `Config::fx..cy`.
 struct KeyFrame {
     /// VINS's keyframe index; must increase from one keyframe to the next.
     int index = -1;
-    /// Seconds; must not decrease.
+    /// Seconds; must not decrease within a sequence.
     double time_stamp = 0.0;
-    /// The keyframe image (CV_8UC1 grey or CV_8UC3 BGR), undistorted; every keyframe the size
-    /// of the first.
+    /// VINS's `sequence`: a keyframe of another sequence than the last one begins a topoloc
+    /// session (`topoloc::LoopDetector::begin_session`), whose clock may restart and whose VIO
+    /// frame is not compared with the earlier sequences' by the odometry gate.
+    int sequence = 0;
+    /// The keyframe image (CV_8UC1 grey or CV_8UC3 BGR), raw as VINS has it; every keyframe
+    /// the size of the first. Only its global descriptor is computed from it, unless the
+    /// keyframe brings no points (ORB corners are then extracted: the image must then be
+    /// undistorted to the pinhole `Config::fx..cy`).
     cv::Mat image;
-    /// VIO pose of the body (IMU) in the VIO world: `vio_T_w_i`, `vio_R_w_i`.
+    /// VIO pose of the body (IMU) in the VIO world: `vio_T_w_i`, `vio_R_w_i` (after VINS's
+    /// shift of a merged sequence): the odometry topoloc's gate compares.
     Eigen::Vector3d vio_T_w_i = Eigen::Vector3d::Zero();
     Eigen::Matrix3d vio_R_w_i = Eigen::Matrix3d::Identity();
+    /// The pose `point_3d` was triangulated in (VINS `origin_vio_T`, `origin_vio_R`, which
+    /// its own PnP uses); none = the VIO pose. Both or neither.
+    std::optional<Eigen::Vector3d> origin_vio_T;
+    std::optional<Eigen::Matrix3d> origin_vio_R;
     /// Optional: the tracked points of the sliding window, with their VIO world positions
-    /// (`point_3d`), undistorted pixels (`point_2d_uv`) and descriptors (VINS:
-    /// `window_brief_descriptors`); all three the same length.
+    /// (`point_3d`), normalized coordinates (`point_2d_norm`) or undistorted pixels
+    /// (`point_2d_uv`), and descriptors (VINS: `window_brief_descriptors`); all the same
+    /// length (each coordinate array may be empty).
     std::vector<cv::Point3f> point_3d;
+    std::vector<cv::Point2f> point_2d_norm;
     std::vector<cv::Point2f> point_2d_uv;
     std::vector<Descriptor> window_descriptors;
-    /// Optional: further keypoints without 3D (VINS: `keypoints` and `brief_descriptors`, its
-    /// extra FAST corners), undistorted pixels; the same length.
+    /// Optional: further keypoints without 3D (VINS: `keypoints_norm` / `keypoints` and
+    /// `brief_descriptors`, its extra FAST corners); the same length.
+    std::vector<cv::Point2f> keypoints_norm;
     std::vector<cv::Point2f> keypoints;
     std::vector<Descriptor> descriptors;
 };
@@ -90,11 +110,31 @@ struct LoopInfo {
     }
 };
 
+/// What `PoseGraph::addKeyFrame` writes after `detectLoop`, in VINS's terms
+/// (`LoopDetector::pose_graph_update`).
+struct PoseGraphUpdate {
+    /// The loops to record: the current keyframe's (if any), then those `confirmed()` gave.
+    /// For each, set `has_loop`, `loop_index` (= `old_index`) and `loop_info` on keyframe
+    /// `cur_index`, holding `m_keyframelist`: the optimisation thread reads them.
+    std::vector<LoopInfo> loops;
+    /// VINS's `earliest_loop_index` after these loops: the smallest old index of every loop so
+    /// far, -1 for none. `optimize4DoF` starts there and asserts that each loop's old index is
+    /// at or after it, so a confirmed loop that reaches further back must lower it.
+    int earliest_loop_index = -1;
+    /// The one index to push to `optimize_buf` (-1: none): the current keyframe's whenever a
+    /// loop was recorded. `optimize4DoF` optimizes up to the last index pushed, so pushing a
+    /// confirmed loop's earlier index after it would leave the current loop out.
+    int optimize_index = -1;
+};
+
 /// Configuration: the camera and its extrinsics, the exclusion window and VINS's own gates.
 struct Config {
-    /// Pinhole intrinsics of the undistorted keyframe images, pixels.
+    /// The pinhole that normalized coordinates are projected through, pixels (VINS: its
+    /// `FOCAL_LENGTH`, 460, and the image centre); also the pinhole of undistorted pixel
+    /// arrays. topoloc's RANSAC thresholds are in these pixels.
     double fx = 0, fy = 0, cx = 0, cy = 0;
     /// The camera in the body frame (VINS `tic`, `qic`): optical axes z forward, x right, y down.
+    /// VINS estimates them online: pass each new estimate to `LoopDetector::set_extrinsics`.
     Eigen::Vector3d tic = Eigen::Vector3d::Zero();
     Eigen::Matrix3d qic = Eigen::Matrix3d::Identity();
     /// Keyframes whose index is within this many of the new one's are never candidates (VINS
@@ -156,6 +196,22 @@ public:
         clear();
     }
 
+    /// Sets the camera extrinsics for the keyframes added from now on (VINS publishes its online
+    /// estimate of `tic`, `qic`; loop_fusion's `extrinsic_callback` receives it). Each keyframe
+    /// keeps the extrinsics it was added with. Returns false, logs and keeps the old ones for
+    /// a non-finite translation or a matrix that is not a rotation.
+    bool set_extrinsics(const Eigen::Vector3d &tic, const Eigen::Matrix3d &qic)
+    {
+        if (!tic.allFinite() || !qic.allFinite() || !is_rotation(qic)) {
+            fail("set_extrinsics: tic must be finite and qic a rotation");
+            return false;
+        }
+        body_T_camera_.linear() = qic;
+        body_T_camera_.translation() = tic;
+        errors_.record("");
+        return true;
+    }
+
     /// Sets the function that receives every error message and every refused loop (e.g.
     /// ROS_WARN or spdlog).
     void set_logger(topoloc_adapter::Logger logger) { errors_.set_logger(std::move(logger)); }
@@ -164,13 +220,14 @@ public:
     std::string last_error() const { return errors_.last_error(); }
 
     /// Keyframes added since construction or the last `clear`.
-    std::size_t size() const noexcept { return poses_.size(); }
+    std::size_t size() const noexcept { return added_.size(); }
 
     /// Forgets every keyframe: a new run starts (new indices may start anywhere).
     void clear()
     {
         detector_ = topoloc::LoopDetector::create(kind_, model_, dim_, config_.options);
-        poses_.clear();
+        added_.clear();
+        last_sequence_.reset();
         loops_.clear();
         confirmed_.clear();
         image_size_.reset();
@@ -200,8 +257,9 @@ public:
             return fail(std::string("keyframe ") + std::to_string(keyframe.index) + ": " +
                         e.what());
         }
-        poses_[keyframe.index] = body_pose(keyframe);
+        added_[keyframe.index] = Added{body_pose(keyframe), body_T_camera_};
         last_index_ = keyframe.index;
+        last_sequence_ = keyframe.sequence;
         for (const topoloc::LoopHint &earlier : detector_.confirmed()) {
             if (std::optional<LoopInfo> info = accept(earlier))
                 confirmed_.push_back(*info);
@@ -219,6 +277,25 @@ public:
             return false;
         info = found->second;
         return true;
+    }
+
+    /// What the pose graph writes after `detectLoop(keyframe, cur_index)` returned
+    /// `loop_index`, given VINS's `earliest_loop_index` before it (see `PoseGraphUpdate`).
+    PoseGraphUpdate pose_graph_update(int cur_index, int loop_index, int earliest_loop_index) const
+    {
+        PoseGraphUpdate update;
+        update.earliest_loop_index = earliest_loop_index;
+        LoopInfo current;
+        if (loop_index >= 0 && findConnection(cur_index, loop_index, current))
+            update.loops.push_back(current);
+        update.loops.insert(update.loops.end(), confirmed_.begin(), confirmed_.end());
+        for (const LoopInfo &loop : update.loops) {
+            if (update.earliest_loop_index < 0 || loop.old_index < update.earliest_loop_index)
+                update.earliest_loop_index = loop.old_index;
+        }
+        if (!update.loops.empty())
+            update.optimize_index = cur_index;
+        return update;
     }
 
     /// Loops of earlier keyframes that the last `detectLoop` confirmed (topoloc accepts the first
@@ -245,6 +322,12 @@ private:
 
     static bool finite(const Eigen::MatrixXd &m) { return m.allFinite(); }
 
+    static bool is_rotation(const Eigen::Matrix3d &R)
+    {
+        const double orthogonality = (R.transpose() * R - Eigen::Matrix3d::Identity()).norm();
+        return orthogonality <= 1e-6 && R.determinant() > 0;
+    }
+
     /// Why `keyframe` cannot be used, or "".
     std::string validate(const KeyFrame &keyframe) const
     {
@@ -257,10 +340,7 @@ private:
             !std::isfinite(keyframe.time_stamp)) {
             return name + " has a non-finite pose or timestamp";
         }
-        const double orthogonality =
-            (keyframe.vio_R_w_i.transpose() * keyframe.vio_R_w_i - Eigen::Matrix3d::Identity())
-                .norm();
-        if (orthogonality > 1e-6 || keyframe.vio_R_w_i.determinant() < 0) {
+        if (!is_rotation(keyframe.vio_R_w_i)) {
             return name + " has a vio_R_w_i that is not a rotation";
         }
         if (keyframe.image.empty() || keyframe.image.depth() != CV_8U ||
@@ -271,12 +351,29 @@ private:
         if (!size.empty()) {
             return size;
         }
-        if (keyframe.point_3d.size() != keyframe.point_2d_uv.size() ||
-            keyframe.point_3d.size() != keyframe.window_descriptors.size()) {
-            return name + ": point_3d, point_2d_uv and window_descriptors differ in length";
+        if (keyframe.origin_vio_T.has_value() != keyframe.origin_vio_R.has_value()) {
+            return name + ": origin_vio_T and origin_vio_R must be given together";
         }
-        if (keyframe.keypoints.size() != keyframe.descriptors.size()) {
-            return name + ": keypoints and descriptors differ in length";
+        if (keyframe.origin_vio_T && (!finite(*keyframe.origin_vio_T) ||
+                                      !finite(*keyframe.origin_vio_R) ||
+                                      !is_rotation(*keyframe.origin_vio_R))) {
+            return name + " has a non-finite origin_vio_T or an origin_vio_R that is no rotation";
+        }
+        const std::size_t points = keyframe.point_3d.size();
+        const auto fits = [](std::size_t n, std::size_t expected) {
+            return n == 0 || n == expected;
+        };
+        if (keyframe.window_descriptors.size() != points ||
+            !fits(keyframe.point_2d_norm.size(), points) ||
+            !fits(keyframe.point_2d_uv.size(), points) ||
+            (points > 0 && keyframe.point_2d_norm.empty() && keyframe.point_2d_uv.empty())) {
+            return name + ": point_3d, window_descriptors and point_2d_norm or point_2d_uv " +
+                   "differ in length";
+        }
+        const std::size_t extra = keyframe.descriptors.size();
+        if (!fits(keyframe.keypoints_norm.size(), extra) || !fits(keyframe.keypoints.size(), extra) ||
+            (extra > 0 && keyframe.keypoints_norm.empty() && keyframe.keypoints.empty())) {
+            return name + ": keypoints_norm or keypoints and descriptors differ in length";
         }
         return "";
     }
@@ -313,23 +410,46 @@ private:
         kf.timestamp = keyframe.time_stamp;
         kf.descriptor = describer_.describe(topoloc::image_view(
             grey.data, uint32_t(grey.cols), uint32_t(grey.rows), TOPOLOC_PIXEL_GRAY8));
-        const Isometry world_T_body = body_pose(keyframe);
-        kf.world_T_body = row_major(world_T_body);
+        kf.world_T_body = row_major(body_pose(keyframe));
         kf.body_T_camera = row_major(body_T_camera_);
-        if (keyframe.point_3d.empty() && keyframe.keypoints.empty()) {
+        if (keyframe.point_3d.empty() && keyframe.descriptors.empty()) {
             add_orb(grey, kf);
         } else {
-            add_points(keyframe, (world_T_body * body_T_camera_).inverse(), kf);
+            add_points(keyframe, (origin_pose(keyframe) * body_T_camera_).inverse(), kf);
         }
+        if (last_sequence_ && keyframe.sequence != *last_sequence_)
+            detector_.begin_session(); // cannot fail: the keyframe was checked
         topoloc::LoopHint hint = detector_.add(kf);
         image_size_.remember(keyframe.image.size());
         return hint;
     }
 
+    /// The body pose `point_3d` is in: VINS's origin pose, else the VIO pose.
+    static Isometry origin_pose(const KeyFrame &keyframe)
+    {
+        if (!keyframe.origin_vio_T)
+            return body_pose(keyframe);
+        Isometry pose = Isometry::Identity();
+        pose.linear() = *keyframe.origin_vio_R;
+        pose.translation() = *keyframe.origin_vio_T;
+        return pose;
+    }
+
+    /// Point `i` of `norm` (projected through the pinhole) or, without normalized ones, of
+    /// `pixels`.
+    cv::Point2f pixel(const std::vector<cv::Point2f> &norm, const std::vector<cv::Point2f> &pixels,
+                      std::size_t i) const
+    {
+        if (norm.empty())
+            return pixels[i];
+        return {float(config_.fx * norm[i].x + config_.cx),
+                float(config_.fy * norm[i].y + config_.cy)};
+    }
+
     /// The host's points: tracked ones with their 3D positions (moved into the camera frame),
     /// then the extra keypoints without.
-    static void add_points(const KeyFrame &keyframe, const Isometry &camera_T_world,
-                           topoloc::LoopKeyframe &kf)
+    void add_points(const KeyFrame &keyframe, const Isometry &camera_T_world,
+                    topoloc::LoopKeyframe &kf) const
     {
         const float nan = std::numeric_limits<float>::quiet_NaN();
         auto push = [&kf](const cv::Point2f &uv, const Descriptor &d, const Eigen::Vector3f &p) {
@@ -340,10 +460,12 @@ private:
         for (std::size_t i = 0; i < keyframe.point_3d.size(); ++i) {
             const cv::Point3f &w = keyframe.point_3d[i];
             const Eigen::Vector3d c = camera_T_world * Eigen::Vector3d(w.x, w.y, w.z);
-            push(keyframe.point_2d_uv[i], keyframe.window_descriptors[i], c.cast<float>());
+            push(pixel(keyframe.point_2d_norm, keyframe.point_2d_uv, i),
+                 keyframe.window_descriptors[i], c.cast<float>());
         }
-        for (std::size_t i = 0; i < keyframe.keypoints.size(); ++i) {
-            push(keyframe.keypoints[i], keyframe.descriptors[i], Eigen::Vector3f(nan, nan, nan));
+        for (std::size_t i = 0; i < keyframe.descriptors.size(); ++i) {
+            push(pixel(keyframe.keypoints_norm, keyframe.keypoints, i), keyframe.descriptors[i],
+                 Eigen::Vector3f(nan, nan, nan));
         }
     }
 
@@ -376,17 +498,22 @@ private:
             for (int c = 0; c < 4; ++c)
                 m(r, c) = hint.matched_T_query[4 * r + c];
         const Isometry camera_old_T_cur(m);
-        const Isometry relative = body_T_camera_ * camera_old_T_cur * body_T_camera_.inverse();
+        const Added &current = added_.at(cur);
+        const auto old_entry = added_.find(old);
+        const Isometry &old_body_T_camera =
+            old_entry != added_.end() ? old_entry->second.body_T_camera : current.body_T_camera;
+        const Isometry relative =
+            old_body_T_camera * camera_old_T_cur * current.body_T_camera.inverse();
         LoopInfo info;
         info.cur_index = cur;
         info.old_index = old;
         info.relative_t = relative.translation();
         info.relative_q = Eigen::Quaterniond(relative.linear()).normalized();
-        const Eigen::Matrix3d R_cur = poses_.at(cur).linear();
+        const Eigen::Matrix3d R_cur = current.body.linear();
         info.relative_yaw =
             normalize_deg(yaw_deg(R_cur) - yaw_deg(R_cur * relative.linear().transpose()));
         info.inliers = hint.inliers;
-        info.covariance = body_covariance(hint);
+        info.covariance = body_covariance(hint, current.body_T_camera);
         if (std::abs(info.relative_yaw) >= config_.max_yaw_deg ||
             info.relative_t.norm() >= config_.max_translation_m) {
             note("loop " + std::to_string(cur) + " -> " + std::to_string(old) +
@@ -399,8 +526,10 @@ private:
     }
 
     /// The hint's covariance (camera frames, right perturbation) in the body frames: the
-    /// adjoint of `camera_T_body` maps a camera-frame tangent to the body frame's.
-    Eigen::Matrix<double, 6, 6> body_covariance(const topoloc::LoopHint &hint) const
+    /// adjoint of `camera_T_body` (the current keyframe's extrinsics) maps a camera-frame
+    /// tangent to the body frame's.
+    static Eigen::Matrix<double, 6, 6> body_covariance(const topoloc::LoopHint &hint,
+                                                       const Isometry &body_T_camera)
     {
         Eigen::Matrix<double, 6, 6> camera;
         for (int r = 0; r < 6; ++r)
@@ -408,8 +537,8 @@ private:
                 camera(r, c) = hint.covariance[6 * r + c];
         // A right perturbation exp(xi) of camera_old_T_cur is one of body_old_T_cur by
         // Ad(body_T_camera) xi; rotation first: [R 0; [t]x R R].
-        const Eigen::Matrix3d R = body_T_camera_.linear();
-        const Eigen::Vector3d t = body_T_camera_.translation();
+        const Eigen::Matrix3d R = body_T_camera.linear();
+        const Eigen::Vector3d t = body_T_camera.translation();
         Eigen::Matrix3d tx;
         tx << 0, -t.z(), t.y(), t.z(), 0, -t.x(), -t.y(), t.x(), 0;
         Eigen::Matrix<double, 6, 6> adjoint = Eigen::Matrix<double, 6, 6>::Zero();
@@ -426,7 +555,13 @@ private:
     cv::Ptr<cv::ORB> orb_;
     Isometry body_T_camera_;
     topoloc::LoopDetector detector_;
-    std::map<int, Isometry> poses_;
+    /// What the adapter keeps of an added keyframe: its VIO body pose and its extrinsics.
+    struct Added {
+        Isometry body;
+        Isometry body_T_camera;
+    };
+    std::map<int, Added> added_;
+    std::optional<int> last_sequence_;
     std::map<int, LoopInfo> loops_;
     std::vector<LoopInfo> confirmed_;
     topoloc_adapter::ImageSize image_size_;
