@@ -8,11 +8,11 @@
 mod common;
 
 use common::correspondences::{keypoints, scene, truth, CAMERA};
-use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 use topoloc::errors::VisionError;
 use topoloc::verify::{
     check_pair, essential_pose, fit_pair, relative_pose, relative_pose_from_fit, PairFit,
-    PairOptions, PoseRefusal, RelativePose, RelativePoseOptions,
+    PairOptions, PoseRefusal, RelativePose, RelativePoseOptions, ScenePoints,
 };
 
 fn rotation_error_deg(a: &Isometry3<f64>, b: &Isometry3<f64>) -> f64 {
@@ -215,7 +215,10 @@ fn a_pose_from_the_pair_fit_samples_its_inliers_and_counts_every_pair() {
         relative_pose_from_fit(
             query.as_ref(),
             matched.as_ref(),
-            Some(&s),
+            ScenePoints {
+                query: None,
+                matched: Some(&s),
+            },
             fit,
             &CAMERA,
             &options,
@@ -250,6 +253,75 @@ fn a_pose_from_the_pair_fit_samples_its_inliers_and_counts_every_pair() {
         matches!(from_fit(&foreign), Err(VisionError::InvalidArgument(ref m)) if m.contains("pair fit")),
         "a fit of other keypoints"
     );
+}
+
+/// VINS-Fusion fits a loop with the current keyframe's points (the old one may have none, e.g.
+/// reloaded): with the query's points only, PnP of the matched pixels gives `query_t_matched`,
+/// inverted to the same `matched_t_query` (and its covariance carried over by the adjoint: the
+/// translation's variance follows the other camera).
+#[test]
+fn a_pose_from_the_query_points_is_the_inverse_fit() {
+    let (q, m, s) = scene(150, 30, &truth(), 1);
+    let (query, matched) = (keypoints(&q), keypoints(&m));
+    let fit = fit_pair(query.as_ref(), matched.as_ref(), &PairOptions::default()).unwrap();
+    let options = RelativePoseOptions::default();
+    let pose_with = |points: ScenePoints<'_>| {
+        relative_pose_from_fit(
+            query.as_ref(),
+            matched.as_ref(),
+            points,
+            &fit,
+            &CAMERA,
+            &options,
+        )
+        .unwrap()
+    };
+    // The scene points in the query camera's frame.
+    let in_query: Vec<[f32; 3]> = s
+        .iter()
+        .map(|p| {
+            let x = truth().inverse_transform_point(&Point3::new(
+                f64::from(p[0]),
+                f64::from(p[1]),
+                f64::from(p[2]),
+            ));
+            [x.x as f32, x.y as f32, x.z as f32]
+        })
+        .collect();
+    let from_query = pose_with(ScenePoints {
+        query: Some(&in_query),
+        matched: None,
+    })
+    .expect("a metric pose from the query's points");
+    assert!(from_query.scale_known);
+    // The generator's 30 outliers are wrong query pixels, which this fit does not use.
+    assert_eq!(from_query.inliers, 150);
+    assert!(rotation_error_deg(&from_query.matched_t_query, &truth()) < 0.3);
+    let dt = (from_query.matched_t_query.translation.vector - truth().translation.vector).norm();
+    assert!(dt < 0.03, "translation off by {dt} m");
+    let from_matched = pose_with(ScenePoints {
+        query: None,
+        matched: Some(&s),
+    })
+    .unwrap();
+    for i in 0..6 {
+        let (a, b) = (
+            from_query.covariance[(i, i)],
+            from_matched.covariance[(i, i)],
+        );
+        assert!(a > 0.0 && b > 0.0, "{i}: {a} {b}");
+        if i < 3 {
+            // The rotation's uncertainty is the same seen from either camera.
+            assert!((a / b - 1.0).abs() < 0.5, "rotation {i}: {a} against {b}");
+        }
+    }
+    // Both sides' points: the matched keyframe's are used, as before.
+    let both = pose_with(ScenePoints {
+        query: Some(&in_query),
+        matched: Some(&s),
+    })
+    .unwrap();
+    assert_eq!(both.matched_t_query, from_matched.matched_t_query);
 }
 
 #[test]

@@ -324,6 +324,25 @@ TEST(a_second_sequence_finds_the_first)
     }
 }
 
+// VINS fits a loop with the current keyframe's 3D points; the old keyframe may have none (a
+// keyframe of a reloaded pose graph has keypoints only). The loop is still metric.
+TEST(a_loop_needs_3d_points_on_the_current_keyframe_only)
+{
+    topoloc_vins::LoopDetector detector(image_map(), test_config());
+    topoloc_vins::KeyFrame old = keyframe(0, 0, Eigen::Isometry3d::Identity(), true, false);
+    old.keypoints = old.point_2d_uv;
+    old.descriptors = old.window_descriptors;
+    old.point_3d.clear();
+    old.point_2d_uv.clear();
+    old.window_descriptors.clear();
+    CHECK_EQ(detector.detectLoop(old, 0), -1);
+    CHECK_EQ(detector.detectLoop(keyframe(7, 0, revisit_body(), true, true), 7), 0);
+    topoloc_vins::LoopInfo info;
+    CHECK(detector.findConnection(7, 0, info));
+    CHECK((info.relative_t - revisit_body().translation()).norm() < 0.03);
+    CHECK(std::abs(info.relative_yaw - (-3.0)) < 0.5);
+}
+
 // VINS re-estimates the extrinsics online: each keyframe keeps the ones it was added with, and
 // a loop's relative body pose uses both keyframes'. A bad estimate is refused.
 TEST(extrinsics_follow_the_online_estimate)

@@ -41,7 +41,7 @@ pub use keypoints::{
 pub use pose::{locate, LocateOptions, Located, PinholeCamera, MIN_PAIRS};
 pub use relative::{
     essential_pose, relative_pose, relative_pose_from_fit, PoseRefusal, RelativePose,
-    RelativePoseOptions,
+    RelativePoseOptions, ScenePoints,
 };
 pub use xfeat::{XFeatDetector, XFeatOptions, DEFAULT_XFEAT_KEYPOINTS, DEFAULT_XFEAT_MAX_PIXELS};
 

@@ -149,16 +149,29 @@ pub fn relative_pose(
     )
 }
 
+/// The scene points (camera frame, NaN where unknown; one per keypoint) of either view of a
+/// pair, for [`relative_pose_from_fit`].
+#[derive(Clone, Copy, Debug, Default)]
+pub struct ScenePoints<'a> {
+    /// The query keyframe's points, in its camera frame.
+    pub query: Option<&'a [[f32; 3]]>,
+    /// The matched keyframe's points, in its camera frame.
+    pub matched: Option<&'a [[f32; 3]]>,
+}
+
 /// [`relative_pose`] on the matches of a pair check already made ([`super::fit_pair`], same
 /// keypoints): no second matching, and the metric fit samples the fundamental matrix's
 /// inliers only (every match within the reprojection threshold then counts), so a candidate
-/// whose matches mostly disagree costs a few RANSAC iterations, not all of them. Without
-/// points, the essential matrix is fitted to every match as in [`relative_pose`]. A fit of
-/// other keypoints (indices out of range) is an invalid argument.
+/// whose matches mostly disagree costs a few RANSAC iterations, not all of them. The metric
+/// fit uses the matched keyframe's points (PnP of the query's pixels); where too few matches
+/// have one, the query's points (PnP of the matched pixels, as VINS-Fusion fits its loops with
+/// the current keyframe's points), the pose and covariance then inverted. Without points, the
+/// essential matrix is fitted to every match as in [`relative_pose`]. A fit of other keypoints
+/// (indices out of range) is an invalid argument.
 pub fn relative_pose_from_fit(
     query: KeypointsRef<'_>,
     matched: KeypointsRef<'_>,
-    matched_points: Option<&[[f32; 3]]>,
+    points: ScenePoints<'_>,
     fit: &PairFit,
     camera: &PinholeCamera,
     options: &RelativePoseOptions,
@@ -172,15 +185,63 @@ pub fn relative_pose_from_fit(
         ));
     }
     let seed = Some(fit.inliers.as_slice());
+    if let Some(query_points) = points.query {
+        let from_matched = match points.matched {
+            Some(matched_points) => metric_pose(
+                query,
+                matched,
+                matched_points,
+                &fit.matches,
+                seed,
+                camera,
+                options,
+            )?,
+            None => Err(PoseRefusal::TooFewMatches { found: 0 }),
+        };
+        if !matches!(from_matched, Err(PoseRefusal::TooFewMatches { .. })) {
+            return Ok(from_matched);
+        }
+        let swapped: Vec<[u32; 2]> = fit.matches.iter().map(|m| [m[1], m[0]]).collect();
+        match metric_pose(
+            matched,
+            query,
+            query_points,
+            &swapped,
+            seed,
+            camera,
+            options,
+        )? {
+            Err(PoseRefusal::TooFewMatches { .. }) => {}
+            metric => return Ok(metric.map(inverted)),
+        }
+    }
     pose_of_matches(
         query,
         matched,
-        matched_points,
+        points.matched,
         &fit.matches,
         seed,
         camera,
         options,
     )
+}
+
+/// The pose of the other camera: `query_t_matched` from `matched_t_query`, with the covariance
+/// of its right perturbation (`Ad(T) Σ Ad(T)^T`, `T` the pose inverted, rotation first).
+fn inverted(pose: RelativePose) -> RelativePose {
+    let t = pose.matched_t_query;
+    let rotation = *t.rotation.to_rotation_matrix().matrix();
+    let mut adjoint = Matrix6::<f64>::zeros();
+    adjoint.fixed_view_mut::<3, 3>(0, 0).copy_from(&rotation);
+    adjoint.fixed_view_mut::<3, 3>(3, 3).copy_from(&rotation);
+    adjoint
+        .fixed_view_mut::<3, 3>(3, 0)
+        .copy_from(&(t.translation.vector.cross_matrix() * rotation));
+    RelativePose {
+        matched_t_query: t.inverse(),
+        covariance: adjoint * pose.covariance * adjoint.transpose(),
+        ..pose
+    }
 }
 
 /// The pose from given matches (`[query index, matched index]`, in range); `seed` marks the

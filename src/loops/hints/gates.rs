@@ -9,6 +9,7 @@ use super::{KeyframeFeatures, LoopDetector, Work};
 use crate::map::PlaceId;
 use crate::verify::{
     fit_pair_reaching, relative_pose_from_fit, FeatureKind, PairFit, PoseRefusal, RelativePose,
+    ScenePoints,
 };
 use nalgebra::{Isometry3, Point3};
 use std::collections::HashMap;
@@ -351,10 +352,14 @@ impl LoopDetector {
             )));
         };
         checks.work.pose_fits += 1;
+        let points = ScenePoints {
+            query: features.camera_points.as_deref(),
+            matched: stored.camera_points.as_deref(),
+        };
         let fitted = relative_pose_from_fit(
             features.keypoints.as_ref(),
             stored.keypoints.as_ref(),
-            stored.camera_points.as_deref(),
+            points,
             fit,
             &camera,
             &self.options.pose,
