@@ -2,7 +2,11 @@
 // loop_info VINS's findConnection would give (relative t, q, yaw in the body frames), VINS's
 // gates refuse what they would refuse, and bad keyframes (out of order, duplicate, NaN pose,
 // another image size, arrays of different lengths, use after clear) give a logged error, no
-// loop and an unchanged detector, also when the logger throws. Images: the textured places of tests/cpp/harness.hpp (their
+// loop and an unchanged detector, also when the logger throws. Against loop_fusion's contracts:
+// confirmed loops keep earliest_loop_index and the optimisation queue consistent (a stand-in of
+// optimize4DoF's walk and assert), a second sequence (new VIO frame, restarted clock) finds the
+// first, points come as normalized coordinates in their origin pose, extrinsics follow the
+// online estimate (none before it), and a loop needs 3D points on the current keyframe only. Images: the textured places of tests/cpp/harness.hpp (their
 // VLAD map is the describer); points: the two views of the same scene from harness.hpp.
 #include "topoloc_vins.hpp"
 
@@ -347,6 +351,19 @@ TEST(a_loop_needs_3d_points_on_the_current_keyframe_only)
 // a loop's relative body pose uses both keyframes'. A bad estimate is refused.
 TEST(extrinsics_follow_the_online_estimate)
 {
+    // loop_fusion makes its detector before VINS publishes any extrinsics (qic is zero then):
+    // keyframes wait for set_extrinsics.
+    topoloc_vins::Config unknown = test_config();
+    unknown.qic = Eigen::Matrix3d::Zero();
+    topoloc_vins::LoopDetector early(image_map(), unknown);
+    CHECK_EQ(early.detectLoop(keyframe(0, 0, Eigen::Isometry3d::Identity(), true, false), 0), -1);
+    CHECK(early.last_error().find("no camera extrinsics yet") != std::string::npos);
+    CHECK_EQ(early.size(), std::size_t{0});
+    CHECK(early.set_extrinsics(Eigen::Vector3d::Zero(), camera_in_body()));
+    CHECK_EQ(early.detectLoop(keyframe(0, 0, Eigen::Isometry3d::Identity(), true, false), 0), -1);
+    CHECK(early.last_error().empty());
+    CHECK_EQ(early.size(), std::size_t{1});
+
     topoloc_vins::LoopDetector detector(image_map(), test_config());
     CHECK(!detector.set_extrinsics(Eigen::Vector3d(0, 0, std::nan("")), camera_in_body()));
     CHECK(!detector.last_error().empty());

@@ -135,11 +135,15 @@ struct Config {
     double fx = 0, fy = 0, cx = 0, cy = 0;
     /// The camera in the body frame (VINS `tic`, `qic`): optical axes z forward, x right, y down.
     /// VINS estimates them online: pass each new estimate to `LoopDetector::set_extrinsics`.
+    /// loop_fusion makes its detector before any estimate arrives (its `qic` is then zero): a
+    /// `qic` that is no rotation means "not known yet", and keyframes are refused until
+    /// `set_extrinsics`.
     Eigen::Vector3d tic = Eigen::Vector3d::Zero();
     Eigen::Matrix3d qic = Eigen::Matrix3d::Identity();
     /// Keyframes whose index is within this many of the new one's are never candidates (VINS
-    /// queries DBoW2 with `max_id = index - 50`).
-    uint64_t exclude_recent = 50;
+    /// queries DBoW2 with `max_id = index - 50`, strictly below: the old index is at most
+    /// `index - 51`).
+    uint64_t exclude_recent = 51;
     /// VINS's findConnection gates: |relative yaw| below this, degrees, and |relative_t| below
     /// `max_translation_m`.
     double max_yaw_deg = 30.0;
@@ -191,8 +195,12 @@ public:
         config_.options.cy = config.cy;
         config_.options.exclude_recent_ids = config.exclude_recent;
         body_T_camera_.setIdentity();
-        body_T_camera_.linear() = config.qic;
-        body_T_camera_.translation() = config.tic;
+        extrinsics_known_ = config.tic.allFinite() && config.qic.allFinite() &&
+                            is_rotation(config.qic);
+        if (extrinsics_known_) {
+            body_T_camera_.linear() = config.qic;
+            body_T_camera_.translation() = config.tic;
+        }
         clear();
     }
 
@@ -208,6 +216,7 @@ public:
         }
         body_T_camera_.linear() = qic;
         body_T_camera_.translation() = tic;
+        extrinsics_known_ = true;
         errors_.record("");
         return true;
     }
@@ -247,6 +256,11 @@ public:
             return fail("keyframe.index " + std::to_string(keyframe.index) +
                         " is not frame_index " + std::to_string(frame_index));
         }
+        if (!extrinsics_known_) {
+            return fail("keyframe " + std::to_string(keyframe.index) +
+                        ": no camera extrinsics yet (Config::qic is no rotation): call "
+                        "set_extrinsics from extrinsic_callback");
+        }
         std::string why = validate(keyframe);
         if (!why.empty())
             return fail(why);
@@ -257,7 +271,7 @@ public:
             return fail(std::string("keyframe ") + std::to_string(keyframe.index) + ": " +
                         e.what());
         }
-        added_[keyframe.index] = Added{body_pose(keyframe), body_T_camera_};
+        added_[keyframe.index] = Added{origin_pose(keyframe), body_T_camera_};
         last_index_ = keyframe.index;
         last_sequence_ = keyframe.sequence;
         for (const topoloc::LoopHint &earlier : detector_.confirmed()) {
@@ -554,8 +568,10 @@ private:
     uint32_t dim_;
     cv::Ptr<cv::ORB> orb_;
     Isometry body_T_camera_;
+    bool extrinsics_known_ = false; // a rotation was given (Config or set_extrinsics)
     topoloc::LoopDetector detector_;
-    /// What the adapter keeps of an added keyframe: its VIO body pose and its extrinsics.
+    /// What the adapter keeps of an added keyframe: its body pose at creation (VINS's origin
+    /// pose, whose yaw its `relative_yaw` uses) and its extrinsics.
     struct Added {
         Isometry body;
         Isometry body_T_camera;
