@@ -771,9 +771,8 @@ private:
     /// Writes the pinhole pixel positions of the usable keypoints into `xy` and returns their
     /// indices: all of a pinhole keyframe's, a fisheye keyframe's bearings projected through
     /// the keyframe's intrinsics. Throws for another camera model.
-    static std::vector<std::size_t> pinhole_keypoints(KeyFrame &kf,
-                                                      const std::vector<cv::KeyPoint> &keys,
-                                                      std::vector<float> &xy)
+    static std::vector<std::size_t>
+    pinhole_keypoints(KeyFrame &kf, const std::vector<cv::KeyPoint> &keys, std::vector<float> &xy)
     {
         const CameraModel model = Access::camera_model(kf);
         if (model == CameraModel::Other)
@@ -808,8 +807,8 @@ private:
         if (d.dims != 2 || d.type() != CV_8UC1 || d.cols != 32 ||
             !rows.fits(static_cast<std::size_t>(d.rows))) {
             fail("descriptors must be " + rows.text() + " x 32 CV_8U (one row per keypoint), " +
-                 "got " + std::to_string(d.rows) + " x " + std::to_string(d.cols) +
-                 " of type " + std::to_string(d.type()));
+                 "got " + std::to_string(d.rows) + " x " + std::to_string(d.cols) + " of type " +
+                 std::to_string(d.type()));
         }
         std::vector<uint8_t> bytes(32 * kept.size());
         for (std::size_t j = 0; j < kept.size(); ++j) {

@@ -304,9 +304,8 @@ TEST(a_second_sequence_finds_the_first)
         first.origin_vio_R = Eigen::Matrix3d::Identity();
         first.sequence = 1;
         CHECK_EQ(detector.detectLoop(first, 0), -1);
-        topoloc_vins::KeyFrame revisit =
-            normalized(keyframe(6, 0, second_sequence ? revisit_body() : shift * revisit_body(),
-                                true, true));
+        topoloc_vins::KeyFrame revisit = normalized(
+            keyframe(6, 0, second_sequence ? revisit_body() : shift * revisit_body(), true, true));
         revisit.time_stamp = second_sequence ? 0.5 : 100.5;
         revisit.sequence = second_sequence ? 2 : 1;
         const int loop = detector.detectLoop(revisit, 6);

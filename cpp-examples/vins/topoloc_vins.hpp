@@ -195,8 +195,8 @@ public:
         config_.options.cy = config.cy;
         config_.options.exclude_recent_ids = config.exclude_recent;
         body_T_camera_.setIdentity();
-        extrinsics_known_ = config.tic.allFinite() && config.qic.allFinite() &&
-                            is_rotation(config.qic);
+        extrinsics_known_ =
+            config.tic.allFinite() && config.qic.allFinite() && is_rotation(config.qic);
         if (extrinsics_known_) {
             body_T_camera_.linear() = config.qic;
             body_T_camera_.translation() = config.tic;
@@ -368,9 +368,9 @@ private:
         if (keyframe.origin_vio_T.has_value() != keyframe.origin_vio_R.has_value()) {
             return name + ": origin_vio_T and origin_vio_R must be given together";
         }
-        if (keyframe.origin_vio_T && (!finite(*keyframe.origin_vio_T) ||
-                                      !finite(*keyframe.origin_vio_R) ||
-                                      !is_rotation(*keyframe.origin_vio_R))) {
+        if (keyframe.origin_vio_T &&
+            (!finite(*keyframe.origin_vio_T) || !finite(*keyframe.origin_vio_R) ||
+             !is_rotation(*keyframe.origin_vio_R))) {
             return name + " has a non-finite origin_vio_T or an origin_vio_R that is no rotation";
         }
         const std::size_t points = keyframe.point_3d.size();
@@ -385,7 +385,8 @@ private:
                    "differ in length";
         }
         const std::size_t extra = keyframe.descriptors.size();
-        if (!fits(keyframe.keypoints_norm.size(), extra) || !fits(keyframe.keypoints.size(), extra) ||
+        if (!fits(keyframe.keypoints_norm.size(), extra) ||
+            !fits(keyframe.keypoints.size(), extra) ||
             (extra > 0 && keyframe.keypoints_norm.empty() && keyframe.keypoints.empty())) {
             return name + ": keypoints_norm or keypoints and descriptors differ in length";
         }
