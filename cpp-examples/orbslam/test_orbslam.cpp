@@ -989,6 +989,32 @@ TEST(a_saved_atlas_comes_back_and_merges)
     CHECK(!db.Save(path));
 }
 
+// ORB-SLAM3 resets its active map (a new dataset, or tracking lost early) by clearMap and keeps
+// using the same Map: its next keyframes, with a restarted clock, are taken.
+TEST(orbslam3_a_reset_map_takes_a_restarted_clock)
+{
+    Map map;
+    Db3 db(image_map(), test_options());
+    World3 world;
+    std::vector<orb3::KeyFrame *> kfs;
+    kfs.push_back(world.make(scene_shot(1, 100.0, false), &map));
+    for (uint32_t p = 1; p <= 4; ++p)
+        kfs.push_back(world.make(other_shot(1 + p, 100.0 + p, p), &map));
+    for (orb3::KeyFrame *kf : kfs)
+        db.add(kf);
+    db.add(world.make(other_shot(6, 50.0, 5), &map)); // time going back without a reset
+    CHECK(contains_text(db.last_error(), "earlier than the last one"));
+    db.clearMap(&map);
+    CHECK(db.last_error().empty());
+    CHECK_EQ(db.size(), std::size_t{0});
+    db.add(world.make(other_shot(7, 0.0, 5), &map));
+    db.add(world.make(other_shot(8, 1.0, 6), &map));
+    CHECK(db.last_error().empty());
+    CHECK_EQ(db.size(), std::size_t{2});
+    db.add(world.make(other_shot(9, 0.5, 7), &map)); // within the new run, time must not go back
+    CHECK(contains_text(db.last_error(), "earlier than the last one"));
+}
+
 // ORB-SLAM3's fisheye keyframes keep raw fisheye pixels in mvKeysUn: the adapter projects
 // their bearings to a pinhole, so the revisit's pose is right. A two-fisheye rig's keyframes
 // have the second camera's descriptors and map points after the first's (NLeft rows of

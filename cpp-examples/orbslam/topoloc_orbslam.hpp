@@ -93,9 +93,9 @@ struct Settings {
 template <typename KeyFrame> struct LoopMatch : topoloc::LoopHint {
     KeyFrame *query = nullptr;   ///< The keyframe the hint is about.
     KeyFrame *matched = nullptr; ///< The keyframe it matched; null once that one is erased or bad.
-    /// The inverse of `matched_T_query`, `Tqm`, current-from-candidate: what ORB-SLAM's
-    /// `Sim3Solver` estimates as `gScm` (with scale 1) and `ComputeSim3` composes with the
-    /// candidate's `Tcw`.
+    /// The inverse of `matched_T_query`, `Tqm`, current-from-candidate: what ORB-SLAM2's
+    /// `Sim3Solver` estimates as `gScm` (with scale 1) and its `ComputeSim3` composes with the
+    /// candidate's `Tcw`. ORB-SLAM3 v1.0 takes no pose guess: it uses the candidates only.
     Pose query_T_matched{1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1};
 };
 
@@ -359,12 +359,18 @@ public:
     }
 
     /// Removes every keyframe of map `pMap` (ORB-SLAM3's `clearMap`; compared with
-    /// `Access::map_of`). Errors: an accessor that throws (nothing is removed then).
+    /// `Access::map_of`). ORB-SLAM3 calls it when it resets the active map, which it then
+    /// reuses: when `pMap` is the last added keyframe's map, the next keyframe begins a new
+    /// session, and its timestamp may be earlier (a new dataset). Errors: an accessor that
+    /// throws (nothing is removed then).
     template <typename MapT> void clearMap(MapT *pMap) noexcept
     {
         run("clearMap", [&] {
-            for (uint64_t id : ids_in_map(static_cast<const void *>(pMap)))
+            const void *map = static_cast<const void *>(pMap);
+            for (uint64_t id : ids_in_map(map))
                 erase_held(id);
+            if (map == last_map_)
+                map_reset_ = true;
         });
     }
 
@@ -642,7 +648,7 @@ private:
         if (saved_ids_.count(id) != 0)
             return &bind_saved(kf, id, timestamp);
         const void *map = Access::map_of(*kf);
-        const bool new_session = last_id_.has_value() && map != last_map_;
+        const bool new_session = last_id_.has_value() && (map != last_map_ || map_reset_);
         check_order(id, timestamp, new_session);
         std::optional<topoloc::LoopDetector> first = check_intrinsics(*kf, id);
         topoloc::LoopKeyframe keyframe = assemble(*kf, id, timestamp);
@@ -657,6 +663,7 @@ private:
         }
         const Entry &entry = commit(kf, id, timestamp, size, hint);
         last_map_ = map;
+        map_reset_ = false;
         release_image(*kf);
         return &entry;
     }
@@ -1016,6 +1023,7 @@ private:
         confirmed_.clear();
         last_id_.reset();
         last_map_ = nullptr;
+        map_reset_ = false;
         last_timestamp_ = 0.0;
         image_size_.reset();
     }
@@ -1104,6 +1112,7 @@ private:
     std::optional<uint64_t> last_id_;
     double last_timestamp_ = 0.0;
     const void *last_map_ = nullptr; // the last added keyframe's (Access::map_of)
+    bool map_reset_ = false;         // clearMap emptied last_map_: the next keyframe starts anew
     topoloc_adapter::ImageSize image_size_;
     topoloc_adapter::ErrorReport errors_;
 };
