@@ -138,15 +138,11 @@ pub fn relative_pose(
         .iter()
         .map(|m| [m.query_idx as u32, m.train_idx as u32])
         .collect();
-    pose_of_matches(
-        query,
-        matched,
-        matched_points,
-        &matches,
-        None,
-        camera,
-        options,
-    )
+    let points = ScenePoints {
+        query: None,
+        matched: matched_points,
+    };
+    pose_of_matches(query, matched, points, &matches, None, camera, options)
 }
 
 /// The scene points (camera frame, NaN where unknown; one per keypoint) of either view of a
@@ -185,45 +181,7 @@ pub fn relative_pose_from_fit(
         ));
     }
     let seed = Some(fit.inliers.as_slice());
-    if let Some(query_points) = points.query {
-        let from_matched = match points.matched {
-            Some(matched_points) => metric_pose(
-                query,
-                matched,
-                matched_points,
-                &fit.matches,
-                seed,
-                camera,
-                options,
-            )?,
-            None => Err(PoseRefusal::TooFewMatches { found: 0 }),
-        };
-        if !matches!(from_matched, Err(PoseRefusal::TooFewMatches { .. })) {
-            return Ok(from_matched);
-        }
-        let swapped: Vec<[u32; 2]> = fit.matches.iter().map(|m| [m[1], m[0]]).collect();
-        match metric_pose(
-            matched,
-            query,
-            query_points,
-            &swapped,
-            seed,
-            camera,
-            options,
-        )? {
-            Err(PoseRefusal::TooFewMatches { .. }) => {}
-            metric => return Ok(metric.map(inverted)),
-        }
-    }
-    pose_of_matches(
-        query,
-        matched,
-        points.matched,
-        &fit.matches,
-        seed,
-        camera,
-        options,
-    )
+    pose_of_matches(query, matched, points, &fit.matches, seed, camera, options)
 }
 
 /// The pose of the other camera: `query_t_matched` from `matched_t_query`, with the covariance
@@ -245,22 +203,50 @@ fn inverted(pose: RelativePose) -> RelativePose {
 }
 
 /// The pose from given matches (`[query index, matched index]`, in range); `seed` marks the
-/// matches the metric fit samples (all when `None`).
+/// matches the metric fit samples (all when `None`). In order: PnP against the matched
+/// keyframe's points, PnP against the query's (inverted), then the essential matrix; a metric
+/// fit that finds too few matches with a point gives way to the next.
 fn pose_of_matches(
     query: KeypointsRef<'_>,
     matched: KeypointsRef<'_>,
-    matched_points: Option<&[[f32; 3]]>,
+    points: ScenePoints<'_>,
     matches: &[[u32; 2]],
     seed: Option<&[bool]>,
     camera: &PinholeCamera,
     options: &RelativePoseOptions,
 ) -> Result<Result<RelativePose, PoseRefusal>, VisionError> {
-    if let Some(points) = matched_points {
-        match metric_pose(query, matched, points, matches, seed, camera, options)? {
-            // Too few matches carry a scene point (depth missing where they are: sky, glass,
-            // out of range): the views still give the two-view pose, without scale.
-            Err(PoseRefusal::TooFewMatches { .. }) => {}
-            metric => return Ok(metric),
+    // Too few matches carry a scene point (depth missing where they are: sky, glass, out of
+    // range): the other view's points, or the views alone without scale, may still give it.
+    let too_few = |fit: &Result<RelativePose, PoseRefusal>| {
+        matches!(fit, Err(PoseRefusal::TooFewMatches { .. }))
+    };
+    if let Some(matched_points) = points.matched {
+        let metric = metric_pose(
+            query,
+            matched,
+            matched_points,
+            matches,
+            seed,
+            camera,
+            options,
+        )?;
+        if !too_few(&metric) {
+            return Ok(metric);
+        }
+    }
+    if let Some(query_points) = points.query {
+        let swapped: Vec<[u32; 2]> = matches.iter().map(|m| [m[1], m[0]]).collect();
+        let metric = metric_pose(
+            matched,
+            query,
+            query_points,
+            &swapped,
+            seed,
+            camera,
+            options,
+        )?;
+        if !too_few(&metric) {
+            return Ok(metric.map(inverted));
         }
     }
     let query_px: Vec<[f32; 2]> = matches
