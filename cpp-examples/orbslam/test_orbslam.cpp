@@ -454,14 +454,15 @@ void check_revisit_hint(const std::optional<Match> &hint, const void *query, con
         CHECK(hint->covariance[7 * i] > 0.0);
 }
 
-// Adds the scene keyframe (id 1, `kfs[0]`) and unrelated keyframes of places 1..4 (ids 2..5,
-// `kfs[1..4]`), all in `map`.
+// Adds the scene keyframe (id 1, `kfs[0]`, at time `t0`) and unrelated keyframes of places 1..4
+// (ids 2..5, `kfs[1..4]`, one second apart after it), all in `map`.
 template <typename Db, typename W, typename KeyFrame>
-void add_scene_and_others(Db &db, W &world, std::vector<KeyFrame *> &kfs, Map *map = nullptr)
+void add_scene_and_others(Db &db, W &world, std::vector<KeyFrame *> &kfs, Map *map = nullptr,
+                          double t0 = 0.0)
 {
-    kfs.push_back(world.make(scene_shot(1, 0.0, false), map));
+    kfs.push_back(world.make(scene_shot(1, t0, false), map));
     for (uint32_t p = 1; p <= 4; ++p)
-        kfs.push_back(world.make(other_shot(1 + p, double(p), p), map));
+        kfs.push_back(world.make(other_shot(1 + p, t0 + p, p), map));
     for (KeyFrame *kf : kfs)
         db.add(kf);
 }
@@ -898,11 +899,7 @@ TEST(orbslam3_a_new_map_finds_the_map_just_lost)
         Db3 db(image_map(), options, settings_with(log));
         World3 world;
         std::vector<orb3::KeyFrame *> kfs;
-        kfs.push_back(world.make(scene_shot(1, 100.0, false), &first));
-        for (uint32_t p = 1; p <= 4; ++p)
-            kfs.push_back(world.make(other_shot(1 + p, 100.0 + p, p), &first));
-        for (orb3::KeyFrame *kf : kfs)
-            db.add(kf);
+        add_scene_and_others(db, world, kfs, &first, 100.0);
         const Shot revisit_shot = scene_shot(6, new_map ? 0.0 : 105.0, true);
         orb3::KeyFrame *revisit = new_map ? world.make(in_another_frame(revisit_shot), &second)
                                           : world.make(revisit_shot, &first);
@@ -997,11 +994,7 @@ TEST(orbslam3_a_reset_map_takes_a_restarted_clock)
     Db3 db(image_map(), test_options());
     World3 world;
     std::vector<orb3::KeyFrame *> kfs;
-    kfs.push_back(world.make(scene_shot(1, 100.0, false), &map));
-    for (uint32_t p = 1; p <= 4; ++p)
-        kfs.push_back(world.make(other_shot(1 + p, 100.0 + p, p), &map));
-    for (orb3::KeyFrame *kf : kfs)
-        db.add(kf);
+    add_scene_and_others(db, world, kfs, &map, 100.0);
     db.add(world.make(other_shot(6, 50.0, 5), &map)); // time going back without a reset
     CHECK(contains_text(db.last_error(), "earlier than the last one"));
     db.clearMap(&map);

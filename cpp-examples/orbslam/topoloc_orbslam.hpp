@@ -564,6 +564,16 @@ private:
                                 : topoloc::LoopDetector::create(kind_, model_, dim_, options);
     }
 
+    /// Makes `first` (from `check_intrinsics`, once the keyframe is in it) the detector, with
+    /// `kf`'s intrinsics as the run's; nothing for none.
+    void adopt(std::optional<topoloc::LoopDetector> &first, KeyFrame &kf)
+    {
+        if (!first)
+            return;
+        detector_ = std::move(*first);
+        intrinsics_ = Access::intrinsics(kf);
+    }
+
     /// Refuses a keyframe whose intrinsics differ from the run's; before the first keyframe of
     /// a run without intrinsics, returns the detector that takes the keyframe's.
     std::optional<topoloc::LoopDetector> check_intrinsics(KeyFrame &kf, uint64_t id) const
@@ -657,10 +667,7 @@ private:
         if (new_session)
             detector.begin_session();
         const topoloc::LoopHint hint = detector.add(keyframe);
-        if (first) {
-            detector_ = std::move(*first);
-            intrinsics_ = Access::intrinsics(*kf);
-        }
+        adopt(first, *kf);
         const Entry &entry = commit(kf, id, timestamp, size, hint);
         last_map_ = map;
         map_reset_ = false;
@@ -688,10 +695,7 @@ private:
             by_id_.erase(id);
             throw;
         }
-        if (first) {
-            detector_ = std::move(*first);
-            intrinsics_ = Access::intrinsics(*kf);
-        }
+        adopt(first, *kf);
         last_map_ = Access::map_of(*kf);
         release_image(*kf);
         return entry;
