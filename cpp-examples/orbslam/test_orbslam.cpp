@@ -1100,6 +1100,44 @@ TEST(intrinsics_culled_keyframes_and_monocular_maps)
     }
 }
 
+TEST(keyframes_with_many_keypoints_give_those_with_map_points_first)
+{
+    Orb2Scene scene;
+    auto &[log, db, world, kfs] = scene;
+    // ORB-SLAM3's monocular initialisation: about 10,000 keypoints per keyframe, over topoloc's
+    // bound. Here the revisit's 80 scene keypoints (each with its map point) come after 5,000
+    // stronger ones without map points: keeping the first or the strongest would lose the loop.
+    Shot shot = scene_shot(10, 10.0, true);
+    Rng rng{99};
+    std::vector<cv::KeyPoint> unmapped;
+    cv::Mat unmapped_rows(int(to::kMaxKeypoints), 32, CV_8U);
+    for (std::size_t k = 0; k < to::kMaxKeypoints; ++k) {
+        unmapped.emplace_back(float(rng.uniform() * 159), float(rng.uniform() * 119), 31.f, -1.f,
+                              100.f);
+        for (int b = 0; b < 32; ++b)
+            unmapped_rows.at<uint8_t>(int(k), b) = rng.byte();
+    }
+    shot.keys.insert(shot.keys.begin(), unmapped.begin(), unmapped.end());
+    cv::vconcat(unmapped_rows, shot.descriptors, shot.descriptors);
+    shot.world.insert(shot.world.begin(), to::kMaxKeypoints, std::nullopt);
+    orb2::KeyFrame *revisit = world.make(shot);
+    CHECK(db.DetectLoopCandidates(revisit, 0.f) == std::vector<orb2::KeyFrame *>{kfs[0]});
+    CHECK(db.last_error().empty());
+    check_revisit_hint(db.GetHint(revisit), revisit, kfs[0]);
+
+    for (const std::size_t bad : {std::size_t{0}, to::kMaxKeypoints + 1}) {
+        to::Settings settings;
+        settings.max_keypoints = bad;
+        bool threw = false;
+        try {
+            Db2 refused(image_map(), test_options(), settings);
+        } catch (const topoloc::Error &e) {
+            threw = contains_text(e.what(), "max_keypoints");
+        }
+        CHECK(threw);
+    }
+}
+
 } // namespace
 
 int main() { return run_all_tests(); }

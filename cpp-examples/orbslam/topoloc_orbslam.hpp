@@ -33,6 +33,7 @@
 
 #include <opencv2/core.hpp>
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <cstddef>
@@ -58,6 +59,9 @@ using Pose = topoloc::Pose;
 /// more off the axis) have no pinhole projection worth keeping.
 inline constexpr double kMinBearingZ = 0.05;
 
+/// Most keypoints topoloc takes from one keyframe (its `topoloc_loop_keyframe` bound).
+inline constexpr std::size_t kMaxKeypoints = 5000;
+
 /// Pinhole intrinsics of the undistorted keypoints (`mvKeysUn`), pixels: ORB-SLAM's `fx`,
 /// `fy`, `cx`, `cy` (the `Camera.fx` ... entries of its settings file).
 struct Intrinsics {
@@ -76,6 +80,12 @@ struct Settings {
     /// units. Let `Sim3Solver` estimate the scale (do not seed `ComputeSim3` with scale 1).
     /// Default false (stereo, RGB-D, or with an IMU: metric).
     bool monocular = false;
+    /// Keypoints of a keyframe given to topoloc (1..=`kMaxKeypoints`): those with a map point
+    /// first, then the strongest (`cv::KeyPoint::response`). Matching two keyframes costs the
+    /// product of their counts: ORB-SLAM's 2,000 per KITTI keyframe (about 10,000 during
+    /// monocular initialisation) verified at 393 ms per keyframe inside ORB-SLAM3, where
+    /// topoloc's own ORB default is 500 (BENCHMARKS.md). Default 500.
+    std::size_t max_keypoints = 500;
     /// Receives every error message (see the top of this header); empty = none. Called without
     /// the database's mutex held, possibly from the tracking and the loop closing thread at once:
     /// it must be thread-safe and must not throw (an exception it throws is swallowed).
@@ -538,6 +548,11 @@ private:
     /// The options for the sensor: a monocular map has no metric odometry to gate with.
     static topoloc::LoopOptions for_sensor(topoloc::LoopOptions options, const Settings &settings)
     {
+        if (settings.max_keypoints < 1 || settings.max_keypoints > kMaxKeypoints)
+            throw topoloc::Error(TOPOLOC_ERR_INVALID_ARGUMENT,
+                                 "Settings::max_keypoints is " +
+                                     std::to_string(settings.max_keypoints) +
+                                     ", must lie in 1..=" + std::to_string(kMaxKeypoints));
         if (settings.monocular)
             options.odometry_gate = false;
         return options;
@@ -741,7 +756,8 @@ private:
         out.timestamp = timestamp;
         const std::vector<cv::KeyPoint> &keys = Access::keypoints(kf);
         const Rows rows = rows_of(kf, keys.size());
-        const std::vector<std::size_t> kept = pinhole_keypoints(kf, keys, out.keypoints);
+        const std::vector<std::size_t> kept = pinhole_keypoints(
+            kf, keys, with_map_point(kf, rows), settings_.max_keypoints, out.keypoints);
         out.keypoint_descriptors = descriptor_bytes(Access::descriptors(kf), rows, kept);
         out.descriptor = describe(Access::image(kf), "keyframe image");
         const std::optional<Pose> Tcw = Access::camera_from_world(kf);
@@ -781,17 +797,21 @@ private:
 
     /// Writes the pinhole pixel positions of the usable keypoints into `xy` and returns their
     /// indices: all of a pinhole keyframe's, a fisheye keyframe's bearings projected through
-    /// the keyframe's intrinsics. Throws for another camera model.
-    static std::vector<std::size_t>
-    pinhole_keypoints(KeyFrame &kf, const std::vector<cv::KeyPoint> &keys, std::vector<float> &xy)
+    /// the keyframe's intrinsics; `limit` of them when there are more (`keep_strongest`).
+    /// Throws for another camera model.
+    static std::vector<std::size_t> pinhole_keypoints(KeyFrame &kf,
+                                                      const std::vector<cv::KeyPoint> &keys,
+                                                      const std::vector<bool> &with_point,
+                                                      std::size_t limit, std::vector<float> &xy)
     {
         const CameraModel model = Access::camera_model(kf);
         if (model == CameraModel::Other)
             fail("the keyframe's camera model is neither pinhole nor Kannala-Brandt fisheye");
         const Intrinsics k = model == CameraModel::Fisheye ? Access::intrinsics(kf) : Intrinsics{};
         std::vector<std::size_t> kept;
+        std::vector<cv::Point2f> pixels;
         kept.reserve(keys.size());
-        xy.reserve(2 * keys.size());
+        pixels.reserve(keys.size());
         for (std::size_t i = 0; i < keys.size(); ++i) {
             cv::Point2f px = keys[i].pt;
             if (model == CameraModel::Fisheye) {
@@ -803,10 +823,59 @@ private:
                                  float(k.fy * ray[1] / ray[2] + k.cy));
             }
             kept.push_back(i);
+            pixels.push_back(px);
+        }
+        if (kept.size() > limit)
+            keep_strongest(keys, with_point, limit, kept, pixels);
+        xy.reserve(2 * pixels.size());
+        for (const cv::Point2f &px : pixels) {
             xy.push_back(px.x);
             xy.push_back(px.y);
         }
         return kept;
+    }
+
+    /// Keeps `limit` of `kept` (indices into `keys`, with their `pixels`): those with a map
+    /// point first, then the highest responses; in their original order.
+    static void keep_strongest(const std::vector<cv::KeyPoint> &keys,
+                               const std::vector<bool> &with_point, std::size_t limit,
+                               std::vector<std::size_t> &kept, std::vector<cv::Point2f> &pixels)
+    {
+        std::vector<std::size_t> order(kept.size());
+        for (std::size_t j = 0; j < order.size(); ++j)
+            order[j] = j;
+        std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) {
+            const bool pa = with_point[kept[a]], pb = with_point[kept[b]];
+            if (pa != pb)
+                return pa;
+            return keys[kept[a]].response > keys[kept[b]].response;
+        });
+        order.resize(limit);
+        std::sort(order.begin(), order.end());
+        std::vector<std::size_t> strongest;
+        std::vector<cv::Point2f> strongest_pixels;
+        strongest.reserve(order.size());
+        strongest_pixels.reserve(order.size());
+        for (std::size_t j : order) {
+            strongest.push_back(kept[j]);
+            strongest_pixels.push_back(pixels[j]);
+        }
+        kept = std::move(strongest);
+        pixels = std::move(strongest_pixels);
+    }
+
+    /// Whether each of the keyframe's keypoints has a usable map point (all false when the map
+    /// point matches do not fit the keypoints: `camera_points` reports that).
+    static std::vector<bool> with_map_point(KeyFrame &kf, const Rows &rows)
+    {
+        std::vector<bool> out(rows.count, false);
+        const auto points = Access::map_points(kf);
+        if (!rows.fits(static_cast<std::size_t>(points.size())))
+            return out;
+        std::array<double, 3> Xw{};
+        for (std::size_t i = 0; i < rows.count; ++i)
+            out[i] = Access::world_position(points[i], Xw);
+        return out;
     }
 
     /// The rows `kept` of an N x 32 CV_8U descriptor matrix, whose row count must fit `rows`.
