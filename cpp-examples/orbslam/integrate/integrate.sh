@@ -14,8 +14,8 @@
 #                and WORK_DIR/<variant>/train_vocabulary
 # --variants     which trees to build (default both)
 # --asan         the topoloc tree's KeyFrameDatabase.cc (C++17 in a C++14 build) under
-#                AddressSanitizer, and ASan linked in (rebuilds that file and relinks; without
-#                --asan the next run goes back)
+#                AddressSanitizer, and ASan linked in (CMake rebuilds the whole tree, about 12
+#                minutes; without --asan the next run goes back)
 #
 # The recipe, measured on Debian 12 (2 cores: about 1 minute for Pangolin, 15 per variant):
 # - Debian packages: those of scripts/install-deps.sh plus libglew-dev, libepoxy-dev,
