@@ -756,15 +756,16 @@ private:
         out.timestamp = timestamp;
         const std::vector<cv::KeyPoint> &keys = Access::keypoints(kf);
         const Rows rows = rows_of(kf, keys.size());
-        const std::vector<std::size_t> kept = pinhole_keypoints(
-            kf, keys, with_map_point(kf, rows), settings_.max_keypoints, out.keypoints);
+        const MapPoints points = map_points_of(kf, rows);
+        const std::vector<std::size_t> kept =
+            pinhole_keypoints(kf, keys, points, settings_.max_keypoints, out.keypoints);
         out.keypoint_descriptors = descriptor_bytes(Access::descriptors(kf), rows, kept);
         out.descriptor = describe(Access::image(kf), "keyframe image");
         const std::optional<Pose> Tcw = Access::camera_from_world(kf);
         if (Tcw) {
             check_pose(*Tcw);
             out.world_T_body = inverse_rigid(*Tcw); // Twc; the body is the camera
-            out.camera_points = camera_points(kf, *Tcw, rows, kept);
+            out.camera_points = camera_points(*Tcw, rows, points, kept);
         }
         return out;
     }
@@ -784,6 +785,34 @@ private:
         }
     };
 
+    /// The world positions of a keyframe's map point matches, read once per keyframe.
+    struct MapPoints {
+        std::size_t matches = 0; ///< How many matches the keyframe has (rows of all cameras).
+        /// Per keypoint, its usable map point's position; empty when `matches` does not fit
+        /// the keypoints (`camera_points` reports that).
+        std::vector<std::optional<std::array<double, 3>>> world;
+        [[nodiscard]] bool has(std::size_t keypoint) const
+        {
+            return keypoint < world.size() && world[keypoint].has_value();
+        }
+    };
+
+    static MapPoints map_points_of(KeyFrame &kf, const Rows &rows)
+    {
+        const auto matches = Access::map_points(kf);
+        MapPoints out;
+        out.matches = static_cast<std::size_t>(matches.size());
+        if (!rows.fits(out.matches))
+            return out;
+        out.world.resize(rows.count);
+        for (std::size_t i = 0; i < rows.count; ++i) {
+            std::array<double, 3> Xw{};
+            if (Access::world_position(matches[i], Xw))
+                out.world[i] = Xw;
+        }
+        return out;
+    }
+
     static Rows rows_of(KeyFrame &kf, std::size_t keypoints)
     {
         const int left = Access::left_count(kf);
@@ -801,8 +830,8 @@ private:
     /// Throws for another camera model.
     static std::vector<std::size_t> pinhole_keypoints(KeyFrame &kf,
                                                       const std::vector<cv::KeyPoint> &keys,
-                                                      const std::vector<bool> &with_point,
-                                                      std::size_t limit, std::vector<float> &xy)
+                                                      const MapPoints &points, std::size_t limit,
+                                                      std::vector<float> &xy)
     {
         const CameraModel model = Access::camera_model(kf);
         if (model == CameraModel::Other)
@@ -826,7 +855,7 @@ private:
             pixels.push_back(px);
         }
         if (kept.size() > limit)
-            keep_strongest(keys, with_point, limit, kept, pixels);
+            keep_strongest(keys, points, limit, kept, pixels);
         xy.reserve(2 * pixels.size());
         for (const cv::Point2f &px : pixels) {
             xy.push_back(px.x);
@@ -837,15 +866,15 @@ private:
 
     /// Keeps `limit` of `kept` (indices into `keys`, with their `pixels`): those with a map
     /// point first, then the highest responses; in their original order.
-    static void keep_strongest(const std::vector<cv::KeyPoint> &keys,
-                               const std::vector<bool> &with_point, std::size_t limit,
-                               std::vector<std::size_t> &kept, std::vector<cv::Point2f> &pixels)
+    static void keep_strongest(const std::vector<cv::KeyPoint> &keys, const MapPoints &points,
+                               std::size_t limit, std::vector<std::size_t> &kept,
+                               std::vector<cv::Point2f> &pixels)
     {
         std::vector<std::size_t> order(kept.size());
         for (std::size_t j = 0; j < order.size(); ++j)
             order[j] = j;
         std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) {
-            const bool pa = with_point[kept[a]], pb = with_point[kept[b]];
+            const bool pa = points.has(kept[a]), pb = points.has(kept[b]);
             if (pa != pb)
                 return pa;
             return keys[kept[a]].response > keys[kept[b]].response;
@@ -862,20 +891,6 @@ private:
         }
         kept = std::move(strongest);
         pixels = std::move(strongest_pixels);
-    }
-
-    /// Whether each of the keyframe's keypoints has a usable map point (all false when the map
-    /// point matches do not fit the keypoints: `camera_points` reports that).
-    static std::vector<bool> with_map_point(KeyFrame &kf, const Rows &rows)
-    {
-        std::vector<bool> out(rows.count, false);
-        const auto points = Access::map_points(kf);
-        if (!rows.fits(static_cast<std::size_t>(points.size())))
-            return out;
-        std::array<double, 3> Xw{};
-        for (std::size_t i = 0; i < rows.count; ++i)
-            out[i] = Access::world_position(points[i], Xw);
-        return out;
     }
 
     /// The rows `kept` of an N x 32 CV_8U descriptor matrix, whose row count must fit `rows`.
@@ -909,20 +924,18 @@ private:
 
     /// The map point of each kept keypoint in the camera frame (`Tcw * Xw`), NaN x3 where
     /// none; the map point rows must fit `rows`.
-    std::vector<float> camera_points(KeyFrame &kf, const Pose &Tcw, const Rows &rows,
-                                     const std::vector<std::size_t> &kept)
+    static std::vector<float> camera_points(const Pose &Tcw, const Rows &rows,
+                                            const MapPoints &points,
+                                            const std::vector<std::size_t> &kept)
     {
-        const auto points = Access::map_points(kf);
-        if (!rows.fits(static_cast<std::size_t>(points.size())))
-            fail(std::to_string(points.size()) + " map point matches for " + rows.text() +
+        if (!rows.fits(points.matches))
+            fail(std::to_string(points.matches) + " map point matches for " + rows.text() +
                  " keypoints");
         const float nan = std::numeric_limits<float>::quiet_NaN();
         std::vector<float> xyz(3 * kept.size(), nan);
-        for (std::size_t j = 0; j < kept.size(); ++j) {
-            std::array<double, 3> Xw{};
-            if (Access::world_position(points[kept[j]], Xw))
-                write_point(transform_point(Tcw, Xw), &xyz[3 * j]);
-        }
+        for (std::size_t j = 0; j < kept.size(); ++j)
+            if (points.has(kept[j]))
+                write_point(transform_point(Tcw, *points.world[kept[j]]), &xyz[3 * j]);
         return xyz;
     }
 

@@ -283,8 +283,8 @@ def write_if_changed(path: Path, content: bytes, mode: int | None = None) -> boo
     return True
 
 
-def lay_out(upstream: Path, out: Path, variant: str) -> int:
-    changed = desired_files(upstream, variant)  # raises before OUT is touched
+def lay_out(upstream: Path, out: Path, changed: dict[str, bytes]) -> int:
+    """Writes OUT: upstream's files, those of `changed` with their new content."""
     written = 0
     for root, dirs, files in os.walk(upstream):
         rel_root = Path(root).relative_to(upstream)
@@ -301,9 +301,9 @@ def lay_out(upstream: Path, out: Path, variant: str) -> int:
     return written
 
 
-def fingerprint(upstream: Path, variant: str) -> str:
+def fingerprint(variant: str, changed: dict[str, bytes]) -> str:
     digest = hashlib.sha256(variant.encode())
-    for rel, content in sorted(desired_files(upstream, variant).items()):
+    for rel, content in sorted(changed.items()):
         digest.update(rel.encode() + b"\0" + content)
     return digest.hexdigest()[:16]
 
@@ -328,13 +328,14 @@ def main() -> int:
         )
         return 2
     try:
-        written = lay_out(upstream, args.out, args.variant)
+        changed = desired_files(upstream, args.variant)  # raises before OUT is touched
+        written = lay_out(upstream, args.out, changed)
     except AnchorError as e:
         print(f"apply.py: {e}", file=sys.stderr)
         return 2
     print(
         f"apply.py: {args.variant} tree in {args.out}: {written} files written "
-        f"(edits {fingerprint(upstream, args.variant)})"
+        f"(edits {fingerprint(args.variant, changed)})"
     )
     return 0
 
