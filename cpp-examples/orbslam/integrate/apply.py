@@ -28,30 +28,18 @@ The edits (no upstream code is copied here beyond the anchors):
 
 from __future__ import annotations
 
-import argparse
-import hashlib
-import os
 import sys
-from dataclasses import dataclass
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
-# Build outputs and version control, wherever they are (upstream has no sources in such folders).
-SKIPPED_DIRS = {".git", "build", "lib"}
+sys.path.insert(0, str(HERE.parent.parent / "common"))
+from anchored_edits import (  # noqa: E402  (the shared module sits beside the examples)
+    Edit,
+    Integration,
+    main,
+)
 
-
-@dataclass(frozen=True)
-class Edit:
-    """Inserts `text` before or after each line that contains `anchor`, or replaces `anchor`
-    inside those lines. `after` first narrows the search to the lines following the first line
-    that contains it. `count` is how many lines must contain the anchor."""
-
-    path: str
-    anchor: str
-    text: str
-    where: str  # "before", "after" or "replace"
-    count: int = 1
-    after: str | None = None
+UPSTREAM_NAME = "ORB-SLAM3 v1.0"
 
 
 BENCH_INCLUDE = "#include <chrono>  // topoloc bench\n#include <string>  // topoloc bench\n"
@@ -214,131 +202,19 @@ REPLACED = {
 }
 
 
-class AnchorError(Exception):
-    pass
-
-
-def apply_edit(text: str, edit: Edit) -> str:
-    lines = text.splitlines(keepends=True)
-    start = 0
-    if edit.after is not None:
-        starts = [i for i, line in enumerate(lines) if edit.after in line]
-        if not starts:
-            raise AnchorError(f"{edit.path}: no line contains {edit.after!r}")
-        start = starts[0] + 1
-    hits = [i for i in range(start, len(lines)) if edit.anchor in lines[i]]
-    if edit.after is not None:
-        hits = hits[:1]  # the first one after the narrowing line
-    if len(hits) != edit.count:
-        raise AnchorError(
-            f"{edit.path}: {len(hits)} lines contain {edit.anchor!r}, expected {edit.count}"
-            " (is this ORB-SLAM3 v1.0?)"
-        )
-    for i in reversed(hits):
-        if edit.where == "replace":
-            lines[i] = lines[i].replace(edit.anchor, edit.text)
-        elif edit.where == "before":
-            lines[i:i] = [edit.text]
-        elif edit.where == "after":
-            lines[i + 1 : i + 1] = [edit.text]
-        else:
-            raise ValueError(edit.where)
-    return "".join(lines)
-
-
 def edits_for(variant: str) -> list[Edit]:
     edits = RECIPE + BENCH
     return edits + TOPOLOC if variant == "topoloc" else edits
 
 
-def desired_files(upstream: Path, variant: str) -> dict[str, bytes]:
-    """The content of every file of OUT whose content differs from upstream's."""
-    edits = edits_for(variant)
-    out: dict[str, bytes] = {}
-    for edit in edits:
-        path = upstream / edit.path
-        if not path.is_file():
-            raise AnchorError(f"{edit.path}: not in {upstream} (is this ORB-SLAM3 v1.0?)")
-        if edit.path not in out:
-            out[edit.path] = path.read_bytes()
-        text = out[edit.path].decode("utf-8", errors="surrogateescape")
-        out[edit.path] = apply_edit(text, edit).encode("utf-8", errors="surrogateescape")
-    if variant == "topoloc":
-        for rel, source in REPLACED.items():
-            if not (upstream / rel).is_file():
-                raise AnchorError(f"{rel}: not in {upstream} (is this ORB-SLAM3 v1.0?)")
-            out[rel] = source.read_bytes()
-    return out
-
-
-def write_if_changed(path: Path, content: bytes, mode: int | None = None) -> bool:
-    if path.is_file() and path.read_bytes() == content:
-        return False
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".topoloc-tmp")
-    tmp.write_bytes(content)
-    if mode is not None:
-        os.chmod(tmp, mode)
-    os.replace(tmp, path)
-    return True
-
-
-def lay_out(upstream: Path, out: Path, changed: dict[str, bytes]) -> int:
-    """Writes OUT: upstream's files, those of `changed` with their new content."""
-    written = 0
-    for root, dirs, files in os.walk(upstream):
-        rel_root = Path(root).relative_to(upstream)
-        dirs[:] = [d for d in dirs if d not in SKIPPED_DIRS]
-        for name in files:
-            rel = (rel_root / name).as_posix()
-            source = upstream / rel
-            if source.is_symlink():
-                continue
-            content = changed.get(rel)
-            if content is None:
-                content = source.read_bytes()
-            written += write_if_changed(out / rel, content, source.stat().st_mode & 0o777)
-    return written
-
-
-def fingerprint(variant: str, changed: dict[str, bytes]) -> str:
-    digest = hashlib.sha256(variant.encode())
-    for rel, content in sorted(changed.items()):
-        digest.update(rel.encode() + b"\0" + content)
-    return digest.hexdigest()[:16]
-
-
-def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("upstream", type=Path)
-    parser.add_argument("out", type=Path)
-    parser.add_argument("--variant", choices=["stock", "topoloc"], required=True)
-    args = parser.parse_args()
-    upstream = args.upstream.resolve()
-    if not (upstream / "include" / "KeyFrameDatabase.h").is_file():
-        print(
-            f"apply.py: {upstream} is not an ORB-SLAM3 checkout (no include/KeyFrameDatabase.h)",
-            file=sys.stderr,
-        )
-        return 2
-    if args.out.resolve() == upstream:
-        print(
-            "apply.py: OUT must differ from UPSTREAM (the checkout is never modified)",
-            file=sys.stderr,
-        )
-        return 2
-    try:
-        changed = desired_files(upstream, args.variant)  # raises before OUT is touched
-        written = lay_out(upstream, args.out, changed)
-    except AnchorError as e:
-        print(f"apply.py: {e}", file=sys.stderr)
-        return 2
-    print(
-        f"apply.py: {args.variant} tree in {args.out}: {written} files written "
-        f"(edits {fingerprint(args.variant, changed)})"
-    )
-    return 0
+INTEGRATION = Integration(
+    upstream_name=UPSTREAM_NAME,
+    marker="include/KeyFrameDatabase.h",
+    edits={variant: edits_for(variant) for variant in ("stock", "topoloc")},
+    replaced={"topoloc": REPLACED},
+    added={},
+)
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(main(INTEGRATION, __doc__.split("\n\n")[0]))

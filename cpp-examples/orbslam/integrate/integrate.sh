@@ -31,6 +31,8 @@ HERE="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
 ROOT="$(cd "$HERE/../../.." && pwd)"
 # shellcheck source=scripts/lib.sh
 source "$ROOT/scripts/lib.sh"
+# shellcheck source=cpp-examples/common/integrate_lib.sh
+source "$ROOT/cpp-examples/common/integrate_lib.sh"
 
 usage() {
     sed -n '2,27p' "${BASH_SOURCE[0]}" | sed 's/^# \{0,1\}//'
@@ -86,15 +88,7 @@ fi
 echo "ok"
 
 if [[ " $VARIANTS " == *" topoloc "* ]]; then
-    section "topoloc (this checkout) into $WORK_DIR/topoloc-install"
-    cmake -S "$ROOT" -B "$WORK_DIR/topoloc-build" -DCMAKE_BUILD_TYPE=Release \
-        -DCMAKE_INSTALL_PREFIX="$WORK_DIR/topoloc-install" -DTOPOLOC_CARGO_TARGET_DIR="$ROOT/target" \
-        -DTOPOLOC_ENABLE_TESTS=OFF >"$WORK_DIR/topoloc-build.log" 2>&1 ||
-        fail "topoloc configure failed (see $WORK_DIR/topoloc-build.log)"
-    cmake --build "$WORK_DIR/topoloc-build" >>"$WORK_DIR/topoloc-build.log" 2>&1 ||
-        fail "topoloc build failed (see $WORK_DIR/topoloc-build.log)"
-    cmake --install "$WORK_DIR/topoloc-build" >>"$WORK_DIR/topoloc-build.log" 2>&1
-    echo "ok"
+    install_topoloc "$ROOT" "$WORK_DIR"
 fi
 
 for variant in $VARIANTS; do
