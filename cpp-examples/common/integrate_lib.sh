@@ -1,3 +1,4 @@
+# shellcheck shell=bash
 # Shell functions shared by the integration scripts (orbslam/integrate/integrate.sh,
 # vins/integrate/integrate.sh). Source after scripts/lib.sh.
 

@@ -505,7 +505,10 @@ private:
         const int cur = int(hint.query_id), old = int(hint.matched_id);
         if (!hint.has_pose || !hint.scale_known) {
             note("loop " + std::to_string(cur) + " -> " + std::to_string(old) +
-                 " has no metric pose (the old keyframe had no 3D points); not a VINS loop");
+                 (hint.has_pose ? " has a translation direction only (PnP with the 3D points "
+                                  "found too few inliers, or there were none)"
+                                : " has no pose") +
+                 "; not a VINS loop");
             return std::nullopt;
         }
         Eigen::Matrix4d m;
