@@ -1,15 +1,16 @@
-"""Trains the GRNN (model.py) on worlds extracted by dataset.py, on the CPU, and exports it to
-ONNX (export.py's contract).
+"""Trains the GRNN (model.py) on worlds extracted by dataset.py, on the CPU; export.py turns the
+checkpoint into the ONNX file topoloc runs.
 
     /usr/bin/python3 python/train/train.py --data DIR --train 'train-*.npz,tr-t-*.npz' \\
         --validate 'tr-a-*.npz' --out grnn.pt [--epochs 60] [--seed 1]
 
 A sample is a sequence of 10-20 consecutive frames of one trajectory (`--frames`); a batch is
-`--batch` sequences of one world (they share its graph). The loss is the cross-entropy of the
-ground-truth view over the map's views, on frames where a place is visible, averaged over the
-sequence; the state starts at zero for each sequence. The seed's optimiser: Adam, weight decay
-1e-3, lr 1e-4 times 0.7 every 20 epochs, batch 32 sequences; an epoch is `--batches` batches.
-Validation reports MNA (the predicted view's place is the true place) and OHA (it is the true
+`--batch` sequences of one world (they share its graph). The loss is the negative
+log-likelihood of the ground-truth place (the view posterior summed over the place's views;
+`--loss view`: of the ground-truth view), on frames where a place is visible, averaged; the
+state starts at zero for each sequence. The seed's optimiser: Adam, weight decay 1e-3, lr 1e-4
+times 0.7 every 20 epochs, batch 32 sequences; an epoch is `--batches` batches.
+Validation reports MNA (the most probable place is the true place) and OHA (it is the true
 place or a graph neighbour) over whole trajectories run frame by frame.
 """
 
@@ -37,10 +38,12 @@ class Graph:
     def __init__(self, world: dataset.World) -> None:
         self.world = world
         self.nodes = torch.from_numpy(world.view_descriptors)
+        self.view_place = torch.from_numpy(world.view_place)
         self.edges = torch.from_numpy(
             dataset.micro_edges(world.view_place, world.view_slot, world.place_edges)
         )
         n_places = int(world.view_place.max()) + 1
+        self.places = n_places
         self.adjacent = np.eye(n_places, dtype=bool)
         for p, q in world.place_edges:
             self.adjacent[p, q] = self.adjacent[q, p] = True
@@ -70,13 +73,28 @@ def sample_batch(
     return torch.from_numpy(d), torch.from_numpy(np.maximum(v, 0)), torch.from_numpy(m)
 
 
-def sequence_loss(model: GRNN, graph: Graph, frames: Tensor, views: Tensor, mask: Tensor) -> Tensor:
+def place_probabilities(graph: Graph, logits: Tensor) -> Tensor:
+    """(B, P): the view posterior summed over each place's views."""
+    views = torch.softmax(logits, dim=1)
+    return torch.zeros(logits.shape[0], graph.places).index_add(1, graph.view_place, views)
+
+
+def sequence_loss(
+    model: GRNN, graph: Graph, frames: Tensor, views: Tensor, mask: Tensor, by_place: bool
+) -> Tensor:
+    """Mean negative log-likelihood of the true view (or, `by_place`, of the true view's
+    place) over the visible frames of the batch."""
     state = torch.zeros(frames.shape[1], graph.nodes.shape[0], model.sizes.state)
     total = torch.zeros(())
     count = mask.sum().clamp(min=1)
     for k in range(frames.shape[0]):
         logits, state = model(graph.nodes, graph.edges, frames[k], state)
-        losses = torch.nn.functional.cross_entropy(logits, views[k], reduction="none")
+        if by_place:
+            places = place_probabilities(graph, logits)
+            truth = graph.view_place[views[k]]
+            losses = -torch.log(places.gather(1, truth[:, None]).squeeze(1) + 1e-9)
+        else:
+            losses = torch.nn.functional.cross_entropy(logits, views[k], reduction="none")
         total = total + (losses * mask[k]).sum()
     return total / count
 
@@ -94,7 +112,7 @@ def evaluate(model: GRNN, graphs: list[Graph]) -> dict[str, float]:
                 logits, state = model(g.nodes, g.edges, frame, state)
                 if not t.visible[k] or t.place[k] < 0:
                     continue
-                place = int(g.world.view_place[int(logits[0].argmax())])
+                place = int(place_probabilities(g, logits)[0].argmax())
                 hits += place == t.place[k]
                 one_hop += bool(g.adjacent[place, t.place[k]])
                 total += 1
@@ -118,6 +136,9 @@ def main() -> int:
     parser.add_argument("--neighbour", type=int, default=128)
     parser.add_argument("--state", type=int, default=512)
     parser.add_argument("--no-temporal", action="store_true")
+    parser.add_argument(
+        "--loss", choices=["place", "view"], default="place", help="likelihood of the place or view"
+    )
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--threads", type=int, default=torch.get_num_threads())
     args = parser.parse_args()
@@ -138,7 +159,7 @@ def main() -> int:
         for _ in range(args.batches):
             graph = train[int(rng.integers(len(train)))]
             d, v, m = sample_batch(graph, args.batch, frames, rng)
-            loss = sequence_loss(model, graph, d, v, m)
+            loss = sequence_loss(model, graph, d, v, m, args.loss == "place")
             optimiser.zero_grad()
             loss.backward()
             optimiser.step()

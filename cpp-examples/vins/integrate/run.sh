@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Runs the loop_fusion nodes of integrate.sh, stock against topoloc, under a real ROS master,
-# fed two sequences of one generated world by driver.py, and writes the table of judge.py.
+# fed two sequences of one generated world by driver.py, and judges each run with judge.py.
 #
 #   cpp-examples/vins/integrate/run.sh WORK_DIR OUT_DIR [--variants "stock topoloc"] [--tag T]
 #                                      [--rate-hz R]
@@ -8,7 +8,7 @@
 # WORK_DIR   integrate.sh's WORK_DIR (the variants' workspaces built)
 # OUT_DIR    gets data/ (the generated worlds), the stock BRIEF vocabulary, the configs and one
 #            folder per run: the node's log, its saved pose graph, the driver's ground truth and
-#            odometry, /usr/bin/time's report, judged.json; and table.md
+#            odometry, /usr/bin/time's report, judged.txt and judged.json
 # --variants which nodes to run (default both)
 # --tag T    run folders are named VARIANT-T (repeated runs)
 # --rate-hz  keyframes per second the driver publishes (default 5; loop_fusion drops keyframes
