@@ -4,11 +4,11 @@ checkpoint into the ONNX file topoloc runs.
     /usr/bin/python3 python/train/train.py --data DIR --train 'train-*.npz,tr-t-*.npz' \\
         --validate 'tr-a-*.npz' --out grnn.pt [--epochs 60] [--seed 1]
 
-A sample is a sequence of 10-20 consecutive frames of one trajectory (`--frames`); a batch is
-`--batch` sequences of one world (they share its graph). The loss is the negative
-log-likelihood of the ground-truth place (the view posterior summed over the place's views;
-`--loss view`: of the ground-truth view), on frames where a place is visible, averaged; the
-state starts at zero for each sequence. The seed's optimiser: Adam, weight decay 1e-3, lr 1e-4
+A sample is a sequence of 10-20 consecutive frames of one trajectory (`--frames`), run frame by
+frame through the candidate windows of window.py from a zero state; a batch is `--batch`
+sequences of one world. The loss is the negative log-likelihood of the ground-truth place (the
+view posterior summed over the place's views) on frames where a place is visible and in the
+window, averaged. The seed's optimiser: Adam, weight decay 1e-3, lr 1e-4
 times 0.7 every 20 epochs, batch 32 sequences; an epoch is `--batches` batches.
 Validation reports MNA (the most probable place is the true place) and OHA (it is the true
 place or a graph neighbour) over whole trajectories run frame by frame.
@@ -19,32 +19,30 @@ from __future__ import annotations
 import argparse
 import sys
 import time
-from dataclasses import asdict
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
 import torch
+from numpy.typing import NDArray
 from torch import Tensor
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 import dataset  # noqa: E402
+import window  # noqa: E402
 from model import GRNN, Sizes  # noqa: E402
 
 
 class Graph:
-    """A world's tensors, built once."""
+    """A world's tensors and window selection, built once."""
 
     def __init__(self, world: dataset.World) -> None:
         self.world = world
         self.nodes = torch.from_numpy(world.view_descriptors)
-        self.view_place = torch.from_numpy(world.view_place)
-        self.edges = torch.from_numpy(
-            dataset.micro_edges(world.view_place, world.view_slot, world.place_edges)
-        )
-        n_places = int(world.view_place.max()) + 1
-        self.places = n_places
-        self.adjacent = np.eye(n_places, dtype=bool)
+        edges = dataset.micro_edges(world.view_place, world.view_slot, world.place_edges)
+        self.windows = window.Windows(world.view_place, edges, world.place_edges)
+        self.adjacent = np.eye(self.windows.places, dtype=bool)
         for p, q in world.place_edges:
             self.adjacent[p, q] = self.adjacent[q, p] = True
 
@@ -56,68 +54,86 @@ def load_worlds(data: Path, patterns: str) -> list[Graph]:
     return [Graph(dataset.load(p)) for p in paths]
 
 
-def sample_batch(
-    graph: Graph, batch: int, frames: tuple[int, int], rng: np.random.Generator
-) -> tuple[Tensor, Tensor, Tensor]:
-    """Frames (L, B, D), target views (L, B) and the visible mask (L, B) of `batch` sequences."""
-    length = int(rng.integers(frames[0], frames[1] + 1))
-    trajectories = [t for t in graph.world.trajectories if len(t.view) >= length]
-    seqs = []
-    for _ in range(batch):
-        t = trajectories[int(rng.integers(len(trajectories)))]
-        start = int(rng.integers(0, len(t.view) - length + 1))
-        seqs.append((t, start))
-    d = np.stack([t.frames[s : s + length] for t, s in seqs], axis=1)
-    v = np.stack([t.view[s : s + length] for t, s in seqs], axis=1)
-    m = np.stack([t.visible[s : s + length] & (t.view[s : s + length] >= 0) for t, s in seqs], 1)
-    return torch.from_numpy(d), torch.from_numpy(np.maximum(v, 0)), torch.from_numpy(m)
+@dataclass
+class Sequence:
+    """Consecutive frames of one trajectory: descriptors, true places, frames to score."""
+
+    frames: NDArray[np.float32]
+    places: NDArray[np.int64]
+    scored: NDArray[np.bool_]
 
 
-def place_probabilities(graph: Graph, logits: Tensor) -> Tensor:
-    """(B, P): the view posterior summed over each place's views."""
-    views = torch.softmax(logits, dim=1)
-    return torch.zeros(logits.shape[0], graph.places).index_add(1, graph.view_place, views)
+def sample_sequences(
+    graph: Graph, count: int, frames: tuple[int, int], rng: np.random.Generator
+) -> list[Sequence]:
+    out = []
+    for _ in range(count):
+        length = int(rng.integers(frames[0], frames[1] + 1))
+        candidates = [t for t in graph.world.trajectories if len(t.place) >= length]
+        t = candidates[int(rng.integers(len(candidates)))]
+        s = int(rng.integers(0, len(t.place) - length + 1))
+        scored = t.visible[s : s + length] & (t.place[s : s + length] >= 0)
+        out.append(Sequence(t.frames[s : s + length], t.place[s : s + length], scored))
+    return out
 
 
-def sequence_loss(
-    model: GRNN, graph: Graph, frames: Tensor, views: Tensor, mask: Tensor, by_place: bool
-) -> Tensor:
-    """Mean negative log-likelihood of the true view (or, `by_place`, of the true view's
-    place) over the visible frames of the batch."""
-    state = torch.zeros(frames.shape[1], graph.nodes.shape[0], model.sizes.state)
-    total = torch.zeros(())
-    count = mask.sum().clamp(min=1)
-    for k in range(frames.shape[0]):
-        logits, state = model(graph.nodes, graph.edges, frames[k], state)
-        if by_place:
-            places = place_probabilities(graph, logits)
-            truth = graph.view_place[views[k]]
-            losses = -torch.log(places.gather(1, truth[:, None]).squeeze(1) + 1e-9)
-        else:
-            losses = torch.nn.functional.cross_entropy(logits, views[k], reduction="none")
-        total = total + (losses * mask[k]).sum()
-    return total / count
+@dataclass
+class Run:
+    """A sequence run frame by frame: the summed loss of its scored frames and their count,
+    the frames whose most probable place is the true one (or one hop from it), and those whose
+    true place was in the window."""
+
+    loss: Tensor
+    scored: int = 0
+    hits: int = 0
+    one_hop: int = 0
+    in_window: int = 0
+
+
+def run_sequence(model: GRNN, graph: Graph, seq: Sequence) -> Run:
+    """Runs `seq` from a zero state through the windows; the loss is the negative
+    log-likelihood of the true place (its views' posterior summed) where it is in the window."""
+    run = Run(torch.zeros(()))
+    previous: dict[int, float] | None = None
+    before: NDArray[np.int64] | None = None
+    state = torch.zeros(1, 0, model.sizes.state)
+    for k in range(len(seq.places)):
+        similarity = graph.world.view_descriptors @ seq.frames[k]
+        w = graph.windows.choose(similarity, previous)
+        state = window.carry_state(state, before if before is not None else w.views[:0], w.views)
+        frame = torch.from_numpy(seq.frames[k : k + 1])
+        logits, state = model(graph.nodes[w.views], w.edges, frame, state)
+        previous, before = window.place_posterior(w, logits), w.views
+        if not seq.scored[k]:
+            continue
+        truth = int(seq.places[k])
+        best = max(previous, key=lambda p: previous[p])
+        run.scored += 1
+        run.hits += best == truth
+        run.one_hop += bool(graph.adjacent[best, truth])
+        if truth in previous:
+            run.in_window += 1
+            views = torch.log_softmax(logits[0], dim=0)
+            mask = torch.from_numpy(w.places == truth)
+            run.loss = run.loss - torch.logsumexp(views[mask], dim=0)
+    return run
 
 
 @torch.no_grad()
 def evaluate(model: GRNN, graphs: list[Graph]) -> dict[str, float]:
-    """MNA and OHA over every trajectory, run frame by frame from a zero state."""
+    """MNA, OHA and window recall over every trajectory, run frame by frame from a zero state."""
     model.eval()
-    hits = one_hop = total = 0
+    total = Run(torch.zeros(()))
     for g in graphs:
         for t in g.world.trajectories:
-            state = torch.zeros(1, g.nodes.shape[0], model.sizes.state)
-            for k in range(len(t.view)):
-                frame = torch.from_numpy(t.frames[k : k + 1])
-                logits, state = model(g.nodes, g.edges, frame, state)
-                if not t.visible[k] or t.place[k] < 0:
-                    continue
-                place = int(place_probabilities(g, logits)[0].argmax())
-                hits += place == t.place[k]
-                one_hop += bool(g.adjacent[place, t.place[k]])
-                total += 1
+            r = run_sequence(model, g, Sequence(t.frames, t.place, t.visible & (t.place >= 0)))
+            total.scored += r.scored
+            total.hits += r.hits
+            total.one_hop += r.one_hop
+            total.in_window += r.in_window
     model.train()
-    return {"mna": hits / max(total, 1), "oha": one_hop / max(total, 1), "frames": total}
+    n = max(total.scored, 1)
+    return {"mna": total.hits / n, "oha": total.one_hop / n, "window": total.in_window / n}
 
 
 def main() -> int:
@@ -136,9 +152,6 @@ def main() -> int:
     parser.add_argument("--neighbour", type=int, default=128)
     parser.add_argument("--state", type=int, default=512)
     parser.add_argument("--no-temporal", action="store_true")
-    parser.add_argument(
-        "--loss", choices=["place", "view"], default="place", help="likelihood of the place or view"
-    )
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--threads", type=int, default=torch.get_num_threads())
     args = parser.parse_args()
@@ -158,8 +171,13 @@ def main() -> int:
         losses = []
         for _ in range(args.batches):
             graph = train[int(rng.integers(len(train)))]
-            d, v, m = sample_batch(graph, args.batch, frames, rng)
-            loss = sequence_loss(model, graph, d, v, m, args.loss == "place")
+            runs = [
+                run_sequence(model, graph, q)
+                for q in sample_sequences(graph, args.batch, frames, rng)
+            ]
+            loss = sum((r.loss for r in runs), torch.zeros(())) / max(
+                1, sum(r.in_window for r in runs)
+            )
             optimiser.zero_grad()
             loss.backward()
             optimiser.step()
@@ -169,6 +187,7 @@ def main() -> int:
         if validate and ((epoch + 1) % 10 == 0 or epoch + 1 == args.epochs):
             scores = evaluate(model, validate)
             line += f", validation MNA {scores['mna']:.3f} OHA {scores['oha']:.3f}"
+            line += f" (true place in the window: {scores['window']:.3f})"
         print(f"{line} ({time.monotonic() - started:.0f} s)", flush=True)
     torch.save({"sizes": asdict(sizes), "state_dict": model.state_dict()}, args.out)
     print(f"train: {args.out}")
