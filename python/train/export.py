@@ -3,9 +3,11 @@
     /usr/bin/python3 python/train/export.py grnn.pt grnn.onnx [--f16]
 
 The contract the Rust estimator checks (names, element types, ranks; N, M, B dynamic):
-- inputs: `nodes` float32 (N, D), the map's unit-norm view descriptors; `edges` int64 (2, M),
-  the micro-node graph (dataset.micro_edges); `frame` float32 (B, D), the frames' unit-norm
-  descriptors; `state` float32 (B, N, S), zeros at a sequence's start;
+- inputs: `nodes` float32 (N, D), the unit-norm descriptors of the window's views
+  (window.py); `edges` int64 (2, M), the micro edges between them (dataset.micro_edges);
+  `frame` float32 (B, D), the frames' unit-norm descriptors; `state` float32 (B, N, S), zeros
+  at a sequence's start; `stats` float32 (B, 3), the max, mean and standard deviation of the
+  frame's cosine over the whole map's views;
 - outputs: `logits` float32 (B, N) (a softmax over the nodes gives the view posterior);
   `new_state` float32 (B, N, S);
 - metadata: `topoloc.model` = "grnn", `topoloc.state` = S, `topoloc.temporal` = 0 or 1,
@@ -24,9 +26,9 @@ import torch
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
-from model import GRNN, Sizes  # noqa: E402
+from model import GRNN, Sizes, map_statistics  # noqa: E402
 
-INPUTS = ["nodes", "edges", "frame", "state"]
+INPUTS = ["nodes", "edges", "frame", "state", "stats"]
 OUTPUTS = ["logits", "new_state"]
 OPSET = 16  # ScatterElements with reduction=add
 
@@ -46,17 +48,19 @@ def export(model: GRNN, out: Path, f16: bool) -> None:
     edges = torch.tensor([[0, 1, 2, 3, 4, 5], [1, 0, 3, 2, 5, 4]], dtype=torch.int64)
     frame = torch.nn.functional.normalize(torch.randn(1, dim), dim=1)
     zeros = torch.zeros(1, n, state)
+    stats = map_statistics(frame @ nodes.T)
     dynamic = {
         "nodes": {0: "n", 1: "d"},
         "edges": {1: "m"},
         "frame": {0: "b", 1: "d"},
         "state": {0: "b", 1: "n"},
+        "stats": {0: "b"},
         "logits": {0: "b", 1: "n"},
         "new_state": {0: "b", 1: "n"},
     }
     torch.onnx.export(
         model,
-        (nodes, edges, frame, zeros),
+        (nodes, edges, frame, zeros, stats),
         str(out),
         input_names=INPUTS,
         output_names=OUTPUTS,

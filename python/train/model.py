@@ -5,8 +5,9 @@ ONNX with the graph's nodes and edges as inputs.
 One step, for B sequences over one graph of N micro nodes (the map's views). Each map fits its
 own PCA, so raw descriptor coordinates mean different things in different maps; the model
 therefore sees them only through similarities, which are the same in every basis: node i's
-features are its view's cosine to the frame s_i, s_i - max(s) and the z-score of s_i over the
-nodes; the global feature is [max, mean, std] of s. On those:
+features are its view's cosine to the frame s_i, s_i - max(s) and the z-score of s_i, with the
+max, mean and standard deviation of s over the whole map (an input: the nodes may be a window);
+the global feature is that [max, mean, std]. On those:
 - NodeModel: each node's neighbours are encoded by phi_v (an MLP down to `neighbour_dim`) and
   averaged; phi_vu maps [x_i, mean of neighbours, u] to the node's new feature;
 - GlobalModel: phi_u maps [mean over nodes, u] to the new global feature;
@@ -53,15 +54,26 @@ def neighbour_mean(values: Tensor, edges: Tensor, degree: Tensor) -> Tensor:
 FEATURES = 3
 
 
-def similarity_features(nodes: Tensor, frame: Tensor) -> tuple[Tensor, Tensor]:
+def similarity_features(nodes: Tensor, frame: Tensor, stats: Tensor) -> tuple[Tensor, Tensor]:
     """Node features (B, N, 3) and global features (B, 3) of the frames (B, D) against the
-    nodes (N, D), both unit-norm descriptors."""
+    nodes (N, D), both unit-norm descriptors; `stats` (B, 3) is [max, mean, std] of the frame's
+    similarity over the whole map (the nodes may be a window of it)."""
     s = frame @ nodes.T
-    top = s.max(dim=1, keepdim=True).values
-    mean = s.mean(dim=1, keepdim=True)
-    std = s.std(dim=1, keepdim=True, unbiased=False) + 1e-6
+    top, mean, std = stats[:, 0:1], stats[:, 1:2], stats[:, 2:3] + 1e-6
     x = torch.stack([s, s - top, (s - mean) / std], dim=2)
-    return x, torch.cat([top, mean, std], dim=1)
+    return x, stats
+
+
+def map_statistics(similarity: Tensor) -> Tensor:
+    """(B, 3): [max, mean, std] of each row of `similarity` (B, V) over the map's views."""
+    return torch.stack(
+        [
+            similarity.max(dim=1).values,
+            similarity.mean(dim=1),
+            similarity.std(dim=1, unbiased=False),
+        ],
+        dim=1,
+    )
 
 
 class NodeModel(nn.Module):
@@ -100,15 +112,16 @@ class GRNN(nn.Module):
         self.score = nn.Linear(sizes.state, 1)
 
     def forward(
-        self, nodes: Tensor, edges: Tensor, frame: Tensor, state: Tensor
+        self, nodes: Tensor, edges: Tensor, frame: Tensor, state: Tensor, stats: Tensor
     ) -> tuple[Tensor, Tensor]:
-        """`nodes` (N, D) the map's view descriptors; `edges` (2, M) int64 directed, no self
-        loops; `frame` (B, D); `state` (B, N, S), zeros at a sequence's start. Returns logits
-        (B, N) and the new state (B, N, S)."""
+        """`nodes` (N, D) the window's view descriptors; `edges` (2, M) int64 directed, no self
+        loops; `frame` (B, D); `state` (B, N, S), zeros at a sequence's start; `stats` (B, 3)
+        the frame's similarity statistics over the whole map (`map_statistics`). Returns
+        logits (B, N) and the new state (B, N, S)."""
         n = nodes.shape[0]
         ones = torch.ones(edges.shape[1], dtype=nodes.dtype)
         in_degree = torch.zeros(n, dtype=nodes.dtype).index_add(0, edges[1], ones)
-        x, g = similarity_features(nodes, frame)
+        x, g = similarity_features(nodes, frame, stats)
         x = self.node1(x, g, edges, in_degree.clamp(min=1.0))
         u = self.glob(x, g)
         x = self.node2(x, u, edges, in_degree.clamp(min=1.0))

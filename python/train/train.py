@@ -31,7 +31,7 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 import dataset  # noqa: E402
 import window  # noqa: E402
-from model import GRNN, Sizes  # noqa: E402
+from model import GRNN, Sizes, map_statistics  # noqa: E402
 
 
 class Graph:
@@ -99,10 +99,11 @@ def run_sequence(model: GRNN, graph: Graph, seq: Sequence) -> Run:
     state = torch.zeros(1, 0, model.sizes.state)
     for k in range(len(seq.places)):
         similarity = graph.world.view_descriptors @ seq.frames[k]
+        stats = map_statistics(torch.from_numpy(similarity)[None])
         w = graph.windows.choose(similarity, previous)
         state = window.carry_state(state, before if before is not None else w.views[:0], w.views)
         frame = torch.from_numpy(seq.frames[k : k + 1])
-        logits, state = model(graph.nodes[w.views], w.edges, frame, state)
+        logits, state = model(graph.nodes[w.views], w.edges, frame, state, stats)
         previous, before = window.place_posterior(w, logits), w.views
         if not seq.scored[k]:
             continue

@@ -3,8 +3,8 @@
 widths 32-128; over 20 places' 240 views, 1-2 ms). The Rust estimator must choose the same
 window.
 
-Per frame, the window's places are: the `appearance` places whose best view is most similar to
-the frame; the `carried` most probable places of the previous frame's posterior; and the graph
+Per frame, the window's places are: the `APPEARANCE` places whose best view is most similar to
+the frame; the `CARRIED` most probable places of the previous frame's posterior; and the graph
 neighbours of the previous most probable place. Its micro nodes are those places' views (in
 ascending view order), its edges the micro edges between them. A view that was in the previous
 window keeps its state; a new one starts from zeros.
@@ -19,7 +19,7 @@ import torch
 from numpy.typing import NDArray
 from torch import Tensor
 
-APPEARANCE = 16
+APPEARANCE = 24
 CARRIED = 8
 
 
