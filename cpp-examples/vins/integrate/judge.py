@@ -15,7 +15,7 @@ Reported: keyframes per sequence; loops, from the log's `[topoloc-bench] loop CU
 (global keyframe indices) and from the pose graph's loop_index column (loops that passed
 findConnection and reached the optimisation), false when the two keyframes' true positions are
 more than 3 m apart or their true yaws more than 30 deg apart, cross-sequence when they belong to
-different sequences; ATE RMSE (m, SE(3) Umeyama, no scale) of the odometry (at the keyframes and
+different sequences; ATE RMSE (m, SE(3) Umeyama, no scale: `topoloc.evaluate_trajectory`) of the odometry (at the keyframes and
 at every published frame) and of the pose graph per sequence, and of the pose graph over all
 sequences with one alignment (low only if the sequences were merged into one frame; the
 odometry's joint figure is the unmerged reference); the median and p90 of
@@ -34,6 +34,10 @@ from pathlib import Path
 from typing import Any, NamedTuple
 
 import numpy as np
+
+ROOT = Path(__file__).resolve().parents[3]
+sys.path.insert(0, str(ROOT / "python"))
+import topoloc  # noqa: E402  (this checkout's package; TOPOLOC_LIBRARY names libtopoloc.so)
 
 MAX_LOOP_DISTANCE_M = 3.0
 MAX_LOOP_YAW_DEG = 30.0
@@ -129,18 +133,16 @@ class Truth:
 
 
 def ate_rmse(estimate: list[Point], truth: list[Point]) -> float | None:
-    """RMSE of the position error after the SE(3) Umeyama alignment of estimate to truth."""
+    """RMSE of the position error after the SE(3) Umeyama alignment of estimate to truth (pairs
+    already matched), by topoloc's evo-equivalent trajectory metrics."""
     if len(estimate) < 3:
         return None
-    x, y = np.asarray(estimate, dtype=float), np.asarray(truth, dtype=float)
-    mx, my = x.mean(axis=0), y.mean(axis=0)
-    u, _, vt = np.linalg.svd((y - my).T @ (x - mx) / len(x))
-    s = np.eye(3)
-    if np.linalg.det(u) * np.linalg.det(vt) < 0:
-        s[2, 2] = -1
-    r = u @ s @ vt
-    error = y - ((x - mx) @ r.T + my)
-    return float(np.sqrt((error**2).sum(axis=1).mean()))
+    rows = np.zeros((len(estimate), 8))
+    rows[:, 0] = np.arange(len(estimate))  # the pairs' order: already associated
+    rows[:, 7] = 1.0  # identity rotations: ATE reads the positions only
+    est, ref = rows.copy(), rows.copy()
+    est[:, 1:4], ref[:, 1:4] = estimate, truth
+    return float(topoloc.evaluate_trajectory(ref, est, alignment="se3").ate_m.rmse)
 
 
 def judge_loops(

@@ -174,7 +174,8 @@ done
 section "judged"
 for variant in $VARIANTS; do
     dir="$OUT/$variant$TAG"
-    "$PY" "$HERE/judge.py" --driver-out "$dir" --pose-graph "$dir/pose_graph/pose_graph.txt" \
+    TOPOLOC_LIBRARY="$ROOT/target/release/libtopoloc.so" "$PY" "$HERE/judge.py" \
+        --driver-out "$dir" --pose-graph "$dir/pose_graph/pose_graph.txt" \
         --log "$dir/log.txt" --exit-code "$(cat "$dir/exit-code.txt" 2>/dev/null || echo 255)" \
         --json "$dir/judged.json" | tee "$dir/judged.txt"
 done
