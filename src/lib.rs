@@ -47,8 +47,8 @@ pub mod verify;
 
 pub use descriptor::{DescriptorIdentity, ExpectedDescriptor};
 pub use localize::{
-    Candidate, Frame, Localization, LocalizeError, Localizer, LocalizerOptions, MetricOptions,
-    Mode, PoseFix,
+    Candidate, Frame, GrnnError, GrnnOptions, Localization, LocalizeError, Localizer,
+    LocalizerOptions, MetricOptions, Mode, PoseFix,
 };
 pub use map::{LoadOptions, Map, MapBuilder, MapError};
 

@@ -137,9 +137,27 @@ pub(crate) fn session(
         tried: vec![model.to_path_buf()],
         hint: format!("{e}; {hint}"),
     })?;
+    let session = session_from_memory(runtime, &bytes, threads)
+        .map_err(|e| match e {
+            VisionError::Model(message) => {
+                VisionError::Model(format!("{}: {message}", model.display()))
+            }
+            other => other,
+        })?;
+    Ok((session, format!("{:x}", Sha256::digest(&bytes))))
+}
+
+/// A session on the model `bytes` with `threads` intra-op threads. A runtime that cannot be
+/// loaded is [`VisionError::BackendUnavailable`]; bytes ONNX Runtime refuses are
+/// [`VisionError::Model`].
+pub(crate) fn session_from_memory(
+    runtime: Option<&Path>,
+    bytes: &[u8],
+    threads: usize,
+) -> Result<Session, VisionError> {
     let env = environment(runtime)?;
-    let onnx = |e: ort::Error| VisionError::Model(format!("{}: {e}", model.display()));
-    let session = Session::builder(env)
+    let onnx = |e: ort::Error| VisionError::Model(e.to_string());
+    Session::builder(env)
         .map_err(onnx)?
         .with_intra_threads(threads.max(1))
         .map_err(|e| onnx(e.into()))?
@@ -147,9 +165,8 @@ pub(crate) fn session(
         // reuse the arena's blocks (BENCHMARKS.md, "Memory budget").
         .with_memory_pattern(false)
         .map_err(|e| onnx(e.into()))?
-        .commit_from_memory(&bytes)
-        .map_err(onnx)?;
-    Ok((session, format!("{:x}", Sha256::digest(&bytes))))
+        .commit_from_memory(bytes)
+        .map_err(onnx)
 }
 
 /// ONNX Runtime's own messages, as `log` records of target `onnxruntime` (its INFO messages,

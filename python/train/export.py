@@ -11,7 +11,9 @@ The contract the Rust estimator checks (names, element types, ranks; N, M, B dyn
 - outputs: `logits` float32 (B, N) (a softmax over the nodes gives the view posterior);
   `new_state` float32 (B, N, S);
 - metadata: `topoloc.model` = "grnn", `topoloc.state` = S, `topoloc.temporal` = 0 or 1,
-  `topoloc.features` = "cosine,cosine-max,zscore".
+  `topoloc.features` = "cosine,cosine-max,zscore", `topoloc.max_nodes` = the most nodes one
+  step accepts (`--max-nodes`, default 4096: a window of 40 places of 100 views; the estimator
+  refuses maps whose largest window is bigger, since the step's cost grows with it).
 With --f16 the weights are stored as float16 and cast to float32 inside the graph (inputs and
 outputs stay float32).
 """
@@ -40,7 +42,7 @@ def load_checkpoint(path: Path) -> GRNN:
     return model.eval()
 
 
-def export(model: GRNN, out: Path, f16: bool) -> None:
+def export(model: GRNN, out: Path, f16: bool, max_nodes: int = 4096) -> None:
     import onnx  # Debian's python3-onnx
 
     n, dim, state = 6, 8, model.sizes.state
@@ -87,6 +89,7 @@ def export(model: GRNN, out: Path, f16: bool) -> None:
         "topoloc.state": str(state),
         "topoloc.temporal": str(int(model.sizes.temporal)),
         "topoloc.features": "cosine,cosine-max,zscore",
+        "topoloc.max_nodes": str(max_nodes),
     }
     for key, value in meta.items():
         entry = proto.metadata_props.add()
@@ -100,8 +103,9 @@ def main() -> int:
     parser.add_argument("checkpoint", type=Path)
     parser.add_argument("out", type=Path)
     parser.add_argument("--f16", action="store_true", help="float16 weights")
+    parser.add_argument("--max-nodes", type=int, default=4096, help="most nodes per step")
     args = parser.parse_args()
-    export(load_checkpoint(args.checkpoint), args.out, args.f16)
+    export(load_checkpoint(args.checkpoint), args.out, args.f16, args.max_nodes)
     print(f"export: {args.out} ({args.out.stat().st_size} bytes)")
     return 0
 

@@ -6,7 +6,7 @@ use crate::build::ImageMapError;
 use crate::descriptor::{DescriptorError, IdentityError};
 use crate::errors::VisionError;
 use crate::eval::TrajectoryError;
-use crate::localize::{LocalizeError, TimestampError};
+use crate::localize::{GrnnError, LocalizeError, TimestampError};
 use crate::loops::LoopsError;
 use crate::map::MapError;
 use crate::skeleton::SkeletonError;
@@ -117,6 +117,15 @@ impl From<LocalizeError> for FfiError {
             LocalizeError::NoDescriber(_) => Self::new(TOPOLOC_ERR_NO_DESCRIBER, e.to_string()),
             // verify_candidates > 0 on a map without keypoints.
             LocalizeError::Verification(_) | LocalizeError::Metric(_) => {
+                Self::new(TOPOLOC_ERR_INVALID_OPTION, e.to_string())
+            }
+            LocalizeError::Grnn(GrnnError::Unavailable(v)) => v.into(),
+            // A file that is not ONNX, or an ONNX file of another contract.
+            LocalizeError::Grnn(GrnnError::NotOnnx(_) | GrnnError::Contract(_) | GrnnError::Run(_)) => {
+                Self::new(TOPOLOC_ERR_MODEL, e.to_string())
+            }
+            // The map does not suit the model.
+            LocalizeError::Grnn(GrnnError::GraphTooLarge { .. } | GrnnError::NoGraph(_)) => {
                 Self::new(TOPOLOC_ERR_INVALID_OPTION, e.to_string())
             }
         }

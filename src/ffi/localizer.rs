@@ -1,6 +1,6 @@
 //! C functions of the localizer: create, process a frame, reset, free.
 
-use super::boundary::slice;
+use super::boundary::{optional_string, slice};
 use super::convert::{expected_descriptor, optional_camera, optional_pose, pose_to_row_major};
 use super::describer::describer_options;
 use super::error::FfiError;
@@ -12,7 +12,9 @@ use super::images::{
 use super::map::{new_on_map, topoloc_map};
 use super::topoloc_status;
 use super::versioned::{init_versioned, read_versioned, versioned, write_versioned};
-use crate::localize::{Frame, Localization, Localizer, LocalizerOptions, MetricOptions, Mode};
+use crate::localize::{
+    Frame, GrnnOptions, Localization, Localizer, LocalizerOptions, MetricOptions, Mode,
+};
 use crate::verify::{LocateOptions, VerificationOptions};
 use nalgebra::Isometry3;
 use std::ffi::c_char;
@@ -28,6 +30,12 @@ pub const TOPOLOC_MODE_SINGLE_FRAME: topoloc_mode = 1;
 /// by the frames' odometry and weighed by appearance; the place is the one nearest to the
 /// particles. Needs a map with every place's position and every view's pose.
 pub const TOPOLOC_MODE_METRIC: topoloc_mode = 2;
+/// Learned mode (ABI 1.16): the seed's graph recurrent network (GRNN) run through ONNX Runtime
+/// on a window of the map's views; the model is `grnn_model_path`'s, or the one built into the
+/// library. Needs ONNX Runtime (`onnx_runtime_path`, else `TOPOLOC_ORT_LIBRARY`, the cache; else
+/// `_BACKEND_UNAVAILABLE`) and a map with edges (else `_INVALID_OPTION`); a model file that is
+/// not ONNX or breaks the contract is `_MODEL`. Odometry is not used.
+pub const TOPOLOC_MODE_GRNN: topoloc_mode = 3;
 
 /// Follows one camera through a map. Created by `topoloc_localizer_new`, released by
 /// `topoloc_localizer_free`. Holds per-camera state: use it from one thread at a time (it may
@@ -51,8 +59,9 @@ castable!(topoloc_localizer: OwnedExclusive => LocalizerState);
 pub struct topoloc_localizer_options {
     /// `sizeof(topoloc_localizer_options)`, set by the `_default` function.
     pub struct_size: usize,
-    /// `TOPOLOC_MODE_FILTER`, `TOPOLOC_MODE_SINGLE_FRAME` or (ABI 1.3) `TOPOLOC_MODE_METRIC`
-    /// (on a map without positions or view poses: `_INVALID_OPTION`).
+    /// `TOPOLOC_MODE_FILTER`, `TOPOLOC_MODE_SINGLE_FRAME`, (ABI 1.3) `TOPOLOC_MODE_METRIC`
+    /// (on a map without positions or view poses: `_INVALID_OPTION`) or (ABI 1.16)
+    /// `TOPOLOC_MODE_GRNN`.
     pub mode: topoloc_mode,
     /// Softmax temperature of the observation likelihood.
     pub temperature: f32,
@@ -125,11 +134,16 @@ pub struct topoloc_localizer_options {
     pub verify_off_map_inliers: f64,
     /// Inliers per e-fold of that likelihood ratio.
     pub verify_off_map_inlier_scale: f64,
+    // ABI 1.16 (topoloc 0.1): the learned estimator.
+    /// ONNX model of `TOPOLOC_MODE_GRNN` (written by `python/train/export.py`); NULL or "" = the
+    /// model built into the library. Read when the localizer is created.
+    pub grnn_model_path: *const c_char,
 }
 
 // ABI 1.0 ended before `image_backend`; 1.1 added the image fields, 1.2 verification, 1.3
 // metric mode, 1.6 pose fixes, 1.9 off-map evidence from verification (its fields are 8 bytes
-// wide so that the 1.6 layout, padded after `pose_min_inliers`, still ends where they start).
+// wide so that the 1.6 layout, padded after `pose_min_inliers`, still ends where they start),
+// 1.16 the learned estimator's model.
 versioned! {
     topoloc_localizer_options [
         image_backend,
@@ -137,6 +151,7 @@ versioned! {
         metric_particles,
         camera_fx,
         verify_off_map_inliers,
+        grnn_model_path,
     ] {
         let d = LocalizerOptions::default();
         Self {
@@ -166,6 +181,7 @@ versioned! {
             pose_min_inliers: d.verification.locate.min_inliers,
             verify_off_map_inliers: -1.0,
             verify_off_map_inlier_scale: f64::from(d.verification.off_map_inlier_scale),
+            grnn_model_path: std::ptr::null(),
         }
     }
 }
@@ -222,6 +238,7 @@ fn localizer_options(o: &topoloc_localizer_options) -> Result<LocalizerOptions, 
         TOPOLOC_MODE_FILTER => Mode::Filter,
         TOPOLOC_MODE_SINGLE_FRAME => Mode::SingleFrame,
         TOPOLOC_MODE_METRIC => Mode::Metric,
+        TOPOLOC_MODE_GRNN => Mode::Grnn,
         other => return Err(FfiError::invalid_option(format!("unknown mode {other}"))),
     };
     Ok(LocalizerOptions {
@@ -256,6 +273,11 @@ fn localizer_options(o: &topoloc_localizer_options) -> Result<LocalizerOptions, 
             temperature: o.metric_temperature,
             seed: o.metric_seed,
             ..MetricOptions::default()
+        },
+        grnn: GrnnOptions {
+            model: optional_string(o.grnn_model_path, "options.grnn_model_path")?.map(Into::into),
+            runtime: optional_string(o.onnx_runtime_path, "options.onnx_runtime_path")?
+                .map(Into::into),
         },
         // The motion model's speed classes are not in the C options yet: defaults.
         ..LocalizerOptions::default()

@@ -25,8 +25,9 @@ pub const TOPOLOC_ABI_VERSION: u32 = 1;
 /// image keyframes (`topoloc_keyframe_describer_*`, `topoloc_loop_detector_add_image`), ranked
 /// candidates (`topoloc_loop_detector_candidates`), sessions
 /// (`topoloc_loop_detector_begin_session`), local features of image maps
-/// (`verification_keypoints`, `local_features`).
-pub const TOPOLOC_ABI_VERSION_MINOR: u32 = 15;
+/// (`verification_keypoints`, `local_features`); 1.16: the learned estimator
+/// (`TOPOLOC_MODE_GRNN`, `grnn_model_path`).
+pub const TOPOLOC_ABI_VERSION_MINOR: u32 = 16;
 
 static VERSION: &CStr =
     match CStr::from_bytes_with_nul(concat!(env!("CARGO_PKG_VERSION"), "\0").as_bytes()) {

@@ -3,6 +3,7 @@
 use crate::descriptor::DescriptorError;
 use crate::errors::VisionError;
 use crate::map::MapError;
+use super::grnn::GrnnError;
 
 /// What can go wrong when creating a localizer or processing a frame. On error the localizer's
 /// state is exactly what it was before the call.
@@ -35,6 +36,10 @@ pub enum LocalizeError {
     /// Metric mode was asked for on a map without place positions or view poses.
     #[error("cannot localize metrically: {0}")]
     Metric(String),
+    /// The learned estimator ([`super::Mode::Grnn`]) cannot load its model, the model does not
+    /// fit the map, or a step failed.
+    #[error(transparent)]
+    Grnn(#[from] GrnnError),
     /// Odometry is not finite.
     #[error("bad odometry: {0}")]
     Odometry(String),

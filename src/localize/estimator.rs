@@ -1,8 +1,9 @@
-//! The state a localizer estimates, stated once per mode: the graph filter alone, or the
-//! particle cloud of metric mode (whose place posterior wins) beside the graph filter, which
-//! still decides on-map vs off-map there.
+//! The state a localizer estimates, stated once per mode: the graph filter alone; or the
+//! particle cloud of metric mode, or the learned network's posterior (whose place posterior
+//! wins), beside the graph filter, which still decides on-map vs off-map there.
 
 use super::filter::{Belief, FilterParams};
+use super::grnn::{Grnn, GrnnOptions};
 use super::options::Mode;
 use super::particles::{MetricOptions, Particles};
 use super::LocalizeError;
@@ -23,6 +24,14 @@ pub(super) enum Estimator {
         /// The graph filter, read for `off_map` only.
         graph: Belief,
     },
+    /// [`Mode::Grnn`]: the learned network gives the place posterior; the graph filter runs
+    /// beside it for the off-map probability only.
+    Learned {
+        /// The network's state (boxed: its buffers are far larger than the filter's handles).
+        grnn: Box<Grnn>,
+        /// The graph filter, read for `off_map` only.
+        graph: Belief,
+    },
 }
 
 impl Estimator {
@@ -32,6 +41,7 @@ impl Estimator {
         mode: Mode,
         params: &FilterParams,
         metric: &MetricOptions,
+        learned: &GrnnOptions,
     ) -> Result<Self, LocalizeError> {
         let mut graph = Belief::new(map, params);
         graph.set_initial(params);
@@ -41,12 +51,18 @@ impl Estimator {
                 particles: Box::new(Particles::new(map, metric).map_err(LocalizeError::Metric)?),
                 graph,
             },
+            Mode::Grnn => Estimator::Learned {
+                grnn: Box::new(Grnn::new(map, learned)?),
+                graph,
+            },
         })
     }
 
     fn graph(&self) -> &Belief {
         match self {
-            Estimator::Graph(graph) | Estimator::Metric { graph, .. } => graph,
+            Estimator::Graph(graph)
+            | Estimator::Metric { graph, .. }
+            | Estimator::Learned { graph, .. } => graph,
         }
     }
 
@@ -55,6 +71,7 @@ impl Estimator {
         match self {
             Estimator::Graph(graph) => &graph.places,
             Estimator::Metric { particles, .. } => &particles.places,
+            Estimator::Learned { grnn, .. } => &grnn.places,
         }
     }
 
@@ -71,39 +88,50 @@ impl Estimator {
                 graph.set_initial(params);
                 particles.set_initial();
             }
+            Estimator::Learned { grnn, graph } => {
+                graph.set_initial(params);
+                grnn.set_initial();
+            }
         }
     }
 
     /// One frame's prediction and appearance update. `continued` is false for the first frame
     /// (or every frame in single-frame mode), which starts from the initial state instead of
     /// moving the previous one; `travelled` is the odometry distance, `odometry` the full motion.
+    /// `query` is the frame's unit descriptor. Only the learned network can fail, and it runs
+    /// first, so an error leaves every part of the state unchanged.
     pub fn step(
         &mut self,
+        map: &Map,
         params: &FilterParams,
         continued: bool,
         odometry: Option<&Isometry3<f64>>,
-        place_scores: &[f32],
-        view_scores: &[f32],
-    ) {
+        scores: Scores<'_>,
+    ) -> Result<(), LocalizeError> {
         let travelled = odometry.map(|pose| pose.translation.vector.norm());
         let (graph, particles) = match self {
             Estimator::Graph(graph) => (graph, None),
             Estimator::Metric { particles, graph } => (graph, Some(particles)),
+            Estimator::Learned { grnn, graph } => {
+                grnn.step(map, continued, scores.query, scores.views, scores.places)?;
+                (graph, None)
+            }
         };
         if continued {
             graph.predict(params, travelled);
         } else {
             graph.set_initial(params);
         }
-        graph.update(params, place_scores);
+        graph.update(params, scores.places);
         if let Some(particles) = particles {
             if continued {
                 particles.predict(odometry);
             } else {
                 particles.set_initial();
             }
-            particles.update(view_scores);
+            particles.update(scores.views);
         }
+        Ok(())
     }
 
     /// Multiplies the belief of every place by `factor(place)` (verification); in metric mode
@@ -112,6 +140,7 @@ impl Estimator {
         match self {
             Estimator::Graph(graph) => graph.weigh_places(params, factor),
             Estimator::Metric { particles, .. } => particles.weigh_places(factor),
+            Estimator::Learned { grnn, .. } => grnn.weigh_places(factor),
         }
     }
 
@@ -119,9 +148,9 @@ impl Estimator {
     /// [`Belief::replace_off_map_evidence`]); every mode's off-map state is the graph filter's.
     pub fn replace_off_map_evidence(&mut self, off_over_on: f64) {
         match self {
-            Estimator::Graph(graph) | Estimator::Metric { graph, .. } => {
-                graph.replace_off_map_evidence(off_over_on)
-            }
+            Estimator::Graph(graph)
+            | Estimator::Metric { graph, .. }
+            | Estimator::Learned { graph, .. } => graph.replace_off_map_evidence(off_over_on),
         }
     }
 
@@ -147,6 +176,16 @@ impl Estimator {
                 graph.save(to_graph);
                 particles.save(to_particles);
             }
+            (
+                Estimator::Learned { grnn, graph },
+                Estimator::Learned {
+                    grnn: to_grnn,
+                    graph: to_graph,
+                },
+            ) => {
+                graph.save(to_graph);
+                grnn.save(to_grnn);
+            }
             (_, backup) => *backup = self.clone(),
         }
     }
@@ -155,4 +194,15 @@ impl Estimator {
     pub fn restore(&mut self, backup: &Estimator) {
         backup.save(self);
     }
+}
+
+/// One frame's similarities, as the estimators read them.
+#[derive(Clone, Copy)]
+pub(super) struct Scores<'a> {
+    /// The frame's unit-norm descriptor.
+    pub query: &'a [f32],
+    /// Its cosine to every view.
+    pub views: &'a [f32],
+    /// Each place's best view's cosine.
+    pub places: &'a [f32],
 }

@@ -1,7 +1,7 @@
 //! The [`Localizer`]: one camera's frames through the stages of the data flow (validate,
 //! describe, score, update, verify, report), each a method below.
 
-use super::estimator::Estimator;
+use super::estimator::{Estimator, Scores};
 use super::filter::FilterParams;
 use super::options::{LocalizerOptions, Mode};
 use super::result::{Candidate, Frame, Localization};
@@ -42,7 +42,13 @@ impl Localizer {
         map.descriptor()
             .check_compatible(&options.expected)
             .map_err(MapError::from)?;
-        let estimator = Estimator::new(&map, options.mode, &params, &options.metric)?;
+        let estimator = Estimator::new(
+            &map,
+            options.mode,
+            &params,
+            &options.metric,
+            &options.grnn,
+        )?;
         let verifier = match options.verification.enabled() {
             true => Some(Verifier::new(&map, &options.verification, &estimator)?),
             false => None,
@@ -145,7 +151,7 @@ impl Localizer {
         if let Some(verifier) = &mut self.verifier {
             verifier.save(&self.estimator);
         }
-        self.update(frame.odometry.as_ref());
+        self.update(frame.odometry.as_ref())?;
         if let Some(verifier) = &mut self.verifier {
             let checked = verifier.verify(
                 &self.map,
@@ -249,16 +255,17 @@ impl Localizer {
         );
     }
 
-    /// Stage 4: the estimator's prediction by the motion model and appearance update.
-    fn update(&mut self, odometry: Option<&Isometry3<f64>>) {
+    /// Stage 4: the estimator's prediction by the motion model and appearance update (for the
+    /// learned estimator, one step of the network). On error the estimator is unchanged.
+    fn update(&mut self, odometry: Option<&Isometry3<f64>>) -> Result<(), LocalizeError> {
         let continued = self.filtering() && self.initialized;
-        self.estimator.step(
-            &self.params,
-            continued,
-            odometry,
-            &self.scratch.place_scores,
-            &self.scratch.view_scores,
-        );
+        let scores = Scores {
+            query: &self.scratch.query,
+            views: &self.scratch.view_scores,
+            places: &self.scratch.place_scores,
+        };
+        self.estimator
+            .step(&self.map, &self.params, continued, odometry, scores)
     }
 
     /// Stage 6: the top-k places, the best one and the off-map decision into `out`.

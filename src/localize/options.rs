@@ -2,6 +2,7 @@
 //! graph filter's parameters.
 
 use super::filter::FilterParams;
+use super::grnn::GrnnOptions;
 use super::particles::MetricOptions;
 use super::LocalizeError;
 use crate::bounds::Bounds;
@@ -20,6 +21,11 @@ pub enum Mode {
     /// odometry and weighed by appearance (see `particles.rs`); the place is the one nearest
     /// to the particles. Needs a map with place positions and view poses.
     Metric,
+    /// The seed's learned graph recurrent network (GRNN), run through ONNX Runtime on a window
+    /// of the map's views each frame (see `grnn/`); the place posterior is the network's.
+    /// Needs ONNX Runtime (`scripts/setup-models.sh`) and a map with edges; the model is
+    /// [`LocalizerOptions::grnn`]'s. Odometry is not used.
+    Grnn,
 }
 
 /// Localizer parameters. `temperature` and `off_map_margin` were chosen with `topoloc sweep`
@@ -68,6 +74,8 @@ pub struct LocalizerOptions {
     pub verification: VerificationOptions,
     /// Parameters of [`Mode::Metric`] (ignored in the other modes).
     pub metric: MetricOptions,
+    /// The network of [`Mode::Grnn`] (ignored in the other modes).
+    pub grnn: GrnnOptions,
 }
 
 /// Most speed classes the motion model accepts.
@@ -91,6 +99,7 @@ impl Default for LocalizerOptions {
             turn_probability: 0.02,
             verification: VerificationOptions::default(),
             metric: MetricOptions::default(),
+            grnn: GrnnOptions::default(),
         }
     }
 }

@@ -326,6 +326,12 @@ impl Map {
         Ok(&self.descriptors()[view as usize * d..(view as usize + 1) * d])
     }
 
+    /// Descriptor of one view without bounds checks (for per-frame loops; `view < view_count()`).
+    pub(crate) fn view_descriptor_unchecked(&self, view: usize) -> &[f32] {
+        let d = self.dim();
+        &self.descriptors()[view * d..(view + 1) * d]
+    }
+
     /// Attributes of one view.
     pub fn view(&self, view: ViewId) -> Result<&ViewRecord, MapError> {
         self.check_view(view)?;
@@ -348,6 +354,18 @@ impl Map {
         let p = place as usize;
         Ok(&self.place_view_ids
             [self.place_view_offsets[p] as usize..self.place_view_offsets[p + 1] as usize])
+    }
+
+    /// Views of a place without bounds checks (for per-frame loops; `place < place_count()`).
+    pub(crate) fn place_views_unchecked(&self, place: usize) -> &[ViewId] {
+        &self.place_view_ids
+            [self.place_view_offsets[place] as usize..self.place_view_offsets[place + 1] as usize]
+    }
+
+    /// Neighbouring places without bounds checks (for per-frame loops; `place < place_count()`).
+    pub(crate) fn neighbours_unchecked(&self, place: usize) -> &[PlaceId] {
+        &self.neighbour_ids
+            [self.neighbour_offsets[place] as usize..self.neighbour_offsets[place + 1] as usize]
     }
 
     /// Position of a place in metres, if the map has one.

@@ -32,7 +32,9 @@ use topoloc::eval::{
 };
 use topoloc::image::{read_rgb, ImageView, PixelFormat};
 use topoloc::map::PlaceId;
-use topoloc::{Frame, LoadOptions, Localization, Localizer, LocalizerOptions, Map, Mode};
+use topoloc::{
+    Frame, GrnnOptions, LoadOptions, Localization, Localizer, LocalizerOptions, Map, Mode,
+};
 use topoloc_sim::dataset::{Dataset, GRAPH_FILE, RECALL_DEPTHS};
 
 /// Options of `eval`.
@@ -90,6 +92,12 @@ pub struct EvalArgs {
     /// Write a PNG: similarity matrix with ground truth and predictions, precision-recall curves.
     #[arg(long)]
     pub plot: Option<PathBuf>,
+    /// Also run the learned GRNN (`Mode::Grnn`; with --verify, verifying as the others do).
+    #[arg(long)]
+    pub grnn: bool,
+    /// With --grnn: its ONNX model (default: the one built into the library).
+    #[arg(long, requires = "grnn")]
+    pub grnn_model: Option<PathBuf>,
     /// Describing threads (0: one per core); latency figures are per image on one thread each.
     #[arg(long, default_value_t = 0)]
     pub threads: usize,
@@ -207,7 +215,7 @@ fn run_images(args: &EvalArgs, images: &Path, map: &Arc<Map>) -> Result<()> {
         images: (args.verify > 0).then_some((files.as_slice(), read)),
     };
     let mut runs = Vec::new();
-    for &(name, mode, _) in configurations(args) {
+    for (name, mode, _) in configurations(args) {
         let similarity = (mode == Mode::SingleFrame).then_some((&mut similarity, map_images));
         let mut localizer = localizer(args, map, mode)?;
         let run = localize_all(
@@ -312,7 +320,7 @@ fn run_dataset(args: &EvalArgs, root: &Path, map: &Arc<Map>) -> Result<()> {
         images: (args.verify > 0).then_some((paths.as_slice(), read)),
     };
     let mut runs = Vec::new();
-    for &(name, mode, odometry) in configurations(args) {
+    for (name, mode, odometry) in configurations(args) {
         let queries = Queries {
             odometry: with_odometry.odometry.filter(|_| odometry),
             ..with_odometry
@@ -345,17 +353,20 @@ fn run_dataset(args: &EvalArgs, root: &Path, map: &Arc<Map>) -> Result<()> {
 }
 
 /// The localizer configurations `(name, mode, with odometry)` asked for: single-frame, the
-/// filter unless `--single-frame`, the filter with odometry with `--odometry`. The last one
-/// that is not given odometry gives the headline figures.
-fn configurations(args: &EvalArgs) -> &'static [(&'static str, Mode, bool)] {
-    const SINGLE: (&str, Mode, bool) = ("single_frame", Mode::SingleFrame, false);
-    const FILTER: (&str, Mode, bool) = ("filter", Mode::Filter, false);
-    const ODOMETRY: (&str, Mode, bool) = ("filter_odometry", Mode::Filter, true);
-    match (args.single_frame, args.odometry) {
-        (true, _) => &[SINGLE],
-        (false, false) => &[SINGLE, FILTER],
-        (false, true) => &[SINGLE, FILTER, ODOMETRY],
+/// filter unless `--single-frame`, the filter with odometry with `--odometry`, the GRNN with
+/// `--grnn`. The last one that is not given odometry gives the headline figures.
+fn configurations(args: &EvalArgs) -> Vec<(&'static str, Mode, bool)> {
+    let mut configurations = vec![("single_frame", Mode::SingleFrame, false)];
+    if !args.single_frame {
+        configurations.push(("filter", Mode::Filter, false));
     }
+    if args.grnn {
+        configurations.push(("grnn", Mode::Grnn, false));
+    }
+    if args.odometry {
+        configurations.push(("filter_odometry", Mode::Filter, true));
+    }
+    configurations
 }
 
 /// A localizer in `mode` keeping the top 10 candidates, at `--temperature` if given, verifying
@@ -364,6 +375,10 @@ fn localizer(args: &EvalArgs, map: &Arc<Map>, mode: Mode) -> Result<Localizer> {
     let mut options = LocalizerOptions {
         mode,
         top_k: 10,
+        grnn: GrnnOptions {
+            model: args.grnn_model.clone(),
+            runtime: args.runtime.onnx_runtime.clone(),
+        },
         ..LocalizerOptions::default()
     };
     if let Some(t) = args.temperature {

@@ -129,6 +129,8 @@ pub enum ModeArg {
     SingleFrame,
     /// Particle filter over the camera pose (map with positions and view poses).
     Metric,
+    /// The learned GRNN (the model built into the library; needs ONNX Runtime).
+    Grnn,
 }
 
 impl From<ModeArg> for Mode {
@@ -137,6 +139,7 @@ impl From<ModeArg> for Mode {
             ModeArg::Filter => Mode::Filter,
             ModeArg::SingleFrame => Mode::SingleFrame,
             ModeArg::Metric => Mode::Metric,
+            ModeArg::Grnn => Mode::Grnn,
         }
     }
 }

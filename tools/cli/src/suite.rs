@@ -8,8 +8,8 @@
 //! geometric verification of the most probable places unless `--verify 0` (scored by GC inliers,
 //! and by the s-GC spatial score: the seed's ablation), and metric mode
 //! (particles moved by the odometry) without and with verification, and with pose fixes from
-//! the best-verified view (the map's keypoint scene points, the sim camera's intrinsics);
-//! `--configurations` picks some). Prints MNA and
+//! the best-verified view (the map's keypoint scene points, the sim camera's intrinsics), and
+//! the learned GRNN alone, with GC and with s-GC; `--configurations` picks some). Prints MNA and
 //! OHA per split as mean ± standard deviation over the worlds, the way the seed's tables do
 //! (thesis Table 4.2), and the graph sizes they were measured on.
 
@@ -23,7 +23,7 @@ use topoloc::describe::DescriberOptions;
 use topoloc::eval::HopDistances;
 use topoloc::image::ImageView;
 use topoloc::verify::{VerificationOptions, VerificationScore};
-use topoloc::{LocalizerOptions, MetricOptions, Mode};
+use topoloc::{GrnnOptions, LocalizerOptions, MetricOptions, Mode};
 use topoloc_sim::capture::image_view;
 use topoloc_sim::scenario::{build_scene, describe_flight, fly};
 use topoloc_sim::style::Split;
@@ -34,9 +34,16 @@ pub struct SuiteArgs {
     /// Splits to run, comma-separated.
     #[arg(long, value_delimiter = ',', default_value = "train,tr-t,tr-a,test", value_parser = parse_split)]
     pub splits: Vec<Split>,
-    /// Worlds per split (worlds 0..N of each).
+    /// Worlds per split (worlds K..K+N of each, K = `--first-world`).
     #[arg(long, default_value_t = 3)]
     pub worlds: u32,
+    /// First world of each split: worlds 0-2 are for development, report on worlds no choice
+    /// saw (6 and up).
+    #[arg(long, default_value_t = 0)]
+    pub first_world: u32,
+    /// ONNX model of the GRNN configurations (default: the one built into the library).
+    #[arg(long)]
+    pub grnn_model: Option<std::path::PathBuf>,
     /// Rooms per storey (default 5, which gives graphs of about 50-300 views like the seed's;
     /// 0 draws it from the split's style).
     #[arg(long, default_value_t = 5)]
@@ -70,7 +77,7 @@ pub struct SuiteArgs {
     pub metric_seed: u64,
     /// Configurations to run, comma-separated (default: all): single-frame, filter,
     /// filter+odometry, filter+odometry+verification (GC), filter+odometry+s-gc, metric+odometry,
-    /// metric+odometry+verification, metric+odometry+pose-fix.
+    /// metric+odometry+verification, metric+odometry+pose-fix, grnn, grnn+gc, grnn+s-gc.
     #[arg(long, value_delimiter = ',', value_parser = parse_configuration)]
     pub configurations: Vec<String>,
     /// Print one JSON object (per split and configuration: every world's figures, mean, std).
@@ -122,7 +129,7 @@ const fn spatially_scored(c: Configuration) -> Configuration {
 }
 
 /// The localizer configurations compared.
-const CONFIGURATIONS: [Configuration; 8] = [
+const CONFIGURATIONS: [Configuration; 11] = [
     configuration("single-frame", Mode::SingleFrame, false, false, false),
     configuration("filter", Mode::Filter, false, false, false),
     configuration("filter+odometry", Mode::Filter, true, false, false),
@@ -149,6 +156,9 @@ const CONFIGURATIONS: [Configuration; 8] = [
         false,
     ),
     configuration("metric+odometry+pose-fix", Mode::Metric, true, true, true),
+    configuration("grnn", Mode::Grnn, false, false, false),
+    configuration("grnn+gc", Mode::Grnn, false, true, false),
+    spatially_scored(configuration("grnn+s-gc", Mode::Grnn, false, true, false)),
 ];
 
 /// Accepts the name of one of [`CONFIGURATIONS`].
@@ -202,7 +212,7 @@ pub fn run(args: &SuiteArgs) -> Result<()> {
     let mut runs: Vec<(Split, Vec<WorldRun>)> = Vec::new();
     for &split in &args.splits {
         let mut worlds = Vec::new();
-        for k in 0..args.worlds {
+        for k in args.first_world..args.first_world + args.worlds {
             let mut world = split.world_params(k);
             if args.rooms > 0 {
                 world.rooms_per_floor = args.rooms;
@@ -246,6 +256,10 @@ pub fn run(args: &SuiteArgs) -> Result<()> {
                         metric: MetricOptions {
                             seed: args.metric_seed,
                             ..MetricOptions::default()
+                        },
+                        grnn: GrnnOptions {
+                            model: args.grnn_model.clone(),
+                            ..GrnnOptions::default()
                         },
                         ..LocalizerOptions::default()
                     };
@@ -381,6 +395,8 @@ fn summary_json(
         "views_per_place": args.capture.views_per_place,
         "verify": args.verify, "inlier_weight": args.inlier_weight,
         "metric_inlier_weight": args.metric_inlier_weight, "metric_seed": args.metric_seed,
+        "first_world": args.first_world,
+        "grnn_model": args.grnn_model.as_ref().map(|p| p.display().to_string()),
         "splits": splits, "seconds": start.elapsed().as_secs_f64(),
     })
 }
