@@ -83,9 +83,10 @@
  * image keyframes (`topoloc_keyframe_describer_*`, `topoloc_loop_detector_add_image`), ranked
  * candidates (`topoloc_loop_detector_candidates`), sessions
  * (`topoloc_loop_detector_begin_session`), local features of image maps
- * (`verification_keypoints`, `local_features`).
+ * (`verification_keypoints`, `local_features`); 1.16: the learned estimator
+ * (`TOPOLOC_MODE_GRNN`, `grnn_model_path`).
  */
-#define TOPOLOC_ABI_VERSION_MINOR 15
+#define TOPOLOC_ABI_VERSION_MINOR 16
 
 /**
  * Result of every fallible C function. Values are grouped in ranges and never renumbered;
@@ -375,8 +376,9 @@ typedef struct topoloc_localizer_options {
    */
   size_t struct_size;
   /**
-   * `TOPOLOC_MODE_FILTER`, `TOPOLOC_MODE_SINGLE_FRAME` or (ABI 1.3) `TOPOLOC_MODE_METRIC`
-   * (on a map without positions or view poses: `_INVALID_OPTION`).
+   * `TOPOLOC_MODE_FILTER`, `TOPOLOC_MODE_SINGLE_FRAME`, (ABI 1.3) `TOPOLOC_MODE_METRIC`
+   * (on a map without positions or view poses: `_INVALID_OPTION`) or (ABI 1.16)
+   * `TOPOLOC_MODE_GRNN`.
    */
   topoloc_mode mode;
   /**
@@ -523,6 +525,11 @@ typedef struct topoloc_localizer_options {
    * Default: 4.
    */
   double verify_off_map_inlier_scale;
+  /**
+   * ONNX model of `TOPOLOC_MODE_GRNN` (written by `python/train/export.py`); NULL or "" = the
+   * model built into the library. Read when the localizer is created.
+   */
+  const char *grnn_model_path;
 } topoloc_localizer_options;
 
 /**
@@ -1556,6 +1563,15 @@ typedef uint32_t topoloc_trajectory_format;
  * particles. Needs a map with every place's position and every view's pose.
  */
 #define TOPOLOC_MODE_METRIC 2
+
+/**
+ * Learned mode (ABI 1.16): the seed's graph recurrent network (GRNN) run through ONNX Runtime
+ * on a window of the map's views; the model is `grnn_model_path`'s, or the one built into the
+ * library. Needs ONNX Runtime (`onnx_runtime_path`, else `TOPOLOC_ORT_LIBRARY`, the cache; else
+ * `_BACKEND_UNAVAILABLE`) and a map with edges (else `_INVALID_OPTION`); a model file that is
+ * not ONNX or breaks the contract is `_MODEL`. Odometry is not used.
+ */
+#define TOPOLOC_MODE_GRNN 3
 
 /**
  * No image (the frame carries a descriptor only).

@@ -148,6 +148,10 @@ TOPOLOC_LIBRARY="$root/target/release/libtopoloc.so" python3 -m pytest -q \
 section "Python package (the whole suite against the wheel installed into target/py-venv)"
 bash python/tests/run_installed.sh
 
+section "GRNN training smoke (python/train: train -> export -> load -> localize, typed errors)"
+bash python/train/setup.sh
+TOPOLOC_LIBRARY="$root/target/release/libtopoloc.so" /usr/bin/python3 python/train/smoke.py
+
 section "Fuzzing (libFuzzer on the C ABI: kept crashers, then a minute per target)"
 bash fuzz/run.sh build
 bash fuzz/run.sh smoke 60

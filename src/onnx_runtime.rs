@@ -137,13 +137,12 @@ pub(crate) fn session(
         tried: vec![model.to_path_buf()],
         hint: format!("{e}; {hint}"),
     })?;
-    let session = session_from_memory(runtime, &bytes, threads)
-        .map_err(|e| match e {
-            VisionError::Model(message) => {
-                VisionError::Model(format!("{}: {message}", model.display()))
-            }
-            other => other,
-        })?;
+    let session = session_from_memory(runtime, &bytes, threads).map_err(|e| match e {
+        VisionError::Model(message) => {
+            VisionError::Model(format!("{}: {message}", model.display()))
+        }
+        other => other,
+    })?;
     Ok((session, format!("{:x}", Sha256::digest(&bytes))))
 }
 

@@ -79,16 +79,30 @@ fn the_built_in_model_follows_a_walk_deterministically_and_reset_forgets() {
     };
     let (frames, truth) = walk(&map, 0.5);
     let first = run(&mut localizer, &frames);
-    let correct = first.iter().zip(&truth).filter(|(r, t)| r.place == **t).count();
+    let correct = first
+        .iter()
+        .zip(&truth)
+        .filter(|(r, t)| r.place == **t)
+        .count();
     let accuracy = correct as f64 / truth.len() as f64;
-    assert!(accuracy >= 0.9, "GRNN accuracy {accuracy} on a walk with light noise");
+    assert!(
+        accuracy >= 0.9,
+        "GRNN accuracy {accuracy} on a walk with light noise"
+    );
     for r in &first {
         let total: f32 = r.candidates.iter().map(|c| c.probability).sum();
         assert!(total <= 1.0 + 1e-4 && r.confidence > 0.0, "{r:?}");
-        assert!(r.candidates.windows(2).all(|w| w[0].probability >= w[1].probability));
+        assert!(r
+            .candidates
+            .windows(2)
+            .all(|w| w[0].probability >= w[1].probability));
     }
     localizer.reset();
-    assert_eq!(run(&mut localizer, &frames), first, "reset must forget everything");
+    assert_eq!(
+        run(&mut localizer, &frames),
+        first,
+        "reset must forget everything"
+    );
     let mut other = grnn(&map).unwrap();
     assert_eq!(run(&mut other, &frames), first, "two localizers must agree");
 }
@@ -108,9 +122,16 @@ fn bad_input_leaves_the_recurrent_state_unchanged() {
             let err = interrupted.localize(&frame(i, short)).unwrap_err();
             assert!(matches!(err, LocalizeError::Descriptor(_)), "{err}");
             let backwards = interrupted.localize(&frame(0, d)).unwrap_err();
-            assert!(matches!(backwards, LocalizeError::Timestamp(_)), "{backwards}");
+            assert!(
+                matches!(backwards, LocalizeError::Timestamp(_)),
+                "{backwards}"
+            );
         }
-        assert_eq!(interrupted.localize(&frame(i, d)).unwrap(), expected[i], "frame {i}");
+        assert_eq!(
+            interrupted.localize(&frame(i, d)).unwrap(),
+            expected[i],
+            "frame {i}"
+        );
     }
 }
 
@@ -124,7 +145,10 @@ fn a_file_that_is_not_onnx_is_refused() {
     let path = dir.path().join("grnn.onnx");
     std::fs::write(&path, b"not a protobuf at all \x00\x01\x02").unwrap();
     let err = Localizer::new(map, options(Some(path))).err().unwrap();
-    assert!(matches!(err, LocalizeError::Grnn(GrnnError::NotOnnx(_))), "{err}");
+    assert!(
+        matches!(err, LocalizeError::Grnn(GrnnError::NotOnnx(_))),
+        "{err}"
+    );
 }
 
 #[test]
@@ -134,7 +158,10 @@ fn a_model_of_another_contract_is_refused() {
         return;
     };
     let err = Localizer::new(map, options(Some(other))).err().unwrap();
-    assert!(matches!(err, LocalizeError::Grnn(GrnnError::Contract(_))), "{err}");
+    assert!(
+        matches!(err, LocalizeError::Grnn(GrnnError::Contract(_))),
+        "{err}"
+    );
     assert!(err.to_string().contains("topoloc.model"), "{err}");
 }
 
@@ -146,7 +173,10 @@ fn a_missing_model_file_names_the_path() {
     }
     let path = std::path::PathBuf::from("/nonexistent/grnn.onnx");
     let err = Localizer::new(map, options(Some(path))).err().unwrap();
-    assert!(matches!(err, LocalizeError::Grnn(GrnnError::Unavailable(_))), "{err}");
+    assert!(
+        matches!(err, LocalizeError::Grnn(GrnnError::Unavailable(_))),
+        "{err}"
+    );
     assert!(err.to_string().contains("/nonexistent/grnn.onnx"), "{err}");
 }
 
@@ -160,7 +190,10 @@ fn maps_without_a_graph_or_too_large_for_the_model_are_refused() {
     }
     let no_edges = Arc::new(builder.build().unwrap());
     let err = Localizer::new(no_edges, options(None)).err().unwrap();
-    assert!(matches!(err, LocalizeError::Grnn(GrnnError::NoGraph(_))), "{err}");
+    assert!(
+        matches!(err, LocalizeError::Grnn(GrnnError::NoGraph(_))),
+        "{err}"
+    );
 
     // Two places of 2,500 views: a window of both is beyond the built-in model's 4,096 nodes.
     let huge = Arc::new(chain_map(2, 2_500, 8));

@@ -493,6 +493,12 @@ OFF_MAP_FIELDS = {
     "topoloc_frame": [],
 }
 
+#: Fields appended after those for the learned estimator (ABI 1.16).
+GRNN_FIELDS = {
+    "topoloc_localizer_options": [("grnn_model_path", c_char_p)],
+    "topoloc_frame": [],
+}
+
 #: Fields of topoloc_result from ``candidates_len`` on, in order: verification (ABI 1.2), then
 #: pose fixes (ABI 1.6). Their types are checked with every field's by
 #: test_every_header_struct_is_mirrored_exactly.
@@ -528,7 +534,9 @@ def test_image_structs_are_in_the_layout_checks():
         )
         pose = metric + len(POSE_FIX_FIELDS[name])
         assert fields[metric:pose] == POSE_FIX_FIELDS[name], f"{name}: pose fix fields not appended"
-        assert fields[pose:] == OFF_MAP_FIELDS[name], f"{name}: off-map fields not appended"
+        off_map = pose + len(OFF_MAP_FIELDS[name])
+        assert fields[pose:off_map] == OFF_MAP_FIELDS[name], f"{name}: off-map fields not appended"
+        assert fields[off_map:] == GRNN_FIELDS[name], f"{name}: GRNN fields not appended"
     result = [f for f, _ in structs["topoloc_result"]]
     assert result[-len(RESULT_TAIL_FIELDS) :] == RESULT_TAIL_FIELDS, "result: fields not appended"
 
@@ -713,7 +721,7 @@ def test_every_library_status_has_a_class_and_every_class_a_status():
 
 
 def test_abi_minor_version():
-    assert topoloc.abi_version_minor() >= _lib.ABI_VERSION_MINOR == 15
+    assert topoloc.abi_version_minor() >= _lib.ABI_VERSION_MINOR == 16
 
 
 EXPECTED_CLASSES = {

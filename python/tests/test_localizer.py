@@ -118,6 +118,21 @@ def test_metric_mode_follows_a_walk_with_odometry(corridor):
     assert [(r.place, r.confidence) for r in again] == [(r.place, r.confidence) for r in results]
 
 
+def test_grnn_mode_checks_its_model_and_map_before_loading_the_runtime(small_map, tmp_path):
+    """The learned mode (ABI 1.16): a missing model file is named, a map without edges is
+    refused; both before ONNX Runtime is loaded (python/train/smoke.py runs the whole path)."""
+    assert topoloc.localizer_options_default()["grnn_model_path"] is None
+    missing = tmp_path / "grnn.onnx"
+    with pytest.raises(topoloc.BackendUnavailableError, match="grnn.onnx"):
+        topoloc.Localizer(small_map, mode="grnn", grnn_model_path=missing)
+    with topoloc.MapBuilder("toy", None, 4) as b:
+        b.add_place()
+        b.add_view(0, np.ones(4))
+        bare = b.build()
+    with bare, pytest.raises(topoloc.InvalidOptionError, match="no graph"):
+        topoloc.Localizer(bare, mode="grnn", grnn_model_path=missing)
+
+
 def test_metric_mode_needs_positions_and_poses(small_map):
     with pytest.raises(topoloc.InvalidOptionError, match="position"):
         topoloc.Localizer(small_map, mode="metric")

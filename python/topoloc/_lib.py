@@ -47,7 +47,7 @@ ABI_VERSION = 1
 
 #: ABI minor version these bindings were written for (``TOPOLOC_ABI_VERSION_MINOR``): they use
 #: items up to "ABI 1.N" of the header.
-ABI_VERSION_MINOR = 15
+ABI_VERSION_MINOR = 16
 
 #: Environment variable naming the shared library to load.
 ENV_VAR = "TOPOLOC_LIBRARY"
@@ -60,6 +60,8 @@ PCA_F32 = 1
 MODE_FILTER = 0
 MODE_SINGLE_FRAME = 1
 MODE_METRIC = 2
+#: ``TOPOLOC_MODE_GRNN`` (ABI 1.16): the learned graph recurrent network.
+MODE_GRNN = 3
 
 #: ``TOPOLOC_PIXEL_*``: pixel formats of ``topoloc_image`` (8 bits per channel, interleaved).
 PIXEL_NONE = 0
@@ -283,6 +285,8 @@ class topoloc_localizer_options(Structure):
         # ABI 1.9: off-map evidence from verification.
         ("verify_off_map_inliers", c_double),
         ("verify_off_map_inlier_scale", c_double),
+        # ABI 1.16: the learned estimator.
+        ("grnn_model_path", c_char_p),
     ]
 
 

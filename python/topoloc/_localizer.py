@@ -115,6 +115,7 @@ _MODES = {
     "filter": _lib.MODE_FILTER,
     "single_frame": _lib.MODE_SINGLE_FRAME,
     "metric": _lib.MODE_METRIC,
+    "grnn": _lib.MODE_GRNN,
 }
 
 #: The :class:`Localizer` options: the fields of ``topoloc_localizer_options``.
@@ -150,6 +151,7 @@ LOCALIZER_OPTIONS = OptionTable(
         unsigned("pose_min_inliers"),
         real("verify_off_map_inliers"),
         real("verify_off_map_inlier_scale"),
+        file_path("grnn_model_path"),
     ],
 )
 
@@ -177,8 +179,12 @@ class Localizer(_SingleThreaded):
       localization of the camera pose, moved by the frames' ``odometry`` and weighed by
       appearance, tuned by ``metric_particles``, ``metric_temperature`` and ``metric_seed``;
       it needs a map with every place's position and every view's pose, else
-      :class:`InvalidOptionError`), or a ``TOPOLOC_MODE_*`` code. See
-      ``topoloc_localizer_options.mode``.
+      :class:`InvalidOptionError`), ``"grnn"`` (ABI 1.16: the seed's learned graph recurrent
+      network, run through ONNX Runtime on a window of the map's views; the model is
+      ``grnn_model_path``'s, or the one built into the library; it needs ONNX Runtime, else
+      :class:`BackendUnavailableError`, and a map with edges, else :class:`InvalidOptionError`;
+      a model file that is not ONNX or breaks the contract raises :class:`ModelError`), or a
+      ``TOPOLOC_MODE_*`` code. See ``topoloc_localizer_options.mode``.
     - The filter's ``temperature``, ``stay_probability``, ``jump_probability``,
       ``off_map_probability``, ``off_map_similarity`` and ``off_map_margin``, and ``top_k``,
       the candidates reported per frame: see the fields of the same names.
@@ -252,6 +258,7 @@ class Localizer(_SingleThreaded):
         pose_min_inliers: Optional[int] = None,
         verify_off_map_inliers: Optional[float] = None,
         verify_off_map_inlier_scale: Optional[float] = None,
+        grnn_model_path: Optional[PathLike] = None,
     ) -> None:
         given = LOCALIZER_OPTIONS.pick(locals())
         handle = _map_handle(map)

@@ -42,8 +42,23 @@ def load_checkpoint(path: Path) -> GRNN:
     return model.eval()
 
 
+def register_scatter_add() -> None:
+    """Exports `scatter_add` as ScatterElements with reduction "add". torch 1.13's own symbolic
+    refuses an index whose static shape it cannot prove equal to the source's (ours is an
+    `expand` of the edge targets, equal at run time)."""
+    from torch.onnx import symbolic_helper
+
+    @symbolic_helper.parse_args("v", "i", "v", "v")
+    def scatter_add(g, data, dim, index, src):  # noqa: ANN001, ANN202 (torch's signature)
+        return g.op("ScatterElements", data, index, src, axis_i=dim, reduction_s="add")
+
+    torch.onnx.register_custom_op_symbolic("aten::scatter_add", scatter_add, OPSET)
+
+
 def export(model: GRNN, out: Path, f16: bool, max_nodes: int = 4096) -> None:
     import onnx  # Debian's python3-onnx
+
+    register_scatter_add()
 
     n, dim, state = 6, 8, model.sizes.state
     nodes = torch.nn.functional.normalize(torch.randn(n, dim), dim=1)

@@ -1,5 +1,5 @@
 """The seed's graph recurrent network (thesis section 4.4.2.2-3, ../shared/design/METHOD.md) in
-plain PyTorch: message passing with `index_add` (no PyTorch Geometric), so that it exports to
+plain PyTorch: message passing with `scatter_add` (no PyTorch Geometric), so that it exports to
 ONNX with the graph's nodes and edges as inputs.
 
 One step, for B sequences over one graph of N micro nodes (the map's views). Each map fits its
@@ -43,11 +43,19 @@ def mlp(inputs: int, hidden: int, outputs: int, dropout: float) -> nn.Sequential
     )
 
 
+def neighbour_sum(values: Tensor, edges: Tensor) -> Tensor:
+    """Sum over each node's in-neighbours of `values` (B, N, F); `edges` (2, M) source ->
+    target. `scatter_add` rather than `index_add`: torch's ONNX export of `index_add` scatters
+    without reduction, so targets with several in-edges (all of them here) would keep one
+    message; `scatter_add` exports to ScatterElements with reduction "add" (opset 16)."""
+    index = edges[1][None, :, None].expand(values.shape[0], -1, values.shape[2])
+    return torch.zeros_like(values).scatter_add(1, index, values[:, edges[0]])
+
+
 def neighbour_mean(values: Tensor, edges: Tensor, degree: Tensor) -> Tensor:
     """Mean over each node's in-neighbours of `values` (B, N, F); `edges` (2, M) source ->
     target; `degree` (N,) in-degree (at least 1)."""
-    summed = torch.zeros_like(values).index_add(1, edges[1], values[:, edges[0]])
-    return summed / degree[None, :, None]
+    return neighbour_sum(values, edges) / degree[None, :, None]
 
 
 #: Per-node and global similarity features (see the module's doc).
@@ -120,7 +128,7 @@ class GRNN(nn.Module):
         logits (B, N) and the new state (B, N, S)."""
         n = nodes.shape[0]
         ones = torch.ones(edges.shape[1], dtype=nodes.dtype)
-        in_degree = torch.zeros(n, dtype=nodes.dtype).index_add(0, edges[1], ones)
+        in_degree = torch.zeros(n, dtype=nodes.dtype).scatter_add(0, edges[1], ones)
         x, g = similarity_features(nodes, frame, stats)
         x = self.node1(x, g, edges, in_degree.clamp(min=1.0))
         u = self.glob(x, g)
@@ -129,9 +137,7 @@ class GRNN(nn.Module):
             # GCN with (A + I) and symmetric normalisation: D^-1/2 (A + I) D^-1/2 Z W.
             norm = (in_degree + 1.0).rsqrt()
             z = self.gcn(state) * norm[None, :, None]
-            z = (z + torch.zeros_like(z).index_add(1, edges[1], z[:, edges[0]])) * norm[
-                None, :, None
-            ]
+            z = (z + neighbour_sum(z, edges)) * norm[None, :, None]
             x = x + z
         new_state = torch.relu(x)
         return self.score(new_state).squeeze(2), new_state

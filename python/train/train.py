@@ -2,7 +2,7 @@
 checkpoint into the ONNX file topoloc runs.
 
     /usr/bin/python3 python/train/train.py --data DIR --train 'train-*.npz,tr-t-*.npz' \\
-        --validate 'tr-a-*.npz' --out grnn.pt [--epochs 60] [--seed 1]
+        --validate 'tr-a-w3-*.npz' --out grnn.pt [--epochs 60] [--seed 1]
 
 A sample is a sequence of 10-20 consecutive frames of one trajectory (`--frames`), run frame by
 frame through the candidate windows of window.py from a zero state; a batch is `--batch`
@@ -11,7 +11,9 @@ view posterior summed over the place's views) on frames where a place is visible
 window, averaged. The seed's optimiser: Adam, weight decay 1e-3, lr 1e-4
 times 0.7 every 20 epochs, batch 32 sequences; an epoch is `--batches` batches.
 Validation reports MNA (the most probable place is the true place) and OHA (it is the true
-place or a graph neighbour) over whole trajectories run frame by frame.
+place or a graph neighbour) over whole trajectories run frame by frame, every 10 epochs; the
+weights that validated best are kept. The validation worlds (default Tr-A world 3) are none of
+the ablation's (worlds 0-2 of each split, Test worlds 6 and up).
 """
 
 from __future__ import annotations
@@ -137,44 +139,47 @@ def evaluate(model: GRNN, graphs: list[Graph]) -> dict[str, float]:
     return {"mna": total.hits / n, "oha": total.one_hop / n, "window": total.in_window / n}
 
 
-def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--data", type=Path, required=True)
-    parser.add_argument("--train", default="train-*.npz,tr-t-*.npz")
-    parser.add_argument("--validate", default="tr-a-*.npz")
-    parser.add_argument("--out", type=Path, required=True)
-    parser.add_argument("--epochs", type=int, default=60)
-    parser.add_argument("--batches", type=int, default=20, help="batches per epoch")
-    parser.add_argument("--batch", type=int, default=32)
-    parser.add_argument("--frames", default="10-20")
-    parser.add_argument("--lr", type=float, default=1e-4)
-    parser.add_argument("--weight-decay", type=float, default=1e-3)
-    parser.add_argument("--hidden", type=int, default=512)
-    parser.add_argument("--neighbour", type=int, default=128)
-    parser.add_argument("--state", type=int, default=512)
-    parser.add_argument("--no-temporal", action="store_true")
-    parser.add_argument("--seed", type=int, default=1)
-    parser.add_argument("--threads", type=int, default=torch.get_num_threads())
-    args = parser.parse_args()
-    torch.manual_seed(args.seed)
-    torch.set_num_threads(args.threads)
-    rng = np.random.default_rng(args.seed)
-    lo, _, hi = args.frames.partition("-")
-    frames = (int(lo), int(hi or lo))
-    train = load_worlds(args.data, args.train)
-    validate = load_worlds(args.data, args.validate) if args.validate else []
-    sizes = Sizes(args.hidden, args.neighbour, args.state, 0.2, not args.no_temporal)
-    model = GRNN(sizes)
-    optimiser = torch.optim.Adam(model.parameters(), lr=args.lr, weight_decay=args.weight_decay)
-    schedule = torch.optim.lr_scheduler.StepLR(optimiser, step_size=20, gamma=0.7)
+@dataclass
+class Schedule:
+    """What one training run does: epochs of `batches` batches of `batch` sequences of
+    `frames` frames; Adam at `lr`, times `gamma` every `lr_step` epochs; validation every
+    `validate_every` epochs (and after the last), keeping the weights that validated best."""
+
+    epochs: int = 60
+    batches: int = 20
+    batch: int = 32
+    frames: tuple[int, int] = (10, 20)
+    lr: float = 1e-4
+    weight_decay: float = 1e-3
+    lr_step: int = 20
+    gamma: float = 0.7
+    validate_every: int = 10
+
+
+def fit(
+    model: GRNN,
+    train: list[Graph],
+    validate: list[Graph],
+    schedule: Schedule,
+    rng: np.random.Generator,
+) -> dict[str, float]:
+    """Trains `model` in place; with `validate`, ends on the weights whose validation MNA + OHA
+    was highest and returns their scores (else the last weights' training loss)."""
+    optimiser = torch.optim.Adam(
+        model.parameters(), lr=schedule.lr, weight_decay=schedule.weight_decay
+    )
+    steps = torch.optim.lr_scheduler.StepLR(
+        optimiser, step_size=schedule.lr_step, gamma=schedule.gamma
+    )
     started = time.monotonic()
-    for epoch in range(args.epochs):
+    best: tuple[float, dict[str, Tensor], dict[str, float]] | None = None
+    for epoch in range(1, schedule.epochs + 1):
         losses = []
-        for _ in range(args.batches):
+        for _ in range(schedule.batches):
             graph = train[int(rng.integers(len(train)))]
             runs = [
                 run_sequence(model, graph, q)
-                for q in sample_sequences(graph, args.batch, frames, rng)
+                for q in sample_sequences(graph, schedule.batch, schedule.frames, rng)
             ]
             loss = sum((r.loss for r in runs), torch.zeros(())) / max(
                 1, sum(r.in_window for r in runs)
@@ -183,14 +188,67 @@ def main() -> int:
             loss.backward()
             optimiser.step()
             losses.append(float(loss))
-        schedule.step()
-        line = f"epoch {epoch + 1}: loss {np.mean(losses):.3f}"
-        if validate and ((epoch + 1) % 10 == 0 or epoch + 1 == args.epochs):
+        steps.step()
+        line = f"epoch {epoch}: loss {np.mean(losses):.3f}"
+        if validate and (epoch % schedule.validate_every == 0 or epoch == schedule.epochs):
             scores = evaluate(model, validate)
             line += f", validation MNA {scores['mna']:.3f} OHA {scores['oha']:.3f}"
             line += f" (true place in the window: {scores['window']:.3f})"
+            if best is None or scores["mna"] + scores["oha"] > best[0]:
+                weights = {k: v.clone() for k, v in model.state_dict().items()}
+                best = (scores["mna"] + scores["oha"], weights, {**scores, "epoch": epoch})
         print(f"{line} ({time.monotonic() - started:.0f} s)", flush=True)
-    torch.save({"sizes": asdict(sizes), "state_dict": model.state_dict()}, args.out)
+    if best is None:
+        return {"loss": float(np.mean(losses)) if schedule.epochs else float("nan")}
+    model.load_state_dict(best[1])
+    print(f"train: keeping the weights of epoch {best[2]['epoch']}", flush=True)
+    return best[2]
+
+
+def save(model: GRNN, out: Path) -> None:
+    """The checkpoint export.py reads."""
+    torch.save({"sizes": asdict(model.sizes), "state_dict": model.state_dict()}, out)
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--data", type=Path, required=True)
+    parser.add_argument("--train", default="train-*.npz,tr-t-*.npz")
+    parser.add_argument("--validate", default="tr-a-w3-*.npz")
+    parser.add_argument("--out", type=Path, required=True)
+    defaults = Schedule()
+    parser.add_argument("--epochs", type=int, default=defaults.epochs)
+    parser.add_argument("--batches", type=int, default=defaults.batches, help="per epoch")
+    parser.add_argument("--batch", type=int, default=defaults.batch)
+    parser.add_argument("--frames", default="10-20")
+    parser.add_argument("--lr", type=float, default=defaults.lr)
+    parser.add_argument("--lr-step", type=int, default=defaults.lr_step, help="epochs per x0.7")
+    parser.add_argument("--weight-decay", type=float, default=defaults.weight_decay)
+    parser.add_argument("--hidden", type=int, default=512)
+    parser.add_argument("--neighbour", type=int, default=128)
+    parser.add_argument("--state", type=int, default=512)
+    parser.add_argument("--no-temporal", action="store_true")
+    parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--threads", type=int, default=1, help="1 keeps runs reproducible")
+    args = parser.parse_args()
+    torch.manual_seed(args.seed)
+    torch.set_num_threads(args.threads)
+    rng = np.random.default_rng(args.seed)
+    lo, _, hi = args.frames.partition("-")
+    schedule = Schedule(
+        epochs=args.epochs,
+        batches=args.batches,
+        batch=args.batch,
+        frames=(int(lo), int(hi or lo)),
+        lr=args.lr,
+        weight_decay=args.weight_decay,
+        lr_step=args.lr_step,
+    )
+    train = load_worlds(args.data, args.train)
+    validate = load_worlds(args.data, args.validate) if args.validate else []
+    model = GRNN(Sizes(args.hidden, args.neighbour, args.state, 0.2, not args.no_temporal))
+    fit(model, train, validate, schedule, rng)
+    save(model, args.out)
     print(f"train: {args.out}")
     return 0
 

@@ -121,9 +121,9 @@ impl From<LocalizeError> for FfiError {
             }
             LocalizeError::Grnn(GrnnError::Unavailable(v)) => v.into(),
             // A file that is not ONNX, or an ONNX file of another contract.
-            LocalizeError::Grnn(GrnnError::NotOnnx(_) | GrnnError::Contract(_) | GrnnError::Run(_)) => {
-                Self::new(TOPOLOC_ERR_MODEL, e.to_string())
-            }
+            LocalizeError::Grnn(
+                GrnnError::NotOnnx(_) | GrnnError::Contract(_) | GrnnError::Run(_),
+            ) => Self::new(TOPOLOC_ERR_MODEL, e.to_string()),
             // The map does not suit the model.
             LocalizeError::Grnn(GrnnError::GraphTooLarge { .. } | GrnnError::NoGraph(_)) => {
                 Self::new(TOPOLOC_ERR_INVALID_OPTION, e.to_string())

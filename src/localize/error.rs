@@ -1,9 +1,9 @@
 //! Errors of the localizer.
 
+use super::grnn::GrnnError;
 use crate::descriptor::DescriptorError;
 use crate::errors::VisionError;
 use crate::map::MapError;
-use super::grnn::GrnnError;
 
 /// What can go wrong when creating a localizer or processing a frame. On error the localizer's
 /// state is exactly what it was before the call.

@@ -42,13 +42,8 @@ impl Localizer {
         map.descriptor()
             .check_compatible(&options.expected)
             .map_err(MapError::from)?;
-        let estimator = Estimator::new(
-            &map,
-            options.mode,
-            &params,
-            &options.metric,
-            &options.grnn,
-        )?;
+        let estimator =
+            Estimator::new(&map, options.mode, &params, &options.metric, &options.grnn)?;
         let verifier = match options.verification.enabled() {
             true => Some(Verifier::new(&map, &options.verification, &estimator)?),
             false => None,

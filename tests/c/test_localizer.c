@@ -382,6 +382,45 @@ static void metric_mode_follows_odometry_and_needs_a_pose_for_every_view(const t
     topoloc_map_free(posed);
 }
 
+/* The learned mode's options are checked before ONNX Runtime is loaded: a map without edges
+ * and a model file that does not exist are refused naming the problem; a caller of ABI 1.15
+ * (no grnn_model_path) gets the built-in model. */
+static void grnn_mode_refuses_a_map_without_graph_and_a_missing_model(const topoloc_map *world)
+{
+    topoloc_localizer_options options;
+    topoloc_localizer *loc = NULL;
+    topoloc_map_builder *b = NULL;
+    topoloc_map *bare = NULL;
+    uint32_t id = 0;
+    CHECK(topoloc_abi_version_minor() >= 16);
+    CHECK_OK(topoloc_localizer_options_default(&options));
+    CHECK(options.grnn_model_path == NULL);
+    options.mode = TOPOLOC_MODE_GRNN;
+    options.grnn_model_path = "/nonexistent/grnn.onnx";
+    CHECK_STATUS(topoloc_localizer_new(world, &options, &loc), TOPOLOC_ERR_BACKEND_UNAVAILABLE);
+    CHECK_MESSAGE_HAS("/nonexistent/grnn.onnx");
+    CHECK(loc == NULL);
+
+    CHECK_OK(topoloc_map_builder_new(KIND, MODEL, DIM, &b));
+    if (b == NULL) {
+        return;
+    }
+    CHECK_OK(topoloc_map_builder_add_place(b, NULL, &id));
+    CHECK_OK(topoloc_map_builder_add_view(b, 0, g_view_desc[0], DIM, NULL, &id));
+    CHECK_OK(topoloc_map_builder_build(b, &bare));
+    topoloc_map_builder_free(b);
+    options.grnn_model_path = NULL;
+    CHECK_STATUS(topoloc_localizer_new(bare, &options, &loc), TOPOLOC_ERR_INVALID_OPTION);
+    CHECK_MESSAGE_HAS("no graph");
+    CHECK(loc == NULL);
+    /* A caller of ABI 1.15: the path lies beyond its struct and is not read. */
+    options.struct_size = offsetof(topoloc_localizer_options, grnn_model_path);
+    options.grnn_model_path = "/nonexistent/grnn.onnx";
+    CHECK_STATUS(topoloc_localizer_new(bare, &options, &loc), TOPOLOC_ERR_INVALID_OPTION);
+    CHECK_MESSAGE_HAS("no graph");
+    topoloc_map_free(bare);
+}
+
 void run_localizer_tests(const topoloc_map *world)
 {
     single_frame_mode_answers_each_frame_as_a_fresh_localizer_would();
@@ -391,4 +430,5 @@ void run_localizer_tests(const topoloc_map *world)
     a_localizer_expecting_another_descriptor_is_refused(world);
     off_map_evidence_options_are_checked_and_older_callers_get_their_defaults(world);
     metric_mode_follows_odometry_and_needs_a_pose_for_every_view(world);
+    grnn_mode_refuses_a_map_without_graph_and_a_missing_model(world);
 }

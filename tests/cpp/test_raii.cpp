@@ -339,6 +339,16 @@ TEST(full_flow_build_save_load_localize)
     const topoloc::Result &r = single.process(observe(4, 9), 0.0);
     CHECK_EQ(r.place, uint32_t{4});
     CHECK_EQ(r.candidates.size(), std::size_t{kPlaces});
+
+    // The learned mode (ABI 1.16): a model file that does not exist is named before ONNX
+    // Runtime is loaded (python/train/smoke.py runs the whole learned path).
+    static_assert(TOPOLOC_ABI_VERSION_MINOR >= 16, "the learned mode is ABI 1.16");
+    options.mode = TOPOLOC_MODE_GRNN;
+    const std::string missing_model = "/nonexistent/grnn.onnx";
+    options.grnn_model_path = missing_model.c_str();
+    const std::string grnn_message = CHECK_THROWS_STATUS(
+        topoloc::Localizer(map, options), TOPOLOC_ERR_BACKEND_UNAVAILABLE);
+    CHECK(grnn_message.find(missing_model) != std::string::npos);
 }
 
 TEST(localizer_outlives_map_owner)

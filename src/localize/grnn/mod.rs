@@ -9,7 +9,7 @@ mod window;
 
 use crate::errors::VisionError;
 use crate::map::Map;
-use model::Network;
+use model::{Network, StepInput, StepOutput};
 use std::path::PathBuf;
 use std::sync::{Arc, Mutex};
 use window::{largest_window, MicroGraph, WindowScratch};
@@ -61,8 +61,7 @@ struct Shared {
     window: WindowScratch,
     nodes: Vec<f32>,
     input_state: Vec<f32>,
-    logits: Vec<f32>,
-    new_state: Vec<f32>,
+    output: StepOutput,
 }
 
 /// The learned estimator's state: the window of the last frame, its nodes' recurrent state and
@@ -90,7 +89,11 @@ impl Grnn {
                 map.place_count()
             )));
         }
-        let network = Network::load(options.model.as_deref(), options.runtime.as_deref(), map.dim())?;
+        let network = Network::load(
+            options.model.as_deref(),
+            options.runtime.as_deref(),
+            map.dim(),
+        )?;
         let nodes = largest_window(map);
         if let Some(limit) = network.max_nodes.filter(|&limit| nodes > limit) {
             return Err(GrnnError::GraphTooLarge { nodes, limit });
@@ -101,8 +104,7 @@ impl Grnn {
             window: WindowScratch::new(map),
             nodes: Vec::new(),
             input_state: Vec::new(),
-            logits: Vec::new(),
-            new_state: Vec::new(),
+            output: StepOutput::default(),
         };
         let mut grnn = Self {
             shared: Arc::new(Mutex::new(shared)),
@@ -139,26 +141,39 @@ impl Grnn {
         let shared = &mut *guard;
         let continued = continued && !self.views.is_empty();
         let previous = continued.then_some((self.window_places.as_slice(), self.places.as_slice()));
-        shared.window.choose(map, &shared.graph, place_scores, previous);
+        shared
+            .window
+            .choose(map, &shared.graph, place_scores, previous);
         let window = &shared.window;
         let (d, s) = (map.dim(), shared.network.state_width);
         shared.nodes.clear();
         for &v in &window.views {
-            shared.nodes.extend_from_slice(map.view_descriptor_unchecked(v as usize));
+            shared
+                .nodes
+                .extend_from_slice(map.view_descriptor_unchecked(v as usize));
         }
-        carry_state(&self.views, &self.state, &window.views, s, continued, &mut shared.input_state);
+        carry_state(
+            &self.views,
+            &self.state,
+            &window.views,
+            s,
+            continued,
+            &mut shared.input_state,
+        );
         debug_assert_eq!(query.len(), d);
-        shared.network.run(
-            &shared.nodes,
-            &window.edges,
-            query,
-            &shared.input_state,
-            &statistics(view_scores),
-            &mut shared.logits,
-            &mut shared.new_state,
-        )?;
-        if shared.logits.iter().any(|l| !l.is_finite()) {
-            return Err(GrnnError::Run("the model returned a non-finite logit".into()));
+        let input = StepInput {
+            nodes: &shared.nodes,
+            edges: &window.edges,
+            frame: query,
+            state: &shared.input_state,
+            stats: &statistics(view_scores),
+        };
+        shared.network.run(&input, &mut shared.output)?;
+        let logits = &shared.output.logits;
+        if logits.iter().any(|l| !l.is_finite()) {
+            return Err(GrnnError::Run(
+                "the model returned a non-finite logit".into(),
+            ));
         }
         if self.views.is_empty() {
             self.places.fill(0.0);
@@ -166,14 +181,14 @@ impl Grnn {
         for &place in &self.window_places {
             self.places[place as usize] = 0.0;
         }
-        let top = shared.logits.iter().copied().fold(f32::NEG_INFINITY, f32::max);
-        let total: f64 = shared.logits.iter().map(|&l| f64::from(l - top).exp()).sum();
-        for (&v, &l) in window.views.iter().zip(&shared.logits) {
+        let top = logits.iter().copied().fold(f32::NEG_INFINITY, f32::max);
+        let total: f64 = logits.iter().map(|&l| f64::from(l - top).exp()).sum();
+        for (&v, &l) in window.views.iter().zip(logits) {
             self.places[map.view_place_unchecked(v as usize)] += f64::from(l - top).exp() / total;
         }
         self.views.clone_from(&window.views);
         self.window_places.clone_from(&window.places);
-        std::mem::swap(&mut self.state, &mut shared.new_state);
+        std::mem::swap(&mut self.state, &mut shared.output.new_state);
         Ok(())
     }
 
@@ -235,7 +250,10 @@ fn carry_state(
 /// deviation, as `python/train/model.py::map_statistics`).
 fn statistics(view_scores: &[f32]) -> [f32; 3] {
     let n = view_scores.len().max(1) as f64;
-    let top = view_scores.iter().copied().fold(f32::NEG_INFINITY, f32::max);
+    let top = view_scores
+        .iter()
+        .copied()
+        .fold(f32::NEG_INFINITY, f32::max);
     let mean = view_scores.iter().map(|&s| f64::from(s)).sum::<f64>() / n;
     let variance = view_scores
         .iter()

@@ -26,6 +26,30 @@ pub(super) struct Network {
     pub max_nodes: Option<usize>,
 }
 
+/// One step's inputs (see the module's contract).
+#[derive(Clone, Copy)]
+pub(super) struct StepInput<'a> {
+    /// The window's view descriptors, n x D row-major.
+    pub nodes: &'a [f32],
+    /// The window's micro edges: m sources, then m targets (window-local).
+    pub edges: &'a [i64],
+    /// The frame's unit descriptor (D).
+    pub frame: &'a [f32],
+    /// The recurrent state of the window's nodes, n x S.
+    pub state: &'a [f32],
+    /// The frame's similarity statistics over the whole map: max, mean, deviation.
+    pub stats: &'a [f32; 3],
+}
+
+/// One step's outputs, reused from frame to frame.
+#[derive(Default)]
+pub(super) struct StepOutput {
+    /// A logit per node (n).
+    pub logits: Vec<f32>,
+    /// The new recurrent state, n x S.
+    pub new_state: Vec<f32>,
+}
+
 /// The shape an input or output must have: element type and one entry per dimension, `None`
 /// where any size goes.
 struct Expected {
@@ -38,7 +62,11 @@ struct Expected {
 impl Network {
     /// Loads `path` (or the built-in model) on the ONNX Runtime `runtime` (or the configured
     /// one) and checks it against the contract for descriptors of dimension `dim`.
-    pub fn load(path: Option<&Path>, runtime: Option<&Path>, dim: usize) -> Result<Self, GrnnError> {
+    pub fn load(
+        path: Option<&Path>,
+        runtime: Option<&Path>,
+        dim: usize,
+    ) -> Result<Self, GrnnError> {
         let bytes = match path {
             Some(path) => std::fs::read(path).map_err(|e| {
                 GrnnError::Unavailable(VisionError::BackendUnavailable {
@@ -49,9 +77,11 @@ impl Network {
             })?,
             None => BUILT_IN.to_vec(),
         };
-        let name = path.map_or("the built-in GRNN model".into(), |p| p.display().to_string());
-        let session = onnx_runtime::session_from_memory(runtime, &bytes, 1)
-            .map_err(|e| match e {
+        let name = path.map_or("the built-in GRNN model".into(), |p| {
+            p.display().to_string()
+        });
+        let session =
+            onnx_runtime::session_from_memory(runtime, &bytes, 1).map_err(|e| match e {
                 VisionError::Model(message) => GrnnError::NotOnnx(format!("{name}: {message}")),
                 other => GrnnError::Unavailable(other),
             })?;
@@ -67,26 +97,68 @@ impl Network {
             .custom("topoloc.state")
             .and_then(|s| s.parse::<usize>().ok())
             .filter(|&s| s > 0)
-            .ok_or_else(|| contract("metadata topoloc.state is missing or not a positive integer".into()))?;
-        let declared_max = match metadata.custom("topoloc.max_nodes") {
-            Some(text) => Some(text.parse::<usize>().ok().filter(|&n| n > 0).ok_or_else(|| {
-                contract(format!("metadata topoloc.max_nodes = {text:?} is not a positive integer"))
-            })?),
-            None => None,
-        };
+            .ok_or_else(|| {
+                contract("metadata topoloc.state is missing or not a positive integer".into())
+            })?;
+        let declared_max =
+            match metadata.custom("topoloc.max_nodes") {
+                Some(text) => Some(text.parse::<usize>().ok().filter(|&n| n > 0).ok_or_else(
+                    || {
+                        contract(format!(
+                            "metadata topoloc.max_nodes = {text:?} is not a positive integer"
+                        ))
+                    },
+                )?),
+                None => None,
+            };
         drop(metadata);
         let (d, s) = (dim as i64, state_width as i64);
         let f32 = TensorElementType::Float32;
         let inputs = [
-            Expected { name: "nodes", ty: f32, dims: [None, Some(d), None], rank: 2 },
-            Expected { name: "edges", ty: TensorElementType::Int64, dims: [Some(2), None, None], rank: 2 },
-            Expected { name: "frame", ty: f32, dims: [Some(1), Some(d), None], rank: 2 },
-            Expected { name: "state", ty: f32, dims: [Some(1), None, Some(s)], rank: 3 },
-            Expected { name: "stats", ty: f32, dims: [Some(1), Some(3), None], rank: 2 },
+            Expected {
+                name: "nodes",
+                ty: f32,
+                dims: [None, Some(d), None],
+                rank: 2,
+            },
+            Expected {
+                name: "edges",
+                ty: TensorElementType::Int64,
+                dims: [Some(2), None, None],
+                rank: 2,
+            },
+            Expected {
+                name: "frame",
+                ty: f32,
+                dims: [Some(1), Some(d), None],
+                rank: 2,
+            },
+            Expected {
+                name: "state",
+                ty: f32,
+                dims: [Some(1), None, Some(s)],
+                rank: 3,
+            },
+            Expected {
+                name: "stats",
+                ty: f32,
+                dims: [Some(1), Some(3), None],
+                rank: 2,
+            },
         ];
         let outputs = [
-            Expected { name: "logits", ty: f32, dims: [Some(1), None, None], rank: 2 },
-            Expected { name: "new_state", ty: f32, dims: [Some(1), None, Some(s)], rank: 3 },
+            Expected {
+                name: "logits",
+                ty: f32,
+                dims: [Some(1), None, None],
+                rank: 2,
+            },
+            Expected {
+                name: "new_state",
+                ty: f32,
+                dims: [Some(1), None, Some(s)],
+                rank: 3,
+            },
         ];
         check_outlets("input", session.inputs(), &inputs).map_err(contract)?;
         check_outlets("output", session.outputs(), &outputs).map_err(contract)?;
@@ -100,21 +172,22 @@ impl Network {
             (Some(a), Some(b)) => Some(a.min(b)),
             (a, b) => a.or(b),
         };
-        Ok(Self { session, state_width, max_nodes })
+        Ok(Self {
+            session,
+            state_width,
+            max_nodes,
+        })
     }
 
-    /// One step: `nodes` (n x D), `edges` (2 x m, sources then targets), `frame` (D), `state`
-    /// (n x S), `stats` (3). Writes the logits (n) and the new state (n x S).
-    pub fn run(
-        &mut self,
-        nodes: &[f32],
-        edges: &[i64],
-        frame: &[f32],
-        state: &[f32],
-        stats: &[f32; 3],
-        logits: &mut Vec<f32>,
-        new_state: &mut Vec<f32>,
-    ) -> Result<(), GrnnError> {
+    /// One step on `input`; writes the logits (n) and the new state (n x S) into `output`.
+    pub fn run(&mut self, input: &StepInput<'_>, output: &mut StepOutput) -> Result<(), GrnnError> {
+        let StepInput {
+            nodes,
+            edges,
+            frame,
+            state,
+            stats,
+        } = *input;
         let (d, s) = (frame.len(), self.state_width);
         let n = nodes.len() / d;
         let m = edges.len() / 2;
@@ -131,29 +204,29 @@ impl Network {
             .map_err(run)?;
         let (shape, values) = outputs["logits"].try_extract_tensor::<f32>().map_err(run)?;
         if **shape != [1, n as i64] {
-            return Err(GrnnError::Run(format!("logits have shape {shape:?}, expected [1, {n}]")));
+            return Err(GrnnError::Run(format!(
+                "logits have shape {shape:?}, expected [1, {n}]"
+            )));
         }
-        logits.clear();
-        logits.extend_from_slice(values);
-        let (shape, values) = outputs["new_state"].try_extract_tensor::<f32>().map_err(run)?;
+        output.logits.clear();
+        output.logits.extend_from_slice(values);
+        let (shape, values) = outputs["new_state"]
+            .try_extract_tensor::<f32>()
+            .map_err(run)?;
         if **shape != [1, n as i64, s as i64] {
             return Err(GrnnError::Run(format!(
                 "new_state has shape {shape:?}, expected [1, {n}, {s}]"
             )));
         }
-        new_state.clear();
-        new_state.extend_from_slice(values);
+        output.new_state.clear();
+        output.new_state.extend_from_slice(values);
         Ok(())
     }
 }
 
 /// Checks that `outlets` are exactly `expected`, in order: names, element types, ranks and the
 /// dimensions the contract fixes (a model's dynamic dimension accepts any size).
-fn check_outlets(
-    kind: &str,
-    outlets: &[Outlet],
-    expected: &[Expected],
-) -> Result<(), String> {
+fn check_outlets(kind: &str, outlets: &[Outlet], expected: &[Expected]) -> Result<(), String> {
     let names: Vec<&str> = outlets.iter().map(|o| o.name()).collect();
     let wanted: Vec<&str> = expected.iter().map(|e| e.name).collect();
     if names != wanted {
@@ -165,10 +238,18 @@ fn check_outlets(
             return Err(format!("{kind} '{}' is not a tensor", e.name));
         };
         if ty != e.ty {
-            return Err(format!("{kind} '{}' holds {ty:?}, expected {:?}", e.name, e.ty));
+            return Err(format!(
+                "{kind} '{}' holds {ty:?}, expected {:?}",
+                e.name, e.ty
+            ));
         }
         if shape.len() != e.rank {
-            return Err(format!("{kind} '{}' has rank {}, expected {}", e.name, shape.len(), e.rank));
+            return Err(format!(
+                "{kind} '{}' has rank {}, expected {}",
+                e.name,
+                shape.len(),
+                e.rank
+            ));
         }
         for (axis, (&got, want)) in shape.iter().zip(e.dims).enumerate() {
             if let Some(want) = want {
