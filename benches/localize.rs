@@ -2,9 +2,14 @@
 //!
 //! Run: `cargo bench --bench localize` (add `-- --quick` for a shorter run). Figures are
 //! recorded in BENCHMARKS.md. Targets (2-core machine): <= 0.3 ms per frame at 1k views,
-//! <= 30 ms at 100k views, map load <= 20 ms at 10k views.
+//! <= 30 ms at 100k views, map load <= 20 ms at 10k views; the learned GRNN
+//! (`localize_grnn`, needs ONNX Runtime: scripts/setup-models.sh) <= 5 ms per frame at 300
+//! places of 12 views, beside the graph filter on the same maps.
 
-use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
+use criterion::measurement::WallTime;
+use criterion::{
+    criterion_group, criterion_main, BenchmarkGroup, BenchmarkId, Criterion, Throughput,
+};
 use std::hint::black_box;
 use std::sync::Arc;
 use std::time::Duration;
@@ -30,6 +35,30 @@ fn queries(map: &Map, count: usize) -> Vec<Vec<f32>> {
         .collect()
 }
 
+/// Times `localizer` on `queries` in turn, one frame per iteration.
+fn bench_frames(
+    group: &mut BenchmarkGroup<'_, WallTime>,
+    id: BenchmarkId,
+    localizer: &mut Localizer,
+    queries: &[Vec<f32>],
+) {
+    let mut out = Localization::default();
+    let mut i = 0usize;
+    group.bench_function(id, |b| {
+        b.iter(|| {
+            let frame = Frame {
+                timestamp: i as f64,
+                descriptor: &queries[i % queries.len()],
+                odometry: None,
+                image: None,
+            };
+            localizer.process(&frame, &mut out).unwrap();
+            i += 1;
+            black_box(out.place)
+        })
+    });
+}
+
 fn per_frame(c: &mut Criterion) {
     let mut group = c.benchmark_group("localize_frame");
     for &views in &[100usize, 1_000, 10_000, 100_000] {
@@ -53,21 +82,49 @@ fn per_frame(c: &mut Criterion) {
                 },
             )
             .unwrap();
-            let mut out = Localization::default();
-            let mut i = 0usize;
-            group.bench_with_input(BenchmarkId::new(name, views), &views, |b, _| {
-                b.iter(|| {
-                    let frame = Frame {
-                        timestamp: i as f64,
-                        descriptor: &queries[i % queries.len()],
-                        odometry: None,
-                        image: None,
-                    };
-                    localizer.process(&frame, &mut out).unwrap();
-                    i += 1;
-                    black_box(out.place)
-                })
-            });
+            bench_frames(
+                &mut group,
+                BenchmarkId::new(name, views),
+                &mut localizer,
+                &queries,
+            );
+        }
+    }
+    group.finish();
+}
+
+/// The whole frame (similarities, window, one network step) with the built-in GRNN model, and
+/// the graph filter on the same maps: 20 to 2,000 places of 12 views (the seed's Fig. 4.11).
+fn per_frame_grnn(c: &mut Criterion) {
+    const VIEWS_PER_PLACE: usize = 12;
+    let mut group = c.benchmark_group("localize_grnn");
+    for &places in &[20usize, 300, 2_000] {
+        let map = Arc::new(random_map(
+            places * VIEWS_PER_PLACE,
+            VIEWS_PER_PLACE,
+            DIM,
+            7,
+        ));
+        let queries = queries(&map, 64);
+        group.throughput(Throughput::Elements(1));
+        for (name, mode) in [("grnn", Mode::Grnn), ("filter", Mode::Filter)] {
+            let options = LocalizerOptions {
+                mode,
+                ..Default::default()
+            };
+            let mut localizer = match Localizer::new(map.clone(), options) {
+                Ok(localizer) => localizer,
+                Err(e) => {
+                    eprintln!("localize_grnn skipped: {e}");
+                    return;
+                }
+            };
+            bench_frames(
+                &mut group,
+                BenchmarkId::new(name, places),
+                &mut localizer,
+                &queries,
+            );
         }
     }
     group.finish();
@@ -95,5 +152,5 @@ fn map_load(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, per_frame, map_load);
+criterion_group!(benches, per_frame, per_frame_grnn, map_load);
 criterion_main!(benches);

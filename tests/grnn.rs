@@ -195,11 +195,11 @@ fn maps_without_a_graph_or_too_large_for_the_model_are_refused() {
         "{err}"
     );
 
-    // Two places of 2,500 views: a window of both is beyond the built-in model's 4,096 nodes.
+    // Two places of 2,500 views: a window of both is beyond the built-in model's 2,048 nodes.
     let huge = Arc::new(chain_map(2, 2_500, 8));
     match Localizer::new(huge, options(None)) {
         Err(LocalizeError::Grnn(GrnnError::GraphTooLarge { nodes, limit })) => {
-            assert_eq!((nodes, limit), (5_000, 4_096));
+            assert_eq!((nodes, limit), (5_000, 2_048));
         }
         Err(LocalizeError::Grnn(GrnnError::Unavailable(e))) => {
             common::models::unavailable(&e.to_string())

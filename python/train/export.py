@@ -12,8 +12,9 @@ The contract the Rust estimator checks (names, element types, ranks; N, M, B dyn
   `new_state` float32 (B, N, S);
 - metadata: `topoloc.model` = "grnn", `topoloc.state` = S, `topoloc.temporal` = 0 or 1,
   `topoloc.features` = "cosine,cosine-max,zscore", `topoloc.max_nodes` = the most nodes one
-  step accepts (`--max-nodes`, default 4096: a window of 40 places of 100 views; the estimator
-  refuses maps whose largest window is bigger, since the step's cost grows with it).
+  step accepts (`--max-nodes`, default 2048: a window of 40 places of 50 views; the estimator
+  refuses maps whose largest window is bigger, since the step's cost and its (N, N)
+  adjacency grow with its square).
 With --f16 the weights are stored as float16 and cast to float32 inside the graph (inputs and
 outputs stay float32).
 """
@@ -55,7 +56,7 @@ def register_scatter_add() -> None:
     torch.onnx.register_custom_op_symbolic("aten::scatter_add", scatter_add, OPSET)
 
 
-def export(model: GRNN, out: Path, f16: bool, max_nodes: int = 4096) -> None:
+def export(model: GRNN, out: Path, f16: bool, max_nodes: int = 2048) -> None:
     import onnx  # Debian's python3-onnx
 
     register_scatter_add()
@@ -118,7 +119,7 @@ def main() -> int:
     parser.add_argument("checkpoint", type=Path)
     parser.add_argument("out", type=Path)
     parser.add_argument("--f16", action="store_true", help="float16 weights")
-    parser.add_argument("--max-nodes", type=int, default=4096, help="most nodes per step")
+    parser.add_argument("--max-nodes", type=int, default=2048, help="most nodes per step")
     args = parser.parse_args()
     export(load_checkpoint(args.checkpoint), args.out, args.f16, args.max_nodes)
     print(f"export: {args.out} ({args.out.stat().st_size} bytes)")

@@ -30,7 +30,9 @@ use std::io::Write;
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::Instant;
-use topoloc::{Frame, LoadOptions, Localization, Localizer, LocalizerOptions, Map, Mode};
+use topoloc::{
+    Frame, GrnnOptions, LoadOptions, Localization, Localizer, LocalizerOptions, Map, Mode,
+};
 
 /// Options of `localize`.
 #[derive(Args, Clone, Debug)]
@@ -87,8 +89,8 @@ pub struct LocalizeArgs {
     /// Unit of numeric image file names.
     #[arg(long, value_enum, default_value_t = StemUnit::S)]
     pub stem_unit: StemUnit,
-    /// Localizer mode: the graph filter, frames one by one, or metric (particles; needs
-    /// odometry and a map with poses).
+    /// Localizer mode: the graph filter, frames one by one, metric (particles; needs
+    /// odometry and a map with poses) or the learned GRNN (the built-in model; ONNX Runtime).
     #[arg(long, value_enum, default_value_t = ModeArg::Filter)]
     pub mode: ModeArg,
     /// Candidates per frame.
@@ -344,6 +346,10 @@ fn localizer(args: &LocalizeArgs, map: &Arc<Map>) -> Result<Localizer> {
     let mut options = LocalizerOptions {
         mode: args.mode.into(),
         top_k: args.top_k as usize,
+        grnn: GrnnOptions {
+            runtime: args.runtime.onnx_runtime.clone(),
+            ..GrnnOptions::default()
+        },
         ..LocalizerOptions::default()
     };
     if let Some(t) = args.temperature {
