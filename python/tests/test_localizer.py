@@ -123,7 +123,7 @@ def test_grnn_mode_checks_its_model_and_map_before_loading_the_runtime(small_map
     refused; both before ONNX Runtime is loaded (python/train/smoke.py runs the whole path)."""
     assert topoloc.localizer_options_default()["grnn_model_path"] is None
     missing = tmp_path / "grnn.onnx"
-    with pytest.raises(topoloc.BackendUnavailableError, match="grnn.onnx"):
+    with pytest.raises(topoloc.BackendUnavailableError, match=r"grnn\.onnx"):
         topoloc.Localizer(small_map, mode="grnn", grnn_model_path=missing)
     with topoloc.MapBuilder("toy", None, 4) as b:
         b.add_place()

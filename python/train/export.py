@@ -50,7 +50,7 @@ def register_scatter_add() -> None:
     from torch.onnx import symbolic_helper
 
     @symbolic_helper.parse_args("v", "i", "v", "v")
-    def scatter_add(g, data, dim, index, src):  # noqa: ANN001, ANN202 (torch's signature)
+    def scatter_add(g, data, dim, index, src):  # torch calls it with graph values
         return g.op("ScatterElements", data, index, src, axis_i=dim, reduction_s="add")
 
     torch.onnx.register_custom_op_symbolic("aten::scatter_add", scatter_add, OPSET)

@@ -30,9 +30,10 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 import dataset  # noqa: E402  (imports the topoloc package of this checkout)
 import export  # noqa: E402
-import train  # noqa: E402
 import window  # noqa: E402
 from model import GRNN, Sizes, map_statistics  # noqa: E402
+
+import train  # noqa: E402
 
 topoloc = dataset.topoloc
 DIM = 32
@@ -96,7 +97,9 @@ def pytorch_posteriors(model: GRNN, world: dataset.World, frames: np.ndarray) ->
         stats = map_statistics(torch.from_numpy(similarity)[None])
         w = graph.windows.choose(similarity, previous)
         state = window.carry_state(state, before if before is not None else w.views[:0], w.views)
-        logits, state = model(graph.nodes[w.views], w.edges, torch.from_numpy(frame[None]), state, stats)
+        logits, state = model(
+            graph.nodes[w.views], w.edges, torch.from_numpy(frame[None]), state, stats
+        )
         previous, before = window.place_posterior(w, logits), w.views
         out.append(previous)
     return out
@@ -120,7 +123,9 @@ def expect_error(error: type, text: str, make) -> None:
 def main() -> int:
     model = trained(seed=3)
     again = trained(seed=3)
-    same = all(torch.equal(a, b) for a, b in zip(model.state_dict().values(), again.state_dict().values()))
+    same = all(
+        torch.equal(a, b) for a, b in zip(model.state_dict().values(), again.state_dict().values())
+    )
     check(same, "training twice from one seed gives identical weights")
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
@@ -142,9 +147,14 @@ def main() -> int:
                 for c in r.candidates:
                     worst = max(worst, abs(c.probability - expected[i].get(c.place, 0.0)))
                 hits += r.place == truth[i]
-        check(worst < 2e-3, f"the library's posterior is PyTorch's (largest difference {worst:.2e})")
+        check(
+            worst < 2e-3, f"the library's posterior is PyTorch's (largest difference {worst:.2e})"
+        )
         single = np.mean(
-            [world.view_place[np.argmax(world.view_descriptors @ f)] == t for f, t in zip(frames, truth)]
+            [
+                world.view_place[np.argmax(world.view_descriptors @ f)] == t
+                for f, t in zip(frames, truth)
+            ]
         )
         accuracy = hits / len(frames)
         check(

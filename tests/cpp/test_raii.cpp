@@ -346,8 +346,8 @@ TEST(full_flow_build_save_load_localize)
     options.mode = TOPOLOC_MODE_GRNN;
     const std::string missing_model = "/nonexistent/grnn.onnx";
     options.grnn_model_path = missing_model.c_str();
-    const std::string grnn_message = CHECK_THROWS_STATUS(
-        topoloc::Localizer(map, options), TOPOLOC_ERR_BACKEND_UNAVAILABLE);
+    const std::string grnn_message =
+        CHECK_THROWS_STATUS(topoloc::Localizer(map, options), TOPOLOC_ERR_BACKEND_UNAVAILABLE);
     CHECK(grnn_message.find(missing_model) != std::string::npos);
 }
 
