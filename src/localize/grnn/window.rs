@@ -85,6 +85,10 @@ pub(super) struct WindowScratch {
     pub views: Vec<u32>,
     /// Edge sources then targets, window-local (the `(2, M)` tensor's rows).
     pub edges: Vec<i64>,
+    /// The previous window's places, sorted by probability.
+    ranked: Vec<u32>,
+    /// Edge targets, before they are appended to `edges`.
+    targets: Vec<i64>,
 }
 
 impl WindowScratch {
@@ -97,6 +101,8 @@ impl WindowScratch {
             places: Vec::new(),
             views: Vec::new(),
             edges: Vec::new(),
+            ranked: Vec::new(),
+            targets: Vec::new(),
         }
     }
 
@@ -125,7 +131,9 @@ impl WindowScratch {
             self.add(place);
         }
         if let Some((window, posterior)) = previous.filter(|(w, _)| !w.is_empty()) {
-            let mut ranked: Vec<u32> = window.to_vec();
+            let mut ranked = std::mem::take(&mut self.ranked);
+            ranked.clear();
+            ranked.extend_from_slice(window);
             ranked.sort_unstable_by(|a, b| {
                 posterior[*b as usize]
                     .total_cmp(&posterior[*a as usize])
@@ -137,6 +145,7 @@ impl WindowScratch {
             for &place in map.neighbours_unchecked(ranked[0] as usize) {
                 self.add(place);
             }
+            self.ranked = ranked;
         }
         self.views.clear();
         for &place in &self.places {
@@ -149,17 +158,17 @@ impl WindowScratch {
             self.local[v as usize] = i as u32;
         }
         self.edges.clear();
-        let mut targets = Vec::new();
+        self.targets.clear();
         for (i, &v) in self.views.iter().enumerate() {
             for &w in graph.targets(v) {
                 let j = self.local[w as usize];
                 if j != u32::MAX {
                     self.edges.push(i as i64);
-                    targets.push(i64::from(j));
+                    self.targets.push(i64::from(j));
                 }
             }
         }
-        self.edges.extend(targets);
+        self.edges.extend_from_slice(&self.targets);
         for &v in &self.views {
             self.local[v as usize] = u32::MAX;
         }
