@@ -1,7 +1,8 @@
 //! The learned estimator (`Mode::Grnn`) through the public API: it follows a walk with the
-//! model built into the library, is deterministic, forgets everything on reset, leaves its
-//! state unchanged after bad input, and refuses with a typed error a file that is not ONNX, a
-//! model of another contract, a map without a graph and a map whose windows exceed the model.
+//! model built into the library, is deterministic, depends on its carried state, forgets
+//! everything on reset, leaves its state unchanged after bad input, and refuses with a typed
+//! error a file that is not ONNX, a model of another contract, a map without a graph and a map
+//! whose windows exceed the model.
 //! Needs ONNX Runtime (scripts/setup-models.sh): skipped without it, failing in CI.
 
 mod common;
@@ -105,6 +106,36 @@ fn the_built_in_model_follows_a_walk_deterministically_and_reset_forgets() {
     );
     let mut other = grnn(&map).unwrap();
     assert_eq!(run(&mut other, &frames), first, "two localizers must agree");
+}
+
+#[test]
+fn forgetting_the_state_changes_every_frame_but_the_first() {
+    let map = Arc::new(chain_map(40, 4, DIM));
+    let Some(mut carrying) = grnn(&map) else {
+        return;
+    };
+    let forgetful = LocalizerOptions {
+        grnn: GrnnOptions {
+            forget_state: true,
+            ..GrnnOptions::default()
+        },
+        ..options(None)
+    };
+    let mut forgetting = Localizer::new(map.clone(), forgetful).unwrap();
+    let (frames, _) = walk(&map, 0.5);
+    let (kept, forgot) = (run(&mut carrying, &frames), run(&mut forgetting, &frames));
+    assert_eq!(kept[0], forgot[0], "the first frame has no state to carry");
+    let differing = kept
+        .iter()
+        .zip(&forgot)
+        .skip(1)
+        .filter(|(a, b)| (a.confidence - b.confidence).abs() > 1e-4)
+        .count();
+    assert!(
+        differing * 10 >= 9 * (frames.len() - 1),
+        "only {differing} of {} later frames changed without the carried state",
+        frames.len() - 1
+    );
 }
 
 #[test]

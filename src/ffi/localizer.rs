@@ -278,6 +278,7 @@ fn localizer_options(o: &topoloc_localizer_options) -> Result<LocalizerOptions, 
             model: optional_string(o.grnn_model_path, "options.grnn_model_path")?.map(Into::into),
             runtime: optional_string(o.onnx_runtime_path, "options.onnx_runtime_path")?
                 .map(Into::into),
+            ..GrnnOptions::default()
         },
         // The motion model's speed classes are not in the C options yet: defaults.
         ..LocalizerOptions::default()

@@ -23,6 +23,10 @@ pub struct GrnnOptions {
     /// The ONNX Runtime library; `None` = `TOPOLOC_ORT_LIBRARY`, `ORT_DYLIB_PATH`, then the
     /// cache `scripts/setup-models.sh` fills.
     pub runtime: Option<PathBuf>,
+    /// The seed's ablation "GRNN without temporal module": every frame starts the window's
+    /// recurrent state from zeros instead of carrying it (the window's choice still follows the
+    /// last posterior). `false` (the default) carries it; for benchmarks, not for hosts.
+    pub forget_state: bool,
 }
 
 /// Why the learned estimator cannot be created or run.
@@ -69,6 +73,8 @@ struct Shared {
 #[derive(Clone)]
 pub(super) struct Grnn {
     shared: Arc<Mutex<Shared>>,
+    /// [`GrnnOptions::forget_state`].
+    forget_state: bool,
     /// The last window's views, ascending.
     views: Vec<u32>,
     /// The last window's places.
@@ -108,6 +114,7 @@ impl Grnn {
         };
         let mut grnn = Self {
             shared: Arc::new(Mutex::new(shared)),
+            forget_state: options.forget_state,
             views: Vec::new(),
             window_places: Vec::new(),
             state: Vec::new(),
@@ -157,7 +164,7 @@ impl Grnn {
             &self.state,
             &window.views,
             s,
-            continued,
+            continued && !self.forget_state,
             &mut shared.input_state,
         );
         debug_assert_eq!(query.len(), d);

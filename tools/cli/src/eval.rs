@@ -378,6 +378,7 @@ fn localizer(args: &EvalArgs, map: &Arc<Map>, mode: Mode) -> Result<Localizer> {
         grnn: GrnnOptions {
             model: args.grnn_model.clone(),
             runtime: args.runtime.onnx_runtime.clone(),
+            ..GrnnOptions::default()
         },
         ..LocalizerOptions::default()
     };

@@ -9,7 +9,8 @@
 //! and by the s-GC spatial score: the seed's ablation), and metric mode
 //! (particles moved by the odometry) without and with verification, and with pose fixes from
 //! the best-verified view (the map's keypoint scene points, the sim camera's intrinsics), and
-//! the learned GRNN alone, with GC and with s-GC; `--configurations` picks some). Prints MNA and
+//! the learned GRNN alone (also without carrying its recurrent state: the seed's "without
+//! temporal module"), with GC and with s-GC; `--configurations` picks some). Prints MNA and
 //! OHA per split as mean ± standard deviation over the worlds, the way the seed's tables do
 //! (thesis Table 4.2), and the graph sizes they were measured on.
 
@@ -77,7 +78,8 @@ pub struct SuiteArgs {
     pub metric_seed: u64,
     /// Configurations to run, comma-separated (default: all): single-frame, filter,
     /// filter+odometry, filter+odometry+verification (GC), filter+odometry+s-gc, metric+odometry,
-    /// metric+odometry+verification, metric+odometry+pose-fix, grnn, grnn+gc, grnn+s-gc.
+    /// metric+odometry+verification, metric+odometry+pose-fix, grnn-no-temporal, grnn, grnn+gc,
+    /// grnn+s-gc.
     #[arg(long, value_delimiter = ',', value_parser = parse_configuration)]
     pub configurations: Vec<String>,
     /// Print one JSON object (per split and configuration: every world's figures, mean, std).
@@ -101,6 +103,9 @@ struct Configuration {
     pose_fix: bool,
     /// The evidence of a verified view: GC inliers or the s-GC spatial score.
     score: VerificationScore,
+    /// GRNN only: the recurrent state is not carried between frames (the seed's "without
+    /// temporal module" ablation, [`GrnnOptions::forget_state`]).
+    forget_state: bool,
 }
 
 const fn configuration(
@@ -117,6 +122,7 @@ const fn configuration(
         verify,
         pose_fix,
         score: VerificationScore::Inliers,
+        forget_state: false,
     }
 }
 
@@ -128,8 +134,16 @@ const fn spatially_scored(c: Configuration) -> Configuration {
     }
 }
 
+/// A GRNN configuration whose recurrent state starts from zeros at every frame.
+const fn without_temporal(c: Configuration) -> Configuration {
+    Configuration {
+        forget_state: true,
+        ..c
+    }
+}
+
 /// The localizer configurations compared.
-const CONFIGURATIONS: [Configuration; 11] = [
+const CONFIGURATIONS: [Configuration; 12] = [
     configuration("single-frame", Mode::SingleFrame, false, false, false),
     configuration("filter", Mode::Filter, false, false, false),
     configuration("filter+odometry", Mode::Filter, true, false, false),
@@ -156,6 +170,13 @@ const CONFIGURATIONS: [Configuration; 11] = [
         false,
     ),
     configuration("metric+odometry+pose-fix", Mode::Metric, true, true, true),
+    without_temporal(configuration(
+        "grnn-no-temporal",
+        Mode::Grnn,
+        false,
+        false,
+        false,
+    )),
     configuration("grnn", Mode::Grnn, false, false, false),
     configuration("grnn+gc", Mode::Grnn, false, true, false),
     spatially_scored(configuration("grnn+s-gc", Mode::Grnn, false, true, false)),
@@ -259,6 +280,7 @@ pub fn run(args: &SuiteArgs) -> Result<()> {
                         },
                         grnn: GrnnOptions {
                             model: args.grnn_model.clone(),
+                            forget_state: c.forget_state,
                             ..GrnnOptions::default()
                         },
                         ..LocalizerOptions::default()
