@@ -56,6 +56,24 @@ def register_scatter_add() -> None:
     torch.onnx.register_custom_op_symbolic("aten::scatter_add", scatter_add, OPSET)
 
 
+def restore_state_input(proto, width: int) -> None:
+    """torch's exporter drops an input the graph never reads: a network trained without the
+    temporal module (`train.py --no-temporal`) ignores `state`. The contract has the same inputs
+    for every model, so the input is put back in its place, unread."""
+    import onnx
+
+    inputs = list(proto.graph.input)
+    if "state" in [i.name for i in inputs]:
+        return
+    shape = ["b", "n", width]
+    inputs.insert(
+        INPUTS.index("state"),
+        onnx.helper.make_tensor_value_info("state", onnx.TensorProto.FLOAT, shape),
+    )
+    del proto.graph.input[:]
+    proto.graph.input.extend(inputs)
+
+
 def export(model: GRNN, out: Path, f16: bool, max_nodes: int = 2048) -> None:
     import onnx  # Debian's python3-onnx
 
@@ -86,6 +104,7 @@ def export(model: GRNN, out: Path, f16: bool, max_nodes: int = 2048) -> None:
         opset_version=OPSET,
     )
     proto = onnx.load(str(out))
+    restore_state_input(proto, state)
     if f16:
         from onnx import numpy_helper
 

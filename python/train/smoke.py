@@ -105,6 +105,23 @@ def pytorch_posteriors(model: GRNN, world: dataset.World, frames: np.ndarray) ->
     return out
 
 
+def library_against_pytorch(model: GRNN, path: Path, world: dataset.World) -> tuple[float, int]:
+    """Localizes the world's first walk through the C ABI with the exported `path`: the largest
+    difference of a candidate's probability from PyTorch's, and the frames on the true place."""
+    frames, truth = world.trajectories[0].frames, world.trajectories[0].place
+    expected = pytorch_posteriors(model, world, frames)
+    worst, hits = 0.0, 0
+    with library_map(world) as m, topoloc.Localizer(
+        m, mode="grnn", grnn_model_path=path, top_k=5, off_map_probability=0.0
+    ) as loc:
+        for i, frame in enumerate(frames):
+            r = loc.process(frame, timestamp=0.1 * i)
+            for c in r.candidates:
+                worst = max(worst, abs(c.probability - expected[i].get(c.place, 0.0)))
+            hits += r.place == truth[i]
+    return worst, hits
+
+
 def check(condition: bool, what: str) -> None:
     if not condition:
         raise SystemExit(f"smoke: FAILED: {what}")
@@ -137,18 +154,19 @@ def main() -> int:
         world = chain_world(seed=11, walks=1)
         frames = world.trajectories[0].frames
         truth = world.trajectories[0].place
-        expected = pytorch_posteriors(model, world, frames)
-        with library_map(world) as m, topoloc.Localizer(
-            m, mode="grnn", grnn_model_path=onnx_path, top_k=5, off_map_probability=0.0
-        ) as loc:
-            worst, hits = 0.0, 0
-            for i, frame in enumerate(frames):
-                r = loc.process(frame, timestamp=0.1 * i)
-                for c in r.candidates:
-                    worst = max(worst, abs(c.probability - expected[i].get(c.place, 0.0)))
-                hits += r.place == truth[i]
+        worst, hits = library_against_pytorch(model, onnx_path, world)
         check(
             worst < 2e-3, f"the library's posterior is PyTorch's (largest difference {worst:.2e})"
+        )
+        torch.manual_seed(5)
+        stateless = GRNN(Sizes(hidden=16, neighbour=8, state=16, temporal=False)).eval()
+        stateless_path = folder / "stateless.onnx"
+        export.export(stateless, stateless_path, f16=False)
+        worst_stateless, _ = library_against_pytorch(stateless, stateless_path, world)
+        check(
+            worst_stateless < 2e-3,
+            "a network without the temporal module keeps the contract's inputs and runs in the "
+            f"library as in PyTorch (largest difference {worst_stateless:.2e})",
         )
         single = np.mean(
             [
