@@ -84,9 +84,11 @@
  * candidates (`topoloc_loop_detector_candidates`), sessions
  * (`topoloc_loop_detector_begin_session`), local features of image maps
  * (`verification_keypoints`, `local_features`); 1.16: the learned estimator
- * (`TOPOLOC_MODE_GRNN`, `grnn_model_path`).
+ * (`TOPOLOC_MODE_GRNN`, `grnn_model_path`); 1.17: the loop options the CLI had alone
+ * (`refine_keyframes`, `pose_min_inliers`, `pair_*`, `cells_pair_*`), the hint's
+ * `translation` (`TOPOLOC_TRANSLATION_*`), `TOPOLOC_GATE_SELF_MATCH`.
  */
-#define TOPOLOC_ABI_VERSION_MINOR 16
+#define TOPOLOC_ABI_VERSION_MINOR 17
 
 /**
  * Result of every fallible C function. Values are grouped in ranges and never renumbered;
@@ -1010,6 +1012,12 @@ typedef struct topoloc_skeleton_options {
 typedef uint32_t topoloc_node_kind;
 
 /**
+ * A fundamental-matrix estimator of the loop candidates' pair checks (ABI 1.17): one of the
+ * `TOPOLOC_PAIR_ESTIMATOR_*` values.
+ */
+typedef uint32_t topoloc_pair_estimator;
+
+/**
  * Loop detector parameters. Initialise with `topoloc_loop_options_default`; the defaults
  * and meaning of each field are those of the Rust `HintOptions` and `DatabaseOptions`.
  */
@@ -1027,6 +1035,7 @@ typedef struct topoloc_loop_options {
   /**
    * Keyframes with an id within this many of the new one's are never candidates (DBoW2's
    * `max_id`; an earlier session's keyframes always may be).
+   * Range: >= 0.
    * Default: 30.
    */
   uint64_t exclude_recent_ids;
@@ -1106,6 +1115,7 @@ typedef struct topoloc_loop_options {
   /**
    * A candidate whose id is less than this from a more similar candidate's is skipped (its
    * stretch is still searched when the better one is refined); 0 = off.
+   * Range: >= 0.
    * Default: 10.
    */
   uint64_t candidate_id_gap;
@@ -1152,6 +1162,54 @@ typedef struct topoloc_loop_options {
    * Default: 0.5.
    */
   double match_pace_slack_s;
+  /**
+   * Keyframes of a candidate's group (its place, the linked places, its stretch of
+   * `candidate_id_gap` ids) checked to refine it, nearest in id first; 0 = no refinement
+   * (ABI 1.17, as the seven fields after it).
+   * Range: 0..=64.
+   * Default: 5.
+   */
+  uint32_t refine_keyframes;
+  /**
+   * Fewest inliers of a hint's relative pose.
+   * Range: 8..=10000.
+   * Default: 30.
+   */
+  uint32_t pose_min_inliers;
+  /**
+   * Estimator of the pair checks of point features (XFeat, ORB/BRIEF):
+   * `TOPOLOC_PAIR_ESTIMATOR_*`.
+   */
+  topoloc_pair_estimator pair_estimator;
+  /**
+   * RANSAC iterations at most of the pair checks of point features.
+   * Range: 1..=100000.
+   * Default: 100.
+   */
+  uint32_t pair_iterations;
+  /**
+   * Smallest cosine of a kept XFeat match (-1: every mutual match; ORB/BRIEF matches are
+   * kept by Hamming distance instead).
+   * Range: [-1, 1].
+   * Default: 0.82.
+   */
+  float pair_min_cosine;
+  /**
+   * Estimator of the pair checks of dense cells: `TOPOLOC_PAIR_ESTIMATOR_*`.
+   */
+  topoloc_pair_estimator cells_pair_estimator;
+  /**
+   * RANSAC iterations at most of the pair checks of dense cells.
+   * Range: 1..=100000.
+   * Default: 1000.
+   */
+  uint32_t cells_pair_iterations;
+  /**
+   * Smallest cosine of a kept dense-cell match (-1: every mutual match).
+   * Range: [-1, 1].
+   * Default: -1.
+   */
+  float cells_pair_min_cosine;
 } topoloc_loop_options;
 
 /**
@@ -1163,11 +1221,14 @@ typedef struct topoloc_loop_keyframe {
    */
   size_t struct_size;
   /**
-   * The host's keyframe id; must increase from one keyframe to the next.
+   * The host's keyframe id: its keyframe counter (0, 1, 2, ... or any increasing count of
+   * keyframes, as VINS-Fusion's and ORB-SLAM's `mnId` are), not a frame index or a time:
+   * `exclude_recent_ids` and `candidate_id_gap` count keyframes in these ids. Must increase
+   * from one keyframe to the next, past erased keyframes' ids too.
    */
   uint64_t id;
   /**
-   * Time in seconds; must not decrease.
+   * Time in seconds; must not decrease (within a session).
    */
   double timestamp;
   /**
@@ -1213,6 +1274,11 @@ typedef struct topoloc_loop_keyframe {
 typedef uint32_t topoloc_gate;
 
 /**
+ * What a hint's translation holds (ABI 1.17): one of the `TOPOLOC_TRANSLATION_*` values.
+ */
+typedef uint32_t topoloc_translation;
+
+/**
  * The best verified candidate of a keyframe, written by `topoloc_loop_detector_add` (and a
  * confirmed one by `topoloc_loop_detector_confirmed`). The caller sets `struct_size` with
  * `topoloc_loop_hint_default`; topoloc writes the rest.
@@ -1255,7 +1321,8 @@ typedef struct topoloc_loop_hint {
    */
   uint32_t inliers;
   /**
-   * The candidate's share of the inliers of all verified candidates (0..=1).
+   * The matched keyframe's share of the inliers of all verified candidates (0..=1), as
+   * `topoloc_loop_detector_candidates` lists it (the matched keyframe is always there).
    */
   float confidence;
   /**
@@ -1264,7 +1331,7 @@ typedef struct topoloc_loop_hint {
   bool has_pose;
   /**
    * True when the translation is metric (the matched keyframe had scene points); else it
-   * has unit length (a direction).
+   * is a unit direction or, for a rotation only, zero: `translation` says which.
    */
   bool scale_known;
   /**
@@ -1277,6 +1344,13 @@ typedef struct topoloc_loop_hint {
    * GTSAM Pose3 tangent order: rotation (rad) x y z, then translation (m) x y z.
    */
   double covariance[36];
+  /**
+   * What the translation of `matched_T_query` holds (ABI 1.17): `TOPOLOC_TRANSLATION_METRIC`
+   * (metres), `_DIRECTION` (unit length) or `_NONE` (no pose, or a rotation only: exactly
+   * zero). A host adds a between-factor with the translation only for `_METRIC`, a
+   * direction factor for `_DIRECTION`, and a rotation factor alone for `_NONE`.
+   */
+  topoloc_translation translation;
 } topoloc_loop_hint;
 
 /**
@@ -1331,8 +1405,9 @@ typedef struct topoloc_keyframe_describer_options {
    */
   const char *xfeat_model_path;
   /**
-   * XFeat: largest network input in pixels; larger images are scaled down first (0: the
-   * image's own size).
+   * XFeat: largest network input in pixels; larger images are scaled down first. 0 = the
+   * image's own size up to 4,194,304 (2048 x 2048, the most XFeat ever runs on); otherwise
+   * 16,384 to 4,194,304, else `_INVALID_OPTION`.
    * Default: 160000.
    */
   uint32_t xfeat_max_pixels;
@@ -1707,7 +1782,8 @@ typedef uint32_t topoloc_trajectory_format;
 
 /**
  * Intrinsics were given but no relative pose could be fitted (too few matches, no
- * consensus, or a pure rotation).
+ * consensus, or views that differ by a rotation only that no rotation explains). A rotation
+ * only that one explains is a pose: `translation` is then `TOPOLOC_TRANSLATION_NONE`.
  */
 #define TOPOLOC_GATE_NO_POSE 4
 
@@ -1715,6 +1791,42 @@ typedef uint32_t topoloc_trajectory_format;
  * The pose disagrees with the host's odometry beyond the bounds.
  */
 #define TOPOLOC_GATE_ODOMETRY 5
+
+/**
+ * The candidate is the keyframe's own image (ABI 1.17): a view of the detector's map with
+ * the very same keypoints, i.e. the map was built from this run's images. A live session
+ * needs a map of an earlier run (`topoloc_loop_detector_from_map`) or none
+ * (`topoloc_loop_detector_new`); the library also logs a warning.
+ */
+#define TOPOLOC_GATE_SELF_MATCH 6
+
+/**
+ * OpenCV's classic RANSAC (`FM_RANSAC`).
+ */
+#define TOPOLOC_PAIR_ESTIMATOR_RANSAC 0
+
+/**
+ * OpenCV's USAC with MAGSAC++ scoring: steadier inlier counts at low inlier ratios, at a
+ * higher cost per fit.
+ */
+#define TOPOLOC_PAIR_ESTIMATOR_MAGSAC 1
+
+/**
+ * No translation: the hint has no pose, or the views differ by a rotation only (the cameras
+ * about one place relative to the scene's depth): `matched_T_query`'s translation is exactly
+ * zero, its rotation holds, and the covariance gives each translation axis 1 m^2.
+ */
+#define TOPOLOC_TRANSLATION_NONE 0
+
+/**
+ * A unit-length direction (`scale_known` 0): the host finds the scale.
+ */
+#define TOPOLOC_TRANSLATION_DIRECTION 1
+
+/**
+ * Metres (`scale_known` 1): the matched keyframe's scene points fixed the scale.
+ */
+#define TOPOLOC_TRANSLATION_METRIC 2
 
 /**
  * No alignment: both trajectories are in one world frame.
@@ -2214,15 +2326,20 @@ topoloc_status topoloc_loop_options_init(struct topoloc_loop_options *options, s
  * Creates an empty loop detector for descriptors of `descriptor_kind` (a non-empty string),
  * `descriptor_model` (may be empty) and dimension `dim`: the place graph grows from nothing.
  * `options` may be NULL for defaults. On success `*out` owns the detector.
- * Errors: `_INVALID_OPTION`, `_INVALID_ARGUMENT` (empty kind, dim 0 or above 65,536, refused
- * before anything is allocated).
+ * Errors: `_INVALID_OPTION`, `_INVALID_ARGUMENT` (empty kind, a kind above 256 bytes or a
+ * model above 4,096, dim 0 or above 65,536, refused before anything is allocated).
  */
 topoloc_status topoloc_loop_detector_new(const char *descriptor_kind, const char *descriptor_model, uint32_t dim, const struct topoloc_loop_options *options, struct topoloc_loop_detector **out);
 
 /**
  * Creates a loop detector whose first session is `map`'s views (with their stored keypoints
  * and, where known, scene points): new keyframes (ids above the map's) close loops against
- * it. The map handle is not kept. On success `*out` owns the detector.
+ * it. The map must come from an earlier run: `topoloc_loop_detector_save`d by a detector, or
+ * built from another run's images; a map of this run's own images makes every keyframe match
+ * itself (`TOPOLOC_GATE_SELF_MATCH`). The map's keyframes are an earlier session's, as after
+ * `topoloc_loop_detector_begin_session`: never inside the exclusion window, and their poses
+ * (in the map's world frame) never compared with the new keyframes' by the odometry gate.
+ * The map handle is not kept. On success `*out` owns the detector.
  * Errors: `_INVALID_OPTION` (also a view without keyframe id), `_INVALID_ARGUMENT` (ids not
  * increasing).
  */
@@ -2251,8 +2368,9 @@ topoloc_status topoloc_loop_hint_init(struct topoloc_loop_hint *hint, size_t siz
  * candidate with the gate that decided (`has_match` 0 when there was none); at most one hint
  * per keyframe. The whole keyframe is validated first: on any error the detector and `*hint`
  * are unchanged.
- * Errors: `_DIMENSION_MISMATCH`, `_NON_FINITE` (descriptor, timestamp, poses), `_ZERO_DESCRIPTOR`,
- * `_INVALID_ARGUMENT` (duplicate or decreasing id, earlier timestamp, bad keypoints or scene
+ * Errors: `_DIMENSION_MISMATCH` (`descriptor_len` is not D, whatever its size), `_NON_FINITE`
+ * (descriptor, timestamp, poses), `_ZERO_DESCRIPTOR`, `_INVALID_ARGUMENT` (duplicate id, an id
+ * not above every id added before, erased or not, earlier timestamp, bad keypoints or scene
  * points, non-rigid poses), `_INVALID_OPTION` (a pose on some keyframes only: the first keyframe
  * decides whether all have one). Cost: one pass over the keyframes' descriptors and a pair check
  * per verified candidate (BENCHMARKS.md).
@@ -2309,7 +2427,8 @@ topoloc_status topoloc_loop_detector_begin_session(struct topoloc_loop_detector 
  * and scene points, those points), for a later session: `topoloc_map_load`, then
  * `topoloc_loop_detector_from_map`, which verifies against them. Atomic (a temporary file
  * renamed over `path`).
- * Errors: `_IO`, `_EMPTY_MAP`.
+ * Errors: `_IO`, `_EMPTY_MAP`; `_INVALID_ARGUMENT` for a map a reader would refuse (its header
+ * too long), before anything is written.
  */
 topoloc_status topoloc_loop_detector_save(const struct topoloc_loop_detector *detector, const char *path);
 
@@ -2332,7 +2451,7 @@ topoloc_status topoloc_keyframe_describer_options_init(struct topoloc_keyframe_d
  * Errors: `_NO_DESCRIBER` (the map was built from descriptors), `_BACKEND_UNAVAILABLE` (a
  * missing runtime or model: the message names the paths tried and what to install),
  * `_DESCRIPTOR_MISMATCH`, `_MODEL` (a file that is not the expected network),
- * `_INVALID_OPTION` (an unknown local-features or backend value, threads out of range, cells
+ * `_INVALID_OPTION` (an unknown local-features or backend value, threads or xfeat_max_pixels out of range, cells
  * on a VLAD map).
  */
 topoloc_status topoloc_keyframe_describer_new(const struct topoloc_map *map, const struct topoloc_keyframe_describer_options *options, struct topoloc_keyframe_describer **out);
@@ -2366,7 +2485,9 @@ topoloc_status topoloc_loop_detector_add_image(struct topoloc_loop_detector *det
 
 /**
  * The loop candidates the last successful `topoloc_loop_detector_add` or `_add_image`
- * verified, most inliers first (accepted or not; keyframes erased since are left out), into
+ * verified, most inliers first (accepted or not; keyframes erased since are left out; a
+ * candidate that refinement swapped for a neighbouring keyframe with more inliers is listed
+ * as that keyframe, so the hint's matched keyframe is always here), into
  * the caller's array `(out, capacity)`; `*count` receives how many were written (at most
  * `capacity`). For hosts that run their own check on several candidates (ORB-SLAM3 takes 3
  * loop and 3 merge candidates).

@@ -16,6 +16,12 @@ use serde::{Deserialize, Serialize};
 /// a mistake or a corrupt file.
 pub const MAX_DESCRIPTOR_DIM: u32 = 1 << 16;
 
+/// Longest descriptor kind, bytes of UTF-8 (a family name: `"onnx-mlf"`, `"vlad-orb"`).
+pub const MAX_DESCRIPTOR_KIND_BYTES: usize = 256;
+/// Longest descriptor model identity, bytes of UTF-8 (a describer's is about 100): with the
+/// kind, it fits a map file's header however it is escaped, so a map that saves also loads.
+pub const MAX_DESCRIPTOR_MODEL_BYTES: usize = 4096;
+
 /// Tolerance on `| ||x|| - 1 |` for a stored descriptor to count as L2-normalised.
 pub const NORM_TOLERANCE: f32 = 1e-3;
 
@@ -32,7 +38,8 @@ pub struct DescriptorIdentity {
 }
 
 impl DescriptorIdentity {
-    /// Creates an identity; `kind` must be non-empty and `dim` in [`Self::DIM_RANGE`].
+    /// Creates an identity; `kind` must be non-empty and at most [`MAX_DESCRIPTOR_KIND_BYTES`],
+    /// `model` at most [`MAX_DESCRIPTOR_MODEL_BYTES`], and `dim` in [`Self::DIM_RANGE`].
     pub fn new(
         kind: impl Into<String>,
         model: impl Into<String>,
@@ -55,6 +62,17 @@ impl DescriptorIdentity {
             return Err(IdentityError::Invalid(
                 "descriptor kind must not be empty".into(),
             ));
+        }
+        for (name, value, max) in [
+            ("kind", &self.kind, MAX_DESCRIPTOR_KIND_BYTES),
+            ("model", &self.model, MAX_DESCRIPTOR_MODEL_BYTES),
+        ] {
+            if value.len() > max {
+                return Err(IdentityError::Invalid(format!(
+                    "descriptor {name} is {} bytes, at most {max}",
+                    value.len()
+                )));
+            }
         }
         Self::DIM_RANGE
             .check("descriptor dimension", self.dim)

@@ -55,8 +55,9 @@ pub struct topoloc_keyframe_describer_options {
     pub onnx_runtime_path: *const c_char,
     /// XFeat model file; NULL or "" = the cache's export (scripts/setup-models.sh).
     pub xfeat_model_path: *const c_char,
-    /// XFeat: largest network input in pixels; larger images are scaled down first (0: the
-    /// image's own size).
+    /// XFeat: largest network input in pixels; larger images are scaled down first. 0 = the
+    /// image's own size up to 4,194,304 (2048 x 2048, the most XFeat ever runs on); otherwise
+    /// 16,384 to 4,194,304, else `_INVALID_OPTION`.
     pub xfeat_max_pixels: u32,
     /// ONNX Runtime intra-op threads of each network.
     pub threads: u32,
@@ -93,7 +94,7 @@ pub extern "C" fn topoloc_keyframe_describer_options_init(
 /// Errors: `_NO_DESCRIBER` (the map was built from descriptors), `_BACKEND_UNAVAILABLE` (a
 /// missing runtime or model: the message names the paths tried and what to install),
 /// `_DESCRIPTOR_MISMATCH`, `_MODEL` (a file that is not the expected network),
-/// `_INVALID_OPTION` (an unknown local-features or backend value, threads out of range, cells
+/// `_INVALID_OPTION` (an unknown local-features or backend value, threads or xfeat_max_pixels out of range, cells
 /// on a VLAD map).
 #[no_mangle]
 pub extern "C" fn topoloc_keyframe_describer_new(
@@ -121,6 +122,9 @@ pub extern "C" fn topoloc_keyframe_describer_new(
                 threads: o.threads as usize,
                 max_pixels: o.xfeat_max_pixels,
             };
+            xfeat
+                .validate()
+                .map_err(|e| FfiError::invalid_option(format!("options.xfeat_max_pixels: {e}")))?;
             let keyframes = KeyframeDescriber::new(describer, kind, &xfeat)?;
             Ok(new_exclusive::<topoloc_keyframe_describer>(keyframes))
         },
@@ -264,7 +268,9 @@ pub struct topoloc_loop_candidate_check {
 }
 
 /// The loop candidates the last successful `topoloc_loop_detector_add` or `_add_image`
-/// verified, most inliers first (accepted or not; keyframes erased since are left out), into
+/// verified, most inliers first (accepted or not; keyframes erased since are left out; a
+/// candidate that refinement swapped for a neighbouring keyframe with more inliers is listed
+/// as that keyframe, so the hint's matched keyframe is always here), into
 /// the caller's array `(out, capacity)`; `*count` receives how many were written (at most
 /// `capacity`). For hosts that run their own check on several candidates (ORB-SLAM3 takes 3
 /// loop and 3 merge candidates).

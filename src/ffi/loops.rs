@@ -12,12 +12,16 @@ use super::topoloc_status;
 use super::versioned::{
     check_versioned, init_versioned, read_optional, read_versioned, versioned, write_versioned,
 };
+use crate::descriptor::DescriptorError;
 use crate::descriptor::DescriptorIdentity;
 use crate::loops::{
     DatabaseOptions, Gate, HintOptions, KeyframeDatabase, KeyframeEntry, KeyframeFeatures,
     LoopDetector, LoopHint, OdometryGate,
 };
-use crate::verify::{Descriptor, Keypoints, RelativePoseOptions, DESCRIPTOR_BYTES, MAX_KEYPOINTS};
+use crate::verify::{
+    Descriptor, FundamentalEstimator, Keypoints, PairOptions, PoseTranslation, RelativePoseOptions,
+    DESCRIPTOR_BYTES, MAX_KEYPOINTS,
+};
 use std::ffi::c_char;
 
 /// Finds loop closures for one SLAM run (and, from a map, against an earlier one). Created by
@@ -41,10 +45,36 @@ pub const TOPOLOC_GATE_TOO_FEW_INLIERS: topoloc_gate = 2;
 /// Too few consecutive keyframes agreed on the place (`consistent_keyframes`).
 pub const TOPOLOC_GATE_INCONSISTENT: topoloc_gate = 3;
 /// Intrinsics were given but no relative pose could be fitted (too few matches, no
-/// consensus, or a pure rotation).
+/// consensus, or views that differ by a rotation only that no rotation explains). A rotation
+/// only that one explains is a pose: `translation` is then `TOPOLOC_TRANSLATION_NONE`.
 pub const TOPOLOC_GATE_NO_POSE: topoloc_gate = 4;
 /// The pose disagrees with the host's odometry beyond the bounds.
 pub const TOPOLOC_GATE_ODOMETRY: topoloc_gate = 5;
+/// The candidate is the keyframe's own image (ABI 1.17): a view of the detector's map with
+/// the very same keypoints, i.e. the map was built from this run's images. A live session
+/// needs a map of an earlier run (`topoloc_loop_detector_from_map`) or none
+/// (`topoloc_loop_detector_new`); the library also logs a warning.
+pub const TOPOLOC_GATE_SELF_MATCH: topoloc_gate = 6;
+
+/// A fundamental-matrix estimator of the loop candidates' pair checks (ABI 1.17): one of the
+/// `TOPOLOC_PAIR_ESTIMATOR_*` values.
+pub type topoloc_pair_estimator = u32;
+/// OpenCV's classic RANSAC (`FM_RANSAC`).
+pub const TOPOLOC_PAIR_ESTIMATOR_RANSAC: topoloc_pair_estimator = 0;
+/// OpenCV's USAC with MAGSAC++ scoring: steadier inlier counts at low inlier ratios, at a
+/// higher cost per fit.
+pub const TOPOLOC_PAIR_ESTIMATOR_MAGSAC: topoloc_pair_estimator = 1;
+
+/// What a hint's translation holds (ABI 1.17): one of the `TOPOLOC_TRANSLATION_*` values.
+pub type topoloc_translation = u32;
+/// No translation: the hint has no pose, or the views differ by a rotation only (the cameras
+/// about one place relative to the scene's depth): `matched_T_query`'s translation is exactly
+/// zero, its rotation holds, and the covariance gives each translation axis 1 m^2.
+pub const TOPOLOC_TRANSLATION_NONE: topoloc_translation = 0;
+/// A unit-length direction (`scale_known` 0): the host finds the scale.
+pub const TOPOLOC_TRANSLATION_DIRECTION: topoloc_translation = 1;
+/// Metres (`scale_known` 1): the matched keyframe's scene points fixed the scale.
+pub const TOPOLOC_TRANSLATION_METRIC: topoloc_translation = 2;
 
 /// Loop detector parameters. Initialise with `topoloc_loop_options_default`; the defaults
 /// and meaning of each field are those of the Rust `HintOptions` and `DatabaseOptions`.
@@ -115,16 +145,39 @@ pub struct topoloc_loop_options {
     pub max_match_pace: f64,
     /// The pace rule's slack, seconds.
     pub match_pace_slack_s: f64,
+    // ABI 1.17 (topoloc 0.1): the options the CLI had alone.
+    /// Keyframes of a candidate's group (its place, the linked places, its stretch of
+    /// `candidate_id_gap` ids) checked to refine it, nearest in id first; 0 = no refinement
+    /// (ABI 1.17, as the seven fields after it).
+    pub refine_keyframes: u32,
+    /// Fewest inliers of a hint's relative pose.
+    pub pose_min_inliers: u32,
+    /// Estimator of the pair checks of point features (XFeat, ORB/BRIEF):
+    /// `TOPOLOC_PAIR_ESTIMATOR_*`.
+    pub pair_estimator: topoloc_pair_estimator,
+    /// RANSAC iterations at most of the pair checks of point features.
+    pub pair_iterations: u32,
+    /// Smallest cosine of a kept XFeat match (-1: every mutual match; ORB/BRIEF matches are
+    /// kept by Hamming distance instead).
+    pub pair_min_cosine: f32,
+    /// Estimator of the pair checks of dense cells: `TOPOLOC_PAIR_ESTIMATOR_*`.
+    pub cells_pair_estimator: topoloc_pair_estimator,
+    /// RANSAC iterations at most of the pair checks of dense cells.
+    pub cells_pair_iterations: u32,
+    /// Smallest cosine of a kept dense-cell match (-1: every mutual match).
+    pub cells_pair_min_cosine: f32,
 }
 
 // ABI 1.5 ended before `candidate_id_gap`, ABI 1.6 before `odometry_max_translation_per_m`,
-// ABI 1.7 before `odometry_search_m`, ABI 1.14 before `max_match_pace`.
+// ABI 1.7 before `odometry_search_m`, ABI 1.14 before `max_match_pace`, ABI 1.16 before
+// `refine_keyframes`.
 versioned! {
     topoloc_loop_options [
         candidate_id_gap,
         odometry_max_translation_per_m,
         odometry_search_m,
         max_match_pace,
+        refine_keyframes,
     ] {
         let (h, d) = (HintOptions::default(), DatabaseOptions::default());
         let gate = h.odometry.unwrap_or_default();
@@ -151,7 +204,34 @@ versioned! {
             odometry_candidates: h.odometry_candidates as u32,
             max_match_pace: h.max_match_pace,
             match_pace_slack_s: h.match_pace_slack_s,
+            refine_keyframes: h.refine_keyframes as u32,
+            pose_min_inliers: h.pose.min_inliers,
+            pair_estimator: estimator_code(h.pair.estimator),
+            pair_iterations: h.pair.max_iterations,
+            pair_min_cosine: h.pair.min_cosine,
+            cells_pair_estimator: estimator_code(h.cells_pair.estimator),
+            cells_pair_iterations: h.cells_pair.max_iterations,
+            cells_pair_min_cosine: h.cells_pair.min_cosine,
         }
+    }
+}
+
+/// The C code of an estimator.
+fn estimator_code(estimator: FundamentalEstimator) -> topoloc_pair_estimator {
+    match estimator {
+        FundamentalEstimator::Ransac => TOPOLOC_PAIR_ESTIMATOR_RANSAC,
+        FundamentalEstimator::Magsac => TOPOLOC_PAIR_ESTIMATOR_MAGSAC,
+    }
+}
+
+/// The estimator a C code stands for; `_INVALID_OPTION` naming `field` for another value.
+fn estimator(code: topoloc_pair_estimator, field: &str) -> Result<FundamentalEstimator, FfiError> {
+    match code {
+        TOPOLOC_PAIR_ESTIMATOR_RANSAC => Ok(FundamentalEstimator::Ransac),
+        TOPOLOC_PAIR_ESTIMATOR_MAGSAC => Ok(FundamentalEstimator::Magsac),
+        other => Err(FfiError::invalid_option(format!(
+            "{field} is {other}: TOPOLOC_PAIR_ESTIMATOR_RANSAC (0) or _MAGSAC (1)"
+        ))),
     }
 }
 
@@ -171,6 +251,14 @@ fn loop_options(
 ) -> Result<(HintOptions, DatabaseOptions), FfiError> {
     let o = read_optional(options, "options")?;
     let camera = optional_camera(o.fx, o.fy, o.cx, o.cy);
+    let gate = OdometryGate {
+        max_rotation_deg: o.odometry_max_rotation_deg,
+        max_translation_m: o.odometry_max_translation_m,
+        max_translation_per_m: o.odometry_max_translation_per_m,
+    };
+    // The bounds are checked with the gate off too: the header gives their ranges.
+    gate.validate()?;
+    let defaults = HintOptions::default();
     let hints = HintOptions {
         candidates: o.candidates as usize,
         candidate_id_gap: o.candidate_id_gap,
@@ -178,21 +266,30 @@ fn loop_options(
         exclude_recent_s: o.exclude_recent_s,
         min_inliers: o.min_inliers,
         consistent_keyframes: o.consistent_keyframes as usize,
-        odometry: o.odometry_gate.then_some(OdometryGate {
-            max_rotation_deg: o.odometry_max_rotation_deg,
-            max_translation_m: o.odometry_max_translation_m,
-            max_translation_per_m: o.odometry_max_translation_per_m,
-        }),
+        odometry: o.odometry_gate.then_some(gate),
         camera,
         odometry_candidates: o.odometry_candidates as usize,
         odometry_search_m: o.odometry_search_m,
         max_match_pace: o.max_match_pace,
         match_pace_slack_s: o.match_pace_slack_s,
+        refine_keyframes: o.refine_keyframes as usize,
         pose: RelativePoseOptions {
             reprojection_px: o.pose_reprojection_px,
+            min_inliers: o.pose_min_inliers,
             ..RelativePoseOptions::default()
         },
-        ..HintOptions::default()
+        pair: PairOptions {
+            estimator: estimator(o.pair_estimator, "options.pair_estimator")?,
+            max_iterations: o.pair_iterations,
+            min_cosine: o.pair_min_cosine,
+            ..defaults.pair
+        },
+        cells_pair: PairOptions {
+            estimator: estimator(o.cells_pair_estimator, "options.cells_pair_estimator")?,
+            max_iterations: o.cells_pair_iterations,
+            min_cosine: o.cells_pair_min_cosine,
+            ..defaults.cells_pair
+        },
     };
     let database = DatabaseOptions {
         novelty_similarity: o.novelty_similarity,
@@ -205,8 +302,8 @@ fn loop_options(
 /// Creates an empty loop detector for descriptors of `descriptor_kind` (a non-empty string),
 /// `descriptor_model` (may be empty) and dimension `dim`: the place graph grows from nothing.
 /// `options` may be NULL for defaults. On success `*out` owns the detector.
-/// Errors: `_INVALID_OPTION`, `_INVALID_ARGUMENT` (empty kind, dim 0 or above 65,536, refused
-/// before anything is allocated).
+/// Errors: `_INVALID_OPTION`, `_INVALID_ARGUMENT` (empty kind, a kind above 256 bytes or a
+/// model above 4,096, dim 0 or above 65,536, refused before anything is allocated).
 #[no_mangle]
 pub extern "C" fn topoloc_loop_detector_new(
     descriptor_kind: *const c_char,
@@ -231,7 +328,12 @@ pub extern "C" fn topoloc_loop_detector_new(
 
 /// Creates a loop detector whose first session is `map`'s views (with their stored keypoints
 /// and, where known, scene points): new keyframes (ids above the map's) close loops against
-/// it. The map handle is not kept. On success `*out` owns the detector.
+/// it. The map must come from an earlier run: `topoloc_loop_detector_save`d by a detector, or
+/// built from another run's images; a map of this run's own images makes every keyframe match
+/// itself (`TOPOLOC_GATE_SELF_MATCH`). The map's keyframes are an earlier session's, as after
+/// `topoloc_loop_detector_begin_session`: never inside the exclusion window, and their poses
+/// (in the map's world frame) never compared with the new keyframes' by the odometry gate.
+/// The map handle is not kept. On success `*out` owns the detector.
 /// Errors: `_INVALID_OPTION` (also a view without keyframe id), `_INVALID_ARGUMENT` (ids not
 /// increasing).
 #[no_mangle]
@@ -262,9 +364,12 @@ pub extern "C" fn topoloc_loop_detector_free(detector: *mut topoloc_loop_detecto
 pub struct topoloc_loop_keyframe {
     /// `sizeof(topoloc_loop_keyframe)`, set by the `_default` function.
     pub struct_size: usize,
-    /// The host's keyframe id; must increase from one keyframe to the next.
+    /// The host's keyframe id: its keyframe counter (0, 1, 2, ... or any increasing count of
+    /// keyframes, as VINS-Fusion's and ORB-SLAM's `mnId` are), not a frame index or a time:
+    /// `exclude_recent_ids` and `candidate_id_gap` count keyframes in these ids. Must increase
+    /// from one keyframe to the next, past erased keyframes' ids too.
     pub id: u64,
-    /// Time in seconds; must not decrease.
+    /// Time in seconds; must not decrease (within a session).
     pub timestamp: f64,
     /// Global descriptor (normalised internally).
     pub descriptor: *const f32,
@@ -339,12 +444,13 @@ pub struct topoloc_loop_hint {
     pub place: u32,
     /// Fundamental-matrix inliers between the two keyframes.
     pub inliers: u32,
-    /// The candidate's share of the inliers of all verified candidates (0..=1).
+    /// The matched keyframe's share of the inliers of all verified candidates (0..=1), as
+    /// `topoloc_loop_detector_candidates` lists it (the matched keyframe is always there).
     pub confidence: f32,
     /// True when `matched_T_query` and `covariance` are set (intrinsics given, pose fitted).
     pub has_pose: bool,
     /// True when the translation is metric (the matched keyframe had scene points); else it
-    /// has unit length (a direction).
+    /// is a unit direction or, for a rotation only, zero: `translation` says which.
     pub scale_known: bool,
     /// The query camera in the matched camera's optical frame (z forward, x right, y down),
     /// 16 doubles row-major 4x4.
@@ -352,10 +458,16 @@ pub struct topoloc_loop_hint {
     /// Covariance of `matched_T_query` for a right perturbation, 36 doubles row-major, in
     /// GTSAM Pose3 tangent order: rotation (rad) x y z, then translation (m) x y z.
     pub covariance: [f64; 36],
+    /// What the translation of `matched_T_query` holds (ABI 1.17): `TOPOLOC_TRANSLATION_METRIC`
+    /// (metres), `_DIRECTION` (unit length) or `_NONE` (no pose, or a rotation only: exactly
+    /// zero). A host adds a between-factor with the translation only for `_METRIC`, a
+    /// direction factor for `_DIRECTION`, and a rotation factor alone for `_NONE`.
+    pub translation: topoloc_translation,
 }
 
+// ABI 1.16 ended before `translation`.
 versioned! {
-    topoloc_loop_hint {
+    topoloc_loop_hint [translation] {
         Self {
             query_id: 0,
             query_place: 0,
@@ -370,6 +482,7 @@ versioned! {
             scale_known: false,
             matched_T_query: pose_to_row_major(&nalgebra::Isometry3::identity()),
             covariance: [0.0; 36],
+            translation: TOPOLOC_TRANSLATION_NONE,
         }
     }
 }
@@ -393,7 +506,23 @@ fn gate_code(gate: &Gate) -> topoloc_gate {
         Gate::Inconsistent { .. } => TOPOLOC_GATE_INCONSISTENT,
         Gate::NoPose(_) => TOPOLOC_GATE_NO_POSE,
         Gate::Odometry { .. } => TOPOLOC_GATE_ODOMETRY,
+        Gate::SelfMatch => TOPOLOC_GATE_SELF_MATCH,
     }
+}
+
+/// A caller's descriptor of `len` floats at `ptr`: `_DIMENSION_MISMATCH` before anything is
+/// read when `len` is not the detector's D (whatever its size).
+fn descriptor_of<'a>(
+    detector: &LoopDetector,
+    ptr: *const f32,
+    len: usize,
+    name: &str,
+) -> Result<&'a [f32], FfiError> {
+    let expected = detector.database().identity().dim as usize;
+    if len != expected {
+        return Err(DescriptorError::Dimension { got: len, expected }.into());
+    }
+    slice(ptr, len, name)
 }
 
 /// The keyframe's features from the C arrays.
@@ -462,6 +591,11 @@ fn c_hint(h: &LoopHint) -> topoloc_loop_hint {
     if let Some(pose) = &h.pose {
         out.has_pose = true;
         out.scale_known = pose.scale_known;
+        out.translation = match pose.translation() {
+            PoseTranslation::Metric => TOPOLOC_TRANSLATION_METRIC,
+            PoseTranslation::Direction => TOPOLOC_TRANSLATION_DIRECTION,
+            PoseTranslation::RotationOnly => TOPOLOC_TRANSLATION_NONE,
+        };
         out.matched_T_query = pose_to_row_major(&pose.matched_t_query);
         for r in 0..6 {
             for c in 0..6 {
@@ -477,8 +611,9 @@ fn c_hint(h: &LoopHint) -> topoloc_loop_hint {
 /// candidate with the gate that decided (`has_match` 0 when there was none); at most one hint
 /// per keyframe. The whole keyframe is validated first: on any error the detector and `*hint`
 /// are unchanged.
-/// Errors: `_DIMENSION_MISMATCH`, `_NON_FINITE` (descriptor, timestamp, poses), `_ZERO_DESCRIPTOR`,
-/// `_INVALID_ARGUMENT` (duplicate or decreasing id, earlier timestamp, bad keypoints or scene
+/// Errors: `_DIMENSION_MISMATCH` (`descriptor_len` is not D, whatever its size), `_NON_FINITE`
+/// (descriptor, timestamp, poses), `_ZERO_DESCRIPTOR`, `_INVALID_ARGUMENT` (duplicate id, an id
+/// not above every id added before, erased or not, earlier timestamp, bad keypoints or scene
 /// points, non-rigid poses), `_INVALID_OPTION` (a pose on some keyframes only: the first keyframe
 /// decides whether all have one). Cost: one pass over the keyframes' descriptors and a pair check
 /// per verified candidate (BENCHMARKS.md).
@@ -495,7 +630,12 @@ pub extern "C" fn topoloc_loop_detector_add(
         let entry = KeyframeEntry {
             id: k.id,
             timestamp: k.timestamp,
-            descriptor: slice(k.descriptor, k.descriptor_len, "keyframe.descriptor")?,
+            descriptor: descriptor_of(
+                detector,
+                k.descriptor,
+                k.descriptor_len,
+                "keyframe.descriptor",
+            )?,
             world_t_body: optional_pose(k.world_T_body, "keyframe.world_T_body")?,
             body_t_camera: optional_pose(k.body_T_camera, "keyframe.body_T_camera")?,
         };
@@ -576,7 +716,7 @@ pub extern "C" fn topoloc_loop_detector_query(
 ) -> topoloc_status {
     run_on(detector, "detector", |detector| {
         check_out(count, "count")?;
-        let descriptor = slice(descriptor, descriptor_len, "descriptor")?;
+        let descriptor = descriptor_of(detector, descriptor, descriptor_len, "descriptor")?;
         let found: Vec<topoloc_loop_candidate> = detector
             .database()
             .relocalization_candidates(descriptor, capacity)?
@@ -626,7 +766,8 @@ pub extern "C" fn topoloc_loop_detector_begin_session(
 /// and scene points, those points), for a later session: `topoloc_map_load`, then
 /// `topoloc_loop_detector_from_map`, which verifies against them. Atomic (a temporary file
 /// renamed over `path`).
-/// Errors: `_IO`, `_EMPTY_MAP`.
+/// Errors: `_IO`, `_EMPTY_MAP`; `_INVALID_ARGUMENT` for a map a reader would refuse (its header
+/// too long), before anything is written.
 #[no_mangle]
 pub extern "C" fn topoloc_loop_detector_save(
     detector: *const topoloc_loop_detector,

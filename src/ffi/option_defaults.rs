@@ -15,7 +15,10 @@ use crate::eval::TrajectoryOptions;
 use crate::localize::{LocalizerOptions, MetricOptions};
 use crate::loops::{DatabaseOptions, HintOptions, OdometryGate};
 use crate::skeleton::SkeletonOptions;
-use crate::verify::{LocateOptions, VerificationOptions, RANSAC_THRESHOLD_PX_RANGE};
+use crate::verify::{
+    LocateOptions, PairOptions, VerificationOptions, PAIR_MIN_INLIERS_RANGE,
+    RANSAC_ITERATIONS_RANGE, RANSAC_THRESHOLD_PX_RANGE,
+};
 use std::mem::{size_of, MaybeUninit};
 
 /// One field's default.
@@ -136,6 +139,12 @@ pub fn option_defaults() -> Vec<OptionDefault> {
                 odometry_candidates,
                 max_match_pace,
                 match_pace_slack_s,
+                refine_keyframes,
+                pose_min_inliers,
+                pair_iterations,
+                pair_min_cosine,
+                cells_pair_iterations,
+                cells_pair_min_cosine,
             ]
         ),
         defaults_of!(
@@ -247,6 +256,14 @@ pub fn option_ranges() -> Vec<OptionRange> {
                 odometry_candidates: HintOptions::ODOMETRY_CANDIDATES_RANGE,
                 max_match_pace: HintOptions::MAX_MATCH_PACE_RANGE,
                 match_pace_slack_s: HintOptions::MATCH_PACE_SLACK_S_RANGE,
+                exclude_recent_ids: HintOptions::ID_COUNT_RANGE,
+                candidate_id_gap: HintOptions::ID_COUNT_RANGE,
+                refine_keyframes: HintOptions::REFINE_KEYFRAMES_RANGE,
+                pose_min_inliers: PAIR_MIN_INLIERS_RANGE,
+                pair_iterations: RANSAC_ITERATIONS_RANGE,
+                pair_min_cosine: PairOptions::MIN_COSINE_RANGE,
+                cells_pair_iterations: RANSAC_ITERATIONS_RANGE,
+                cells_pair_min_cosine: PairOptions::MIN_COSINE_RANGE,
             ]
         ),
         ranges_of!(

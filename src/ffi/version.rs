@@ -26,8 +26,10 @@ pub const TOPOLOC_ABI_VERSION: u32 = 1;
 /// candidates (`topoloc_loop_detector_candidates`), sessions
 /// (`topoloc_loop_detector_begin_session`), local features of image maps
 /// (`verification_keypoints`, `local_features`); 1.16: the learned estimator
-/// (`TOPOLOC_MODE_GRNN`, `grnn_model_path`).
-pub const TOPOLOC_ABI_VERSION_MINOR: u32 = 16;
+/// (`TOPOLOC_MODE_GRNN`, `grnn_model_path`); 1.17: the loop options the CLI had alone
+/// (`refine_keyframes`, `pose_min_inliers`, `pair_*`, `cells_pair_*`), the hint's
+/// `translation` (`TOPOLOC_TRANSLATION_*`), `TOPOLOC_GATE_SELF_MATCH`.
+pub const TOPOLOC_ABI_VERSION_MINOR: u32 = 17;
 
 static VERSION: &CStr =
     match CStr::from_bytes_with_nul(concat!(env!("CARGO_PKG_VERSION"), "\0").as_bytes()) {

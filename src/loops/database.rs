@@ -189,6 +189,9 @@ pub struct KeyframeDatabase {
     last_travel: Option<(Point3<f64>, f64)>,
     /// The current session (see the module documentation), counted from 0.
     session: u32,
+    /// The largest id ever added or reloaded (kept when that keyframe is erased): ids must
+    /// increase past it.
+    last_id: Option<u64>,
     unit: Vec<f32>,
 }
 
@@ -210,13 +213,17 @@ impl KeyframeDatabase {
             with_poses: None,
             last_travel: None,
             session: 0,
+            last_id: None,
         })
     }
 
     /// A database holding a map's views as keyframes, for a later session that queries it
     /// (localization only: add nothing) or extends it. Every view must carry a keyframe id,
     /// increasing with the view index (maps saved by [`KeyframeDatabase::save`] do); new
-    /// keyframes need larger ids. The reloaded keyframes count as older than any timestamp.
+    /// keyframes need larger ids. The reloaded keyframes are an earlier session's, as after
+    /// [`KeyframeDatabase::begin_session`]: older than any timestamp, their poses compared
+    /// only among themselves, never with the new keyframes' (which are in the host's new
+    /// world frame), and the first new keyframe starts a new place.
     pub fn from_map(map: &Map, options: DatabaseOptions) -> Result<Self, LoopsError> {
         let mut db = Self::new(map.descriptor().clone(), options)?;
         let mut previous: Option<u64> = None;
@@ -253,8 +260,11 @@ impl KeyframeDatabase {
             db.places[r.place as usize].members.push(r.id);
         }
         db.edges = map.edges().iter().map(|e| (e.a, e.b)).collect();
-        db.last_place = db.records.last().map(|r| r.place);
         db.with_poses = db.records.first().map(|r| r.world_t_camera.is_some());
+        db.last_id = db.records.last().map(|r| r.id);
+        // The map's keyframes are an earlier session's (session 0, their poses in the map's
+        // world frame): the keyframes added now are in the host's new world frame.
+        db.begin_session();
         Ok(db)
     }
 
@@ -291,6 +301,7 @@ impl KeyframeDatabase {
         self.last_place = Some(added.place);
         self.last_timestamp = Some(keyframe.timestamp);
         self.with_poses = Some(camera.is_some());
+        self.last_id = Some(keyframe.id);
         Ok(added)
     }
 
@@ -303,10 +314,10 @@ impl KeyframeDatabase {
         if self.index_of(keyframe.id).is_some() {
             return Err(LoopsError::DuplicateId(keyframe.id));
         }
-        if let Some(last) = self.records.last().filter(|r| r.id > keyframe.id) {
+        if let Some(last) = self.last_id.filter(|&last| last >= keyframe.id) {
             return Err(LoopsError::OutOfOrder(format!(
-                "id {} after id {}: ids must increase",
-                keyframe.id, last.id
+                "id {} after id {last}: ids must increase (also past erased keyframes')",
+                keyframe.id
             )));
         }
         if !keyframe.timestamp.is_finite() {
@@ -548,6 +559,22 @@ impl KeyframeDatabase {
         Ok(a.session == b.session && a.world_t_camera.is_some() && b.world_t_camera.is_some())
     }
 
+    /// The ids held from `lo` to `hi` (both included), increasing: a slice of the id-ordered
+    /// records found by binary search, so the cost is the ids returned, not `hi - lo`.
+    pub fn ids_between(&self, lo: u64, hi: u64) -> impl DoubleEndedIterator<Item = u64> + '_ {
+        let start = self.records.partition_point(|r| r.id < lo);
+        let end = self.records.partition_point(|r| r.id <= hi).max(start);
+        self.records[start..end].iter().map(|r| r.id)
+    }
+
+    /// Cosine similarity of `descriptor` (normalised here) to keyframe `id`'s.
+    pub fn similarity(&self, descriptor: &[f32], id: u64) -> Result<f32, LoopsError> {
+        let r = self.index_of(id).ok_or(LoopsError::UnknownKeyframe(id))?;
+        let mut unit = Vec::with_capacity(self.dim());
+        normalize_descriptor_into(descriptor, self.dim(), &mut unit)?;
+        Ok(dot(self.row(r), &unit))
+    }
+
     /// The largest id held (the last added, unless erased since); `None` when empty.
     pub fn max_id(&self) -> Option<u64> {
         self.records.last().map(|r| r.id)
@@ -697,6 +724,11 @@ impl KeyframeDatabase {
                 .sum::<usize>()
             // A B-tree node per few links; about 3 words per link.
             + self.edges.len() * 3 * size_of::<usize>()
+    }
+
+    /// The descriptor identity (kind, model, D) every keyframe's descriptor has.
+    pub fn identity(&self) -> &DescriptorIdentity {
+        &self.identity
     }
 
     fn dim(&self) -> usize {

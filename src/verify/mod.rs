@@ -40,10 +40,13 @@ pub use keypoints::{
 };
 pub use pose::{locate, LocateOptions, Located, PinholeCamera, MIN_PAIRS};
 pub use relative::{
-    essential_pose, relative_pose, relative_pose_from_fit, PoseRefusal, RelativePose,
-    RelativePoseOptions, ScenePoints,
+    essential_pose, relative_pose, relative_pose_from_fit, PoseRefusal, PoseTranslation,
+    RelativePose, RelativePoseOptions, ScenePoints,
 };
-pub use xfeat::{XFeatDetector, XFeatOptions, DEFAULT_XFEAT_KEYPOINTS, DEFAULT_XFEAT_MAX_PIXELS};
+pub use xfeat::{
+    XFeatDetector, XFeatOptions, DEFAULT_XFEAT_KEYPOINTS, DEFAULT_XFEAT_MAX_PIXELS,
+    MAX_XFEAT_PIXELS,
+};
 
 /// Keypoints per view a map built from images stores by default, and a query detects.
 pub const DEFAULT_KEYPOINTS: usize = 500;

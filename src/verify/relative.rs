@@ -100,6 +100,32 @@ pub struct RelativePose {
     pub covariance: Matrix6<f64>,
 }
 
+/// What a relative pose's translation holds.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PoseTranslation {
+    /// Metres: the matched keyframe's scene points fixed the scale.
+    Metric,
+    /// A unit-length direction: the scale is the host's to find.
+    Direction,
+    /// Zero: the views differ by a rotation only (the cameras about one place, relative to
+    /// the scene's depth); the rotation holds, the covariance gives each translation axis
+    /// 1 m^2.
+    RotationOnly,
+}
+
+impl RelativePose {
+    /// What the translation of [`Self::matched_t_query`] holds.
+    pub fn translation(&self) -> PoseTranslation {
+        if self.scale_known {
+            PoseTranslation::Metric
+        } else if self.matched_t_query.translation.vector == Vector3::zeros() {
+            PoseTranslation::RotationOnly
+        } else {
+            PoseTranslation::Direction
+        }
+    }
+}
+
 /// Why [`relative_pose`] gave no pose (a hint's gate status names it).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum PoseRefusal {

@@ -9,6 +9,7 @@
 //! stores each as `round(127 x d)`.
 
 use super::keypoints::{Descriptors, Keypoints, XFeatDescriptor, MAX_KEYPOINTS, XFEAT_DIM};
+use crate::bounds::Bounds;
 use crate::errors::VisionError;
 use crate::image::ImageView;
 use crate::onnx_runtime::{cache_dir, session};
@@ -36,9 +37,31 @@ pub struct XFeatOptions {
     /// ONNX Runtime intra-op threads.
     pub threads: usize,
     /// Largest network input, pixels: a larger image is scaled down (aspect kept) before the
-    /// network, and its keypoints scaled back to the image's pixels; 0 = the image's own size.
-    /// The network's time grows with its input. Default [`DEFAULT_XFEAT_MAX_PIXELS`].
+    /// network, and its keypoints scaled back to the image's pixels; 0 = the image's own size
+    /// up to [`MAX_XFEAT_PIXELS`]. Otherwise in [`XFeatOptions::MAX_PIXELS_RANGE`]. The
+    /// network's time and memory grow with its input. Default [`DEFAULT_XFEAT_MAX_PIXELS`].
     pub max_pixels: u32,
+}
+
+/// The most pixels XFeat ever runs on (2048 x 2048): larger images are scaled down to it
+/// whatever [`XFeatOptions::max_pixels`] says, which bounds one image's time and memory.
+pub const MAX_XFEAT_PIXELS: u32 = 1 << 22;
+
+impl XFeatOptions {
+    /// Accepted non-zero values of [`Self::max_pixels`]: from 128 x 128 (an input of at least
+    /// 32 pixels a side for aspect ratios up to 16:1) to [`MAX_XFEAT_PIXELS`].
+    pub const MAX_PIXELS_RANGE: Bounds = Bounds::whole(16_384, MAX_XFEAT_PIXELS as u64);
+
+    /// Fails with [`VisionError::InvalidArgument`] naming `max_pixels` when it is neither 0
+    /// nor in [`Self::MAX_PIXELS_RANGE`].
+    pub fn validate(&self) -> Result<(), VisionError> {
+        if self.max_pixels == 0 {
+            return Ok(());
+        }
+        Self::MAX_PIXELS_RANGE
+            .check("XFeat max_pixels", self.max_pixels)
+            .map_err(|e| VisionError::InvalidArgument(format!("{e} (or 0: the image's size)")))
+    }
 }
 
 /// The default [`XFeatOptions::max_pixels`]: 160,000 (KITTI's 1241x376 runs at 704x192, in a
@@ -70,6 +93,7 @@ impl XFeatDetector {
     /// `descriptors` outputs is [`VisionError::Model`].
     /// Keeps at most `max_keypoints` (1..=[`MAX_KEYPOINTS`]) per image, best scores first.
     pub fn new(options: &XFeatOptions, max_keypoints: usize) -> Result<Self, VisionError> {
+        options.validate()?;
         if !(1..=MAX_KEYPOINTS).contains(&max_keypoints) {
             return Err(VisionError::InvalidArgument(format!(
                 "XFeat keypoints per image is {max_keypoints}, must lie in 1..={MAX_KEYPOINTS}"
@@ -113,10 +137,18 @@ impl XFeatDetector {
         image.validate()?;
         let (w, h) = network_input(image.width, image.height, self.max_pixels);
         if w == 0 || h == 0 {
-            return Err(VisionError::InvalidImage(format!(
-                "image is {}x{}: XFeat needs at least {SIDE_MULTIPLE} pixels on a side",
-                image.width, image.height
-            )));
+            let short = image.width.min(image.height) < SIDE_MULTIPLE;
+            return Err(VisionError::InvalidImage(match short {
+                true => format!(
+                    "image is {}x{}: XFeat needs at least {SIDE_MULTIPLE} pixels on a side",
+                    image.width, image.height
+                ),
+                false => format!(
+                    "image is {}x{}: scaled to XFeat max_pixels {} it is under {SIDE_MULTIPLE} \
+                     pixels on a side; raise max_pixels for this aspect ratio",
+                    image.width, image.height, self.max_pixels
+                ),
+            }));
         }
         self.grey_input(image, w, h)?;
         let model = |e: ort::Error| VisionError::Model(format!("XFeat: {e}"));
@@ -181,14 +213,15 @@ impl XFeatDetector {
 }
 
 /// The network's input size for a `width` x `height` image: scaled down (aspect kept) to at
-/// most `max_pixels` (0: no limit), then each side cut to a multiple of [`SIDE_MULTIPLE`]
+/// most `max_pixels` (0: [`MAX_XFEAT_PIXELS`]), then each side cut to a multiple of [`SIDE_MULTIPLE`]
 /// (0 when the side is shorter).
 fn network_input(width: u32, height: u32, max_pixels: u32) -> (u32, u32) {
     let pixels = f64::from(width) * f64::from(height);
-    let scale = match max_pixels {
-        0 => 1.0,
-        limit => (f64::from(limit) / pixels).sqrt().min(1.0),
+    let limit = match max_pixels {
+        0 => MAX_XFEAT_PIXELS,
+        limit => limit.min(MAX_XFEAT_PIXELS),
     };
+    let scale = (f64::from(limit) / pixels).sqrt().min(1.0);
     let side = |v: u32| ((f64::from(v) * scale) as u32) / SIDE_MULTIPLE * SIDE_MULTIPLE;
     (side(width), side(height))
 }
@@ -261,6 +294,9 @@ mod tests {
         assert_eq!(network_input(1241, 376, 200_000), (800, 224));
         assert_eq!(network_input(320, 240, 1_000_000), (320, 224));
         assert_eq!(network_input(40, 40, 100), (0, 0));
+        // 0 and anything above the ceiling stop at 2048 x 2048.
+        assert_eq!(network_input(8192, 8192, 0), (2048, 2048));
+        assert_eq!(network_input(8192, 8192, u32::MAX), (2048, 2048));
     }
 
     #[test]

@@ -196,6 +196,35 @@ void make_revisit(const uint8_t *in, uint64_t seed, uint8_t *out);
 topoloc_image gray_image(const uint8_t *px);
 
 /* ------------------------------------------------------------------------------------------ */
+/* Loop keyframes (test_loops.c): a scene of LOOP_POINTS points with binary descriptors         */
+/* ------------------------------------------------------------------------------------------ */
+
+#define LOOP_DIM 8
+#define LOOP_POINTS 60
+
+/* LOOP_POINTS scene points 3-8 m in front of a 300-pixel pinhole camera (320x240, centre
+ * 160,120), seen from it (`first`) and from a camera moved by `tx` to the right and `tz` ahead
+ * (metres) and turned `yaw_deg` about y (`second`); each point has the same random 32-byte
+ * descriptor in both views (`descriptors`, 32 * LOOP_POINTS bytes). */
+void loop_scene_points(float *first, float *second, uint8_t *descriptors, double tx, double tz,
+                       double yaw_deg);
+/* A LOOP_DIM global descriptor of scene `scene`. */
+void loop_descriptor(float *d, int scene);
+
+/* The scene seen twice (0.3 m right, 0.1 m ahead, 3 degrees), and a keyframe of it. */
+struct loop_scene {
+    float points[2 * LOOP_POINTS], seen_again[2 * LOOP_POINTS], d[LOOP_DIM];
+    uint8_t descriptors[32 * LOOP_POINTS];
+};
+
+/* Fills `scene`, and `kf` (and `hint`) with their defaults (a check each) and the first view of
+ * the scene: global descriptor of scene 1, its keypoints and their descriptors. */
+void first_view_of_the_scene(struct loop_scene *scene, topoloc_loop_keyframe *kf,
+                             topoloc_loop_hint *hint);
+/* A detector of kind "test", model "loops", D = LOOP_DIM. */
+topoloc_status new_detector(const topoloc_loop_options *options, topoloc_loop_detector **det);
+
+/* ------------------------------------------------------------------------------------------ */
 /* Sections, one file each, run by main.c in this order                                        */
 /* ------------------------------------------------------------------------------------------ */
 
@@ -211,6 +240,8 @@ void run_builder_tests(void);
 void run_skeleton_tests(void);
 /* test_loops.c */
 void run_loop_tests(void);
+/* test_loop_contracts.c: what a new host trips over (issue 46) */
+void run_loop_contract_tests(void);
 /* test_trajectory.c */
 void run_trajectory_tests(void);
 /* test_threads.c */

@@ -39,6 +39,7 @@ int main(void)
         run_builder_tests();
         run_skeleton_tests();
         run_loop_tests();
+        run_loop_contract_tests();
         run_trajectory_tests();
         run_thread_tests(world);
         run_logging_tests(world);

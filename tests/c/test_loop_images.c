@@ -31,6 +31,7 @@ static bool same_hint(const topoloc_loop_hint *a, const topoloc_loop_hint *b)
            a->accepted == b->accepted && a->gate == b->gate && a->matched_id == b->matched_id &&
            a->place == b->place && a->inliers == b->inliers && a->confidence == b->confidence &&
            a->has_pose == b->has_pose && a->scale_known == b->scale_known &&
+           a->translation == b->translation &&
            memcmp(a->matched_T_query, b->matched_T_query, sizeof a->matched_T_query) == 0 &&
            memcmp(a->covariance, b->covariance, sizeof a->covariance) == 0;
 }

@@ -9,16 +9,14 @@
  */
 #include "harness.h"
 
-#define LOOP_DIM 8
-#define LOOP_POINTS 60
+#include <math.h>
 
-/* LOOP_POINTS scene points 3-8 m in front of a 300-pixel pinhole camera, seen from it
- * (`first`) and from a camera 0.3 m to the right and 0.1 m ahead, turned 3 degrees
- * (`second`); each point has the same random 32-byte descriptor in both views. */
-static void loop_keypoints(float *first, float *second, uint8_t *descriptors)
+void loop_scene_points(float *first, float *second, uint8_t *descriptors, double tx, double tz,
+                       double yaw_deg)
 {
     uint32_t state = 12345u;
-    const double c = 0.99862953475, s = 0.05233595624; /* cos, sin of 3 degrees */
+    const double c = cos(yaw_deg * 3.14159265358979323846 / 180.0);
+    const double s = sin(yaw_deg * 3.14159265358979323846 / 180.0);
     int i = 0;
     while (i < LOOP_POINTS) {
         double x, y, z, qx, qz, u1, v1, u2, v2;
@@ -29,8 +27,8 @@ static void loop_keypoints(float *first, float *second, uint8_t *descriptors)
         state = state * 1664525u + 1013904223u;
         y = ((double)(state >> 8) / 16777216.0 - 0.5) * 0.7 * z;
         /* The second camera: p' = R^T (p - t), R a yaw about y. */
-        qx = c * (x - 0.3) - s * (z - 0.1);
-        qz = s * (x - 0.3) + c * (z - 0.1);
+        qx = c * (x - tx) - s * (z - tz);
+        qz = s * (x - tx) + c * (z - tz);
         u1 = 300.0 * x / z + 160.0;
         v1 = 300.0 * y / z + 120.0;
         u2 = 300.0 * qx / qz + 160.0;
@@ -50,22 +48,21 @@ static void loop_keypoints(float *first, float *second, uint8_t *descriptors)
     }
 }
 
-static void loop_descriptor(float *d, int scene)
+/* LOOP_POINTS scene points seen from a camera 0.3 m to the right and 0.1 m ahead, turned 3
+ * degrees. */
+static void loop_keypoints(float *first, float *second, uint8_t *descriptors)
+{
+    loop_scene_points(first, second, descriptors, 0.3, 0.1, 3.0);
+}
+
+void loop_descriptor(float *d, int scene)
 {
     for (int i = 0; i < LOOP_DIM; i++)
         d[i] = (i == scene % LOOP_DIM) ? 1.0f : 0.05f * (float)i;
 }
 
-/* The scene seen twice, and a keyframe of it. */
-struct loop_scene {
-    float points[2 * LOOP_POINTS], seen_again[2 * LOOP_POINTS], d[LOOP_DIM];
-    uint8_t descriptors[32 * LOOP_POINTS];
-};
-
-/* Fills `scene`, and `kf` (and `hint`) with their defaults (a check each) and the first view of
- * the scene: global descriptor of scene 1, its keypoints and their descriptors. */
-static void first_view_of_the_scene(struct loop_scene *scene, topoloc_loop_keyframe *kf,
-                                    topoloc_loop_hint *hint)
+void first_view_of_the_scene(struct loop_scene *scene, topoloc_loop_keyframe *kf,
+                             topoloc_loop_hint *hint)
 {
     loop_keypoints(scene->points, scene->seen_again, scene->descriptors);
     loop_descriptor(scene->d, 1);
@@ -78,7 +75,7 @@ static void first_view_of_the_scene(struct loop_scene *scene, topoloc_loop_keyfr
     kf->keypoint_descriptors = scene->descriptors;
 }
 
-static topoloc_status new_detector(const topoloc_loop_options *options, topoloc_loop_detector **det)
+topoloc_status new_detector(const topoloc_loop_options *options, topoloc_loop_detector **det)
 {
     return topoloc_loop_detector_new("test", "loops", LOOP_DIM, options, det);
 }
@@ -238,15 +235,20 @@ static void a_detector_saves_as_a_map_and_erases_keyframes_by_id(topoloc_loop_de
 }
 
 /* A second session from the map saved at `path` has both keyframes with their keypoints: a
- * revisit verifies against them as the first session did (the first keyframe of a streak). */
+ * revisit (a new image: its keypoints a quarter pixel off the saved ones) verifies against them
+ * as the first session did (the first keyframe of a streak). */
 static void a_second_session_from_the_saved_map_verifies_against_its_keypoints(
     const char *path, topoloc_loop_keyframe *kf, topoloc_loop_hint *hint)
 {
     topoloc_map *saved = NULL;
     topoloc_loop_detector *again = NULL;
     size_t len = 0, keypoints = 0;
+    float new_image[2 * LOOP_POINTS];
 
     SECTION();
+    for (size_t i = 0; i < 2 * LOOP_POINTS; i++)
+        new_image[i] = kf->keypoints[i] + 0.25f;
+    kf->keypoints = new_image;
     CHECK_STATUS(topoloc_map_load(path, NULL, &saved), TOPOLOC_OK);
     CHECK_STATUS(topoloc_map_keypoint_total(saved, &keypoints), TOPOLOC_OK);
     CHECK(keypoints == 2 * LOOP_POINTS);
@@ -259,6 +261,7 @@ static void a_second_session_from_the_saved_map_verifies_against_its_keypoints(
     CHECK(hint->query_id == 20 && hint->has_match && hint->inliers >= 30);
     CHECK(hint->matched_id == 0 || hint->matched_id == 10);
     CHECK(hint->gate == TOPOLOC_GATE_INCONSISTENT);
+    kf->keypoints = NULL;
     topoloc_loop_detector_free(again);
     topoloc_map_free(saved);
 }
@@ -375,6 +378,9 @@ static void a_new_session_finds_the_keyframes_just_lost_and_may_restart_its_cloc
     CHECK(!hint.has_match && hint.gate == TOPOLOC_GATE_NO_CANDIDATE);
 
     CHECK_STATUS(topoloc_loop_detector_begin_session(det), TOPOLOC_OK);
+    /* A new image of the same spot (a quarter pixel off keyframe 3's keypoints). */
+    for (size_t i = 0; i < 2 * LOOP_POINTS; i++)
+        scene.seen_again[i] += 0.25f;
     kf.id = 4;
     kf.timestamp = 0.0;
     CHECK_STATUS(topoloc_loop_detector_add(det, &kf, &hint), TOPOLOC_OK);

@@ -31,6 +31,10 @@ pub enum Gate {
     },
     /// No relative pose could be fitted.
     NoPose(PoseRefusal),
+    /// The candidate holds the very keypoints of the new keyframe: its own image, added again
+    /// or in a map built from this run's images. A live session needs a map of an earlier run,
+    /// or none; the detector logs a warning.
+    SelfMatch,
     /// The pose disagrees with the host's odometry.
     Odometry {
         /// Rotation difference, degrees.
@@ -51,6 +55,7 @@ impl Gate {
             Gate::Inconsistent { .. } => "inconsistent",
             Gate::NoPose(_) => "no_pose",
             Gate::Odometry { .. } => "odometry",
+            Gate::SelfMatch => "self_match",
         }
     }
 }
@@ -117,16 +122,31 @@ impl LoopDetector {
                 confidence: 0.0,
             });
         }
-        let total: u32 = verified.iter().map(|v| v.inliers).sum();
-        for v in &mut verified {
-            v.confidence = if total > 0 {
-                v.inliers as f32 / total as f32
-            } else {
-                0.0
-            };
+        share_and_rank(&mut verified);
+        Ok(verified)
+    }
+
+    /// The verified candidates as the host sees them: each candidate that refinement swapped
+    /// for a keyframe of its group with more inliers is replaced by that keyframe (with its own
+    /// similarity), so the list always holds the hint's matched keyframe; a keyframe listed
+    /// twice is kept once. Confidences are then shared again and the list ranked.
+    pub(super) fn settle(
+        &self,
+        entry: &KeyframeEntry<'_>,
+        mut verified: Vec<VerifiedCandidate>,
+        refined: &[(u64, VerifiedCandidate)],
+    ) -> Result<Vec<VerifiedCandidate>, LoopsError> {
+        for &(original, chosen) in refined {
+            if verified.iter().any(|v| v.id == chosen.id) {
+                verified.retain(|v| v.id != original);
+            } else if let Some(slot) = verified.iter_mut().find(|v| v.id == original) {
+                *slot = VerifiedCandidate {
+                    similarity: self.database.similarity(entry.descriptor, chosen.id)?,
+                    ..chosen
+                };
+            }
         }
-        // Stable: among equal inliers, the more similar (earlier) candidate stays first.
-        verified.sort_by_key(|v| std::cmp::Reverse(v.inliers));
+        share_and_rank(&mut verified);
         Ok(verified)
     }
 
@@ -182,6 +202,11 @@ impl LoopDetector {
         };
         // The best candidate is refined before the inlier gate: its stretch may hold a
         // keyframe the query agrees with more.
+        // A candidate that is the keyframe's own image means the map holds this run: no
+        // candidate of this keyframe means anything to the host.
+        if let Some(own) = verified.iter().find(|v| self.is_own_image(features, v.id)) {
+            return Ok(Some((*own, refused(Gate::SelfMatch, None))));
+        }
         let first = self.refine(entry, features, first, checks)?;
         if first.inliers < self.options.min_inliers {
             return Ok(Some((first, refused(Gate::TooFewInliers, None))));
@@ -237,6 +262,15 @@ impl LoopDetector {
             }),
         };
         Ok(Some((refined, gated)))
+    }
+
+    /// Whether keyframe `id` has exactly the query's keypoints (positions and descriptors):
+    /// the same image. Cost: one comparison pass, stopped at the first difference.
+    fn is_own_image(&self, features: &KeyframeFeatures, id: u64) -> bool {
+        let query = &features.keypoints;
+        self.features
+            .get(&id)
+            .is_some_and(|stored| !query.is_empty() && stored.keypoints == *query)
     }
 
     /// GC inliers of the query against keyframe `id` (checked once per query: the fit is kept
@@ -295,16 +329,30 @@ impl LoopDetector {
         let mut refined = best;
         // The stretch the candidate stands for (the keyframes the id gap skipped) and its
         // place group.
-        let gap = self.options.candidate_id_gap;
-        let stretch = (best.id.saturating_sub(gap.saturating_sub(1))
-            ..=best.id.saturating_add(gap.saturating_sub(1)))
-            .filter(|id| self.features.contains_key(id));
+        // The nearest `refine_keyframes` on either side are enough: the group keeps at most
+        // that many, nearest first. Walking the held ids (not the id range) keeps the cost
+        // independent of the gap's value.
+        let reach = self.options.candidate_id_gap.saturating_sub(1);
+        let usable = |id: &u64| *id != best.id && *id <= max_id && self.features.contains_key(id);
+        let per_side = self.options.refine_keyframes;
+        let below = self
+            .database
+            .ids_between(best.id.saturating_sub(reach), best.id)
+            .rev()
+            .filter(usable)
+            .take(per_side);
+        let above = self
+            .database
+            .ids_between(best.id, best.id.saturating_add(reach))
+            .filter(usable)
+            .take(per_side);
+        let stretch: Vec<u64> = below.chain(above).collect();
         let mut group: Vec<u64> = self
             .database
             .group_keyframes(best.place)
             .into_iter()
-            .chain(stretch)
             .filter(|&id| id != best.id && id <= max_id)
+            .chain(stretch)
             .collect();
         group.sort_by_key(|&id| (id.abs_diff(best.id), id));
         group.dedup();
@@ -314,8 +362,8 @@ impl LoopDetector {
                 continue;
             };
             if inliers > refined.inliers {
-                // Internal: the refined keyframe stands in for the candidate, whose
-                // similarity and confidence it keeps.
+                // The refined keyframe stands in for the candidate ([`Self::settle`] gives it
+                // its own similarity and confidence).
                 refined = VerifiedCandidate {
                     id,
                     place: self.database.place_of(id)?,
@@ -323,6 +371,9 @@ impl LoopDetector {
                     ..best
                 };
             }
+        }
+        if refined.id != best.id {
+            checks.refined.push((best.id, refined));
         }
         Ok(refined)
     }
@@ -445,15 +496,32 @@ impl LoopDetector {
     }
 }
 
-/// The pair checks of one query: their fits, by keyframe id, and the work counted.
+/// The pair checks of one query: their fits, by keyframe id, the candidates refinement
+/// swapped (`(candidate, the keyframe that replaced it)`), and the work counted.
 #[derive(Default)]
 pub(super) struct Checks {
     pub fits: HashMap<u64, PairFit>,
+    pub refined: Vec<(u64, VerifiedCandidate)>,
     pub work: Work,
 }
 
+/// Gives each candidate its share of all the candidates' inliers as its confidence, then ranks
+/// them by inliers (stable: among equal inliers, the more similar, earlier one stays first).
+fn share_and_rank(verified: &mut [VerifiedCandidate]) {
+    let total: u32 = verified.iter().map(|v| v.inliers).sum();
+    for v in verified.iter_mut() {
+        v.confidence = if total > 0 {
+            v.inliers as f32 / total as f32
+        } else {
+            0.0
+        };
+    }
+    verified.sort_by_key(|v| std::cmp::Reverse(v.inliers));
+}
+
 /// A loop candidate of a keyframe with its pair check: what a host that runs its own check
-/// ranks ([`Processed::candidates`](super::Processed::candidates)).
+/// ranks ([`Processed::candidates`](super::Processed::candidates)). A candidate that refinement
+/// swapped for a keyframe of its group with more inliers is listed as that keyframe.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct VerifiedCandidate {
     /// The candidate keyframe's id.
@@ -462,7 +530,7 @@ pub struct VerifiedCandidate {
     pub place: PlaceId,
     /// Cosine similarity of the keyframe's global descriptor to the candidate's.
     pub similarity: f32,
-    /// Fundamental-matrix inliers of the pair check (before refinement within its group).
+    /// Fundamental-matrix inliers of the pair check.
     pub inliers: u32,
     /// Its share of the inliers of every verified candidate of the keyframe (0..=1).
     pub confidence: f32,

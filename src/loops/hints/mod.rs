@@ -9,7 +9,9 @@
 //! 2. the candidate with the most fundamental-matrix inliers, refined within its group (the
 //!    keyframes of its place and the linked places, and of its stretch: neighbouring
 //!    keyframes look alike, geometry picks the nearest), has at least `min_inliers`
-//!    ([`Gate::TooFewInliers`]);
+//!    ([`Gate::TooFewInliers`]); no candidate may be the keyframe's own image (the very same
+//!    keypoints: a map built from this run's images, [`Gate::SelfMatch`], logged as a
+//!    warning);
 //! 3. with camera intrinsics and point-accurate features, a relative pose is found
 //!    ([`Gate::NoPose`]; dense cells verify but give no pose);
 //! 4. with odometry poses on both keyframes, the pose agrees with the odometry's relative
@@ -73,8 +75,9 @@ pub struct LoopHint {
     pub place: PlaceId,
     /// Fundamental-matrix inliers.
     pub inliers: u32,
-    /// The candidate's share of the inliers of every verified candidate (0..=1): near 1 when
-    /// no other candidate agrees with the query, near 1/n among n look-alikes.
+    /// The matched keyframe's share of the inliers of every verified candidate
+    /// ([`Processed::candidates`], where it is listed) (0..=1): near 1 when no other
+    /// candidate agrees with the query, near 1/n among n look-alikes.
     pub confidence: f32,
     /// The relative pose, when intrinsics were given and it was fitted.
     pub pose: Option<RelativePose>,
@@ -105,7 +108,8 @@ pub struct Processed {
     pub confirmed: Vec<LoopHint>,
     /// Every loop candidate that was verified, most inliers first (ties: the more similar),
     /// accepted or not: for hosts that run their own check on several (ORB-SLAM3 takes 3 loop
-    /// and 3 merge candidates). Empty when there was none.
+    /// and 3 merge candidates). A candidate refined to a neighbouring keyframe is listed as
+    /// that keyframe, so the hint's matched keyframe is always here. Empty when there was none.
     pub candidates: Vec<VerifiedCandidate>,
     /// The geometric work it took, for hosts that budget or log the cost.
     pub work: Work,
@@ -151,6 +155,9 @@ pub struct LoopDetector {
     /// The largest id of a previous session's keyframes ([`LoopDetector::from_map`]): they are
     /// never inside the exclusion window, whatever this session's ids.
     reloaded_max_id: Option<u64>,
+    /// Keyframes refused as [`Gate::SelfMatch`] so far (their warning is logged for the
+    /// first and then every hundredth).
+    self_matches: u64,
 }
 
 impl LoopDetector {
@@ -168,6 +175,7 @@ impl LoopDetector {
             confirmed: Vec::new(),
             candidates: Vec::new(),
             reloaded_max_id: None,
+            self_matches: 0,
         })
     }
 
@@ -295,17 +303,22 @@ impl LoopDetector {
         let mut checks = Checks::default();
         let verified = self.verified_candidates(entry, &features, &mut checks)?;
         let decided = self.decide(entry, &features, &verified, &mut checks)?;
+        let verified = self.settle(entry, verified, &checks.refined)?;
         let added = self.database.add(entry)?;
         let (hint, streak) = match decided {
             None => (None, None),
             Some((best, Gated { gate, pose, streak })) => {
+                let confidence = verified
+                    .iter()
+                    .find(|v| v.id == best.id)
+                    .map_or(best.confidence, |v| v.confidence);
                 let hint = LoopHint {
                     query_id: entry.id,
                     query_place: added.place,
                     matched_id: best.id,
                     place: best.place,
                     inliers: best.inliers,
-                    confidence: best.confidence,
+                    confidence,
                     pose,
                     gate,
                 };
@@ -318,6 +331,9 @@ impl LoopDetector {
         self.streak = streak;
         self.confirmed = self.follow_streak(hint.as_ref())?;
         self.candidates = verified;
+        if hint.is_some_and(|h| h.gate == Gate::SelfMatch) {
+            self.warn_self_match(entry.id, hint.map_or(0, |h| h.matched_id));
+        }
         match &hint {
             Some(h) => log::debug!(
                 "keyframe {}: candidate keyframe {} (place {}), {} inliers, gate {:?}; {} confirmed",
@@ -337,6 +353,21 @@ impl LoopDetector {
             candidates: self.candidates.clone(),
             work: checks.work,
         })
+    }
+
+    /// Logs that keyframe `id` matched its own image in keyframe `matched` (the first time and
+    /// every hundredth after): the host's likeliest mistake, a map built from this run's images.
+    fn warn_self_match(&mut self, id: u64, matched: u64) {
+        self.self_matches += 1;
+        if self.self_matches % 100 == 1 {
+            log::warn!(
+                "keyframe {id} has exactly the keypoints of keyframe {matched}: the same image \
+                 ({} such keyframes so far). If the detector was made from a map built from this \
+                 run's own images, every keyframe matches itself: a live session needs a map of \
+                 an earlier run (from_map) or none (new)",
+                self.self_matches
+            );
+        }
     }
 
     /// The hints the last successful [`LoopDetector::process`] confirmed

@@ -130,6 +130,12 @@ impl OdometryGate {
     /// Accepted values of [`Self::max_translation_per_m`].
     pub const PER_M_RANGE: Bounds = Bounds::at_least(0.0);
 
+    /// Fails with [`LoopsError::InvalidOption`] naming the bound out of range (for hosts
+    /// that hold a gate's bounds while the gate is off).
+    pub fn validate(&self) -> Result<(), LoopsError> {
+        self.check_ranges().map_err(LoopsError::InvalidOption)
+    }
+
     fn check_ranges(&self) -> Result<(), String> {
         Self::BOUND_RANGE.check("odometry max_rotation_deg", self.max_rotation_deg)?;
         Self::BOUND_RANGE.check("odometry max_translation_m", self.max_translation_m)?;
@@ -156,9 +162,14 @@ impl HintOptions {
     pub const ODOMETRY_SEARCH_M_RANGE: Bounds = Bounds::at_least(0.0);
     /// Accepted values of [`Self::refine_keyframes`] (0: no refinement).
     pub const REFINE_KEYFRAMES_RANGE: Bounds = Bounds::whole(0, 64);
+    /// Accepted values of [`Self::candidate_id_gap`] and [`Self::exclude_recent_ids`] (ids;
+    /// any: their cost does not grow with their value).
+    pub const ID_COUNT_RANGE: Bounds = Bounds::whole_at_least(0);
 
     fn check_ranges(&self) -> Result<(), String> {
         Self::CANDIDATES_RANGE.check("candidates", self.candidates)?;
+        Self::ID_COUNT_RANGE.check("candidate_id_gap", self.candidate_id_gap)?;
+        Self::ID_COUNT_RANGE.check("exclude_recent_ids", self.exclude_recent_ids)?;
         Self::EXCLUDE_RECENT_S_RANGE.check("exclude_recent_s", self.exclude_recent_s)?;
         Self::MIN_INLIERS_RANGE.check("min_inliers", self.min_inliers)?;
         Self::CONSISTENT_KEYFRAMES_RANGE

@@ -63,6 +63,21 @@ fn starts_like_map(bytes: &[u8]) -> bool {
     header[..n] == HEADER_START[..n]
 }
 
+/// Fails when serialised map `bytes` have a header longer than a reader accepts: a map is
+/// never saved that cannot be loaded.
+pub(super) fn check_header_fits(bytes: &[u8]) -> Result<(), MapError> {
+    let header_len = bytes
+        .get(..8)
+        .map_or(0, |b| u64::from_le_bytes(b.try_into().expect("8 bytes")));
+    if header_len > MAX_HEADER_BYTES {
+        return Err(MapError::Invalid(format!(
+            "the map's header would be {header_len} bytes, a reader accepts at most \
+             {MAX_HEADER_BYTES}: shorten the creator or the descriptor's kind or model"
+        )));
+    }
+    Ok(())
+}
+
 /// Checks the framing of a file (header length, JSON header, total length) and returns the
 /// `topoloc` metadata JSON string.
 pub(super) fn frame(bytes: &[u8]) -> Result<String, MapError> {

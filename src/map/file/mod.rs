@@ -121,8 +121,11 @@ impl Map {
             META_KEY.to_string(),
             serde_json::to_string(&meta).expect("serialises"),
         )]);
-        safetensors::serialize(tensors.iter().map(|(name, t)| (*name, t)), Some(metadata))
-            .map_err(|e| MapError::Invalid(format!("serialising the map failed: {e}")))
+        let bytes =
+            safetensors::serialize(tensors.iter().map(|(name, t)| (*name, t)), Some(metadata))
+                .map_err(|e| MapError::Invalid(format!("serialising the map failed: {e}")))?;
+        header::check_header_fits(&bytes)?;
+        Ok(bytes)
     }
 
     /// Writes the map to `path` atomically: a temporary file in the same directory is written,
