@@ -27,7 +27,7 @@
  *   topoloc/localizer.hpp   `Localizer`, `Frame`, `Result`
  *   topoloc/describer.hpp   `Describer`
  *   topoloc/keyframes.hpp   `KeyframeDescriber` (keyframe images for a loop detector)
- *   topoloc/loops.hpp       `LoopDetector`, `LoopKeyframe`, `LoopHint`, `Gate`,
+ *   topoloc/loops.hpp       `LoopDetector`, `LoopKeyframe`, `LoopHint`, `Gate`, `Translation`,
  *                           `LoopCandidateCheck`
  *   topoloc/trajectory.hpp  `evaluate_trajectory`, `evaluate_trajectory_files`
  *   topoloc/detail.hpp      internal: `detail::Owner`, filled C structs, string and array reads
@@ -53,11 +53,13 @@
  *                                                                 topoloc_opencv.hpp)
  *   forget history            topoloc_localizer_reset             Localizer::reset                   Localizer.reset
  *   new loop detector         topoloc_loop_detector_new           LoopDetector::create               LoopDetector(kind, ...)
+ *     for a map's descriptors                                     LoopDetector::for_descriptors_of   LoopDetector.for_descriptors_of
  *   loop detector from a map  topoloc_loop_detector_from_map      LoopDetector::from_map             LoopDetector.from_map
  *   add a keyframe (a hint)   topoloc_loop_detector_add           LoopDetector::add                  LoopDetector.add
- *   describe keyframe images  topoloc_keyframe_describer_new      KeyframeDescriber(map, options)    -
- *   add a keyframe image      topoloc_loop_detector_add_image     LoopDetector::add_image            -
- *   its verified candidates   topoloc_loop_detector_candidates    LoopDetector::candidates           -
+ *   describe keyframe images  topoloc_keyframe_describer_new      KeyframeDescriber(map, options)    KeyframeDescriber(map, ...)
+ *   add a keyframe image      topoloc_loop_detector_add_image     LoopDetector::add_image            LoopDetector.add_image
+ *   its verified candidates   topoloc_loop_detector_candidates    LoopDetector::candidates           LoopDetector.candidates
+ *   new session (new world)   topoloc_loop_detector_begin_session LoopDetector::begin_session        LoopDetector.begin_session
  *   hints it confirmed        topoloc_loop_detector_confirmed     LoopDetector::confirmed            LoopDetector.confirmed
  *                             (+ _confirmed_count)
  *   relocalization            topoloc_loop_detector_query         LoopDetector::query                LoopDetector.query

@@ -39,6 +39,8 @@ enum class Gate : uint32_t {
                        ///< the place (`consistent_keyframes`).
     NoPose = 4,        ///< `TOPOLOC_GATE_NO_POSE`: intrinsics given but no relative pose fitted.
     Odometry = 5,      ///< `TOPOLOC_GATE_ODOMETRY`: the pose disagrees with the host's odometry.
+    SelfMatch = 6,     ///< `TOPOLOC_GATE_SELF_MATCH` (ABI 1.17): the candidate is the keyframe's
+                       ///< own image (a map built from this run's images; see `from_map`).
 };
 static_assert(std::is_same_v<std::underlying_type_t<Gate>, topoloc_gate>,
               "Gate has the representation of topoloc_gate");
@@ -51,6 +53,24 @@ static_assert(static_cast<topoloc_gate>(Gate::Inconsistent) == TOPOLOC_GATE_INCO
               "Inconsistent");
 static_assert(static_cast<topoloc_gate>(Gate::NoPose) == TOPOLOC_GATE_NO_POSE, "NoPose");
 static_assert(static_cast<topoloc_gate>(Gate::Odometry) == TOPOLOC_GATE_ODOMETRY, "Odometry");
+static_assert(static_cast<topoloc_gate>(Gate::SelfMatch) == TOPOLOC_GATE_SELF_MATCH, "SelfMatch");
+
+/// What a hint's translation holds (`LoopHint::translation`; the C `TOPOLOC_TRANSLATION_*`
+/// values, ABI 1.17).
+enum class Translation : uint32_t {
+    None = 0,      ///< `TOPOLOC_TRANSLATION_NONE`: no pose, or a rotation only (exactly zero).
+    Direction = 1, ///< `TOPOLOC_TRANSLATION_DIRECTION`: unit length; the host finds the scale.
+    Metric = 2,    ///< `TOPOLOC_TRANSLATION_METRIC`: metres (the matched keyframe's points).
+};
+static_assert(std::is_same_v<std::underlying_type_t<Translation>, topoloc_translation>,
+              "Translation has the representation of topoloc_translation");
+static_assert(static_cast<topoloc_translation>(Translation::None) == TOPOLOC_TRANSLATION_NONE,
+              "None");
+static_assert(static_cast<topoloc_translation>(Translation::Direction) ==
+                  TOPOLOC_TRANSLATION_DIRECTION,
+              "Direction");
+static_assert(static_cast<topoloc_translation>(Translation::Metric) == TOPOLOC_TRANSLATION_METRIC,
+              "Metric");
 
 /// One relocalization candidate of `LoopDetector::query` (the C struct: keyframe id, place,
 /// cosine similarity).
@@ -67,7 +87,10 @@ using LoopCandidateCheck = topoloc_loop_candidate_check;
 /// keypoint: keypoint `i` is at (`keypoints[2i]`, `keypoints[2i+1]`), has descriptor bytes
 /// `keypoint_descriptors[32i .. 32i+32)` and scene point `camera_points[3i .. 3i+3)`.
 struct LoopKeyframe {
-    uint64_t id = 0;                   ///< Host keyframe id; must increase from one to the next.
+    /// Host keyframe id: its keyframe counter (not a frame index or a time; the exclusion
+    /// window and the candidate id gap count keyframes in it). Must increase from one to the
+    /// next, past erased keyframes' ids too.
+    uint64_t id = 0;
     double timestamp = 0.0;            ///< Seconds; must not decrease.
     std::vector<float> descriptor;     ///< Global descriptor (the detector's D floats).
     std::optional<Pose> world_T_body;  ///< Odometry pose of the body; all keyframes or none.
@@ -91,9 +114,12 @@ struct LoopHint {
     uint64_t matched_id = 0;       ///< The matched keyframe's id.
     uint32_t place = 0;            ///< The matched keyframe's place.
     uint32_t inliers = 0;          ///< Fundamental-matrix inliers between the two keyframes.
-    float confidence = 0.f;        ///< The candidate's share of the inliers of all verified ones.
+    float confidence = 0.f;   ///< The matched keyframe's share of the inliers of all verified ones.
     bool has_pose = false;    ///< `matched_T_query` and `covariance` are set (intrinsics given).
-    bool scale_known = false; ///< The translation is metric; else it has unit length.
+    bool scale_known = false; ///< The translation is metric (`translation == Metric`).
+    /// What the translation holds (ABI 1.17): metres, a unit direction, or none (no pose, or a
+    /// rotation only: exactly zero).
+    Translation translation = Translation::None;
     /// The query camera in the matched camera's optical frame (z forward, x right, y down),
     /// row-major 4x4; identity unless `has_pose`.
     Pose matched_T_query{1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1};
@@ -315,6 +341,7 @@ private:
         hint.confidence = raw.confidence;
         hint.has_pose = raw.has_pose;
         hint.scale_known = raw.scale_known;
+        hint.translation = static_cast<Translation>(raw.translation);
         std::memcpy(hint.matched_T_query.data(), raw.matched_T_query, sizeof raw.matched_T_query);
         std::memcpy(hint.covariance.data(), raw.covariance, sizeof raw.covariance);
         return hint;

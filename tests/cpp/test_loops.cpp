@@ -73,6 +73,12 @@ TEST(loop_options_and_gates)
     CHECK(options.pose_reprojection_px == 5.0);
     CHECK(options.odometry_candidates == 1u && options.odometry_search_m == 2.0);
     CHECK(options.max_match_pace == 3.0 && options.match_pace_slack_s == 0.5);
+    static_assert(TOPOLOC_ABI_VERSION_MINOR >= 17, "the CLI's loop options are ABI 1.17");
+    CHECK(options.refine_keyframes == 5u && options.pose_min_inliers == 30u);
+    CHECK(options.pair_estimator == TOPOLOC_PAIR_ESTIMATOR_RANSAC &&
+          options.pair_iterations == 100u && options.pair_min_cosine == 0.82f);
+    CHECK(options.cells_pair_estimator == TOPOLOC_PAIR_ESTIMATOR_MAGSAC &&
+          options.cells_pair_iterations == 1000u && options.cells_pair_min_cosine == -1.0f);
 
     static_assert(static_cast<uint32_t>(topoloc::Gate::Accepted) == TOPOLOC_GATE_ACCEPTED);
     static_assert(static_cast<uint32_t>(topoloc::Gate::NoCandidate) == TOPOLOC_GATE_NO_CANDIDATE);
@@ -266,7 +272,12 @@ TEST(loop_closure_flow)
     CHECK(saved.view_info(1).keyframe_id == std::optional<uint64_t>(10));
     topoloc::LoopDetector again = topoloc::LoopDetector::from_map(saved);
     CHECK_EQ(again.size(), std::size_t{2});
-    const topoloc::LoopHint later = again.add(keyframe(20, 20.0, true));
+    // A new image of the spot (its keypoints a quarter pixel off the saved ones: the very same
+    // keypoints would be the saved keyframe's own image, Gate::SelfMatch).
+    topoloc::LoopKeyframe new_image = keyframe(20, 20.0, true);
+    for (float &v : new_image.keypoints)
+        v += 0.25f;
+    const topoloc::LoopHint later = again.add(new_image);
     CHECK_EQ(later.query_id, uint64_t{20});
     // Verified against the saved keypoints (the first keyframe of a streak at the defaults).
     CHECK(later.has_match && later.inliers >= 30);
@@ -292,13 +303,20 @@ TEST(loop_detector_from_map_errors)
     CHECK_EQ(detector.size(), std::size_t{kPlaces * kViews});
 }
 
-TEST(metric_hint_with_intrinsics)
+// The test options with the pinhole intrinsics of the two-view scene.
+topoloc::LoopOptions options_with_intrinsics()
 {
     topoloc::LoopOptions options = test_options();
     options.fx = 300.0;
     options.fy = 300.0;
     options.cx = 160.0;
     options.cy = 120.0;
+    return options;
+}
+
+TEST(metric_hint_with_intrinsics)
+{
+    const topoloc::LoopOptions options = options_with_intrinsics();
     topoloc::LoopDetector detector =
         topoloc::LoopDetector::create("test", "loops", kLoopDim, options);
     topoloc::LoopKeyframe first = keyframe(0, 0.0, false);
@@ -306,7 +324,7 @@ TEST(metric_hint_with_intrinsics)
     (void)detector.add(first);
     const topoloc::LoopHint hint = detector.add(keyframe(10, 10.0, true));
     CHECK(hint.accepted && hint.gate == topoloc::Gate::Accepted && hint.matched_id == 0);
-    CHECK(hint.has_pose && hint.scale_known);
+    CHECK(hint.has_pose && hint.scale_known && hint.translation == topoloc::Translation::Metric);
     if (hint.has_pose) {
         // The second camera sits 0.3 m right and 0.1 m ahead of the first, turned 3 degrees.
         const topoloc::Pose &T = hint.matched_T_query;
@@ -321,6 +339,27 @@ TEST(metric_hint_with_intrinsics)
             }
         }
     }
+}
+
+TEST(a_hint_says_what_its_translation_holds_and_its_own_image_is_refused)
+{
+    // Without scene points: a unit direction.
+    const topoloc::LoopOptions options = options_with_intrinsics();
+    topoloc::LoopDetector first = topoloc::LoopDetector::create("test", "loops", kLoopDim, options);
+    (void)first.add(keyframe(0, 0.0, false));
+    const topoloc::LoopHint direction = first.add(keyframe(10, 10.0, true));
+    CHECK(direction.accepted && direction.translation == topoloc::Translation::Direction);
+    const topoloc::Pose &T = direction.matched_T_query;
+    CHECK(std::abs(std::sqrt(T[3] * T[3] + T[7] * T[7] + T[11] * T[11]) - 1.0) < 1e-9);
+
+    // A map of this run: its keyframes again, with the same keypoints, are their own images.
+    TempDir dir;
+    const std::string path = (dir.path / "own-run.topoloc").string();
+    first.save(path);
+    topoloc::LoopDetector live = topoloc::LoopDetector::from_map(topoloc::Map::load(path), options);
+    const topoloc::LoopHint own = live.add(keyframe(11, 0.0, false));
+    CHECK(own.has_match && !own.accepted && own.gate == topoloc::Gate::SelfMatch);
+    CHECK_EQ(own.matched_id, uint64_t{0});
 }
 
 TEST(loop_add_of_a_c_record)
