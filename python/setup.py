@@ -12,7 +12,8 @@ The metadata lives in ``pyproject.toml``; this file adds what it cannot say:
   not ``py3-none-any``), loaded through ctypes rather than the CPython C API (so one wheel serves
   every Python 3 of that platform).
 
-Build outputs go to ``<repository>/target/py-build``, not into the source tree. Errors are typed:
+Build outputs go to ``py-build`` in cargo's target directory (``$CARGO_TARGET_DIR``, else
+``<repository>/target``), not into the source tree. Errors are typed:
 :class:`CargoNotFoundError` when there is no ``cargo``, :class:`CargoBuildError` when the build
 fails or produces no library, :class:`CargoManifestError` when ``Cargo.toml`` has no version.
 
@@ -115,6 +116,14 @@ def _run_cargo(cmd: List[str], env: Dict[str, str], capture: bool) -> subprocess
         raise CargoNotFoundError(f"could not run cargo ({cmd[0]}): {e}") from e
 
 
+def build_directory(env: Dict[str, str]) -> Path:
+    """Where setuptools builds: ``py-build`` in ``$CARGO_TARGET_DIR`` (relative to the
+    working directory, as cargo reads it) when set, else in ``<repository>/target``. Known
+    before cargo runs, so that no build file lands in a checkout a caller moved away from."""
+    target = env.get("CARGO_TARGET_DIR")
+    return (Path(target).resolve() if target else REPO_ROOT / "target") / "py-build"
+
+
 def target_directory(cargo: str, env: Dict[str, str]) -> Path:
     """Cargo's target directory for the workspace (``cargo metadata``)."""
     cmd = [
@@ -194,7 +203,7 @@ def _setup() -> None:
         def has_ext_modules(self) -> bool:
             return True
 
-    build_base = REPO_ROOT / "target" / "py-build"
+    build_base = build_directory(dict(os.environ))
     setup(
         version=cargo_version(),
         distclass=BinaryDistribution,
@@ -207,6 +216,5 @@ def _setup() -> None:
 
 
 if __name__ == "__main__":
-    build_base_dir = REPO_ROOT / "target" / "py-build"
-    build_base_dir.mkdir(parents=True, exist_ok=True)
+    build_directory(dict(os.environ)).mkdir(parents=True, exist_ok=True)
     _setup()

@@ -98,8 +98,9 @@ def test_options_defaults():
     raw = _options.defaults(_lib.topoloc_loop_options, _lib.lib.topoloc_loop_options_init)
     assert raw.struct_size == ctypes.sizeof(_lib.topoloc_loop_options)
     assert set(d) == {name for name, _ in _lib.topoloc_loop_options._fields_} - {"struct_size"}
+    estimators = {"ransac": _lib.PAIR_ESTIMATOR_RANSAC, "magsac": _lib.PAIR_ESTIMATOR_MAGSAC}
     for name, value in d.items():
-        assert value == getattr(raw, name), name
+        assert estimators.get(value, value) == getattr(raw, name), name
     assert d["candidates"] == 5 and d["min_inliers"] == 30 and d["consistent_keyframes"] == 3
     assert d["exclude_recent_ids"] == 30 and d["exclude_recent_s"] == 10.0
     assert d["odometry_gate"] is True
@@ -111,6 +112,12 @@ def test_options_defaults():
     assert d["odometry_max_translation_per_m"] == 0.02 and d["pose_reprojection_px"] == 5.0
     assert d["odometry_candidates"] == 1 and d["odometry_search_m"] == 2.0
     assert d["max_match_pace"] == 3.0 and d["match_pace_slack_s"] == 0.5
+    # ABI 1.17: the verification options the CLI had alone.
+    assert d["refine_keyframes"] == 5 and d["pose_min_inliers"] == 30
+    assert d["pair_estimator"] == "ransac" and d["pair_iterations"] == 100
+    assert d["pair_min_cosine"] == pytest.approx(0.82)
+    assert d["cells_pair_estimator"] == "magsac" and d["cells_pair_iterations"] == 1000
+    assert d["cells_pair_min_cosine"] == -1.0
     with topoloc.LoopDetector("test", "loops", DIM) as det:
         assert det.options == d and det.dim == DIM
     with topoloc.LoopDetector(
@@ -136,7 +143,7 @@ def test_invalid_options():
 
 
 def test_gate_constants():
-    assert [int(g) for g in topoloc.Gate] == [0, 1, 2, 3, 4, 5]
+    assert [int(g) for g in topoloc.Gate] == [0, 1, 2, 3, 4, 5, 6]
     for g in topoloc.Gate:
         assert getattr(_lib, f"GATE_{g.name}") == g
 
@@ -328,7 +335,8 @@ def test_save_load_and_second_session(tmp_path, detector, views):
             and again.dim == DIM
             and again.options == dict(topoloc.loop_options_default(), **OPTIONS)
         )
-        hint = again.add(20, 20.0, descriptor(1), first, descriptors)
+        # The same place seen again (not the same image: that is refused as SELF_MATCH).
+        hint = again.add(20, 20.0, descriptor(1), first + 0.25, descriptors)
         # Verified against the saved keypoints, as live.
         assert hint.query_id == 20 and hint.has_match and hint.inliers >= 30
         assert hint.gate == topoloc.Gate.ACCEPTED and hint.matched_id in (0, 10)

@@ -183,6 +183,14 @@ def test_setup_reads_the_cargo_version(setup_py, monkeypatch, tmp_path):
     assert setup_py.cargo_version() == expected
 
 
+def test_setup_builds_in_cargos_target_directory(setup_py, tmp_path):
+    repo_target = setup_py.REPO_ROOT / "target" / "py-build"
+    assert setup_py.build_directory({}) == repo_target
+    assert setup_py.build_directory({"CARGO_TARGET_DIR": ""}) == repo_target
+    elsewhere = tmp_path / "cargo-target"
+    assert setup_py.build_directory({"CARGO_TARGET_DIR": str(elsewhere)}) == elsewhere / "py-build"
+
+
 def test_setup_refuses_a_manifest_without_version(setup_py, tmp_path):
     bad = tmp_path / "Cargo.toml"
     bad.write_text('[package]\nname = "topoloc"\nversion.workspace = true\n')

@@ -36,11 +36,15 @@ map frame.
 
 Loop closure (ABI 1.5): a :class:`LoopDetector` takes SLAM keyframes (global descriptor,
 keypoints with binary descriptors, optional poses) and returns one gated :class:`LoopHint` per
-keyframe, with the relative pose when camera intrinsics are given.
+keyframe, with the relative pose when camera intrinsics are given (:class:`Translation` says
+whether its translation is metric, a direction, or none). Keyframe ids count keyframes, not
+camera frames. A live run starts an empty detector; a later run closes loops against an
+earlier one with ``LoopDetector.from_map(Map.load(saved))``, never with a map of its own
+images (each keyframe would match itself: :attr:`Gate.SELF_MATCH`).
 
 A :class:`Describer` (ABI 1.12) turns images into the global descriptors of a map built from
-images, for a loop detector made for that map's descriptors (``LoopDetector(m.descriptor_kind,
-m.descriptor_model, m.dim)``). A :class:`KeyframeDescriber` (ABI 1.15) also extracts the
+images, for a loop detector made for that map's descriptors
+(``LoopDetector.for_descriptors_of(m)``). A :class:`KeyframeDescriber` (ABI 1.15) also extracts the
 image's local features (XFeat by default, :class:`LocalFeatures`) in the same pass:
 :meth:`LoopDetector.add_image` takes keyframes as images (and depth), and
 :meth:`LoopDetector.candidates` lists the verified candidates (:class:`LoopCandidateCheck`).
@@ -112,7 +116,7 @@ from ._lib import (
 )
 from ._localizer import Candidate, Localizer, PoseFix, Result, localizer_options_default
 from ._logging import TRACE, log_level, set_log_level
-from ._loops import Gate, LoopCandidate, LoopDetector, LoopHint, loop_options_default
+from ._loops import Gate, LoopCandidate, LoopDetector, LoopHint, Translation, loop_options_default
 from ._map import Map, MapBuilder, ViewInfo, keyframe_options_default, map_from_keyframes
 from ._skeleton import Graph, skeleton_graph, skeleton_options_default
 from ._trajectory import (
@@ -161,6 +165,7 @@ __all__ = [
     "KeyframeDescriber",
     "LocalFeatures",
     "Gate",
+    "Translation",
     # trajectory metrics (ABI 1.11)
     "evaluate_trajectory",
     "evaluate_trajectory_files",

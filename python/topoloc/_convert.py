@@ -136,9 +136,18 @@ def _path(value: PathLike, name: str = "path") -> bytes:
 # ---------------------------------------------------------------------------------------------
 
 
+def _real_array(values: Any, name: str) -> NDArray[Any]:
+    """``values`` as an array of real numbers: ``TypeError`` for complex, boolean, string or
+    object elements (which a cast to float would change or drop silently)."""
+    arr = np.asarray(values)
+    if arr.size and arr.dtype.kind not in "iuf":
+        raise TypeError(f"{name} must be an array of real numbers, got dtype {arr.dtype}")
+    return arr
+
+
 def _descriptor(values: Any, name: str = "descriptor") -> NDArray[np.float32]:
     """A C-contiguous float32 1-D copy (or view) of ``values``."""
-    arr = np.asarray(values, dtype=np.float32)
+    arr = _real_array(values, name)
     if arr.ndim != 1:
         raise DimensionMismatchError(f"{name} must be a 1-D array of floats, got shape {arr.shape}")
     return np.ascontiguousarray(arr, dtype=np.float32)
@@ -146,7 +155,7 @@ def _descriptor(values: Any, name: str = "descriptor") -> NDArray[np.float32]:
 
 def _pose(values: Any, name: str) -> NDArray[np.float64]:
     """A C-contiguous (row-major) float64 4x4 array."""
-    arr = np.asarray(values, dtype=np.float64)
+    arr = _real_array(values, name)
     if arr.shape != (4, 4):
         raise InvalidArgumentError(f"{name} must be a 4x4 matrix, got shape {arr.shape}")
     return np.ascontiguousarray(arr, dtype=np.float64)
@@ -156,10 +165,7 @@ def _keypoint_array(
     values: Any, name: str, columns: int, count: Optional[int]
 ) -> NDArray[np.float32]:
     """A C-contiguous float32 (N, columns) array; ``count``: the N it must have."""
-    arr = np.asarray(values)
-    if arr.size and arr.dtype.kind not in "iuf":
-        raise TypeError(f"{name} must be an array of real numbers, got dtype {arr.dtype}")
-    arr = arr.astype(np.float32, copy=False)
+    arr = _real_array(values, name).astype(np.float32, copy=False)
     if arr.ndim != 2 or arr.shape[1] != columns:
         raise InvalidArgumentError(f"{name} must be an (N, {columns}) array, got shape {arr.shape}")
     if count is not None and arr.shape[0] != count:

@@ -47,7 +47,7 @@ ABI_VERSION = 1
 
 #: ABI minor version these bindings were written for (``TOPOLOC_ABI_VERSION_MINOR``): they use
 #: items up to "ABI 1.N" of the header.
-ABI_VERSION_MINOR = 16
+ABI_VERSION_MINOR = 17
 
 #: Environment variable naming the shared library to load.
 ENV_VAR = "TOPOLOC_LIBRARY"
@@ -95,6 +95,17 @@ GATE_TOO_FEW_INLIERS = 2
 GATE_INCONSISTENT = 3
 GATE_NO_POSE = 4
 GATE_ODOMETRY = 5
+#: ``TOPOLOC_GATE_SELF_MATCH`` (ABI 1.17): the candidate is the query's own image.
+GATE_SELF_MATCH = 6
+
+#: ``TOPOLOC_PAIR_ESTIMATOR_*`` (ABI 1.17): the estimator of a keyframe pair's geometric check.
+PAIR_ESTIMATOR_RANSAC = 0
+PAIR_ESTIMATOR_MAGSAC = 1
+
+#: ``TOPOLOC_TRANSLATION_*`` (ABI 1.17): what a loop hint's translation holds.
+TRANSLATION_NONE = 0
+TRANSLATION_DIRECTION = 1
+TRANSLATION_METRIC = 2
 
 #: ``TOPOLOC_LOCAL_FEATURES_*`` (ABI 1.15): local features of image maps and keyframe describers.
 LOCAL_FEATURES_ORB = 1
@@ -396,6 +407,15 @@ class topoloc_loop_options(Structure):
         # ABI 1.15
         ("max_match_pace", c_double),
         ("match_pace_slack_s", c_double),
+        # ABI 1.17
+        ("refine_keyframes", c_uint32),
+        ("pose_min_inliers", c_uint32),
+        ("pair_estimator", c_uint32),
+        ("pair_iterations", c_uint32),
+        ("pair_min_cosine", c_float),
+        ("cells_pair_estimator", c_uint32),
+        ("cells_pair_iterations", c_uint32),
+        ("cells_pair_min_cosine", c_float),
     ]
 
 
@@ -431,6 +451,8 @@ class topoloc_loop_hint(Structure):
         ("scale_known", c_bool),
         ("matched_T_query", c_double * 16),
         ("covariance", c_double * 36),
+        # ABI 1.17
+        ("translation", c_uint32),
     ]
 
 

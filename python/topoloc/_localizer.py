@@ -23,6 +23,7 @@ from ._convert import (
     _image,
     _matrix,
     _pose,
+    _real,
 )
 from ._errors import InvalidOptionError, check
 from ._handles import _SingleThreaded
@@ -332,7 +333,7 @@ class Localizer(_SingleThreaded):
             q = None
             img, _pixels = _image(image, pixel_format, "image")
         odo = None if odometry is None else _pose(odometry, "odometry")
-        ts = float(timestamp)
+        ts = _real(timestamp, "timestamp")
         # q, odo and _pixels (locals, alive until the call returns) hold what the frame points to.
         with self._using("process") as h:
             frame, result = self._frame, self._result

@@ -1,5 +1,6 @@
 """Loop closure (ABI 1.5; mirrors ``src/ffi/loops.rs``, image keyframes ``src/ffi/loop_images.rs``):
-:class:`LoopDetector`, its options, :class:`LoopHint`, :class:`LoopCandidate` and :class:`Gate`.
+:class:`LoopDetector`, its options, :class:`LoopHint`, :class:`LoopCandidate`, :class:`Gate`
+and :class:`Translation`.
 """
 
 from __future__ import annotations
@@ -8,7 +9,7 @@ import ctypes
 import enum
 from ctypes import byref, c_size_t
 from dataclasses import dataclass
-from typing import Any, Callable, Dict, List, Optional, Union
+from typing import Any, Callable, Dict, List, Optional, Type, TypeVar, Union
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -26,6 +27,7 @@ from ._convert import (
     _out_call,
     _path,
     _pose,
+    _real,
     _text,
     _u8_ptr,
     _u32,
@@ -36,9 +38,16 @@ from ._handles import _SingleThreaded
 from ._keyframes import KeyframeDescriber, LoopCandidateCheck, _depth_image, _describer_handle
 from ._lib import lib
 from ._map import Map, _map_handle
-from ._options import OptionTable, defaults, flag, real, unsigned, unsigned64
+from ._options import OptionTable, choice, defaults, flag, real, unsigned, unsigned64
 
-__all__ = ["Gate", "LoopCandidate", "LoopDetector", "LoopHint", "loop_options_default"]
+__all__ = [
+    "Gate",
+    "LoopCandidate",
+    "LoopDetector",
+    "LoopHint",
+    "Translation",
+    "loop_options_default",
+]
 
 
 class Gate(enum.IntEnum):
@@ -58,6 +67,22 @@ class Gate(enum.IntEnum):
     NO_POSE = _lib.GATE_NO_POSE
     #: The pose disagrees with the host's odometry beyond the bounds.
     ODOMETRY = _lib.GATE_ODOMETRY
+    #: The candidate is the query's own image (every keypoint matched, no motion): the
+    #: detector was started from a map of this run's own images instead of an earlier run's
+    #: (ABI 1.17; the library also logs a warning).
+    SELF_MATCH = _lib.GATE_SELF_MATCH
+
+
+class Translation(enum.IntEnum):
+    """What the translation of :attr:`LoopHint.matched_T_query` holds
+    (``TOPOLOC_TRANSLATION_*``, ABI 1.17): which factor a pose graph adds."""
+
+    #: No pose, or a rotation only: the translation is exactly zero (a rotation factor alone).
+    NONE = _lib.TRANSLATION_NONE
+    #: A unit direction: the scale is unknown (a direction factor).
+    DIRECTION = _lib.TRANSLATION_DIRECTION
+    #: Metres: the matched keyframe had scene points (a full between-factor).
+    METRIC = _lib.TRANSLATION_METRIC
 
 
 @dataclass(frozen=True, eq=False)
@@ -78,12 +103,15 @@ class LoopHint:
         has_pose: whether ``matched_T_query`` and ``covariance`` are set (intrinsics given,
             pose fitted).
         scale_known: whether the translation is metric (the matched keyframe had scene
-            points); otherwise it has unit length (a direction).
+            points); otherwise it is a unit direction or, for a rotation only, zero:
+            ``translation`` says which.
         matched_T_query: (4, 4) float64, the query camera in the matched camera's optical
             frame (z forward, x right, y down); the identity without a pose.
         covariance: (6, 6) float64 covariance of ``matched_T_query`` for a right
             perturbation, in GTSAM Pose3 tangent order: rotation (rad) x y z, then
             translation (m) x y z; zeros without a pose.
+        translation: the :class:`Translation` that ``matched_T_query`` holds (metres, a unit
+            direction, or none).
     """
 
     query_id: int
@@ -99,6 +127,7 @@ class LoopHint:
     scale_known: bool
     matched_T_query: NDArray[np.float64]
     covariance: NDArray[np.float64]
+    translation: Union[Translation, int]
 
 
 @dataclass(frozen=True)
@@ -110,6 +139,12 @@ class LoopCandidate:
     place: int
     similarity: float
 
+
+#: ``TOPOLOC_PAIR_ESTIMATOR_*`` by name: the estimator of a keyframe pair's geometric check.
+_PAIR_ESTIMATORS = {
+    "ransac": _lib.PAIR_ESTIMATOR_RANSAC,
+    "magsac": _lib.PAIR_ESTIMATOR_MAGSAC,
+}
 
 #: The :class:`LoopDetector` options: the fields of ``topoloc_loop_options``, by their names.
 LOOP_OPTIONS = OptionTable(
@@ -140,6 +175,14 @@ LOOP_OPTIONS = OptionTable(
         unsigned("odometry_candidates"),
         real("max_match_pace"),
         real("match_pace_slack_s"),
+        unsigned("refine_keyframes"),
+        unsigned("pose_min_inliers"),
+        choice("pair_estimator", _PAIR_ESTIMATORS),
+        unsigned("pair_iterations"),
+        real("pair_min_cosine"),
+        choice("cells_pair_estimator", _PAIR_ESTIMATORS),
+        unsigned("cells_pair_iterations"),
+        real("cells_pair_min_cosine"),
     ],
 )
 
@@ -198,9 +241,21 @@ class LoopDetector(_SingleThreaded):
     ``odometry_max_translation_per_m``), the camera's pinhole intrinsics for relative poses
     (``fx``, ``fy``, ``cx``, ``cy``; without them hints carry no pose;
     ``pose_reprojection_px``), the place graph (``novelty_similarity``, ``place_spacing_m``,
-    ``neighbour_radius_m``) and the candidates the odometry adds (``odometry_candidates``,
-    ``odometry_search_m``). A value out of range raises :class:`InvalidOptionError`, an
-    unknown name ``TypeError``.
+    ``neighbour_radius_m``), the candidates the odometry adds (``odometry_candidates``,
+    ``odometry_search_m``) and the verification itself (``refine_keyframes``,
+    ``pose_min_inliers``, ``pair_estimator`` and ``cells_pair_estimator`` as ``"ransac"`` or
+    ``"magsac"``, ``pair_iterations``, ``pair_min_cosine``, ``cells_pair_iterations``,
+    ``cells_pair_min_cosine``). A value out of range raises :class:`InvalidOptionError`, a
+    value of the wrong type (a string for a flag) or an unknown name ``TypeError``.
+
+    Keyframe ids count keyframes (0, 1, 2, ... or any increasing numbers), not camera frames:
+    ``exclude_recent_ids`` and ``candidate_id_gap`` are in these units.
+
+    Which constructor: a live run's first session starts empty (this constructor, or
+    :meth:`for_descriptors_of` for the descriptors of an image map); to close loops against
+    an earlier run, :meth:`save` that run's detector and start the next with :meth:`from_map`
+    of the loaded map. A map built from this run's own images is not a session: each keyframe
+    would match itself (refused as :attr:`Gate.SELF_MATCH`).
 
     Ownership: owns a C ``topoloc_loop_detector`` handle, released by :meth:`close`, the
     ``with`` statement or garbage collection. A map given to :meth:`from_map` is not kept.
@@ -214,6 +269,14 @@ class LoopDetector(_SingleThreaded):
         names = _text(kind, "kind"), _text(model, "model")
         d = _u32(dim, "dim")
         self._open_with(opts, d, lib.topoloc_loop_detector_new, *names, d)
+
+    @classmethod
+    def for_descriptors_of(cls, map: Map, **options: Any) -> LoopDetector:
+        """An empty detector for the global descriptors of ``map`` (its kind, model and
+        dimension): for a host that describes its keyframe images with a
+        :class:`KeyframeDescriber` of the same map. The map is not kept. Options and errors as
+        for the constructor."""
+        return cls(map.descriptor_kind, map.descriptor_model, map.dim, **options)
 
     @classmethod
     def from_map(cls, map: Map, **options: Any) -> LoopDetector:
@@ -291,7 +354,7 @@ class LoopDetector(_SingleThreaded):
         id, earlier timestamp, poses on some keyframes only, bad keypoints, non-rigid poses).
         """
         kid = _u64(id, "id")
-        ts = float(timestamp)
+        ts = _real(timestamp, "timestamp")
         q = _descriptor(descriptor)
         if (keypoints is None) != (keypoint_descriptors is None):
             raise InvalidArgumentError(
@@ -366,7 +429,7 @@ class LoopDetector(_SingleThreaded):
         """
         keyframes = _describer_handle(describer)
         kid = _u64(id, "id")
-        ts = float(timestamp)
+        ts = _real(timestamp, "timestamp")
         img, pixels = _image(image, pixel_format, "image")
         depth_struct = None
         if depth is not None:
@@ -485,15 +548,19 @@ def _loop_hint(hint: Any) -> LoopHint:
     return _from_struct(
         LoopHint,
         hint,
-        gate=_gate(int(hint.gate)),
+        gate=_known(Gate, int(hint.gate)),
         matched_T_query=_matrix(hint.matched_T_query, 4),
         covariance=_matrix(hint.covariance, 6),
+        translation=_known(Translation, int(hint.translation)),
     )
 
 
-def _gate(code: int) -> Union[Gate, int]:
-    """The :class:`Gate` of a code (a code from a newer library stays an int)."""
+_E = TypeVar("_E", bound=enum.IntEnum)
+
+
+def _known(kind: Type[_E], code: int) -> Union[_E, int]:
+    """The ``kind`` member of a code (a code from a newer library stays an int)."""
     try:
-        return Gate(code)
+        return kind(code)
     except ValueError:
         return code

@@ -29,6 +29,8 @@ from typing import (
     Union,
 )
 
+import numpy as np
+
 from ._convert import _code, _code_name, _path, _real, _text, _u32, _u64
 from ._errors import TopolocError, check
 
@@ -108,6 +110,9 @@ def _path_value(stored: Optional[bytes]) -> Optional[str]:
 
 
 def _flag(value: Any, name: str, error: Type[TopolocError]) -> bool:
+    # A str ("false") or a number would turn the option on by its truth: only booleans.
+    if not isinstance(value, (bool, np.bool_)):
+        raise TypeError(f"{name} must be a bool, got {type(value).__name__}")
     return bool(value)
 
 
@@ -137,7 +142,7 @@ unsigned = FieldKind(_u32, int)
 unsigned64 = FieldKind(_u64, int)
 #: A ``float`` or ``double`` option (the library checks NaN, infinities and the range).
 real = FieldKind(_real, float)
-#: A ``bool`` option (any value, by its truth).
+#: A ``bool`` option (``True``/``False`` or a numpy bool; anything else is a ``TypeError``).
 flag = FieldKind(_flag, bool)
 #: A C string option (``str`` or UTF-8 ``bytes``; read back ``None`` for NULL or "").
 text = FieldKind(_text_field, _text_value)
