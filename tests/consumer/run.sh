@@ -45,6 +45,23 @@ cmake -S "$repo" -B "$work/topoloc-build" "${generator_args[@]}" \
 cmake --build "$work/topoloc-build"
 cmake --install "$work/topoloc-build"
 
+section "the default cargo target dir of an out-of-tree build (configure only)"
+# Without -DTOPOLOC_CARGO_TARGET_DIR cargo must write under the build dir, or into
+# $CARGO_TARGET_DIR when set: never into the source tree.
+cached_target() {
+    sed -n 's/^TOPOLOC_CARGO_TARGET_DIR:PATH=//p' "$1/CMakeCache.txt"
+}
+env -u CARGO_TARGET_DIR cmake -S "$repo" -B "$work/default-build" "${generator_args[@]}" \
+    -DTOPOLOC_ENABLE_TESTS=OFF >/dev/null
+[[ "$(cached_target "$work/default-build")" == "$work/default-build/cargo-target" ]] ||
+    fail "default cargo target dir is $(cached_target "$work/default-build"), expected $work/default-build/cargo-target"
+CARGO_TARGET_DIR="$work/elsewhere" cmake -S "$repo" -B "$work/env-build" "${generator_args[@]}" \
+    -DTOPOLOC_ENABLE_TESTS=OFF >/dev/null
+[[ "$(cached_target "$work/env-build")" == "$work/elsewhere" ]] ||
+    fail "with CARGO_TARGET_DIR the cargo target dir is $(cached_target "$work/env-build"), expected $work/elsewhere"
+rm -rf "$work/default-build" "$work/env-build"
+echo "ok: <build>/cargo-target by default, \$CARGO_TARGET_DIR when set"
+
 libdir_rel="$(sed -n 's/^CMAKE_INSTALL_LIBDIR:PATH=//p' "$work/topoloc-build/CMakeCache.txt")"
 includedir_rel="$(sed -n 's/^CMAKE_INSTALL_INCLUDEDIR:PATH=//p' "$work/topoloc-build/CMakeCache.txt")"
 libdir="$prefix/${libdir_rel:-lib}"
