@@ -4,12 +4,18 @@
 # of it enters topoloc's repository).
 #
 #   cpp-examples/orbslam/integrate/integrate.sh ORB_SLAM3_DIR PANGOLIN_DIR WORK_DIR [--variants "stock topoloc"]
+#       [--orbslam-rev REV] [--pangolin-rev REV]
 #
 # ORB_SLAM3_DIR  a checkout of github.com/UZ-SLAMLab/ORB_SLAM3 at v1.0 (the vocabulary file
-#                ORBvoc.txt is not needed: run.sh trains one)
-# PANGOLIN_DIR   a checkout of github.com/stevenlovegrove/Pangolin at v0.8 (Debian 12 has none)
+#                ORBvoc.txt is not needed: run.sh trains one), or its git directory without a
+#                work tree (a bare clone, or the snapshot `fetch` brings): its HEAD
+#                (--orbslam-rev REV another commit) is laid out into WORK_DIR/upstream/orbslam3,
+#                skipping the blobs the snapshot lacks (the vocabulary tarball, IMU timestamps)
+# PANGOLIN_DIR   a checkout of github.com/stevenlovegrove/Pangolin at v0.8 (Debian 12 has none),
+#                or its git directory, laid out the same way (--pangolin-rev REV, default HEAD)
 # WORK_DIR       gets pangolin/ (its install), topoloc-install/ (topoloc installed with CMake from this
-#                checkout), and one ORB-SLAM3 tree per variant, built: WORK_DIR/<variant>/lib/
+#                checkout), the topoloc CLI that run.sh calls (<checkout>/target/release/topoloc),
+#                and one ORB-SLAM3 tree per variant, built: WORK_DIR/<variant>/lib/
 #                libORB_SLAM3.so, Examples/Monocular/mono_kitti, Examples/RGB-D/rgbd_tum,
 #                and WORK_DIR/<variant>/train_vocabulary
 # --variants     which trees to build (default both)
@@ -35,7 +41,7 @@ source "$ROOT/scripts/lib.sh"
 source "$ROOT/cpp-examples/common/integrate_lib.sh"
 
 usage() {
-    sed -n '2,27p' "${BASH_SOURCE[0]}" | sed 's/^# \{0,1\}//'
+    sed -n '2,33p' "${BASH_SOURCE[0]}" | sed 's/^# \{0,1\}//'
     exit "${1:-0}"
 }
 
@@ -44,8 +50,15 @@ ORB_SLAM3_DIR="$(cd "$1" && pwd)" PANGOLIN_DIR="$(cd "$2" && pwd)" WORK_DIR="$3"
 shift 3
 VARIANTS="stock topoloc"
 ASAN=OFF
+ORBSLAM_REV=HEAD
+PANGOLIN_REV=HEAD
 while [[ $# -gt 0 ]]; do
     case "$1" in
+        --orbslam-rev | --pangolin-rev)
+            [[ $# -ge 2 ]] || fail "$1 needs a commit"
+            if [[ "$1" == --orbslam-rev ]]; then ORBSLAM_REV="$2"; else PANGOLIN_REV="$2"; fi
+            shift 2
+            ;;
         --variants)
             [[ $# -ge 2 ]] || fail "--variants needs a list"
             VARIANTS="$2"
@@ -62,10 +75,12 @@ done
 for v in $VARIANTS; do
     [[ "$v" == stock || "$v" == topoloc ]] || fail "unknown variant '$v' (stock or topoloc)"
 done
-[[ -f "$PANGOLIN_DIR/components/pango_core/include/pangolin/pangolin.h" ]] ||
-    fail "$PANGOLIN_DIR is not a Pangolin checkout (v0.8)"
 mkdir -p "$WORK_DIR"
 WORK_DIR="$(cd "$WORK_DIR" && pwd)"
+ORB_SLAM3_DIR="$(UPSTREAM_REV="$ORBSLAM_REV" upstream_tree "$ORB_SLAM3_DIR" orbslam3 "$WORK_DIR")"
+PANGOLIN_DIR="$(UPSTREAM_REV="$PANGOLIN_REV" upstream_tree "$PANGOLIN_DIR" pangolin "$WORK_DIR")"
+[[ -f "$PANGOLIN_DIR/components/pango_core/include/pangolin/pangolin.h" ]] ||
+    fail "$PANGOLIN_DIR is not a Pangolin checkout (v0.8)"
 JOBS="$(nproc)"
 
 apt_install_missing orbslam3-integrate build-essential cmake pkg-config libopencv-dev libeigen3-dev \
@@ -90,6 +105,7 @@ echo "ok"
 if [[ " $VARIANTS " == *" topoloc "* ]]; then
     install_topoloc "$ROOT" "$WORK_DIR"
 fi
+build_topoloc_cli "$ROOT"
 
 for variant in $VARIANTS; do
     tree="$WORK_DIR/$variant"

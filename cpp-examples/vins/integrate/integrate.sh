@@ -6,8 +6,11 @@
 #   cpp-examples/vins/integrate/integrate.sh VINS_FUSION_DIR WORK_DIR [--variants "stock topoloc"]
 #
 # VINS_FUSION_DIR  a checkout of github.com/HKUST-Aerial-Robotics/VINS-Fusion (master be55a93;
-#                  support_files/brief_k10L6.bin is not needed: run.sh trains one)
-# WORK_DIR         gets topoloc-install/ (topoloc installed with CMake from this checkout) and one
+#                  support_files/brief_k10L6.bin is not needed: run.sh trains one), or its git
+#                  directory without a work tree (a bare clone, or the snapshot `fetch` brings):
+#                  its HEAD is laid out into WORK_DIR/upstream/vins-fusion, skipping missing blobs
+# WORK_DIR         gets topoloc-install/ (topoloc installed with CMake from this checkout), the
+#                  topoloc CLI that run.sh calls (<checkout>/target/release/topoloc) and one
 #                  catkin workspace per variant, built: WORK_DIR/<variant>-ws/src (the tree of
 #                  apply.py), WORK_DIR/<variant>-ws/devel/lib/loop_fusion/loop_fusion_node;
 #                  and WORK_DIR/train_brief_vocabulary (the stock vocabulary's trainer)
@@ -31,7 +34,7 @@ source "$ROOT/scripts/lib.sh"
 source "$ROOT/cpp-examples/common/integrate_lib.sh"
 
 usage() {
-    sed -n '2,24p' "${BASH_SOURCE[0]}" | sed 's/^# \{0,1\}//'
+    sed -n '2,26p' "${BASH_SOURCE[0]}" | sed 's/^# \{0,1\}//'
     exit "${1:-0}"
 }
 
@@ -53,9 +56,10 @@ done
 for v in $VARIANTS; do
     [[ "$v" == stock || "$v" == topoloc ]] || fail "unknown variant '$v' (stock or topoloc)"
 done
-[[ -f "$VINS_DIR/loop_fusion/src/pose_graph.cpp" ]] || fail "$VINS_DIR is not a VINS-Fusion checkout"
 mkdir -p "$WORK_DIR"
 WORK_DIR="$(cd "$WORK_DIR" && pwd)"
+VINS_DIR="$(upstream_tree "$VINS_DIR" vins-fusion "$WORK_DIR")"
+[[ -f "$VINS_DIR/loop_fusion/src/pose_graph.cpp" ]] || fail "$VINS_DIR is not a VINS-Fusion checkout"
 JOBS="$(nproc)"
 
 apt_install_missing vins-integrate build-essential cmake pkg-config libopencv-dev libeigen3-dev \
@@ -67,6 +71,7 @@ apt_install_missing vins-integrate build-essential cmake pkg-config libopencv-de
 if [[ " $VARIANTS " == *" topoloc "* ]]; then
     install_topoloc "$ROOT" "$WORK_DIR"
 fi
+build_topoloc_cli "$ROOT"
 
 for variant in $VARIANTS; do
     ws="$WORK_DIR/$variant-ws"
