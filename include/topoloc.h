@@ -86,7 +86,8 @@
  * (`verification_keypoints`, `local_features`); 1.16: the learned estimator
  * (`TOPOLOC_MODE_GRNN`, `grnn_model_path`); 1.17: the loop options the CLI had alone
  * (`refine_keyframes`, `pose_min_inliers`, `pair_*`, `cells_pair_*`), the hint's
- * `translation` (`TOPOLOC_TRANSLATION_*`), `TOPOLOC_GATE_SELF_MATCH`.
+ * `translation` (`TOPOLOC_TRANSLATION_*`), `TOPOLOC_GATE_SELF_MATCH`,
+ * `topoloc_loop_detector_next_id`.
  */
 #define TOPOLOC_ABI_VERSION_MINOR 17
 
@@ -2431,6 +2432,15 @@ topoloc_status topoloc_loop_detector_begin_session(struct topoloc_loop_detector 
  * too long), before anything is written.
  */
 topoloc_status topoloc_loop_detector_save(const struct topoloc_loop_detector *detector, const char *path);
+
+/**
+ * The smallest id the next keyframe may have (`*out`, ABI 1.17): one above the largest id
+ * ever added or reloaded, erased keyframes' included; 0 for an empty new detector. A host
+ * whose keyframe ids restart at 0 in a new run adds this value to them after
+ * `topoloc_loop_detector_from_map`.
+ * Errors: `_INVALID_ARGUMENT` once id `UINT64_MAX` was added (no id can follow).
+ */
+topoloc_status topoloc_loop_detector_next_id(const struct topoloc_loop_detector *detector, uint64_t *out);
 
 /**
  * Number of keyframes held (`*out`).

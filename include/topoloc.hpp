@@ -66,6 +66,7 @@
  *   cull a keyframe           topoloc_loop_detector_erase         LoopDetector::erase                LoopDetector.erase
  *   save the session          topoloc_loop_detector_save          LoopDetector::save                 LoopDetector.save
  *   keyframes held            topoloc_loop_detector_len           LoopDetector::size                 len(LoopDetector)
+ *   the next keyframe's id    topoloc_loop_detector_next_id       LoopDetector::next_id              LoopDetector.next_id
  *   trajectory ATE/RPE        topoloc_trajectory_evaluate         evaluate_trajectory                evaluate_trajectory
  *                             topoloc_trajectory_evaluate_files   evaluate_trajectory_files          evaluate_trajectory_files
  *

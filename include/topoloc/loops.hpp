@@ -393,6 +393,15 @@ public:
 
     /// Number of keyframes held.
     [[nodiscard]] std::size_t size() const { return read_value(&topoloc_loop_detector_len); }
+
+    /// The smallest id the next keyframe may have (ABI 1.17): one above the largest id ever
+    /// added or reloaded, 0 for an empty new detector. A host whose keyframe ids restart at 0
+    /// in a new run adds it to them after `from_map`. Throws `Error`
+    /// (`TOPOLOC_ERR_INVALID_ARGUMENT` once id `UINT64_MAX` was added).
+    [[nodiscard]] std::uint64_t next_id() const
+    {
+        return read_value(&topoloc_loop_detector_next_id);
+    }
 };
 
 } // namespace topoloc

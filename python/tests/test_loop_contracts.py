@@ -35,6 +35,7 @@ def test_a_session_saved_with_poses_closes_loops_after_a_reload(tmp_path, views)
     with topoloc.Map.load(path) as m:
         again = topoloc.LoopDetector.from_map(m, **OPTIONS, **CAMERA)
     with again:
+        assert again.next_id == 1  # the new run's ids go on past the map's
         # The new run's odometry is in its own world frame, 500 m and 90 degrees away: the
         # map's keyframes are an earlier session's, not compared by the odometry gate.
         hint = again.add(
@@ -152,10 +153,14 @@ def test_bounds_lengths_and_ids_are_refused_as_documented(views):
         det.add(1, 1.0, descriptor(2), first + 0.5, descriptors)
         det.erase(1)
         # Ids increase past an erased one.
+        assert det.next_id == 2
         with pytest.raises(topoloc.InvalidArgumentError):
             det.add(1, 2.0, descriptor(2))
         det.add(2, 2.0, descriptor(2))
         assert len(det) == 2
+        det.add(2**64 - 1, 3.0, descriptor(3))
+        with pytest.raises(topoloc.InvalidArgumentError, match="no id can follow"):
+            det.next_id
 
 
 def test_for_descriptors_of_takes_a_maps_identity():
@@ -163,7 +168,7 @@ def test_for_descriptors_of_takes_a_maps_identity():
         b.add_view(b.add_place(), descriptor(1))
         m = b.build()
     with topoloc.LoopDetector.for_descriptors_of(m, **OPTIONS) as det:
-        assert det.dim == DIM and len(det) == 0
+        assert det.dim == DIM and len(det) == 0 and det.next_id == 0
         assert det.options == dict(topoloc.loop_options_default(), **OPTIONS)
     with pytest.raises(topoloc.InvalidOptionError):
         topoloc.LoopDetector.for_descriptors_of(m, candidates=0)

@@ -739,6 +739,8 @@ SIGNATURES = {
     "topoloc_loop_detector_begin_session": (status_t, [LoopDetectorPtr]),
     "topoloc_loop_detector_save": (status_t, [LoopDetectorPtr, c_char_p]),
     "topoloc_loop_detector_len": (status_t, [LoopDetectorPtr, _p(c_size_t)]),
+    # ABI 1.17
+    "topoloc_loop_detector_next_id": (status_t, [LoopDetectorPtr, _p(c_uint64)]),
     # Confirmed loop hints (ABI 1.10)
     "topoloc_loop_detector_confirmed_count": (status_t, [LoopDetectorPtr, _p(c_size_t)]),
     "topoloc_loop_detector_confirmed": (

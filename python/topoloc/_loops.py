@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import ctypes
 import enum
-from ctypes import byref, c_size_t
+from ctypes import byref, c_size_t, c_uint64
 from dataclasses import dataclass
 from typing import Any, Callable, Dict, List, Optional, Type, TypeVar, Union
 
@@ -317,6 +317,15 @@ class LoopDetector(_SingleThreaded):
         """Number of keyframes held."""
         with self._using("__len__") as h:
             return int(_out_call(c_size_t, lib.topoloc_loop_detector_len, h).value)
+
+    @property
+    def next_id(self) -> int:
+        """The smallest id the next keyframe may have (ABI 1.17): one above the largest id
+        ever added or reloaded, 0 for an empty new detector. A host whose keyframe ids restart
+        at 0 in a new run adds it to them after :meth:`from_map`. Raises
+        :class:`InvalidArgumentError` once id ``2**64 - 1`` was added."""
+        with self._using("next_id") as h:
+            return int(_out_call(c_uint64, lib.topoloc_loop_detector_next_id, h).value)
 
     def __repr__(self) -> str:
         if self.closed:

@@ -779,6 +779,28 @@ pub extern "C" fn topoloc_loop_detector_save(
     })
 }
 
+/// The smallest id the next keyframe may have (`*out`, ABI 1.17): one above the largest id
+/// ever added or reloaded, erased keyframes' included; 0 for an empty new detector. A host
+/// whose keyframe ids restart at 0 in a new run adds this value to them after
+/// `topoloc_loop_detector_from_map`.
+/// Errors: `_INVALID_ARGUMENT` once id `UINT64_MAX` was added (no id can follow).
+#[no_mangle]
+pub extern "C" fn topoloc_loop_detector_next_id(
+    detector: *const topoloc_loop_detector,
+    out: *mut u64,
+) -> topoloc_status {
+    run_on(detector, "detector", |d| {
+        fill_out(out, "out", || {
+            d.database().next_id().ok_or_else(|| {
+                FfiError::invalid(format!(
+                    "keyframe id {} was added: no id can follow",
+                    u64::MAX
+                ))
+            })
+        })
+    })
+}
+
 /// Number of keyframes held (`*out`).
 #[no_mangle]
 pub extern "C" fn topoloc_loop_detector_len(

@@ -28,7 +28,8 @@ pub const TOPOLOC_ABI_VERSION: u32 = 1;
 /// (`verification_keypoints`, `local_features`); 1.16: the learned estimator
 /// (`TOPOLOC_MODE_GRNN`, `grnn_model_path`); 1.17: the loop options the CLI had alone
 /// (`refine_keyframes`, `pose_min_inliers`, `pair_*`, `cells_pair_*`), the hint's
-/// `translation` (`TOPOLOC_TRANSLATION_*`), `TOPOLOC_GATE_SELF_MATCH`.
+/// `translation` (`TOPOLOC_TRANSLATION_*`), `TOPOLOC_GATE_SELF_MATCH`,
+/// `topoloc_loop_detector_next_id`.
 pub const TOPOLOC_ABI_VERSION_MINOR: u32 = 17;
 
 static VERSION: &CStr =

@@ -516,6 +516,14 @@ impl KeyframeDatabase {
         self.records.len()
     }
 
+    /// The smallest id the next keyframe may have: one above the largest id ever added or
+    /// reloaded (erased keyframes' included), 0 for a new database; `None` once id `u64::MAX`
+    /// was added (no id can follow). A later run whose host ids restart at 0 offsets its ids
+    /// by this value after [`KeyframeDatabase::from_map`].
+    pub fn next_id(&self) -> Option<u64> {
+        self.last_id.map_or(Some(0), |last| last.checked_add(1))
+    }
+
     /// True when no keyframe is held.
     pub fn is_empty(&self) -> bool {
         self.records.is_empty()

@@ -66,10 +66,13 @@ static void a_session_saved_with_poses_closes_loops_after_a_reload(void)
     topoloc_loop_hint hint;
     struct loop_scene scene;
     double odometry[16];
+    uint64_t next = 99;
 
     SECTION();
     contract_options(&options);
     CHECK_OK(new_detector(&options, &first));
+    CHECK_OK(topoloc_loop_detector_next_id(first, &next));
+    CHECK(next == 0);
     if (first == NULL)
         return;
     first_view_of_the_scene(&scene, &kf, &hint);
@@ -79,6 +82,8 @@ static void a_session_saved_with_poses_closes_loops_after_a_reload(void)
     second = reload_as_next_session(first, &options);
     if (second == NULL)
         return;
+    CHECK_OK(topoloc_loop_detector_next_id(second, &next));
+    CHECK(next == 1); /* the new run's ids go on past the map's */
     /* The second session's world frame: far from the first's. */
     pose_of(odometry, 500.0, -200.0, 3.0, 90.0);
     kf.id = 1;
@@ -309,6 +314,7 @@ static void bounds_lengths_and_ids_are_refused_as_the_header_says(void)
     struct loop_scene scene;
     topoloc_loop_candidate found[2];
     size_t count = 0, len = 0;
+    uint64_t next = 0;
 
     SECTION();
     contract_options(&options);
@@ -354,9 +360,23 @@ static void bounds_lengths_and_ids_are_refused_as_the_header_says(void)
     CHECK_MESSAGE_HAS("must increase");
     CHECK_OK(topoloc_loop_detector_len(det, &len));
     CHECK(len == 1);
+    /* The next id a host may give: past the erased keyframe's. */
+    CHECK_OK(topoloc_loop_detector_next_id(det, &next));
+    CHECK(next == 11);
+    CHECK_ERROR(topoloc_loop_detector_next_id(det, NULL), TOPOLOC_ERR_NULL_ARGUMENT);
     kf.id = 11;
     CHECK_OK(topoloc_loop_detector_add(det, &kf, &hint));
+    /* After the largest id no id can follow: said, not wrapped to 0. */
+    kf.id = UINT64_MAX;
+    kf.timestamp = 20.0;
+    kf.keypoints = scene.points;
+    CHECK_OK(topoloc_loop_detector_add(det, &kf, &hint));
+    next = 7;
+    CHECK_ERROR(topoloc_loop_detector_next_id(det, &next), TOPOLOC_ERR_INVALID_ARGUMENT);
+    CHECK_MESSAGE_HAS("no id can follow");
+    CHECK(next == 7);
     topoloc_loop_detector_free(det);
+    CHECK_ERROR(topoloc_loop_detector_next_id(NULL, &next), TOPOLOC_ERR_NULL_ARGUMENT);
 }
 
 /* A map built from this run's own images: every keyframe is also a view of the map, with the

@@ -301,6 +301,8 @@ TEST(loop_detector_from_map_errors)
     // A map with keyframe ids (the chain fixture) is one.
     const topoloc::LoopDetector detector = topoloc::LoopDetector::from_map(chain_map());
     CHECK_EQ(detector.size(), std::size_t{kPlaces * kViews});
+    // A new run's ids go on past the map's largest.
+    CHECK_EQ(detector.next_id(), std::uint64_t{(kPlaces - 1) * 100 + kViews});
 }
 
 // The test options with the pinhole intrinsics of the two-view scene.
