@@ -254,5 +254,7 @@ topoloc_map *run_image_tests(const topoloc_map *world);
 void run_describer_tests(const topoloc_map *image_map, const topoloc_map *world);
 /* test_loop_images.c: `image_map` is run_image_tests' map. */
 void run_loop_image_tests(const topoloc_map *image_map, const topoloc_map *world);
+/* test_readme.c: the README's loop-closure function over two runs of the image world. */
+void run_readme_tests(const topoloc_map *image_map);
 
 #endif

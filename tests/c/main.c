@@ -47,6 +47,7 @@ int main(void)
         if (image_map != NULL) {
             run_describer_tests(image_map, world);
             run_loop_image_tests(image_map, world);
+            run_readme_tests(image_map);
         }
         topoloc_map_free(image_map);
     }

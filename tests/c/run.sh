@@ -40,7 +40,9 @@ CXX="${CXX:-c++}"
 PINNED_STATIC_LIBS="-ldl -lstdc++ -lopencv_calib3d -lopencv_features2d -lopencv_flann -lopencv_imgcodecs -lopencv_imgproc -lopencv_core -lgcc_s -lutil -lrt -lpthread -lm -ldl -lc"
 
 CFLAGS_STRICT=(-std=c11 -Wall -Wextra -Werror -pedantic)
-TEST_SOURCES=("$here/main.c" "$here/harness.c" "$here"/test_*.c)
+# The README's loop-closure function, extracted into the build dir below (test_readme.c runs it).
+README_SNIPPET="$build/readme_close_loops.c"
+TEST_SOURCES=("$here/main.c" "$here/harness.c" "$here"/test_*.c "$README_SNIPPET")
 CXXFLAGS_STRICT=(-std=c++17 -Wall -Wextra -Werror -pedantic)
 
 # Runs a test binary, shows its output, and checks its exit status and its summary line.
@@ -65,6 +67,12 @@ minor="$(sed -n 's/^#define TOPOLOC_VERSION_MINOR \([0-9][0-9]*\)$/\1/p' "$repo/
 [[ -n "$major" && -n "$minor" ]] || fail "no TOPOLOC_VERSION_MAJOR/MINOR in include/topoloc.h"
 expected_soname="$(soname_of_version "$major" "$minor")"
 link_library_dir "$target/libtopoloc.so" "$expected_soname" "$build/lib"
+# The README's C block that defines close_loops, unchanged (a new host copies it as is).
+awk '/^```c$/ { block = ""; inside = 1; next }
+     /^```$/ && inside { inside = 0; if (block ~ /\nint close_loops\(/) { printf "%s", block; found = 1; exit } next }
+     inside { block = block $0 "\n" }
+     END { if (!found) exit 1 }' "$repo/README.md" >"$README_SNIPPET" ||
+    fail "README.md has no C block defining close_loops (tests/c/test_readme.c runs it)"
 # -lm: the test program itself uses libm (cos, sin).
 LINK_SHARED=(-L"$build/lib" "-Wl,-rpath,$build/lib" -ltopoloc -pthread -lm)
 
