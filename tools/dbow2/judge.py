@@ -14,10 +14,14 @@ hints, precision, recall, median ms, and over the alpha sweep each alpha's figur
 at 100% precision.
 
 With --topoloc, the hints file of `topoloc loops --out` on the same sequence at the same keyframe
-rate is judged by the same code: its keyframe indices are mapped to frames through dloop.csv
-(run.sh keyframes as topoloc does; the counts must agree), its recall at 100% precision is swept
-over the hints' confidence, and its median time per keyframe is read from --topoloc-json (the
-report of `topoloc loops --json`).
+rate is judged by the same code on topoloc's own keyframes: their frames are the report's
+`sequence.keyframe_frames` (--topoloc-json, the report of `topoloc loops --json`), checked
+against the hints' `query_frame` column; the hints' `query_index` / `matched_index` are keyframe
+indices among them. (A report without `keyframe_frames`, from an older topoloc, maps the keyframe
+indices to frames through dloop.csv, whose keyframe count must then agree.) Its recall at 100%
+precision is swept over the hints' confidence, and its median time per keyframe is read from the
+report. A precision or recall without hints or possible loops is null, in topoloc's report as
+here.
 """
 import argparse
 import csv
@@ -114,28 +118,49 @@ def judge(rows, times, pos, quat, args):
     }
 
 
-def judge_topoloc(hints_path, report_path, keyframe_rows, times, pos, quat, args):
-    """topoloc's hints judged as DLoopDetector's rows are: the hint file's keyframe indices are
-    the positions in `keyframe_rows` (dloop.csv, same keyframing)."""
-    with open(report_path) as f:
-        report = json.load(f)
+def topoloc_keyframe_frames(report, keyframe_rows):
+    """The frame of each of topoloc's keyframes: the report's own list, else (an older topoloc)
+    dloop.csv's, which must have as many keyframes."""
+    frames = report.get("sequence", {}).get("keyframe_frames")
+    if frames is not None:
+        if len(frames) != report["keyframes"]:
+            sys.exit("judge.py: the topoloc report's keyframe_frames and keyframes disagree")
+        return [int(f) for f in frames]
     if report["keyframes"] != len(keyframe_rows):
         sys.exit(
             f"judge.py: topoloc kept {report['keyframes']} keyframes, run.sh "
-            f"{len(keyframe_rows)}: run both at the same --keyframe-rate"
+            f"{len(keyframe_rows)}, and its report lists no keyframe_frames: run both at the "
+            "same --keyframe-rate"
         )
+    return [int(k["frame"]) for k in keyframe_rows]
+
+
+def judge_topoloc(hints_path, report_path, keyframe_rows, times, pos, quat, args):
+    """topoloc's hints judged as DLoopDetector's rows are, on topoloc's keyframes: the hint
+    file's keyframe indices are positions among them."""
+    with open(report_path) as f:
+        report = json.load(f)
+    frames = topoloc_keyframe_frames(report, keyframe_rows)
     hints = {}
     with open(hints_path) as f:
         for r in csv.DictReader(f):
-            hints[int(r["query_index"])] = (int(r["matched_index"]), float(r["confidence"]))
+            q = int(r["query_index"])
+            if q >= len(frames):
+                sys.exit(f"judge.py: {hints_path} names keyframe {q} of {len(frames)}")
+            if r.get("query_frame") not in (None, "") and int(r["query_frame"]) != frames[q]:
+                sys.exit(
+                    f"judge.py: {hints_path}: keyframe {q} is frame {r['query_frame']}, "
+                    f"the report says {frames[q]}"
+                )
+            hints[q] = (int(r["matched_index"]), float(r["confidence"]))
     rows = [
         {
-            "frame": k["frame"],
+            "frame": frame,
             "status": "LOOP_DETECTED" if i in hints else "NONE",
             "matched_index": hints[i][0] if i in hints else "",
             "ms": report["keyframe_ms_median"],
         }
-        for i, k in enumerate(keyframe_rows)
+        for i, frame in enumerate(frames)
     ]
     out = judge(rows, times, pos, quat, args)
     out.pop("statuses")

@@ -5,8 +5,9 @@
 //               [--keyframe-rate HZ] [--max-frames N] [--alpha A]
 //
 // SEQ_DIR holds image_0/*.png (file-name order) and times.txt (one timestamp in seconds per
-// line). Keyframes are chosen as `topoloc loops --keyframe-rate` does: the first frame, then
-// every frame at least 1/HZ - 1e-9 s after the last kept one (all frames without a rate).
+// line). Keyframes are chosen as `topoloc loops --keyframe-rate` does: the first frame (t0),
+// then the first frame at or after each due time t0 + k / HZ, k = 1, 2, ... (all frames without
+// a rate): HZ keyframes per second on average, 3 of KITTI's 10 Hz being frames 0, 4, 7, 10, ...
 // The detector keeps DLoopDetector's default parameters (Parameters(rows, cols)) except
 // dislocal = round(10 * HZ) keyframes (100 without a rate: KITTI's 10 Hz) and alpha.
 //
@@ -179,11 +180,21 @@ int main(int argc, char **argv)
         nframes = std::min(nframes, static_cast<size_t>(max_frames));
 
     // Keyframes, as `topoloc loops --keyframe-rate` keeps them.
+    // Due times t0 + k / HZ: the first frame at or after each is kept (HZ per second on
+    // average); `due` numbers the next one, the slack absorbs timestamp rounding.
     std::vector<size_t> keyframes;
+    const double slack_s = 1e-6;
+    double due = 0.0;
     for (size_t i = 0; i < nframes; ++i) {
-        if (keyframes.empty() || rate <= 0 ||
-            times[i] - times[keyframes.back()] >= 1.0 / rate - 1e-9)
+        if (rate <= 0) {
             keyframes.push_back(i);
+            continue;
+        }
+        const double periods = (times[i] - times[0]) * rate;
+        if (periods >= due - slack_s * rate) {
+            keyframes.push_back(i);
+            due = std::floor(periods + slack_s * rate) + 1.0;
+        }
     }
     const int dislocal = rate > 0 ? static_cast<int>(std::lround(10.0 * rate)) : 100;
 

@@ -204,22 +204,3 @@ pub fn progress_bar(total: usize, what: &str) -> indicatif::ProgressBar {
     bar.set_message(what.to_string());
     bar
 }
-
-/// The TUM trajectory at `path`, which must hold one pose per image of `files`, in order.
-pub fn poses_for_images(
-    path: &Path,
-    files: &[PathBuf],
-    images: &Path,
-) -> Result<Vec<topoloc::build::TimedPose>> {
-    let poses = topoloc::build::read_tum(path)?;
-    if poses.len() != files.len() {
-        anyhow::bail!(
-            "{} has {} poses for {} images in {}: give one pose per image, in file-name order",
-            path.display(),
-            poses.len(),
-            files.len(),
-            images.display()
-        );
-    }
-    Ok(poses)
-}

@@ -1,26 +1,35 @@
-//! `topoloc build-map`: a map from an image folder (optionally with a TUM trajectory), with the
-//! describer stored in it.
+//! `topoloc build-map`: a map from an image folder or an image sequence (optionally with a TUM
+//! trajectory), with the describer stored in it.
+//!
+//! `--images` is read as `topoloc loops --images` reads it ([`crate::sequence::open`]): a KITTI,
+//! TUM RGB-D or EuRoC sequence folder gives its frames in the layout's order (`times.txt` beside
+//! the image folder, `rgb.txt` or `associations.txt`, `data.csv`), any other folder its images
+//! in file-name order. The map's views are those frames, in that order. `--poses` gives one pose
+//! per frame: as many poses as frames are taken in order; otherwise, for a sequence layout, each
+//! frame takes the pose nearest its timestamp ([`crate::sequence::poses_at_frames`]).
 
-use crate::backend_args::{
-    image_files, poses_for_images, progress_bar, BackendArgs, LocalFeatures,
-};
+use crate::backend_args::{progress_bar, BackendArgs, LocalFeatures};
+use crate::sequence;
 use anyhow::Result;
 use clap::{Args, ValueEnum};
 use serde_json::json;
 use std::path::PathBuf;
 use topoloc::build::{
-    build_from_images, BuildStage, ImageLayout, ImageMapOptions, ImageSource, KeyframeOptions,
+    build_from_images, read_tum, BuildStage, ImageLayout, ImageMapOptions, ImageSource,
+    KeyframeOptions,
 };
 use topoloc::describe::{FitOptions, PcaPrecision};
 
 /// Options of `build-map`.
 #[derive(Args, Clone, Debug)]
 pub struct BuildMapArgs {
-    /// Folder of images, taken in file-name order.
+    /// Folder of images, taken in file-name order, or a KITTI, TUM RGB-D or EuRoC sequence
+    /// folder, taken in the layout's order (as `loops --images`).
     #[arg(long)]
     pub images: PathBuf,
-    /// TUM trajectory (`t tx ty tz qx qy qz qw`), one pose per image in the same order: places
-    /// are then made by spacing and revisits merged.
+    /// TUM trajectory (`t tx ty tz qx qy qz qw`), one pose per image in the same order (for a
+    /// sequence layout, else the pose nearest each frame's timestamp, within 20 ms): places are
+    /// then made by spacing and revisits merged.
     #[arg(long)]
     pub poses: Option<PathBuf>,
     #[command(flatten)]
@@ -82,10 +91,11 @@ impl From<PcaPrecisionArg> for PcaPrecision {
 
 /// Runs the command.
 pub fn run(args: &BuildMapArgs) -> Result<()> {
-    let files = image_files(&args.images)?;
+    let sequence = sequence::open(&args.images)?;
+    let files: Vec<PathBuf> = sequence.frames.iter().map(|f| f.image.clone()).collect();
     let poses = match &args.poses {
         Some(path) => Some(
-            poses_for_images(path, &files, &args.images)?
+            sequence::poses_at_frames(&sequence, read_tum(path)?, path)?
                 .into_iter()
                 .map(|p| p.world_t_camera)
                 .collect::<Vec<_>>(),
@@ -134,6 +144,10 @@ pub fn run(args: &BuildMapArgs) -> Result<()> {
     let summary = json!({
         "map": args.out.display().to_string(),
         "images": report.images,
+        "sequence": {
+            "layout": format!("{:?}", sequence.layout),
+            "frames": sequence.frames.len(),
+        },
         "places": map.place_count(),
         "views": map.view_count(),
         "edges": map.edge_count(),

@@ -4,23 +4,36 @@
 //! topoloc loops --images DIR [--every N] [--keyframe-rate HZ] [--poses TUM.txt] [--intrinsics FILE] [--map MAP] --out HINTS.csv [--json]
 //! ```
 //! `--images` is a folder of images in file-name order, or a KITTI, TUM RGB-D or EuRoC
-//! sequence folder ([`crate::sequence`]); `--every N` / `--keyframe-rate HZ` thin its frames to
-//! keyframes (index = position among the keyframes; timestamps from `--poses`, else from the
-//! layout, else the frame index in seconds). Without `--map` the graph grows from nothing: the
-//! describer (PCA) is fitted on the sequence's own images first, as `build-map` does, then the
-//! sequence is replayed online. With `--map` (a map built from images with keypoints) the
+//! sequence folder ([`crate::sequence`]); its frames are numbered 0, 1, 2 ... in that order
+//! (the *frame index*). `--every N` / `--keyframe-rate HZ` thin them to keyframes, numbered
+//! 0, 1, 2 ... among themselves (the *keyframe index*): every Nth frame, and with a rate R the
+//! first frame at or after each due time `t0 + k / R` by the layout's timestamps (a plain
+//! folder's are its frame indices), which keeps R per second on average
+//! ([`sequence::keyframes`]); the rate kept, keyframes over the time the frames cover
+//! ([`sequence::effective_rate`]), is printed on stderr and reported. The keyframes' timestamps
+//! are then those of `--poses`, else of the layout. Without `--map` the graph grows from
+//! nothing: the describer (PCA) is fitted on the sequence's own images first, as `build-map`
+//! does, then the sequence is replayed online. With `--map` (a map built from images with keypoints) the
 //! map's views are the first session's keyframes and the hints name their keyframe ids.
 //!
 //! `HINTS.csv` has a header line, then one row per accepted hint, in query order (a hint a
 //! later keyframe confirmed included, [`topoloc::loops::Processed::confirmed`]):
-//! `query_index,matched_index,inliers,confidence,scale_known,tx,ty,tz,qx,qy,qz,qw` where the
-//! pose columns (`matched_T_query`: the query camera in the matched camera's optical frame,
-//! translation then unit quaternion) are empty for hints without a pose. `--intrinsics FILE`
-//! holds `fx fy cx cy` (pixels, whitespace-separated); `--depth DIR` gives keyframes 3D points
-//! and hints metric poses. `--json` prints the hints, the median and p90 time per keyframe (and
+//! `query_index,matched_index,inliers,confidence,scale_known,tx,ty,tz,qx,qy,qz,qw,query_frame,matched_frame`.
+//! `query_index` and `matched_index` are keyframe indices, `query_frame` and `matched_frame`
+//! the frame indices of the same keyframes (the position of their image in `--images`). With
+//! `--map`, a match in the map has the map's keyframe id as `matched_index` and an empty
+//! `matched_frame` (the first session's frames are unknown); a match among this run's own
+//! keyframes has both. The pose columns (`matched_T_query`: the query camera in the matched
+//! camera's optical frame, translation then unit quaternion) are empty for hints without a
+//! pose. `--intrinsics FILE` holds `fx fy cx cy` (pixels, whitespace-separated); `--depth DIR`
+//! gives keyframes 3D points and hints metric poses. `--json` prints the hints, the median and p90 time per keyframe (and
 //! the median of its describing part: global descriptor and local features), the count of
-//! each keyframe's own gate and of the confirmed hints; with `--aligned-tolerance T` (a
-//! frame-aligned second session, such as Gardens Point) also precision and recall.
+//! each keyframe's own gate and of the confirmed hints, and under `sequence` the layout, the
+//! frame and keyframe counts, the asked and effective keyframe rates and every keyframe's frame
+//! index; with `--aligned-tolerance T` (a frame-aligned second session, such as Gardens Point)
+//! also precision and recall, and with `--truth` those against the ground truth (under
+//! `truth`). A precision or recall whose denominator is 0 (no hint, no possible loop, no posed
+//! hint) is `null`, not 0.
 
 use crate::backend_args::{progress_bar, BackendArgs, LocalFeatures};
 use crate::plot::{write_precision_recall_png, Series};
@@ -60,8 +73,11 @@ pub struct LoopsArgs {
     /// Keep every Nth frame as a keyframe.
     #[arg(long, default_value_t = 1)]
     pub every: usize,
-    /// Keep at most this many keyframes per second (by the frames' timestamps), as a SLAM
-    /// front end does.
+    /// Keep this many keyframes per second on average, as a SLAM front end does: the first
+    /// frame (at t0), then the first frame at or after each due time t0 + k / HZ (k = 1, 2,
+    /// ...), by the layout's timestamps (a plain folder's: its frame indices). Never more than
+    /// HZ, fewer only where frames are further apart than 1 / HZ (3 of KITTI's 10 Hz: frames 0,
+    /// 4, 7, 10, ...). The rate kept is printed on stderr and reported (`effective_rate_hz`).
     #[arg(long)]
     pub keyframe_rate: Option<f64>,
     /// TUM trajectory, one pose per image: odometry (world_T_camera) and timestamps.
@@ -81,7 +97,12 @@ pub struct LoopsArgs {
     /// A map of a first session (built from images with keypoints).
     #[arg(long)]
     pub map: Option<PathBuf>,
-    /// Where the accepted hints are written (CSV).
+    /// Where the accepted hints are written (CSV
+    /// `query_index,matched_index,inliers,confidence,scale_known,tx,ty,tz,qx,qy,qz,qw,query_frame,matched_frame`):
+    /// `query_index` / `matched_index` are keyframe indices (with `--map`, `matched_index` is
+    /// the map's keyframe id for a match in the map); `query_frame` / `matched_frame` are the
+    /// same keyframes' frame indices in `--images` (`matched_frame` empty for a match in the
+    /// map).
     #[arg(long)]
     pub out: PathBuf,
     /// Local features without `--map` (with one, the map's kind). XFeat by default: its hints
@@ -109,8 +130,9 @@ pub struct LoopsArgs {
     #[arg(long, default_value_t = 45.0)]
     pub truth_max_angle_deg: f64,
     /// Also write every keyframe's best candidate, accepted or not, with the gate that decided
-    /// (CSV `query_index,gate,matched_index,inliers,confidence,detail`; `detail` is the
-    /// agreeing streak, the pose refusal, or the odometry differences `deg/m`): what a host logs.
+    /// (CSV `query_index,gate,matched_index,inliers,confidence,detail`, keyframe indices as in
+    /// `--out`; `detail` is the agreeing streak, the pose refusal, or the odometry differences
+    /// `deg/m`): what a host logs.
     #[arg(long)]
     pub decisions: Option<PathBuf>,
     /// With `--truth`: also draw the accepted hints' precision against recall as their
@@ -247,6 +269,20 @@ impl CameraFrame {
 pub fn run(args: &LoopsArgs) -> Result<()> {
     let sequence = sequence::open(&args.images)?;
     let kept = sequence::keyframes(&sequence.frames, args.every, args.keyframe_rate)?;
+    let effective_rate = sequence::effective_rate(&sequence.frames, kept.len());
+    eprintln!(
+        "{} keyframes of {} frames{}: {} per second{}",
+        kept.len(),
+        sequence.frames.len(),
+        match (args.every, args.keyframe_rate) {
+            (1, None) => String::new(),
+            (every, None) => format!(" (every {every})"),
+            (1, Some(rate)) => format!(" (--keyframe-rate {rate})"),
+            (every, Some(rate)) => format!(" (every {every}, --keyframe-rate {rate})"),
+        },
+        effective_rate.map_or("n/a".to_string(), |r| format!("{r:.3}")),
+        sequence::duration_s(&sequence.frames).map_or(String::new(), |d| format!(" over {d:.3} s")),
+    );
     let frames: Vec<&Frame> = kept.iter().map(|&i| &sequence.frames[i]).collect();
     let files: Vec<PathBuf> = frames.iter().map(|f| f.image.clone()).collect();
     // Pose files hold one pose per frame of the whole sequence; the keyframes take theirs.
@@ -394,7 +430,7 @@ pub fn run(args: &LoopsArgs) -> Result<()> {
     }
     bar.finish_and_clear();
     hints.sort_by_key(|(index, _)| *index);
-    write_csv(&args.out, &hints, first_id)?;
+    write_csv(&args.out, &hints, first_id, &kept)?;
     if let Some(path) = &args.decisions {
         std::fs::write(path, decisions).with_context(|| format!("writing {}", path.display()))?;
     }
@@ -404,14 +440,19 @@ pub fn run(args: &LoopsArgs) -> Result<()> {
         &gates,
         [&times, &describe_times],
         work,
-        files.len(),
         first_id,
+        &kept,
     );
     out["confirmed"] = json!(confirmed);
     out["sequence"] = json!({
         "layout": format!("{:?}", sequence.layout),
         "frames": sequence.frames.len(),
         "keyframes": kept.len(),
+        "every": args.every,
+        "keyframe_rate_hz": args.keyframe_rate,
+        "duration_s": sequence::duration_s(&sequence.frames),
+        "effective_rate_hz": effective_rate,
+        "keyframe_frames": kept,
     });
     if let Some(truth) = &truth {
         add_truth(&mut out, args, &hints, truth, &timestamps, first_id)?;
@@ -431,6 +472,9 @@ pub fn run(args: &LoopsArgs) -> Result<()> {
 /// posed hints whose relative pose is right ([`PoseError::is_small`]), wherever they match;
 /// `precision_place_or_pose` counts a hint right when it is correct by place or its pose is
 /// right (a constraint a pose graph can take, though the cameras are beyond the radius).
+/// Each precision and recall is null where its denominator is 0 (no hint, no possible loop,
+/// no posed hint), and so are the curve's recalls and `recall_at_full_precision` without a
+/// possible loop.
 fn add_truth(
     out: &mut serde_json::Value,
     args: &LoopsArgs,
@@ -500,26 +544,32 @@ fn add_truth(
         "max_angle_deg": args.truth_max_angle_deg,
         "possible": possible,
         "correct": correct,
-        "precision": correct as f64 / hints.len().max(1) as f64,
-        "recall": correct as f64 / possible.max(1) as f64,
-        "precision_place_or_pose": right_constraints as f64 / hints.len().max(1) as f64,
+        "precision": ratio(correct, hints.len()),
+        "recall": ratio(correct, possible),
+        "precision_place_or_pose": ratio(right_constraints, hints.len()),
         "rotation_error_deg_median": median(&rotation),
         "translation_error_m_median": median(&translation),
         "direction_error_deg_median": median(&direction),
         "posed_hints": posed,
         "rotation_only_hints": rotation_only,
         "pose_correct": pose_correct,
-        "pose_precision": pose_correct as f64 / posed.max(1) as f64,
+        "pose_precision": ratio(pose_correct, posed),
         "no_revisit_km": no_revisit_km,
         "no_revisit_hints": no_revisit_hints,
         "hints_per_km_without_revisit": (no_revisit_km > 0.0)
             .then(|| no_revisit_hints as f64 / no_revisit_km),
     });
     let curve = precision_recall(&mut judged, possible);
-    out["truth"]["recall_at_full_precision"] = json!(recall_at_full_precision(&curve));
+    // Without a possible loop, recall (and the best one at precision 1) is undefined: null.
+    let defined = |recall: f64| (possible > 0).then_some(recall);
+    out["truth"]["recall_at_full_precision"] = json!(defined(recall_at_full_precision(&curve)));
     out["truth"]["precision_recall"] = json!(curve
         .iter()
-        .map(|p| json!({"confidence": p.confidence, "recall": p.recall, "precision": p.precision}))
+        .map(|p| json!({
+            "confidence": p.confidence,
+            "recall": defined(p.recall),
+            "precision": p.precision,
+        }))
         .collect::<Vec<_>>());
     if let Some(path) = &args.pr_curve {
         let points: Vec<(f64, f64)> = curve.iter().map(|p| (p.recall, p.precision)).collect();
@@ -733,11 +783,22 @@ fn write_decision(csv: &mut String, index: usize, hint: Option<&LoopHint>, first
     );
 }
 
-/// The hints file: header, then one row per accepted hint.
-fn write_csv(path: &Path, hints: &[(usize, LoopHint)], first_id: u64) -> Result<()> {
-    let mut csv = String::from(
-        "query_index,matched_index,inliers,confidence,scale_known,tx,ty,tz,qx,qy,qz,qw\n",
-    );
+/// The hints file's header (see the module documentation): keyframe indices first, the
+/// same keyframes' frame indices last (after the columns older readers know by position).
+const HINTS_HEADER: &str = concat!(
+    "query_index,matched_index,inliers,confidence,scale_known,tx,ty,tz,qx,qy,qz,qw,",
+    "query_frame,matched_frame"
+);
+
+/// The hints file: header, then one row per accepted hint. `kept` holds the keyframes' frame
+/// indices.
+fn write_csv(
+    path: &Path,
+    hints: &[(usize, LoopHint)],
+    first_id: u64,
+    kept: &[usize],
+) -> Result<()> {
+    let mut csv = format!("{HINTS_HEADER}\n");
     for (index, hint) in hints {
         let _ = write!(
             csv,
@@ -750,7 +811,7 @@ fn write_csv(path: &Path, hints: &[(usize, LoopHint)], first_id: u64) -> Result<
             Some(pose) => {
                 let t = pose.matched_t_query.translation.vector;
                 let q = pose.matched_t_query.rotation.coords;
-                let _ = writeln!(
+                let _ = write!(
                     csv,
                     ",{},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6}",
                     u8::from(pose.scale_known),
@@ -763,13 +824,22 @@ fn write_csv(path: &Path, hints: &[(usize, LoopHint)], first_id: u64) -> Result<
                     q.w
                 );
             }
-            None => csv.push_str(",,,,,,,,\n"),
+            None => csv.push_str(",,,,,,,,"),
         }
+        let matched = matched_frame(hint, first_id, kept).map_or(String::new(), |f| f.to_string());
+        let _ = writeln!(csv, ",{},{matched}", kept[*index]);
     }
     std::fs::write(path, csv).with_context(|| format!("writing {}", path.display()))
 }
 
-/// The matched keyframe as the CSV names it: a map's keyframe id, or an index of this run.
+/// The matched keyframe's frame index in this run's sequence: None for a map's keyframe.
+fn matched_frame(hint: &LoopHint, first_id: u64, kept: &[usize]) -> Option<usize> {
+    let own = hint.matched_id.checked_sub(first_id)?;
+    usize::try_from(own).ok().and_then(|k| kept.get(k).copied())
+}
+
+/// The matched keyframe as the CSV names it: a map's keyframe id, or a keyframe index of this
+/// run.
 fn matched_index(hint: &LoopHint, first_id: u64) -> u64 {
     if hint.matched_id >= first_id {
         hint.matched_id - first_id
@@ -784,9 +854,10 @@ fn report(
     gates: &BTreeMap<&str, usize>,
     [times, describe_times]: [&[f64]; 2],
     work: Work,
-    frames: usize,
     first_id: u64,
+    kept: &[usize],
 ) -> serde_json::Value {
+    let frames = kept.len();
     let (median, p90) = median_and_p90(times);
     let (describe_median, _) = median_and_p90(describe_times);
     let mut out = json!({
@@ -802,6 +873,8 @@ fn report(
         "accepted": hints.iter().map(|(i, h)| json!({
             "query_index": i,
             "matched_index": matched_index(h, first_id),
+            "query_frame": kept[*i],
+            "matched_frame": matched_frame(h, first_id, kept),
             "inliers": h.inliers,
             "confidence": h.confidence,
             "has_pose": h.pose.is_some(),
@@ -814,11 +887,17 @@ fn report(
                 h.matched_id < first_id && h.matched_id.abs_diff(*i as u64) <= tolerance
             })
             .count();
-        out["precision"] = json!(correct as f64 / hints.len().max(1) as f64);
-        out["recall"] = json!(correct as f64 / frames.max(1) as f64);
+        out["precision"] = json!(ratio(correct, hints.len()));
+        out["recall"] = json!(ratio(correct, frames));
         out["correct"] = json!(correct);
     }
     out
+}
+
+/// `part / whole`, None (JSON null) when `whole` is 0: a precision without hints, a recall
+/// without possible loops, is undefined rather than 0.
+fn ratio(part: usize, whole: usize) -> Option<f64> {
+    (whole > 0).then(|| part as f64 / whole as f64)
 }
 
 fn print_report(args: &LoopsArgs, out: &serde_json::Value) {
@@ -826,11 +905,13 @@ fn print_report(args: &LoopsArgs, out: &serde_json::Value) {
         println!("{out}");
         return;
     }
+    let figure =
+        |v: &serde_json::Value| v.as_f64().map_or("n/a".to_string(), |x| format!("{x:.3}"));
     let figures = |v: &serde_json::Value| {
         format!(
-            "; precision {:.3}, recall {:.3}",
-            v["precision"].as_f64().unwrap_or(0.0),
-            v["recall"].as_f64().unwrap_or(0.0)
+            "; precision {}, recall {}",
+            figure(&v["precision"]),
+            figure(&v["recall"])
         )
     };
     println!(

@@ -65,7 +65,8 @@ enum Command {
     /// seed's Fig. 4.11): single-frame, filter and filter with odometry on generated corridor
     /// worlds; print a markdown table (median and p90 ms, descriptor memory) and write a PNG.
     Scaling(scaling::ScalingArgs),
-    /// Build a map from an image folder; the describer (backend, PCA, codebook) is stored in it.
+    /// Build a map from an image folder or a KITTI, TUM RGB-D or EuRoC sequence folder; the
+    /// describer (backend, PCA, codebook) is stored in it.
     BuildMap(build_map::BuildMapArgs),
     /// Localize a query image folder (or a dataset written by `simulate`) against a map built
     /// from images and report R@N, R@100P, latency (and MNA/OHA with ground-truth nodes or a

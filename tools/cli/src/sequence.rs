@@ -9,8 +9,9 @@
 //!   (the `mav0` or `cam0` folder may be given too);
 //! - else a folder of images in file-name order, timestamped by their index (0, 1, 2 ... s).
 //!
-//! [`keyframes`] thins a sequence to keyframes as a SLAM front end does: every Nth frame, or
-//! at most one per `1/rate` seconds.
+//! [`keyframes`] thins a sequence to keyframes as a SLAM front end does: every Nth frame, and
+//! with a rate R, one frame per due time `t0 + k / R` (R per second on average; see there);
+//! [`effective_rate`] says how many per second were kept.
 
 use crate::backend_args::image_files;
 use anyhow::{bail, Context, Result};
@@ -154,8 +155,17 @@ pub fn poses_at_frames(
         .collect()
 }
 
-/// The indices of the keyframes among `frames`: every `every`th frame (1: all), and with
-/// `rate_hz` at most one per `1 / rate_hz` seconds (the first frame always).
+/// Slack of a due time in [`keyframes`], seconds: far below any frame interval, above the
+/// rounding of Unix-time timestamps (about 2e-7 s at 1.7e9 s).
+const DUE_SLACK_S: f64 = 1e-6;
+
+/// The indices of the keyframes among `frames`, in order. `every` N keeps frames 0, N, 2N, ...
+/// (1: all). With `rate_hz` R as well, of those the first frame (at `t0`) and then the first
+/// frame at or after each due time `t0 + k / R` (k = 1, 2, ...) are kept: at most one per due
+/// time, and a frame late past several due times (a gap) is kept once, the next due time being
+/// the first one after it. So R keyframes per second are kept on average (never more, and fewer
+/// only where the frames themselves are further apart than `1 / R`): 3 per second of KITTI's
+/// 10 Hz frames are frames 0, 4, 7, 10, 14, 17, 20, ... (not every 4th, 2.5 per second).
 pub fn keyframes(frames: &[Frame], every: usize, rate_hz: Option<f64>) -> Result<Vec<usize>> {
     if every == 0 {
         bail!("--every must be at least 1");
@@ -163,19 +173,40 @@ pub fn keyframes(frames: &[Frame], every: usize, rate_hz: Option<f64>) -> Result
     if let Some(rate) = rate_hz.filter(|r| !(r.is_finite() && *r > 0.0)) {
         bail!("--keyframe-rate is {rate}, must be finite and > 0");
     }
+    let Some(t0) = frames.first().map(|f| f.timestamp) else {
+        return Ok(Vec::new());
+    };
     let mut kept = Vec::new();
-    let mut last: Option<f64> = None;
+    // The number of the next due time: frames at t0 + due / rate or later are kept.
+    let mut due = 0.0f64;
     for (i, frame) in frames.iter().enumerate().step_by(every) {
-        let due = match (last, rate_hz) {
-            (Some(t), Some(rate)) => frame.timestamp - t >= 1.0 / rate - 1e-9,
-            _ => true,
-        };
-        if due {
+        let Some(rate) = rate_hz else {
             kept.push(i);
-            last = Some(frame.timestamp);
+            continue;
+        };
+        let periods = (frame.timestamp - t0) * rate;
+        if periods >= due - DUE_SLACK_S * rate {
+            kept.push(i);
+            due = (periods + DUE_SLACK_S * rate).floor() + 1.0;
         }
     }
     Ok(kept)
+}
+
+/// Keyframes per second: `kept` over the time the frames cover, their last timestamp minus
+/// their first plus one mean frame interval (`(last - first) * n / (n - 1)` for n frames, so
+/// keeping every frame gives the frame rate). None for a single frame. A plain folder's
+/// timestamps are its frame indices: keyframes per frame then.
+pub fn effective_rate(frames: &[Frame], kept: usize) -> Option<f64> {
+    let duration = duration_s(frames)?;
+    (duration > 0.0).then(|| kept as f64 / duration)
+}
+
+/// The time `frames` cover, seconds, as [`effective_rate`] counts it (None for fewer than 2).
+pub fn duration_s(frames: &[Frame]) -> Option<f64> {
+    let (first, last) = (frames.first()?, frames.last()?);
+    let n = frames.len();
+    (n >= 2).then(|| (last.timestamp - first.timestamp) * n as f64 / (n - 1) as f64)
 }
 
 /// KITTI's image folder and `times.txt`, from the sequence folder or its image folder.
@@ -470,8 +501,37 @@ mod tests {
         assert_eq!(keyframes(&s.frames, 1, None).unwrap().len(), 10);
         assert_eq!(keyframes(&s.frames, 3, None).unwrap(), [0, 3, 6, 9]);
         assert_eq!(keyframes(&s.frames, 1, Some(0.5)).unwrap(), [0, 2, 4, 6, 8]);
-        assert_eq!(keyframes(&s.frames, 3, Some(0.25)).unwrap(), [0, 6]);
+        // Due at 0, 4, 8 s: of frames 0, 3, 6, 9 the first at or after each.
+        assert_eq!(keyframes(&s.frames, 3, Some(0.25)).unwrap(), [0, 6, 9]);
+        // Due every 0.4 s: each frame reaches a due time (the frames are sparser).
+        assert_eq!(keyframes(&s.frames, 1, Some(2.5)).unwrap().len(), 10);
+        assert_eq!(effective_rate(&s.frames, 5), Some(0.5));
+        assert_eq!(effective_rate(&s.frames[..1], 1), None);
         assert!(keyframes(&s.frames, 0, None).is_err());
         assert!(keyframes(&s.frames, 1, Some(0.0)).is_err());
+    }
+
+    #[test]
+    fn a_keyframe_rate_is_kept_on_average_and_a_gap_keeps_one_frame() {
+        // 10 Hz from Unix time 1.7e9 s (TUM, EuRoC), 30 s: 3 per second kept, not 2.5.
+        let frames = |times: &[f64]| -> Vec<Frame> {
+            times
+                .iter()
+                .map(|&timestamp| Frame {
+                    image: PathBuf::new(),
+                    timestamp,
+                    depth: None,
+                })
+                .collect()
+        };
+        let times: Vec<f64> = (0..300).map(|i| 1.7e9 + i as f64 * 0.1).collect();
+        let kept = keyframes(&frames(&times), 1, Some(3.0)).unwrap();
+        assert_eq!(kept[..7], [0, 4, 7, 10, 14, 17, 20]);
+        assert_eq!(kept.len(), 90);
+        let rate = effective_rate(&frames(&times), kept.len()).unwrap();
+        assert!((rate - 3.0).abs() < 1e-6, "{rate}");
+        // A 2 s gap after 1.0 s: the frame after it is kept once, then the grid goes on.
+        let gappy = frames(&[0.0, 0.5, 1.0, 3.05, 3.1, 3.6, 4.0]);
+        assert_eq!(keyframes(&gappy, 1, Some(2.0)).unwrap(), [0, 1, 2, 3, 5, 6]);
     }
 }

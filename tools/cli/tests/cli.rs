@@ -651,7 +651,8 @@ fn loops_follows_the_contract_online_and_against_a_map() {
     }
     let map = dir.path().join("places.topoloc");
     build_vlad_map(&map_dir, &map);
-    let header = "query_index,matched_index,inliers,confidence,scale_known,tx,ty,tz,qx,qy,qz,qw";
+    let header = "query_index,matched_index,inliers,confidence,scale_known,tx,ty,tz,qx,qy,qz,qw,\
+                  query_frame,matched_frame";
     // A second session against the map: hints name the map's keyframe ids.
     let decisions = dir.path().join("decisions.csv");
     let (report, rows) = loops_report(
@@ -698,12 +699,14 @@ fn loops_follows_the_contract_online_and_against_a_map() {
     assert_eq!(rows[0].join(","), header);
     assert!(rows.len() > 1 + places as usize / 2, "{report}");
     for row in &rows[1..] {
-        assert_eq!(row.len(), 12, "{row:?}");
+        assert_eq!(row.len(), 14, "{row:?}");
         assert_eq!(row[0], row[1], "query i matches map keyframe i: {row:?}");
         assert!(
-            row[4..].iter().all(String::is_empty),
+            row[4..12].iter().all(String::is_empty),
             "no intrinsics, no pose: {row:?}"
         );
+        assert_eq!(row[12], row[0], "every frame a keyframe: {row:?}");
+        assert_eq!(row[13], "", "a match in the map has no frame: {row:?}");
     }
     assert_eq!(report["precision"], 1.0, "{report}");
     // The same queries as a KITTI sequence (image_0/ and times.txt at 10 Hz), every second
