@@ -125,9 +125,7 @@ def checkout(git_dir: Path, rev: str, out_dir: Path) -> List[str]:
 
 def main(argv: Sequence[str]) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument(
-        "git_dir", type=Path, help="a git directory (bare clone or mirror)"
-    )
+    parser.add_argument("git_dir", type=Path, help="a git directory (bare clone or mirror)")
     parser.add_argument("rev", help="the commit, tag or branch to lay out")
     parser.add_argument("out_dir", type=Path, help="the folder to write the tree into")
     args = parser.parse_args(argv)

@@ -160,7 +160,7 @@ def test_bounds_lengths_and_ids_are_refused_as_documented(views):
         assert len(det) == 2
         det.add(2**64 - 1, 3.0, descriptor(3))
         with pytest.raises(topoloc.InvalidArgumentError, match="no id can follow"):
-            det.next_id
+            _ = det.next_id
 
 
 def test_for_descriptors_of_takes_a_maps_identity():
