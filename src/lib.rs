@@ -21,7 +21,7 @@
 //! | 4 | [`map`] | the graph of places and views, and its file format |
 //! | 3 | [`describe`], [`verify`] | descriptor backends; local features and geometric checks |
 //! | 2 | [`image`], [`descriptor`], [`onnx_runtime`] | leaf vocabulary: image views and pixel formats, descriptor identity; the ONNX Runtime library |
-//! | 1 | [`errors`], [`bounds`] | the error kinds several image-work modules share; the values each option accepts |
+//! | 1 | [`errors`], [`bounds`], [`profile`] | the error kinds several image-work modules share; the values each option accepts; time per pipeline stage |
 //!
 //! [`eval`] (metrics: MNA, OHA, R@N, precision-recall, calibration, trajectory ATE/RPE) reads
 //! maps and results and is read by no other module of the library but `ffi`, which exposes its
@@ -42,6 +42,7 @@ pub mod localize;
 pub mod loops;
 pub mod map;
 pub mod onnx_runtime;
+pub mod profile;
 pub mod skeleton;
 pub mod verify;
 

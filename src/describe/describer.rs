@@ -14,6 +14,7 @@ use crate::bounds::Bounds;
 use crate::descriptor::DescriptorIdentity;
 use crate::errors::VisionError;
 use crate::image::ImageView;
+use crate::profile::{measure, Stage};
 use serde::{Deserialize, Serialize};
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -729,7 +730,7 @@ impl Describer {
                 &vlad
             }
         };
-        *out = self.model.pca.project(vector)?;
+        *out = measure(Stage::Pooling, || self.model.pca.project(vector))?;
         Ok(())
     }
 }

@@ -7,6 +7,7 @@ use crate::errors::VisionError;
 use crate::image::ImageView;
 pub use crate::onnx_runtime::cache_dir;
 use crate::onnx_runtime::session;
+use crate::profile::{self, measure, Stage};
 use opencv::core::Size;
 use opencv::prelude::*;
 use ort::session::Session;
@@ -154,24 +155,17 @@ impl OnnxMlf {
         tap: Option<&str>,
     ) -> Result<(Vec<f32>, Option<DenseTap>), VisionError> {
         let (w, h) = self.options.input_size;
-        let rgb = image.to_rgb_resized(Size::new(w as i32, h as i32))?;
-        let pixels = rgb.data_bytes()?;
-        let plane = (w * h) as usize;
-        self.input.resize(3 * plane, 0.0);
-        for (i, px) in pixels.chunks_exact(3).enumerate() {
-            for c in 0..3 {
-                self.input[c * plane + i] = (f32::from(px[c]) / 255.0 - MEAN[c]) / STD[c];
-            }
-        }
+        measure(Stage::CnnInput, || self.fill_input(image))?;
         let tensor = TensorRef::from_array_view((
             [1usize, 3, h as usize, w as usize],
             self.input.as_slice(),
         ))
         .map_err(|e| VisionError::Model(e.to_string()))?;
-        let outputs = self
-            .session
-            .run(ort::inputs!["input" => tensor])
-            .map_err(|e| VisionError::Model(e.to_string()))?;
+        let outputs = measure(Stage::Cnn, || {
+            self.session.run(ort::inputs!["input" => tensor])
+        })
+        .map_err(|e| VisionError::Model(e.to_string()))?;
+        let pooling = std::time::Instant::now();
         let feature_map = |name: &str| -> Result<FeatureMap<'_>, VisionError> {
             let value = outputs
                 .get(name)
@@ -214,6 +208,23 @@ impl OnnxMlf {
                 })
             }
         };
+        profile::add(Stage::Pooling, pooling.elapsed());
         Ok((vector, dense))
+    }
+
+    /// The network's input: `image` resized to the input size, RGB, ImageNet-normalised,
+    /// channel-major.
+    fn fill_input(&mut self, image: &ImageView<'_>) -> Result<(), VisionError> {
+        let (w, h) = self.options.input_size;
+        let rgb = image.to_rgb_resized(Size::new(w as i32, h as i32))?;
+        let pixels = rgb.data_bytes()?;
+        let plane = (w * h) as usize;
+        self.input.resize(3 * plane, 0.0);
+        for (i, px) in pixels.chunks_exact(3).enumerate() {
+            for c in 0..3 {
+                self.input[c * plane + i] = (f32::from(px[c]) / 255.0 - MEAN[c]) / STD[c];
+            }
+        }
+        Ok(())
     }
 }

@@ -6,6 +6,7 @@ use super::error::LoopsError;
 use super::hints::KeyframeFeatures;
 use crate::describe::{BackendKind, Describer};
 use crate::image::ImageView;
+use crate::profile::{measure, Stage};
 use crate::verify::{
     cells_from_map, FeatureDetector, FeatureKind, XFeatOptions, CELL_TAP, DEFAULT_CELLS,
     DEFAULT_KEYPOINTS,
@@ -87,12 +88,14 @@ impl KeyframeDescriber {
                 let tap = self
                     .describer
                     .describe_with_tap(image, descriptor, CELL_TAP)?;
-                cells_from_map(
-                    &tap.values,
-                    [tap.channels, tap.height, tap.width],
-                    tap.cell_size,
-                    DEFAULT_CELLS,
-                )?
+                measure(Stage::LocalFeatures, || {
+                    cells_from_map(
+                        &tap.values,
+                        [tap.channels, tap.height, tap.width],
+                        tap.cell_size,
+                        DEFAULT_CELLS,
+                    )
+                })?
             }
             LocalFeatures::Detector(detector) => {
                 self.describer.describe(image, descriptor)?;

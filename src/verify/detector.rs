@@ -5,6 +5,7 @@ use super::keypoints::{FeatureKind, KeypointDetector, Keypoints};
 use super::xfeat::{XFeatDetector, XFeatOptions};
 use crate::errors::VisionError;
 use crate::image::ImageView;
+use crate::profile::{measure, Stage};
 
 /// A loaded detector of one feature kind; one per thread.
 pub enum FeatureDetector {
@@ -46,9 +47,9 @@ impl FeatureDetector {
 
     /// Detects and describes the keypoints of `image` (positions in the image as given).
     pub fn detect(&mut self, image: &ImageView<'_>) -> Result<Keypoints, VisionError> {
-        match self {
+        measure(Stage::LocalFeatures, || match self {
             FeatureDetector::Orb(d) => d.detect(image),
             FeatureDetector::XFeat(d) => d.detect(image),
-        }
+        })
     }
 }

@@ -5,6 +5,7 @@
 use super::keypoints::{Descriptor, DescriptorsRef, KeypointsRef, DESCRIPTOR_BYTES};
 use crate::bounds::Bounds;
 use crate::errors::VisionError;
+use crate::profile::{measure, Stage};
 use faer::linalg::matmul::matmul;
 use faer::{Accum, Mat as FaerMat, MatRef, Par};
 use opencv::boxed_ref::BoxedRef;
@@ -269,7 +270,9 @@ pub fn fit_pair_reaching(
     if query.points.len() < MIN_MATCHES || view.points.len() < MIN_MATCHES {
         return Ok(PairFit::default());
     }
-    let kept = mutual_matches(query, view, options.max_hamming, options.min_cosine)?;
+    let kept = measure(Stage::Matching, || {
+        mutual_matches(query, view, options.max_hamming, options.min_cosine)
+    })?;
     let matches: Vec<[u32; 2]> = kept
         .iter()
         .map(|m| [m.query_idx as u32, m.train_idx as u32])
@@ -278,6 +281,18 @@ pub fn fit_pair_reaching(
         let inliers = vec![false; matches.len()];
         return Ok(PairFit { matches, inliers });
     }
+    let inliers = measure(Stage::Fit, || fit_matches(query, view, &kept, options))?;
+    Ok(PairFit { matches, inliers })
+}
+
+/// The inlier mask of `kept` matches of `query` to `view`: the fundamental matrix's, or the
+/// matches that did not move when they are more ([`fit_pair_reaching`]).
+fn fit_matches(
+    query: KeypointsRef<'_>,
+    view: KeypointsRef<'_>,
+    kept: &[DMatch],
+    options: &PairOptions,
+) -> Result<Vec<bool>, VisionError> {
     let point = |p: [f32; 2]| Point2f::new(p[0], p[1]);
     let from: Vector<Point2f> = kept
         .iter()
@@ -300,8 +315,8 @@ pub fn fit_pair_reaching(
         options.max_iterations as i32,
         &mut mask,
     )?;
-    let inliers: Vec<bool> = if fundamental.empty() || mask.total() != matches.len() {
-        vec![false; matches.len()]
+    let inliers: Vec<bool> = if fundamental.empty() || mask.total() != kept.len() {
+        vec![false; kept.len()]
     } else {
         mask.data_bytes()?.iter().map(|&m| m != 0).collect()
     };
@@ -314,11 +329,10 @@ pub fn fit_pair_reaching(
         .map(|(a, b)| (a.x - b.x).hypot(a.y - b.y) <= options.ransac_threshold_px as f32)
         .collect();
     let count = |mask: &[bool]| mask.iter().filter(|&&m| m).count();
-    let inliers = match count(&still) > count(&inliers) {
+    Ok(match count(&still) > count(&inliers) {
         true => still,
         false => inliers,
-    };
-    Ok(PairFit { matches, inliers })
+    })
 }
 
 /// Outcome of [`spatial_check`].

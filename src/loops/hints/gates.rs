@@ -7,6 +7,7 @@ use super::super::error::LoopsError;
 use super::streak::Streak;
 use super::{KeyframeFeatures, LoopDetector, Work};
 use crate::map::PlaceId;
+use crate::profile::{measure, Stage};
 use crate::verify::{
     fit_pair_reaching, relative_pose_from_fit, FeatureKind, PairFit, PoseRefusal, RelativePose,
     ScenePoints,
@@ -407,14 +408,16 @@ impl LoopDetector {
             query: features.camera_points.as_deref(),
             matched: stored.camera_points.as_deref(),
         };
-        let fitted = relative_pose_from_fit(
-            features.keypoints.as_ref(),
-            stored.keypoints.as_ref(),
-            points,
-            fit,
-            &camera,
-            &self.options.pose,
-        )
+        let fitted = measure(Stage::Pose, || {
+            relative_pose_from_fit(
+                features.keypoints.as_ref(),
+                stored.keypoints.as_ref(),
+                points,
+                fit,
+                &camera,
+                &self.options.pose,
+            )
+        })
         .map_err(|e| LoopsError::InvalidKeyframe(e.to_string()))?;
         let pose = match fitted {
             Ok(pose) => pose,

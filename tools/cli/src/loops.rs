@@ -39,6 +39,7 @@ use crate::backend_args::{progress_bar, BackendArgs, LocalFeatures};
 use crate::plot::{write_precision_recall_png, Series};
 use crate::process::median_and_p90;
 use crate::sequence::{self, Frame};
+use crate::stages::StageLog;
 use anyhow::{bail, Context, Result};
 use clap::{Args, ValueEnum};
 use nalgebra::{Isometry3, Matrix3, Translation3, UnitQuaternion};
@@ -80,6 +81,10 @@ pub struct LoopsArgs {
     /// 4, 7, 10, ...). The rate kept is printed on stderr and reported (`effective_rate_hz`).
     #[arg(long)]
     pub keyframe_rate: Option<f64>,
+    /// Resize every image to WxH (for example 320x240) after decoding it, as a host with
+    /// smaller images would give them; intrinsics are scaled with it. Not with `--depth`.
+    #[arg(long, value_parser = parse_size)]
+    pub resize: Option<(u32, u32)>,
     /// TUM trajectory, one pose per image: odometry (world_T_camera) and timestamps.
     #[arg(long)]
     pub poses: Option<PathBuf>,
@@ -291,11 +296,17 @@ pub fn run(args: &LoopsArgs) -> Result<()> {
         Ok(kept.iter().map(|&i| poses[i]).collect())
     };
     let poses = args.poses.as_deref().map(per_keyframe).transpose()?;
-    let camera = args
-        .intrinsics
-        .as_deref()
-        .map(read_intrinsics)
-        .transpose()?;
+    if args.resize.is_some() && args.depth.is_some() {
+        bail!("--resize and --depth together are not supported: depth images keep their size");
+    }
+    let camera = match (args.intrinsics.as_deref(), args.resize) {
+        (None, _) => None,
+        (Some(path), None) => Some(read_intrinsics(path)?),
+        (Some(path), Some(size)) => {
+            let (w, h, _) = read_rgb(&files.first().context("no keyframes")?.clone())?;
+            Some(scale_camera(read_intrinsics(path)?, (w, h), size))
+        }
+    };
     let truth: Option<Vec<Isometry3<f64>>> = args
         .truth
         .as_deref()
@@ -381,9 +392,13 @@ pub fn run(args: &LoopsArgs) -> Result<()> {
     let mut work = Work::default();
     let mut confirmed = 0;
     let mut decisions = String::from("query_index,gate,matched_index,inliers,confidence,detail\n");
+    let mut stages = StageLog::default();
     for (index, path) in files.iter().enumerate() {
-        let (w, h, rgb) = read_rgb(path)?;
+        let decode = Instant::now();
+        let (w, h, rgb) = decode_image(path, args.resize)?;
+        let decode = decode.elapsed();
         let image = ImageView::packed(w, h, PixelFormat::Rgb8, &rgb);
+        let _ = topoloc::profile::take();
         let start = Instant::now();
         let mut descriptor = Vec::new();
         let KeyframeFeatures { keypoints, .. } = describer
@@ -415,6 +430,7 @@ pub fn run(args: &LoopsArgs) -> Result<()> {
             },
         )?;
         times.push(start.elapsed().as_secs_f64() * 1e3);
+        stages.record(decode, topoloc::profile::take(), times[times.len() - 1]);
         work.pair_checks += done.work.pair_checks;
         work.pose_fits += done.work.pose_fits;
         *gates.entry(done.gate().name()).or_insert(0usize) += 1;
@@ -444,6 +460,8 @@ pub fn run(args: &LoopsArgs) -> Result<()> {
         &kept,
     );
     out["confirmed"] = json!(confirmed);
+    out["stages"] = stages.to_json();
+    out["resize"] = json!(args.resize.map(|(w, h)| format!("{w}x{h}")));
     out["sequence"] = json!({
         "layout": format!("{:?}", sequence.layout),
         "frames": sequence.frames.len(),
@@ -931,6 +949,53 @@ fn print_report(args: &LoopsArgs, out: &serde_json::Value) {
         )),
         args.out.display()
     );
+}
+
+/// `WxH` (for example `320x240`), both at least 32.
+fn parse_size(text: &str) -> Result<(u32, u32), String> {
+    let parsed = text
+        .split_once('x')
+        .and_then(|(w, h)| Some((w.parse::<u32>().ok()?, h.parse::<u32>().ok()?)));
+    match parsed {
+        Some((w, h)) if w >= 32 && h >= 32 => Ok((w, h)),
+        _ => Err(format!(
+            "'{text}' is not WxH with both at least 32 (e.g. 320x240)"
+        )),
+    }
+}
+
+/// An image file as RGB, resized to `size` when given (OpenCV's area interpolation).
+fn decode_image(path: &Path, size: Option<(u32, u32)>) -> Result<(u32, u32, Vec<u8>)> {
+    let (w, h, rgb) = read_rgb(path)?;
+    let Some((to_w, to_h)) = size else {
+        return Ok((w, h, rgb));
+    };
+    use opencv::prelude::*;
+    let source = Mat::new_rows_cols_with_data(h as i32, (w * 3) as i32, &rgb)?;
+    let source = source.reshape(3, h as i32)?;
+    let mut resized = Mat::default();
+    opencv::imgproc::resize(
+        &source,
+        &mut resized,
+        opencv::core::Size::new(to_w as i32, to_h as i32),
+        0.0,
+        0.0,
+        opencv::imgproc::INTER_AREA,
+    )
+    .with_context(|| format!("resizing {}", path.display()))?;
+    Ok((to_w, to_h, resized.data_bytes()?.to_vec()))
+}
+
+/// Intrinsics of images of `from` pixels for the same images resized to `to`.
+fn scale_camera(camera: PinholeCamera, from: (u32, u32), to: (u32, u32)) -> PinholeCamera {
+    let sx = f64::from(to.0) / f64::from(from.0);
+    let sy = f64::from(to.1) / f64::from(from.1);
+    PinholeCamera {
+        fx: camera.fx * sx,
+        fy: camera.fy * sy,
+        cx: camera.cx * sx,
+        cy: camera.cy * sy,
+    }
 }
 
 #[cfg(test)]

@@ -19,6 +19,7 @@ mod scaling;
 mod scenario_args;
 mod sequence;
 mod simulate;
+mod stages;
 mod suite;
 mod sweep;
 mod top_view;
