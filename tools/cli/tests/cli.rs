@@ -7,7 +7,7 @@ use std::path::Path;
 mod common;
 use common::{
     build_vlad_map, eval_dataset, fails_with, json, place, read_json, s, simulate_tiny, topoloc,
-    tum_rows, write_intrinsics, write_pgm, write_places,
+    tum_rows, two_sessions, write_intrinsics, write_pgm, write_places, HINTS_HEADER,
 };
 
 #[test]
@@ -635,24 +635,10 @@ fn loops_report(dir: &Path, args: &[&str]) -> (serde_json::Value, Vec<Vec<String
 #[test]
 fn loops_follows_the_contract_online_and_against_a_map() {
     let dir = tempfile::tempdir().unwrap();
-    let (map_dir, query_dir, both) = (
-        dir.path().join("map"),
-        dir.path().join("query"),
-        dir.path().join("both"),
-    );
+    let (map_dir, query_dir, both) = two_sessions(dir.path());
     let places = 12;
-    write_places(&map_dir, &query_dir, places);
-    // Both sessions in one folder: the map's images, then the queries.
-    std::fs::create_dir_all(&both).unwrap();
-    for i in 0..places {
-        let name = format!("{i:03}.pgm");
-        std::fs::copy(map_dir.join(&name), both.join(format!("a{name}"))).unwrap();
-        std::fs::copy(query_dir.join(&name), both.join(format!("b{name}"))).unwrap();
-    }
     let map = dir.path().join("places.topoloc");
     build_vlad_map(&map_dir, &map);
-    let header = "query_index,matched_index,inliers,confidence,scale_known,tx,ty,tz,qx,qy,qz,qw,\
-                  query_frame,matched_frame";
     // A second session against the map: hints name the map's keyframe ids.
     let decisions = dir.path().join("decisions.csv");
     let (report, rows) = loops_report(
@@ -696,7 +682,7 @@ fn loops_follows_the_contract_online_and_against_a_map() {
     ] {
         assert!(report.get(key).is_some(), "missing '{key}' in {report}");
     }
-    assert_eq!(rows[0].join(","), header);
+    assert_eq!(rows[0].join(","), HINTS_HEADER);
     assert!(rows.len() > 1 + places as usize / 2, "{report}");
     for row in &rows[1..] {
         assert_eq!(row.len(), 14, "{row:?}");

@@ -7,7 +7,10 @@ use std::path::Path;
 use std::process::Output;
 
 mod common;
-use common::{build_vlad_map, fails_with, json, place, s, topoloc, write_pgm, write_places};
+use common::{
+    build_vlad_map, fails_with, json, place, s, topoloc, two_sessions, write_pgm, write_places,
+    HINTS_HEADER,
+};
 
 /// Writes `n` KITTI frames (`image_0/000000.pgm` ..., places 0, 1, ... cycling over
 /// `places`) and `times.txt` at `hz` into `dir`.
@@ -153,28 +156,13 @@ fn loops(dir: &Path, name: &str, args: &[&str]) -> (serde_json::Value, Vec<Vec<S
     (report, rows, stderr)
 }
 
-const HEADER: &str =
-    "query_index,matched_index,inliers,confidence,scale_known,tx,ty,tz,qx,qy,qz,qw,\
-                      query_frame,matched_frame";
-
 /// Each hint gives its keyframe indices and the frame indices of the same keyframes; a match in
 /// a map has no frame (empty in the CSV, null in the JSON).
 #[test]
 fn loops_hints_give_keyframe_and_frame_indices() {
     let dir = tempfile::tempdir().unwrap();
-    let (map_dir, query_dir, both) = (
-        dir.path().join("map"),
-        dir.path().join("query"),
-        dir.path().join("both"),
-    );
+    let (map_dir, query_dir, both) = two_sessions(dir.path());
     let places = 12;
-    write_places(&map_dir, &query_dir, places);
-    std::fs::create_dir_all(&both).unwrap();
-    for i in 0..places {
-        let name = format!("{i:03}.pgm");
-        std::fs::copy(map_dir.join(&name), both.join(format!("a{name}"))).unwrap();
-        std::fs::copy(query_dir.join(&name), both.join(format!("b{name}"))).unwrap();
-    }
 
     // Online, every second frame: keyframe k is frame 2k; revisit b(2j) (keyframe 6 + j)
     // matches a(2j) (keyframe j).
@@ -196,7 +184,7 @@ fn loops_hints_give_keyframe_and_frame_indices() {
             "6",
         ],
     );
-    assert_eq!(rows[0].join(","), HEADER);
+    assert_eq!(rows[0].join(","), HINTS_HEADER);
     assert_eq!(report["keyframes"], places, "{report}");
     let frames: Vec<u64> = (0..places).map(|k| 2 * k).collect();
     assert_eq!(
@@ -240,7 +228,7 @@ fn loops_hints_give_keyframe_and_frame_indices() {
         "map",
         &["--images", &s(&kitti), "--map", &s(&map), "--every", "2"],
     );
-    assert_eq!(rows[0].join(","), HEADER);
+    assert_eq!(rows[0].join(","), HINTS_HEADER);
     assert!(rows.len() > 1, "{report}");
     for row in &rows[1..] {
         let (q, m, f): (u64, u64, u64) = (

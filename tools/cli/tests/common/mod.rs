@@ -48,6 +48,26 @@ pub fn write_places(map_dir: &Path, query_dir: &Path, places: u64) {
     }
 }
 
+/// The header of `topoloc loops --out`.
+pub const HINTS_HEADER: &str =
+    "query_index,matched_index,inliers,confidence,scale_known,tx,ty,tz,qx,qy,qz,qw,\
+     query_frame,matched_frame";
+
+/// Two sessions under `dir`: `map/` and `query/` as [`write_places`] writes 12 places, and
+/// `both/` with the map's images (`a000.pgm` ...) then the queries (`b000.pgm` ...), as one
+/// run. Returns the three folders.
+pub fn two_sessions(dir: &Path) -> (std::path::PathBuf, std::path::PathBuf, std::path::PathBuf) {
+    let (map_dir, query_dir, both) = (dir.join("map"), dir.join("query"), dir.join("both"));
+    write_places(&map_dir, &query_dir, 12);
+    std::fs::create_dir_all(&both).unwrap();
+    for i in 0..12 {
+        let name = format!("{i:03}.pgm");
+        std::fs::copy(map_dir.join(&name), both.join(format!("a{name}"))).unwrap();
+        std::fs::copy(query_dir.join(&name), both.join(format!("b{name}"))).unwrap();
+    }
+    (map_dir, query_dir, both)
+}
+
 /// A path as a command-line argument.
 pub fn s(path: &Path) -> String {
     path.to_str().unwrap().to_string()
