@@ -15,7 +15,7 @@ use std::path::Path;
 use std::sync::Arc;
 use std::time::Duration;
 use topoloc::describe::describer::RawFeatures;
-use topoloc::describe::onnx::{cache_dir, OnnxOptions, DEFAULT_MODEL_FILE};
+use topoloc::describe::onnx::{cache_dir, OnnxOptions, DEFAULT_MODEL_FILE, F32_MODEL_FILE};
 use topoloc::describe::pca::{Components, Pca, PcaPrecision};
 use topoloc::describe::vlad::{Codebook, VladOptions};
 use topoloc::describe::{BackendConfig, Describer, DescriberModel, Extractor};
@@ -111,6 +111,15 @@ fn describe(c: &mut Criterion) {
     let mut configs = vec![("vlad-orb", BackendConfig::Vlad(VladOptions::default()))];
     if onnx_ready {
         configs.insert(0, ("onnx-mlf", BackendConfig::Onnx(OnnxOptions::default())));
+        // The f32 network beside the int8 default, in the same run.
+        let f32_model = cache_dir().join(F32_MODEL_FILE);
+        if f32_model.is_file() {
+            let f32_options = OnnxOptions {
+                model: Some(f32_model),
+                ..OnnxOptions::default()
+            };
+            configs.insert(1, ("onnx-mlf-f32", BackendConfig::Onnx(f32_options)));
+        }
     } else {
         eprintln!("skipped onnx-mlf: no model in {}", cache_dir().display());
     }

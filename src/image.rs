@@ -126,19 +126,8 @@ impl<'a> ImageView<'a> {
                 self.stride,
             )
         }?;
-        let code = match self.format {
-            PixelFormat::Gray8 => opencv::imgproc::COLOR_GRAY2RGB,
-            PixelFormat::Rgb8 => -1,
-            PixelFormat::Bgr8 => opencv::imgproc::COLOR_BGR2RGB,
-            PixelFormat::Rgba8 => opencv::imgproc::COLOR_RGBA2RGB,
-            PixelFormat::Bgra8 => opencv::imgproc::COLOR_BGRA2RGB,
-        };
-        let mut rgb = Mat::default();
-        if code < 0 {
-            rgb = borrowed.try_clone()?;
-        } else {
-            opencv::imgproc::cvt_color_def(&borrowed, &mut rgb, code)?;
-        }
+        // Resized in the image's own format, then converted: the same pixels (resizing works
+        // per channel, the conversions copy or reorder channels), on fewer of them.
         let shrinking = size.width < self.width as i32 || size.height < self.height as i32;
         let interpolation = if shrinking {
             opencv::imgproc::INTER_AREA
@@ -146,8 +135,17 @@ impl<'a> ImageView<'a> {
             opencv::imgproc::INTER_LINEAR
         };
         let mut resized = Mat::default();
-        opencv::imgproc::resize(&rgb, &mut resized, size, 0.0, 0.0, interpolation)?;
-        Ok(resized)
+        opencv::imgproc::resize(&borrowed, &mut resized, size, 0.0, 0.0, interpolation)?;
+        let code = match self.format {
+            PixelFormat::Gray8 => opencv::imgproc::COLOR_GRAY2RGB,
+            PixelFormat::Rgb8 => return Ok(resized),
+            PixelFormat::Bgr8 => opencv::imgproc::COLOR_BGR2RGB,
+            PixelFormat::Rgba8 => opencv::imgproc::COLOR_RGBA2RGB,
+            PixelFormat::Bgra8 => opencv::imgproc::COLOR_BGRA2RGB,
+        };
+        let mut rgb = Mat::default();
+        opencv::imgproc::cvt_color_def(&resized, &mut rgb, code)?;
+        Ok(rgb)
     }
 }
 

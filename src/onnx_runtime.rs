@@ -146,6 +146,64 @@ pub(crate) fn session(
     Ok((session, format!("{:x}", Sha256::digest(&bytes))))
 }
 
+/// SHA-256 (hex) of the file at `path`; a file that cannot be read is
+/// [`VisionError::BackendUnavailable`] naming it and `hint`.
+pub(crate) fn file_sha256(path: &Path, hint: &str) -> Result<String, VisionError> {
+    let bytes = std::fs::read(path).map_err(|e| VisionError::BackendUnavailable {
+        what: "ONNX model".into(),
+        tried: vec![path.to_path_buf()],
+        hint: format!("{e}; {hint}"),
+    })?;
+    Ok(format!("{:x}", Sha256::digest(&bytes)))
+}
+
+/// Checks that `session` (loaded from `model`) has exactly one input, named `name`, a float
+/// tensor of rank 4 whose known dimensions equal `dims` where those are given (`None`: any;
+/// a dimension the model leaves dynamic passes; `Some(-1)`: the model must leave it dynamic). Else [`VisionError::Model`] naming the file,
+/// what it has and what was expected: a network that would fail at its first image is refused
+/// when it is loaded.
+pub(crate) fn check_single_input(
+    session: &Session,
+    model: &Path,
+    name: &str,
+    dims: [Option<i64>; 4],
+) -> Result<(), VisionError> {
+    use ort::value::{TensorElementType, ValueType};
+    let expected = || {
+        let dim = |d: &Option<i64>| d.map_or("?".to_string(), |v| v.to_string());
+        format!(
+            "one float input '{name}' of shape [{}]",
+            dims.iter().map(dim).collect::<Vec<_>>().join(", ")
+        )
+    };
+    let refuse = |has: String| {
+        Err(VisionError::Model(format!(
+            "{} has {has}; expected {}",
+            model.display(),
+            expected()
+        )))
+    };
+    let inputs = session.inputs();
+    let [input] = inputs else {
+        let names: Vec<&str> = inputs.iter().map(|i| i.name()).collect();
+        return refuse(format!("inputs {names:?}"));
+    };
+    if input.name() != name {
+        return refuse(format!("the input '{}'", input.name()));
+    }
+    let ValueType::Tensor { ty, shape, .. } = input.dtype() else {
+        return refuse(format!("an input '{name}' that is not a tensor"));
+    };
+    let fits = |(have, want): (&i64, &Option<i64>)| *have < 0 || want.is_none_or(|w| *have == w);
+    if *ty != TensorElementType::Float32 || shape.len() != 4 || !shape.iter().zip(&dims).all(fits) {
+        return refuse(format!(
+            "an input '{name}' of {ty:?} shape {:?}",
+            &shape[..]
+        ));
+    }
+    Ok(())
+}
+
 /// A session on the model `bytes` with `threads` intra-op threads. A runtime that cannot be
 /// loaded is [`VisionError::BackendUnavailable`]; bytes ONNX Runtime refuses are
 /// [`VisionError::Model`].

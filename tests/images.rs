@@ -12,7 +12,7 @@ use topoloc::build::{
     build_from_images, BuildStage, ImageLayout, ImageMapError, ImageMapOptions, ImageSource,
     PlaceLayout, DEFAULT_MAP_FEATURES,
 };
-use topoloc::describe::onnx::{OnnxOptions, DEFAULT_MODEL_FILE};
+use topoloc::describe::onnx::{OnnxMlf, OnnxOptions, DEFAULT_MODEL_FILE, F32_MODEL_FILE};
 use topoloc::describe::vlad::VladOptions;
 use topoloc::describe::{BackendConfig, BackendKind, BackendSpec, Describer, DescriberOptions};
 use topoloc::errors::VisionError;
@@ -228,9 +228,86 @@ fn a_describer_of_another_backend_or_model_is_refused() {
         model_sha256.replace_range(0..4, "0000");
     }
     match Describer::new(Arc::new(model), &DescriberOptions::default()) {
-        Err(VisionError::Mismatch(msg)) => assert!(msg.contains("sha256"), "{msg}"),
+        // Neither cache file is the map's: both are named.
+        Err(VisionError::Mismatch(msg)) => assert!(
+            msg.contains("sha256")
+                && msg.contains(DEFAULT_MODEL_FILE)
+                && msg.contains(F32_MODEL_FILE),
+            "{msg}"
+        ),
         Err(e) => panic!("expected Mismatch, got {e}"),
         Ok(_) => panic!("expected Mismatch, got a describer"),
+    }
+}
+
+/// Maps name their network by its hash: a map of the f32 network (built before int8 was the
+/// default, or by a host that asked for it) loads with no model path, from the cache's f32
+/// file, and describes as it was built; a map of the int8 default loads the int8 file.
+#[test]
+fn maps_of_the_f32_network_and_of_the_int8_default_both_load_from_the_cache() {
+    let (Some(f32_file), true) = (common::models::cached(F32_MODEL_FILE), onnx_available()) else {
+        return;
+    };
+    let images: Vec<Vec<u8>> = (0..4).map(place_image).collect();
+    let f32_backend = BackendConfig::Onnx(OnnxOptions {
+        model: Some(f32_file),
+        ..OnnxOptions::default()
+    });
+    let mut identities = Vec::new();
+    for backend in [f32_backend, BackendConfig::Onnx(OnnxOptions::default())] {
+        let map = build(&images, backend).unwrap();
+        let model = map.describer().unwrap().clone();
+        let mut describer = Describer::new(model.clone(), &DescriberOptions::default())
+            .expect("the cache holds the map's network");
+        assert_eq!(describer.identity(), map.descriptor());
+        // The map's own first image describes as the map's first view was.
+        let mut out = Vec::new();
+        describer.describe(&gray(&images[0]), &mut out).unwrap();
+        let view = map.view_descriptor(0).unwrap().to_vec();
+        let cosine: f32 = out.iter().zip(&view).map(|(a, b)| a * b).sum();
+        assert!(cosine > 0.999, "cosine {cosine} to the map's own view");
+        identities.push(describer.identity().clone());
+    }
+    assert_ne!(
+        identities[0], identities[1],
+        "two networks, two descriptor identities"
+    );
+}
+
+/// A network that is not the declared one is refused when it is loaded, naming the file and
+/// what was expected: XFeat's model (one grey `image` input) as the describer's CNN, and the
+/// CNN (a 3-channel `input`) as XFeat.
+#[test]
+fn models_with_other_inputs_are_refused_naming_the_file() {
+    let (Some(xfeat), Some(cnn)) = (
+        common::models::cached(topoloc::verify::xfeat::DEFAULT_XFEAT_MODEL_FILE),
+        common::models::cached(DEFAULT_MODEL_FILE),
+    ) else {
+        return;
+    };
+    let as_cnn = OnnxMlf::new(OnnxOptions {
+        model: Some(xfeat.clone()),
+        ..OnnxOptions::default()
+    });
+    match as_cnn {
+        Err(VisionError::Model(msg)) => assert!(
+            msg.contains(&*xfeat.to_string_lossy()) && msg.contains("'input'"),
+            "{msg}"
+        ),
+        Err(e) => panic!("expected a model error, got {e}"),
+        Ok(_) => panic!("XFeat accepted as the describer's CNN"),
+    }
+    let options = topoloc::verify::XFeatOptions {
+        model: Some(cnn.clone()),
+        ..Default::default()
+    };
+    match topoloc::verify::XFeatDetector::new(&options, 256) {
+        Err(VisionError::Model(msg)) => assert!(
+            msg.contains(&*cnn.to_string_lossy()) && msg.contains("'image'"),
+            "{msg}"
+        ),
+        Err(e) => panic!("expected a model error, got {e}"),
+        Ok(_) => panic!("the CNN accepted as XFeat"),
     }
 }
 

@@ -4,6 +4,9 @@
 //! pooling, per-level L2) must agree with it on a fixed 320x240 pattern. The pattern is already at
 //! the network input size, so neither side resizes; resizing is covered by other tests.
 //!
+//! The f32 network is the one compared with PyTorch; the int8 default is compared with the f32
+//! network (it is a quantization of it, so PyTorch has no int8 reference).
+//!
 //! Skipped (with a message) only when the cache lacks the model or the weights
 //! (scripts/setup-models.sh) or /usr/bin/python3 cannot import torch and torchvision.
 
@@ -11,7 +14,7 @@ mod common;
 
 use std::path::Path;
 use std::process::Command;
-use topoloc::describe::onnx::{OnnxMlf, OnnxOptions, DEFAULT_MODEL_FILE};
+use topoloc::describe::onnx::{OnnxMlf, OnnxOptions, DEFAULT_MODEL_FILE, F32_MODEL_FILE};
 use topoloc::describe::pca::Pca;
 use topoloc::image::{ImageView, PixelFormat};
 
@@ -54,7 +57,7 @@ fn pattern() -> Vec<u8> {
 
 /// The reference vector, or None (after printing why) when the test must be skipped.
 fn reference(image: &[u8], taps: &[&str], grid: (usize, usize)) -> Option<Vec<f32>> {
-    let _model = common::models::cached(DEFAULT_MODEL_FILE)?;
+    let _model = common::models::cached(F32_MODEL_FILE)?;
     let weights = common::models::cached(WEIGHTS_FILE)?;
     let has_torch = Command::new(PYTHON)
         .args(["-c", "import torch, torchvision"])
@@ -90,8 +93,14 @@ fn reference(image: &[u8], taps: &[&str], grid: (usize, usize)) -> Option<Vec<f3
     Some(serde_json::from_slice(&output.stdout).expect("a JSON list of floats"))
 }
 
+/// The f32 network of the cache with these taps and grid.
 fn backend(taps: &[&str], grid: (usize, usize)) -> OnnxMlf {
+    backend_of(F32_MODEL_FILE, taps, grid)
+}
+
+fn backend_of(file: &str, taps: &[&str], grid: (usize, usize)) -> OnnxMlf {
     OnnxMlf::new(OnnxOptions {
+        model: Some(common::models::cache_dir().join(file)),
         taps: taps.iter().map(|t| t.to_string()).collect(),
         grid,
         ..Default::default()
@@ -183,7 +192,7 @@ fn other_taps_and_global_pooling_match_the_pytorch_reference() {
 
 #[test]
 fn pca_of_the_mlf_vector_matches_a_direct_computation() {
-    if common::models::cached(DEFAULT_MODEL_FILE).is_none() {
+    if common::models::cached(F32_MODEL_FILE).is_none() {
         return;
     }
     let image = pattern();
@@ -269,4 +278,63 @@ fn pca_of_the_mlf_vector_matches_a_direct_computation() {
             );
         }
     }
+}
+
+fn cosine(a: &[f32], b: &[f32]) -> f64 {
+    let dot = |x: &[f32], y: &[f32]| -> f64 {
+        x.iter()
+            .zip(y)
+            .map(|(&p, &q)| f64::from(p) * f64::from(q))
+            .sum()
+    };
+    dot(a, b) / (dot(a, a) * dot(b, b)).sqrt()
+}
+
+/// The int8 default keeps the f32 network's multi-level features: per tap (4x4 cells), the
+/// cosine of the two pooled vectors on the pattern in full light and darkened to a night's
+/// 15%, where quantization's coarse activation ranges would show first.
+#[test]
+fn int8_model_keeps_the_f32_networks_features_per_tap() {
+    if common::models::cached(F32_MODEL_FILE).is_none()
+        || common::models::cached(DEFAULT_MODEL_FILE).is_none()
+    {
+        return;
+    }
+    let bright = pattern();
+    let dark: Vec<u8> = bright
+        .iter()
+        .map(|&v| (f32::from(v) * 0.15) as u8)
+        .collect();
+    for (tap, floor) in [("f6", 0.97), ("f13", 0.96), ("f17", 0.91), ("f18", 0.92)] {
+        let mut f32_net = backend(&[tap], (4, 4));
+        let mut int8_net = backend_of(DEFAULT_MODEL_FILE, &[tap], (4, 4));
+        for (light, image) in [("bright", &bright), ("dark", &dark)] {
+            let view = ImageView::packed(W, H, PixelFormat::Rgb8, image);
+            let a = f32_net.raw_features(&view).unwrap();
+            let b = int8_net.raw_features(&view).unwrap();
+            let c = cosine(&a, &b);
+            println!("{tap} {light}: cosine {c:.5}");
+            assert!(
+                c > floor,
+                "{tap} {light}: int8 against f32 cosine {c:.5} <= {floor}"
+            );
+        }
+    }
+}
+
+/// The two cache files are different networks to a map: a map records its model's hash, and
+/// the int8 file is not the f32 one.
+#[test]
+fn int8_and_f32_models_have_different_hashes() {
+    let (Some(_), Some(_)) = (
+        common::models::cached(F32_MODEL_FILE),
+        common::models::cached(DEFAULT_MODEL_FILE),
+    ) else {
+        return;
+    };
+    let taps = ["f6", "f13", "f17", "f18"];
+    let a = backend_of(F32_MODEL_FILE, &taps, (4, 4));
+    let b = backend_of(DEFAULT_MODEL_FILE, &taps, (4, 4));
+    assert_ne!(a.model_sha256(), b.model_sha256());
+    assert_ne!(a.identity(), b.identity());
 }

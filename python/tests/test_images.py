@@ -25,7 +25,7 @@ from conftest import require_models, skip_or_fail
 
 W, H = 320, 240
 PLACES = 12
-ONNX_MODEL = Path.home() / ".cache" / "topoloc" / "models" / "mobilenetv2-mlf.onnx"
+ONNX_MODEL = Path.home() / ".cache" / "topoloc" / "models" / "mobilenetv2-mlf-int8.onnx"
 
 
 def place_image(seed: int, w: int = W, h: int = H) -> np.ndarray:

@@ -600,7 +600,8 @@ pub struct DescriberOptions {
     pub family: Option<String>,
     /// ONNX Runtime library (else `TOPOLOC_ORT_LIBRARY`, `ORT_DYLIB_PATH`, the cache).
     pub onnx_runtime: Option<PathBuf>,
-    /// ONNX model file (else the cache's default); must be the very model the map was built with.
+    /// ONNX model file; must be the very model the map was built with. Else the cache's file
+    /// that is ([`super::onnx::default_model_for`]: the int8 default or the f32 network).
     pub onnx_model: Option<PathBuf>,
     /// ONNX Runtime intra-op threads; 0 means 1.
     pub threads: usize,
@@ -641,20 +642,24 @@ impl Describer {
         }
         let config = match &model.spec {
             BackendSpec::Onnx {
+                model_sha256,
                 taps,
                 grid,
                 input_size,
                 preprocessing,
-                ..
             } => {
                 if preprocessing != ONNX_PREPROCESSING {
                     return Err(VisionError::Mismatch(format!(
                         "the map's preprocessing '{preprocessing}' is not supported by this build ('{ONNX_PREPROCESSING}')"
                     )));
                 }
+                let model_file = match &options.onnx_model {
+                    Some(path) => path.clone(),
+                    None => super::onnx::default_model_for(model_sha256)?,
+                };
                 BackendConfig::Onnx(OnnxOptions {
                     runtime: options.onnx_runtime.clone(),
-                    model: options.onnx_model.clone(),
+                    model: Some(model_file),
                     taps: taps.clone(),
                     grid: (grid[0], grid[1]),
                     input_size: (input_size[0], input_size[1]),

@@ -6,7 +6,7 @@ use crate::bounds::Bounds;
 use crate::errors::VisionError;
 use crate::image::ImageView;
 pub use crate::onnx_runtime::cache_dir;
-use crate::onnx_runtime::session;
+use crate::onnx_runtime::{check_single_input, session};
 use crate::profile::{self, measure, Stage};
 use opencv::core::Size;
 use opencv::prelude::*;
@@ -17,15 +17,57 @@ use std::path::PathBuf;
 /// ImageNet normalisation of the default backbone (torchvision MobileNetV2), RGB order.
 const MEAN: [f32; 3] = [0.485, 0.456, 0.406];
 const STD: [f32; 3] = [0.229, 0.224, 0.225];
-/// File name of the default model in the cache (made by scripts/setup-models.sh).
-pub const DEFAULT_MODEL_FILE: &str = "models/mobilenetv2-mlf.onnx";
+/// Every grey level of each channel, normalised as the network expects: `(v / 255 - mean) / std`.
+fn normalised_levels() -> &'static [[f32; 256]; 3] {
+    static TABLE: std::sync::OnceLock<[[f32; 256]; 3]> = std::sync::OnceLock::new();
+    TABLE.get_or_init(|| {
+        std::array::from_fn(|c| std::array::from_fn(|v| (v as f32 / 255.0 - MEAN[c]) / STD[c]))
+    })
+}
+
+/// File name of the default model in the cache: MobileNetV2's multi-level export quantized to
+/// int8 by `scripts/setup-models.sh` (BENCHMARKS.md, "int8 MobileNetV2", shows its time and
+/// that localization and loop hints keep their accuracy).
+pub const DEFAULT_MODEL_FILE: &str = "models/mobilenetv2-mlf-int8.onnx";
+/// File name of the same network in f32 in the cache: the option for a host that wants it
+/// (pass its path), and the model of maps built before the int8 default.
+pub const F32_MODEL_FILE: &str = "models/mobilenetv2-mlf.onnx";
+/// What a missing model file's error tells the caller to do.
+const MODEL_HINT: &str = "run scripts/setup-models.sh or pass the model path";
+
+/// The cache's model file for a map built with the model whose SHA-256 is `sha256`, for a
+/// describer given no model path: the int8 default ([`DEFAULT_MODEL_FILE`]) or the f32 network
+/// ([`F32_MODEL_FILE`]), whichever is that very file, so maps of either keep loading. Neither
+/// is [`VisionError::Mismatch`] naming both files and the hash the map asks for (missing ones
+/// as missing); the file is then read again, and hashed, by the session that loads it.
+pub fn default_model_for(sha256: &str) -> Result<PathBuf, VisionError> {
+    let mut seen = Vec::new();
+    for file in [DEFAULT_MODEL_FILE, F32_MODEL_FILE] {
+        let path = cache_dir().join(file);
+        if !path.is_file() {
+            seen.push(format!("{} (missing)", path.display()));
+            continue;
+        }
+        let found = crate::onnx_runtime::file_sha256(&path, MODEL_HINT)?;
+        if found == sha256 {
+            return Ok(path);
+        }
+        seen.push(format!("{} (sha256:{})", path.display(), &found[..16]));
+    }
+    Err(VisionError::Mismatch(format!(
+        "the map was built with the ONNX model sha256:{}, which is none of the cache's models: {}; \
+         pass the model file the map was built with (or run scripts/setup-models.sh)",
+        sha256.get(..16).unwrap_or(sha256),
+        seen.join(", ")
+    )))
+}
 
 /// Where the ONNX backend finds its files, and what it extracts.
 #[derive(Clone, Debug, PartialEq)]
 pub struct OnnxOptions {
     /// ONNX Runtime shared library; else `TOPOLOC_ORT_LIBRARY`, `ORT_DYLIB_PATH`, then the cache.
     pub runtime: Option<PathBuf>,
-    /// Model file; else the cache's default MobileNetV2 multi-level export.
+    /// Model file; else the cache's int8 MobileNetV2 multi-level export ([`DEFAULT_MODEL_FILE`]).
     pub model: Option<PathBuf>,
     /// Output names of the feature maps to use (the default model names them `f{block}`).
     pub taps: Vec<String>,
@@ -101,7 +143,14 @@ impl OnnxMlf {
             options.runtime.as_deref(),
             &model,
             options.threads,
-            "run scripts/setup-models.sh or pass the model path",
+            MODEL_HINT,
+        )?;
+        let (w, h) = options.input_size;
+        check_single_input(
+            &session,
+            &model,
+            "input",
+            [None, Some(3), Some(i64::from(h)), Some(i64::from(w))],
         )?;
         let outputs: Vec<&str> = session.outputs().iter().map(|o| o.name()).collect();
         if let Some(missing) = options.taps.iter().find(|t| !outputs.contains(&t.as_str())) {
@@ -220,10 +269,13 @@ impl OnnxMlf {
         let pixels = rgb.data_bytes()?;
         let plane = (w * h) as usize;
         self.input.resize(3 * plane, 0.0);
+        let table = normalised_levels();
+        let (red, rest) = self.input.split_at_mut(plane);
+        let (green, blue) = rest.split_at_mut(plane);
         for (i, px) in pixels.chunks_exact(3).enumerate() {
-            for c in 0..3 {
-                self.input[c * plane + i] = (f32::from(px[c]) / 255.0 - MEAN[c]) / STD[c];
-            }
+            red[i] = table[0][px[0] as usize];
+            green[i] = table[1][px[1] as usize];
+            blue[i] = table[2][px[2] as usize];
         }
         Ok(())
     }

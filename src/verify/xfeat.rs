@@ -12,7 +12,7 @@ use super::keypoints::{Descriptors, Keypoints, XFeatDescriptor, MAX_KEYPOINTS, X
 use crate::bounds::Bounds;
 use crate::errors::VisionError;
 use crate::image::ImageView;
-use crate::onnx_runtime::{cache_dir, session};
+use crate::onnx_runtime::{cache_dir, check_single_input, session};
 use opencv::core::{Mat, Size};
 use opencv::prelude::*;
 use ort::session::Session;
@@ -89,8 +89,9 @@ pub struct XFeatDetector {
 
 impl XFeatDetector {
     /// Loads the runtime and the model; a missing file is [`VisionError::BackendUnavailable`]
-    /// naming the path and `scripts/setup-models.sh`, a model without the `scores` and
-    /// `descriptors` outputs is [`VisionError::Model`].
+    /// naming the path and `scripts/setup-models.sh`; a model whose input is not one grey
+    /// image `image` of free size, or without the `scores` and `descriptors` outputs, is
+    /// [`VisionError::Model`] naming the file.
     /// Keeps at most `max_keypoints` (1..=[`MAX_KEYPOINTS`]) per image, best scores first.
     pub fn new(options: &XFeatOptions, max_keypoints: usize) -> Result<Self, VisionError> {
         options.validate()?;
@@ -108,6 +109,13 @@ impl XFeatDetector {
             &model,
             options.threads,
             "run scripts/setup-models.sh (it exports XFeat) or pass the model path",
+        )?;
+        // Grey images of any size: the network's input must leave height and width free.
+        check_single_input(
+            &session,
+            &model,
+            "image",
+            [None, Some(1), Some(-1), Some(-1)],
         )?;
         let outputs: Vec<&str> = session.outputs().iter().map(|o| o.name()).collect();
         if !(outputs.contains(&"scores") && outputs.contains(&"descriptors")) {

@@ -142,7 +142,7 @@ void tmp_path(char *out, size_t len, const char *name);
 bool write_file(const char *path, const unsigned char *data, size_t len);
 /* The cache's model files (scripts/setup-models.sh), relative to $TOPOLOC_CACHE or
  * ~/.cache/topoloc. */
-#define ONNX_MODEL_FILE "models/mobilenetv2-mlf.onnx"
+#define ONNX_MODEL_FILE "models/mobilenetv2-mlf-int8.onnx"
 #define XFEAT_MODEL_FILE "models/xfeat.onnx"
 /* True when the cache's `file` exists (its path into `path`) and the run is not under valgrind
  * (ONNX Runtime takes minutes there, and its code is not ours to check); otherwise says which

@@ -3,7 +3,7 @@
 //! (`CI=true`), where a missing model means a broken set-up, not a test to skip.
 
 use std::path::PathBuf;
-use topoloc::describe::onnx::cache_dir;
+pub use topoloc::describe::onnx::cache_dir;
 
 /// `file` in the model cache, or `None` after saying the test is skipped; panics in CI.
 pub fn cached(file: &str) -> Option<PathBuf> {

@@ -345,7 +345,7 @@ TEST(image_keyframes_with_depth_and_c_records)
 // session; XFeat image keyframes of the revisits close loops against it with a pose.
 TEST(the_learned_path_closes_loops_with_poses_against_an_xfeat_map)
 {
-    if (!cached_model("models/mobilenetv2-mlf.onnx", "learned loop") ||
+    if (!cached_model("models/mobilenetv2-mlf-int8.onnx", "learned loop") ||
         !cached_model("models/xfeat.onnx", "learned loop"))
         return;
     constexpr uint32_t kPlacesX = 6;
