@@ -87,9 +87,9 @@
  * (`TOPOLOC_MODE_GRNN`, `grnn_model_path`); 1.17: the loop options the CLI had alone
  * (`refine_keyframes`, `pose_min_inliers`, `pair_*`, `cells_pair_*`), the hint's
  * `translation` (`TOPOLOC_TRANSLATION_*`), `TOPOLOC_GATE_SELF_MATCH`,
- * `topoloc_loop_detector_next_id`.
+ * `topoloc_loop_detector_next_id`; 1.18: `TOPOLOC_PAIR_ESTIMATOR_USAC_FAST`.
  */
-#define TOPOLOC_ABI_VERSION_MINOR 17
+#define TOPOLOC_ABI_VERSION_MINOR 18
 
 /**
  * Result of every fallible C function. Values are grouped in ranges and never renumbered;
@@ -1811,6 +1811,14 @@ typedef uint32_t topoloc_trajectory_format;
  * higher cost per fit.
  */
 #define TOPOLOC_PAIR_ESTIMATOR_MAGSAC 1
+
+/**
+ * OpenCV's USAC in its fast settings (`USAC_FAST`, ABI 1.18): bad models dropped after a few
+ * points, so pairs that do not match cost a fraction of RANSAC's time; it finds more inliers
+ * on look-alike pairs too (less precise on small images), and none for a camera that only
+ * turned (its degenerate samples).
+ */
+#define TOPOLOC_PAIR_ESTIMATOR_USAC_FAST 2
 
 /**
  * No translation: the hint has no pose, or the views differ by a rotation only (the cameras

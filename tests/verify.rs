@@ -90,7 +90,11 @@ fn a_camera_back_where_the_view_was_taken_keeps_its_inliers_with_either_fit() {
     // No motion: every match stays where it was, which no fundamental matrix describes.
     let stored = detect(&place_image(5));
     let other = detect(&place_image(6));
-    for estimator in [FundamentalEstimator::Ransac, FundamentalEstimator::Magsac] {
+    for estimator in [
+        FundamentalEstimator::Ransac,
+        FundamentalEstimator::Magsac,
+        FundamentalEstimator::UsacFast,
+    ] {
         let options = PairOptions {
             estimator,
             max_iterations: 1000,

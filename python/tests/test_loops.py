@@ -98,7 +98,11 @@ def test_options_defaults():
     raw = _options.defaults(_lib.topoloc_loop_options, _lib.lib.topoloc_loop_options_init)
     assert raw.struct_size == ctypes.sizeof(_lib.topoloc_loop_options)
     assert set(d) == {name for name, _ in _lib.topoloc_loop_options._fields_} - {"struct_size"}
-    estimators = {"ransac": _lib.PAIR_ESTIMATOR_RANSAC, "magsac": _lib.PAIR_ESTIMATOR_MAGSAC}
+    estimators = {
+        "ransac": _lib.PAIR_ESTIMATOR_RANSAC,
+        "magsac": _lib.PAIR_ESTIMATOR_MAGSAC,
+        "usac_fast": _lib.PAIR_ESTIMATOR_USAC_FAST,
+    }
     for name, value in d.items():
         assert estimators.get(value, value) == getattr(raw, name), name
     assert d["candidates"] == 5 and d["min_inliers"] == 30 and d["consistent_keyframes"] == 3

@@ -47,7 +47,7 @@ ABI_VERSION = 1
 
 #: ABI minor version these bindings were written for (``TOPOLOC_ABI_VERSION_MINOR``): they use
 #: items up to "ABI 1.N" of the header.
-ABI_VERSION_MINOR = 17
+ABI_VERSION_MINOR = 18
 
 #: Environment variable naming the shared library to load.
 ENV_VAR = "TOPOLOC_LIBRARY"
@@ -101,6 +101,7 @@ GATE_SELF_MATCH = 6
 #: ``TOPOLOC_PAIR_ESTIMATOR_*`` (ABI 1.17): the estimator of a keyframe pair's geometric check.
 PAIR_ESTIMATOR_RANSAC = 0
 PAIR_ESTIMATOR_MAGSAC = 1
+PAIR_ESTIMATOR_USAC_FAST = 2
 
 #: ``TOPOLOC_TRANSLATION_*`` (ABI 1.17): what a loop hint's translation holds.
 TRANSLATION_NONE = 0

@@ -144,6 +144,7 @@ class LoopCandidate:
 _PAIR_ESTIMATORS = {
     "ransac": _lib.PAIR_ESTIMATOR_RANSAC,
     "magsac": _lib.PAIR_ESTIMATOR_MAGSAC,
+    "usac_fast": _lib.PAIR_ESTIMATOR_USAC_FAST,
 }
 
 #: The :class:`LoopDetector` options: the fields of ``topoloc_loop_options``, by their names.
@@ -243,10 +244,11 @@ class LoopDetector(_SingleThreaded):
     ``pose_reprojection_px``), the place graph (``novelty_similarity``, ``place_spacing_m``,
     ``neighbour_radius_m``), the candidates the odometry adds (``odometry_candidates``,
     ``odometry_search_m``) and the verification itself (``refine_keyframes``,
-    ``pose_min_inliers``, ``pair_estimator`` and ``cells_pair_estimator`` as ``"ransac"`` or
-    ``"magsac"``, ``pair_iterations``, ``pair_min_cosine``, ``cells_pair_iterations``,
-    ``cells_pair_min_cosine``). A value out of range raises :class:`InvalidOptionError`, a
-    value of the wrong type (a string for a flag) or an unknown name ``TypeError``.
+    ``pose_min_inliers``, ``pair_estimator`` and ``cells_pair_estimator`` as ``"ransac"``,
+    ``"magsac"`` or ``"usac_fast"``, ``pair_iterations``, ``pair_min_cosine``,
+    ``cells_pair_iterations``, ``cells_pair_min_cosine``). A value out of range raises
+    :class:`InvalidOptionError`, a value of the wrong type (a string for a flag) or an unknown
+    name ``TypeError``.
 
     Keyframe ids count keyframes (0, 1, 2, ... or any increasing numbers), not camera frames:
     ``exclude_recent_ids`` and ``candidate_id_gap`` are in these units.

@@ -29,8 +29,8 @@ pub const TOPOLOC_ABI_VERSION: u32 = 1;
 /// (`TOPOLOC_MODE_GRNN`, `grnn_model_path`); 1.17: the loop options the CLI had alone
 /// (`refine_keyframes`, `pose_min_inliers`, `pair_*`, `cells_pair_*`), the hint's
 /// `translation` (`TOPOLOC_TRANSLATION_*`), `TOPOLOC_GATE_SELF_MATCH`,
-/// `topoloc_loop_detector_next_id`.
-pub const TOPOLOC_ABI_VERSION_MINOR: u32 = 17;
+/// `topoloc_loop_detector_next_id`; 1.18: `TOPOLOC_PAIR_ESTIMATOR_USAC_FAST`.
+pub const TOPOLOC_ABI_VERSION_MINOR: u32 = 18;
 
 static VERSION: &CStr =
     match CStr::from_bytes_with_nul(concat!(env!("CARGO_PKG_VERSION"), "\0").as_bytes()) {

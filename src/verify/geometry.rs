@@ -36,6 +36,11 @@ pub enum FundamentalEstimator {
     /// OpenCV's USAC with MAGSAC++ scoring (`USAC_MAGSAC`): steadier inlier counts at low
     /// inlier ratios, at a higher cost per fit.
     Magsac,
+    /// OpenCV's USAC in its fast settings (`USAC_FAST`: SPRT drops a bad model after a few
+    /// points instead of scoring every match, local optimisation refines the best): a fraction
+    /// of RANSAC's time on pairs that do not match, which are most of a loop detector's checks.
+    /// Deterministic (USAC's fixed seed).
+    UsacFast,
 }
 
 /// Options of [`check_pair`].
@@ -309,6 +314,7 @@ fn fit_matches(
         match options.estimator {
             FundamentalEstimator::Ransac => calib3d::FM_RANSAC,
             FundamentalEstimator::Magsac => calib3d::USAC_MAGSAC,
+            FundamentalEstimator::UsacFast => calib3d::USAC_FAST,
         },
         options.ransac_threshold_px,
         options.confidence,
@@ -323,10 +329,15 @@ fn fit_matches(
     // The no-motion model beside the fundamental matrix: a camera back where the view was taken
     // sees its points where they were, which no fundamental matrix describes (MAGSAC++ then
     // finds none, and dense cells, on a 16 px grid, do not move for a shift of a few pixels).
-    let still: Vec<bool> = from
+    let still: Vec<bool> = kept
         .iter()
-        .zip(to.iter())
-        .map(|(a, b)| (a.x - b.x).hypot(a.y - b.y) <= options.ransac_threshold_px as f32)
+        .map(|m| {
+            let (a, b) = (
+                query.points[m.query_idx as usize],
+                view.points[m.train_idx as usize],
+            );
+            (a[0] - b[0]).hypot(a[1] - b[1]) <= options.ransac_threshold_px as f32
+        })
         .collect();
     let count = |mask: &[bool]| mask.iter().filter(|&&m| m).count();
     Ok(match count(&still) > count(&inliers) {

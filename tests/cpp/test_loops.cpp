@@ -73,7 +73,7 @@ TEST(loop_options_and_gates)
     CHECK(options.pose_reprojection_px == 5.0);
     CHECK(options.odometry_candidates == 1u && options.odometry_search_m == 2.0);
     CHECK(options.max_match_pace == 3.0 && options.match_pace_slack_s == 0.5);
-    static_assert(TOPOLOC_ABI_VERSION_MINOR >= 17, "the CLI's loop options are ABI 1.17");
+    static_assert(TOPOLOC_ABI_VERSION_MINOR >= 18, "TOPOLOC_PAIR_ESTIMATOR_USAC_FAST is ABI 1.18");
     CHECK(options.refine_keyframes == 5u && options.pose_min_inliers == 30u);
     CHECK(options.pair_estimator == TOPOLOC_PAIR_ESTIMATOR_RANSAC &&
           options.pair_iterations == 100u && options.pair_min_cosine == 0.82f);

@@ -73,7 +73,9 @@ pub struct HintOptions {
     /// matches below cosine 0.82 dropped (XFeat's own matcher's floor) and RANSAC at 1.5 px
     /// with 100 iterations (chosen on generated train and tr-t revisits in bright and dim
     /// light: the precision of 200 iterations on every match at two thirds of the keyframe
-    /// time, BENCHMARKS.md).
+    /// time, BENCHMARKS.md). USAC_FAST ([`FundamentalEstimator::UsacFast`]) fits in a
+    /// quarter of the time and kept the precision on train worlds and KITTI 00, but not on
+    /// KITTI at 320x240 (15 hints without a revisit), and refuses a camera that only turned.
     pub pair: PairOptions,
     /// The same for dense cells. Default [`PairOptions::cells_default`].
     pub cells_pair: PairOptions,

@@ -223,6 +223,8 @@ pub enum PairEstimator {
     Ransac,
     /// MAGSAC++ (OpenCV's USAC).
     Magsac,
+    /// OpenCV's USAC in its fast settings (a quarter of RANSAC's time; see BENCHMARKS.md).
+    UsacFast,
 }
 
 impl PairEstimator {
@@ -230,6 +232,7 @@ impl PairEstimator {
         match self {
             PairEstimator::Ransac => FundamentalEstimator::Ransac,
             PairEstimator::Magsac => FundamentalEstimator::Magsac,
+            PairEstimator::UsacFast => FundamentalEstimator::UsacFast,
         }
     }
 }
