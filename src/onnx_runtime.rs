@@ -132,11 +132,7 @@ pub(crate) fn session(
     threads: usize,
     hint: &str,
 ) -> Result<(Session, String), VisionError> {
-    let bytes = std::fs::read(model).map_err(|e| VisionError::BackendUnavailable {
-        what: "ONNX model".into(),
-        tried: vec![model.to_path_buf()],
-        hint: format!("{e}; {hint}"),
-    })?;
+    let bytes = read_model(model, hint)?;
     let session = session_from_memory(runtime, &bytes, threads).map_err(|e| match e {
         VisionError::Model(message) => {
             VisionError::Model(format!("{}: {message}", model.display()))
@@ -149,19 +145,24 @@ pub(crate) fn session(
 /// SHA-256 (hex) of the file at `path`; a file that cannot be read is
 /// [`VisionError::BackendUnavailable`] naming it and `hint`.
 pub(crate) fn file_sha256(path: &Path, hint: &str) -> Result<String, VisionError> {
-    let bytes = std::fs::read(path).map_err(|e| VisionError::BackendUnavailable {
+    Ok(format!("{:x}", Sha256::digest(read_model(path, hint)?)))
+}
+
+/// The bytes of the model file at `path`; one that cannot be read is
+/// [`VisionError::BackendUnavailable`] naming it and `hint`.
+fn read_model(path: &Path, hint: &str) -> Result<Vec<u8>, VisionError> {
+    std::fs::read(path).map_err(|e| VisionError::BackendUnavailable {
         what: "ONNX model".into(),
         tried: vec![path.to_path_buf()],
         hint: format!("{e}; {hint}"),
-    })?;
-    Ok(format!("{:x}", Sha256::digest(&bytes)))
+    })
 }
 
 /// Checks that `session` (loaded from `model`) has exactly one input, named `name`, a float
 /// tensor of rank 4 whose known dimensions equal `dims` where those are given (`None`: any;
-/// a dimension the model leaves dynamic passes; `Some(-1)`: the model must leave it dynamic). Else [`VisionError::Model`] naming the file,
-/// what it has and what was expected: a network that would fail at its first image is refused
-/// when it is loaded.
+/// a dimension the model leaves dynamic passes; `Some(-1)`: the model must leave it dynamic).
+/// Else [`VisionError::Model`] naming the file, what it has and what was expected: a network
+/// that would fail at its first image is refused when it is loaded.
 pub(crate) fn check_single_input(
     session: &Session,
     model: &Path,
